@@ -1,0 +1,349 @@
+"""Scenario: every parameter of a run, validated, documented, loadable from TOML.
+
+Each field states its unit and its source: a paper equation or section, or
+"assumed" with the reason. The paper (Sec. 7) gives V, k_d, k_r, k_theta,
+sigma_1, sigma_2, the team sizes, r_C, the FOV, trials and steps, and the shape of
+the action set; everything else is an assumption, chosen for physical consistency
+(see the README's parameter table).
+"""
+
+from __future__ import annotations
+
+import math
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+G = 9.81
+"""Gravitational acceleration [m/s^2], eq. (1)."""
+
+
+class ScenarioError(ValueError):
+    """A scenario, config file or override that cannot be used; the message is one line."""
+
+
+class _Part(BaseModel):
+    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+
+
+class SensorModel(_Part):
+    """Range-bearing sensor with a distance-dependent noise (eq. 2-4)."""
+
+    k_d: float = Field(0.1056, gt=0, description="range-noise scale [m]; paper eq. (3), Sec. 7")
+    k_r: float = Field(
+        10.07, ge=0, description="range-noise growth rate [-]; paper eq. (3), Sec. 7"
+    )
+    k_theta: float = Field(
+        0.01, gt=0, description="bearing-noise scale [rad]; paper eq. (3), Sec. 7"
+    )
+    half_fov_deg: float = Field(
+        5.0,
+        gt=0,
+        lt=90,
+        description="half field of view alpha [deg]; paper Sec. 7.1 (FOV 2*alpha = 10 deg)",
+    )
+
+    @property
+    def alpha(self) -> float:
+        """Half field of view [rad]."""
+        return math.radians(self.half_fov_deg)
+
+
+class UAVModel(_Part):
+    """Fixed-wing UAVs at constant speed and altitude, bank-angle actions (eq. 1)."""
+
+    speed: float = Field(15.0, gt=0, description="airspeed V [m/s]; paper Sec. 7")
+    bank_angle_deg: float = Field(
+        45.0,
+        gt=0,
+        lt=90,
+        description=(
+            "bank angle phi of the action set {-phi, 0, +phi} [deg]; assumed: the paper does "
+            "not give it; 45 deg gives a turn radius V^2/(g tan phi) = 22.9 m, so a UAV can "
+            "orbit inside its 44 m observation disk"
+        ),
+    )
+    altitude: float = Field(
+        500.0,
+        gt=0,
+        description=(
+            "mean flight altitude [m]; assumed: the observation radius is h tan(alpha), and "
+            "at alpha = 5 deg a UAV needs several hundred metres for its disk to exceed its "
+            "turn radius"
+        ),
+    )
+    altitude_spacing: float = Field(
+        5.0,
+        ge=0,
+        description=(
+            "altitude difference between consecutive UAVs [m]; assumed: the paper flies each "
+            "UAV at its own altitude; 5 m keeps the team's spread (20 m for 5 UAVs) well "
+            "inside r_C = 50 m"
+        ),
+    )
+    altitudes: list[float] | None = Field(
+        None,
+        description=(
+            "explicit per-UAV altitudes [m], overriding altitude and altitude_spacing; "
+            "length n_uavs"
+        ),
+    )
+    start_spread: float = Field(
+        20.0,
+        ge=0,
+        description=(
+            "side of the square around the field centre where UAVs start [m]; assumed: the "
+            "team takes off together"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _positive_altitudes(self) -> UAVModel:
+        if self.altitudes is not None and any(h <= 0 for h in self.altitudes):
+            raise ValueError("every altitude must be > 0")
+        return self
+
+
+class TargetModel(_Part):
+    """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
+
+    sigma_1: float = Field(
+        0.16, ge=0, description="acceleration-noise std along x [m/s^2]; paper eq. (15), Sec. 7"
+    )
+    sigma_2: float = Field(
+        0.16, ge=0, description="acceleration-noise std along y [m/s^2]; paper eq. (15), Sec. 7"
+    )
+    initial_velocity_std: float = Field(
+        1.0,
+        ge=0,
+        description=(
+            "std of each initial velocity component [m/s]; assumed: slow ground vehicles or "
+            "pedestrians; the paper says only that targets move randomly"
+        ),
+    )
+
+
+class EstimationModel(_Part):
+    """Initial belief shared by all UAVs (the paper does not say how filters start)."""
+
+    initial_position_std: float = Field(
+        5.0,
+        gt=0,
+        description=(
+            "std of the initial position cue and of the prior [m]; assumed: every UAV starts "
+            "with a cue of each target (a consistent Gaussian prior around the truth)"
+        ),
+    )
+    initial_velocity_std: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "prior velocity std [m/s]; assumed: equal to the targets' initial velocity "
+            "spread, so the prior is consistent"
+        ),
+    )
+
+
+class PlannerModel(_Part):
+    """Receding-horizon action search (Algorithm 1, lines 1-4)."""
+
+    horizon: int = Field(
+        3,
+        ge=2,
+        le=10,
+        description=(
+            "planning horizon h [steps]; assumed: the paper does not give it; under eq. (1) "
+            "the bank angle chosen at step k first moves the UAV at k+2, so h >= 2"
+        ),
+    )
+    discount: float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description=(
+            "weight lambda^(t-1) of the t-th step's det G [-]; Algorithm 1 sums "
+            "undiscounted (1.0)"
+        ),
+    )
+
+
+class Scenario(_Part):
+    """Every parameter of one simulated mission.
+
+    Defaults are the paper's Sec. 7.1 experiment (5 UAVs, 4 targets, r_C = 50 m,
+    FOV 10 deg, 500 steps) completed with the assumptions documented per field.
+    """
+
+    n_uavs: int = Field(5, ge=1, le=10_000, description="number of UAVs N^u; paper Sec. 7.1")
+    n_targets: int = Field(
+        4, ge=1, le=10_000, description="number of targets N^t; paper Sec. 7.1"
+    )
+    steps: int = Field(500, ge=1, description="simulated decision cycles; paper Sec. 7")
+    dt: float = Field(
+        1.0,
+        gt=0,
+        description=(
+            "time step Delta T [s]; assumed: one decision per second, the usual rate of "
+            "fixed-wing tracking studies; the paper does not give it"
+        ),
+    )
+    comm_range: float = Field(
+        50.0, ge=0, description="communication range r_C, 3-D distance [m]; paper Sec. 7.1"
+    )
+    field_size: float = Field(
+        200.0,
+        gt=0,
+        description=(
+            "side of the square field the targets move in [m]; assumed: the paper does not "
+            "give it; it sets how often r_C connects the UAVs that compete for a target"
+        ),
+    )
+    uav: UAVModel = Field(default_factory=UAVModel, description="UAV kinematics (eq. 1)")
+    sensor: SensorModel = Field(default_factory=SensorModel, description="sensor (eq. 2-4)")
+    target: TargetModel = Field(default_factory=TargetModel, description="targets (eq. 13-15)")
+    estimation: EstimationModel = Field(
+        default_factory=EstimationModel, description="initial belief"
+    )
+    planner: PlannerModel = Field(
+        default_factory=PlannerModel, description="planning (Algorithm 1)"
+    )
+
+    @model_validator(mode="after")
+    def _altitude_count(self) -> Scenario:
+        if self.uav.altitudes is not None and len(self.uav.altitudes) != self.n_uavs:
+            raise ValueError(
+                f"uav.altitudes has {len(self.uav.altitudes)} entries but n_uavs is {self.n_uavs}"
+            )
+        if min(self.altitudes()) <= 0:
+            raise ValueError(
+                "uav.altitude and uav.altitude_spacing give a UAV an altitude <= 0"
+            )
+        return self
+
+    def altitudes(self) -> list[float]:
+        """Altitude h_i of each UAV [m], centred on `uav.altitude`."""
+        if self.uav.altitudes is not None:
+            return list(self.uav.altitudes)
+        mid = (self.n_uavs - 1) / 2
+        return [self.uav.altitude + (i - mid) * self.uav.altitude_spacing for i in range(self.n_uavs)]
+
+    # ------------------------------------------------------------------ I/O
+
+    @classmethod
+    def from_toml(cls, path: str | Path) -> Scenario:
+        """Load a scenario from a TOML file; missing fields keep their defaults."""
+        return cls.from_dict(read_toml(path), origin=str(path))
+
+    @classmethod
+    def from_dict(cls, data: dict[str, Any], origin: str = "scenario") -> Scenario:
+        """Validate a (nested) dict; raise ScenarioError with one line naming the field."""
+        try:
+            return cls.model_validate(data)
+        except ValidationError as exc:
+            raise ScenarioError(f"{origin}: {describe_errors(exc)}") from None
+
+    def with_overrides(self, overrides: dict[str, Any]) -> Scenario:
+        """A copy with dotted fields replaced, e.g. ``{"sensor.half_fov_deg": 10}``."""
+        data = self.model_dump()
+        for dotted, value in overrides.items():
+            set_dotted(data, dotted, value)
+        return Scenario.from_dict(data, origin="--set")
+
+    def to_toml(self) -> str:
+        """The scenario as TOML text (round-trips through `from_toml`)."""
+        return dump_toml(self.model_dump(exclude_none=True))
+
+    def describe(self) -> list[tuple[str, Any, str]]:
+        """Every leaf field as (dotted name, value, description)."""
+        return list(_describe(self, ""))
+
+
+def _describe(model: BaseModel, prefix: str):
+    for name, info in type(model).model_fields.items():
+        value = getattr(model, name)
+        if isinstance(value, BaseModel):
+            yield from _describe(value, f"{prefix}{name}.")
+        else:
+            yield f"{prefix}{name}", value, info.description or ""
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file into a dict, with one-line errors."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ScenarioError(f"cannot read config file {path}: {reason}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"config file {path} is not valid TOML: {exc}") from None
+
+
+def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+    """Set ``data["a"]["b"] = value`` for ``dotted = "a.b"``, refusing unknown names."""
+    keys = dotted.split(".")
+    node = data
+    for depth, key in enumerate(keys):
+        if not isinstance(node, dict) or key not in node:
+            where = ".".join(keys[: depth + 1])
+            raise ScenarioError(f"unknown scenario field '{where}'")
+        if depth == len(keys) - 1:
+            if isinstance(node[key], dict):
+                raise ScenarioError(f"'{dotted}' is a group of fields; set one of its fields")
+            node[key] = value
+        else:
+            node = node[key]
+
+
+def describe_errors(exc: ValidationError) -> str:
+    """Pydantic errors as one line: ``field: problem (got value)``, joined by '; '."""
+    parts = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"])
+        if err["type"] == "extra_forbidden":
+            parts.append(f"unknown field '{loc}'")
+            continue
+        msg = err["msg"].removeprefix("Value error, ")
+        got = err.get("input")
+        shown = "" if isinstance(got, dict) or got is None else f" (got {got!r})"
+        parts.append(f"{loc}: {msg}{shown}" if loc else f"{msg}{shown}")
+    return "; ".join(parts)
+
+
+def parse_value(text: str) -> Any:
+    """Read a command-line value as TOML (numbers, booleans, lists), else as a string."""
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def dump_toml(data: dict[str, Any]) -> str:
+    """Minimal TOML writer for the scenario's shape: scalars, lists, nested tables."""
+    lines: list[str] = []
+    tables = []
+    for key, value in data.items():
+        if isinstance(value, dict):
+            tables.append((key, value))
+        else:
+            lines.append(f"{key} = {_toml_value(value)}")
+    for key, table in tables:
+        lines.append("")
+        lines.append(f"[{key}]")
+        lines.extend(f"{k} = {_toml_value(v)}" for k, v in table.items())
+    return "\n".join(lines) + "\n"
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")
