@@ -61,17 +61,17 @@ class UAVModel(_Part):
         lt=90,
         description=(
             "bank angle phi of the action set {-phi, 0, +phi} [deg]; assumed: the paper does "
-            "not give it; 45 deg gives a turn radius V^2/(g tan phi) = 22.9 m, so a UAV can "
-            "orbit inside its 44 m observation disk"
+            "not give it; 45 deg, a usual limit for small fixed-wing UAVs, gives a turn radius "
+            "V^2/(g tan phi) = 22.9 m, inside the 37 m observation disk"
         ),
     )
     altitude: float = Field(
-        500.0,
+        425.0,
         gt=0,
         description=(
-            "mean flight altitude [m]; assumed: the observation radius is h tan(alpha), and "
-            "at alpha = 5 deg a UAV needs several hundred metres for its disk to exceed its "
-            "turn radius"
+            "mean flight altitude [m]; assumed: the observation radius h tan(alpha) must exceed "
+            "the turn radius for a UAV to orbit a target in view (37 m against 23 m at 425 m); "
+            "calibrated with dt against the paper's Fig. 5 (see README)"
         ),
     )
     altitude_spacing: float = Field(
@@ -80,7 +80,7 @@ class UAVModel(_Part):
         description=(
             "altitude difference between consecutive UAVs [m]; assumed: the paper flies each "
             "UAV at its own altitude; 5 m keeps the team's spread (20 m for 5 UAVs) well "
-            "inside r_C = 50 m"
+            "inside r_C = 50 m; results barely depend on it (0 to 10 m tried)"
         ),
     )
     altitudes: list[float] | None = Field(
@@ -154,8 +154,9 @@ class PlannerModel(_Part):
         ge=2,
         le=10,
         description=(
-            "planning horizon h [steps]; assumed: the paper does not give it; under eq. (1) "
-            "the bank angle chosen at step k first moves the UAV at k+2, so h >= 2"
+            "planning horizon h [steps]; assumed: the paper does not give it; 3 steps (1.5 s) "
+            "keeps the search at 27 sequences per target; under eq. (1) the bank angle "
+            "chosen at step k first moves the UAV at k+2, so h >= 2"
         ),
     )
     discount: float = Field(
@@ -182,11 +183,12 @@ class Scenario(_Part):
     )
     steps: int = Field(500, ge=1, description="simulated decision cycles; paper Sec. 7")
     dt: float = Field(
-        1.0,
+        0.5,
         gt=0,
         description=(
-            "time step Delta T [s]; assumed: one decision per second, the usual rate of "
-            "fixed-wing tracking studies; the paper does not give it"
+            "time step Delta T [s]; assumed: 2 Hz decisions, a common rate for small fixed-wing "
+            "UAVs; the paper does not give it; calibrated with uav.altitude against the "
+            "paper's Fig. 5 (see README)"
         ),
     )
     comm_range: float = Field(

@@ -169,8 +169,8 @@ def plan_exhaustive(
     for t in range(horizon):
         state = fly(state, actions[sequences[:, t]], dt, g)
         delta = targets[..., None, :, t, :] - state[..., :, None, :2]  # (..., Nu, S, Nt, 2)
-        d = np.sqrt(np.einsum("...k,...k->...", delta, delta) + h[..., None] ** 2)
-        score = score + discount**t * fisher_det(d, edge_range(h[..., None], sensor), sensor)
+        d = np.sqrt(np.einsum("...k,...k->...", delta, delta) + h * h)
+        score = score + discount**t * fisher_det(d, edge_range(h, sensor), sensor)
     score = np.swapaxes(score, -1, -2)  # (..., Nu, Nt, S)
     best = np.argmax(score, axis=-1)
     value = np.take_along_axis(score, best[..., None], axis=-1)[..., 0]

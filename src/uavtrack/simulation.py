@@ -135,9 +135,16 @@ def sense(
 
 
 def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
-    """(truth, sensor) generators of one trial, independent streams of its seed."""
+    """(truth, sensor) generators of one trial, independent streams of its seed.
+
+    The children are derived from the seed's spawn key, not with `SeedSequence.spawn`,
+    whose counter would give a reused seed object different streams.
+    """
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    truth, sensor = seq.spawn(2)
+    truth, sensor = (
+        np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, k), pool_size=seq.pool_size)
+        for k in range(2)
+    )
     return np.random.default_rng(truth), np.random.default_rng(sensor)
 
 

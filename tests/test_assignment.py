@@ -1,0 +1,82 @@
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from uavtrack import assignment
+
+
+def brute_force_value(bids):
+    """Best total of an injective assignment of the smaller side."""
+    n, m = bids.shape
+    if n <= m:
+        return max(sum(bids[i, c] for i, c in enumerate(cols))
+                   for cols in itertools.permutations(range(m), n))
+    return max(sum(bids[r, j] for j, r in enumerate(rows))
+               for rows in itertools.permutations(range(n), m))
+
+
+matrices = st.tuples(st.integers(1, 6), st.integers(1, 6), st.integers(0, 2**32 - 1)).map(
+    lambda t: np.random.default_rng(t[2]).random((t[0], t[1])))
+
+
+@settings(max_examples=120, deadline=None)
+@given(matrices)
+def test_hungarian_matches_brute_force(bids):
+    n, m = bids.shape
+    choice = assignment.hungarian(bids)
+    assert (choice >= 0).all() and (choice < m).all()
+    if n <= m:
+        assert len(set(choice)) == n
+        assert bids[np.arange(n), choice].sum() == pytest.approx(brute_force_value(bids))
+    else:
+        # Remark 2: the first round is an optimal matching of m UAVs, then it repeats
+        counts = np.bincount(choice, minlength=m)
+        assert counts.max() - counts.min() <= 1
+        assert counts.min() == n // m
+
+
+def test_remark_2_repeats_on_the_uavs_left_over():
+    bids = np.array([[5.0, 1.0], [4.0, 3.0], [3.0, 0.0], [2.0, 2.5], [0.0, 0.1]])
+    choice = assignment.hungarian(bids)
+    # round 1 over all rows: best matching is rows 0 -> 0 and 1 -> 1 (5 + 3)
+    # round 2 over rows 2, 3, 4: row 2 -> 0 and row 3 -> 1 (3 + 2.5)
+    # round 3: row 4 alone takes column 1 (0.1)
+    assert choice.tolist() == [0, 1, 0, 1, 1]
+
+
+def test_ties_go_to_lower_indices():
+    assert assignment.hungarian(np.ones((1, 4))).tolist() == [0]
+    assert assignment.hungarian(np.zeros((3, 3))).tolist() == [0, 1, 2]
+    assert assignment.greedy(np.ones((2, 3))).tolist() == [0, 0]
+
+
+def test_non_finite_bids_rejected():
+    with pytest.raises(ValueError, match="finite"):
+        assignment.hungarian(np.array([[1.0, np.nan]]))
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 5), st.integers(0, 2**32 - 1))
+def test_neighbourhood_extremes(n, m, seed):
+    rng = np.random.default_rng(seed)
+    bids = rng.random((2, n, m))
+    full = np.ones((2, n, n), dtype=bool)
+    none = np.zeros((2, n, n), dtype=bool)
+    # complete graph: every UAV solves the global problem
+    assert np.array_equal(assignment.neighbourhood(bids, full), assignment.centralized(bids))
+    # no links: every UAV alone is greedy
+    assert np.array_equal(assignment.neighbourhood(bids, none), assignment.greedy(bids))
+
+
+def test_neighbourhood_keeps_own_row_of_local_problem():
+    # path 0 - 1 - 2: UAV 0 solves {0, 1}, UAV 1 solves {0, 1, 2}, UAV 2 solves {1, 2}
+    bids = np.array([[1.0, 0.0], [0.9, 0.1], [0.0, 1.0]])
+    adj = np.array([[0, 1, 0], [1, 0, 1], [0, 1, 0]], dtype=bool)
+    out = assignment.neighbourhood(bids, adj)
+    assert out[0] == assignment.hungarian(bids[[0, 1]])[0]
+    assert out[1] == assignment.hungarian(bids)[1]
+    assert out[2] == assignment.hungarian(bids[[1, 2]])[1]
+    assert out.tolist() == [0, 0, 1]

@@ -1,0 +1,158 @@
+import networkx as nx
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from uavtrack import fusion, network
+
+
+def graph(n, edges):
+    adj = np.zeros((n, n), dtype=bool)
+    for a, b in edges:
+        adj[a, b] = adj[b, a] = True
+    return adj
+
+
+def component_max_index(confidence, adj):
+    """Oracle: for each (i, j), the UAV of i's component with the highest confidence."""
+    g = nx.from_numpy_array(adj.astype(int))
+    out = np.empty(confidence.shape, dtype=int)
+    for comp in nx.connected_components(g):
+        comp = sorted(comp)
+        best = np.array(comp)[np.argmax(confidence[comp], axis=0)]
+        out[comp] = best
+    return out
+
+
+def eccentricities(adj):
+    g = nx.from_numpy_array(adj.astype(int))
+    ecc = np.zeros(len(adj), dtype=int)
+    for comp in nx.connected_components(g):
+        sub = g.subgraph(comp)
+        for node, e in nx.eccentricity(sub).items():
+            ecc[node] = e
+    return ecc
+
+
+def test_relay_on_path_m_j_i():
+    # m = 0, j = 1, i = 2; j's eccentricity is 1 but i needs 2 rounds and gets m's value via j
+    adj = graph(3, [(0, 1), (1, 2)])
+    confidence = np.array([[9.0], [1.0], [2.0]])
+    source, rounds = fusion.max_consensus(confidence, adj)
+    assert rounds.tolist() == [2, 1, 2]
+    assert source[:, 0].tolist() == [0, 0, 0]
+    # one round less and i cannot have it: D_i is needed
+    short = fusion.consensus_rounds(confidence, adj, np.array([2, 1, 1]))
+    assert short[2, 0] != 0
+
+
+def test_star_center_one_round_leaves_two():
+    adj = graph(6, [(0, k) for k in range(1, 6)])
+    confidence = np.arange(6.0)[:, None] * np.array([1.0, -1.0])  # leaf 5 max, then centre max
+    source, rounds = fusion.max_consensus(confidence, adj)
+    assert rounds.tolist() == [1, 2, 2, 2, 2, 2]
+    assert (source[:, 0] == 5).all() and (source[:, 1] == 0).all()
+
+
+def test_long_path_needs_eccentricity_rounds():
+    n = 7
+    adj = graph(n, [(k, k + 1) for k in range(n - 1)])
+    confidence = np.zeros((n, 1))
+    confidence[0] = 1.0
+    source, rounds = fusion.max_consensus(confidence, adj)
+    assert rounds.tolist() == [max(k, n - 1 - k) for k in range(n)]
+    assert (source == 0).all()
+
+
+def test_isolated_uavs_keep_their_own():
+    adj = np.zeros((4, 4), dtype=bool)
+    confidence = np.random.default_rng(0).random((4, 3))
+    source, rounds = fusion.max_consensus(confidence, adj)
+    assert (rounds == 0).all()
+    assert (source == np.arange(4)[:, None]).all()
+
+
+@st.composite
+def geometric_graphs(draw):
+    n = draw(st.integers(1, 14))
+    pts = np.array(draw(st.lists(st.tuples(st.floats(0, 100), st.floats(0, 100)),
+                                 min_size=n, max_size=n)))
+    radius = draw(st.floats(0, 60))
+    uavs = np.zeros((n, 5))
+    uavs[:, :2] = pts
+    adj = network.adjacency(uavs, radius)
+    m = draw(st.integers(1, 4))
+    seed = draw(st.integers(0, 2**32 - 1))
+    confidence = np.random.default_rng(seed).random((n, m))
+    return adj, confidence
+
+
+@settings(max_examples=150, deadline=None)
+@given(geometric_graphs())
+def test_max_consensus_on_random_geometric_graphs(case):
+    adj, confidence = case
+    source, rounds = fusion.max_consensus(confidence, adj)
+    ecc = eccentricities(adj)
+    # D_i, learned by the flooding protocol, is i's eccentricity in its component
+    assert np.array_equal(rounds, ecc)
+    # every UAV ends with its component's maximum, never a value from elsewhere
+    assert np.array_equal(source, component_max_index(confidence, adj))
+    # and D_i rounds are needed: with the maximum at i's farthest UAV, D_i - 1 do not suffice
+    dist = dict(nx.all_pairs_shortest_path_length(nx.from_numpy_array(adj.astype(int))))
+    for i in np.flatnonzero(ecc > 0):
+        far = max(dist[i], key=dist[i].get)
+        probe = np.zeros((len(adj), 1))
+        probe[far] = 1.0
+        fewer = rounds.copy()
+        fewer[i] -= 1
+        assert fusion.consensus_rounds(probe, adj, fewer)[i, 0] != far
+        assert fusion.consensus_rounds(probe, adj, rounds)[i, 0] == far
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.lists(geometric_graphs(), min_size=2, max_size=4))
+def test_batched_consensus_equals_one_graph_at_a_time(cases):
+    n = min(a.shape[0] for a, _ in cases)
+    m = min(c.shape[1] for _, c in cases)
+    adj = np.stack([a[:n, :n] for a, _ in cases])
+    conf = np.stack([c[:n, :m] for _, c in cases])
+    batched = fusion.fuse(conf, adj)
+    for b in range(len(cases)):
+        alone = fusion.fuse(conf[b], adj[b])
+        assert np.array_equal(batched.source[b], alone.source)
+        assert np.array_equal(batched.rounds[b], alone.rounds)
+        assert batched.messages[b] == alone.messages
+
+
+def test_messages_count_edges_times_rounds():
+    adj = graph(3, [(0, 1), (1, 2)])
+    result = fusion.fuse(np.ones((3, 2)), adj)
+    # degrees (1, 2, 1) times rounds (2, 1, 2)
+    assert result.messages == 1 * 2 + 2 * 1 + 1 * 2
+
+
+def test_gather_picks_source_rows(rng):
+    values = rng.normal(size=(2, 3, 4, 4, 4))
+    source = rng.integers(0, 3, (2, 3, 4))
+    out = fusion.gather(source, values)
+    for b in range(2):
+        for i in range(3):
+            for j in range(4):
+                assert np.array_equal(out[b, i, j], values[b, source[b, i, j], j])
+
+
+def test_adjacency_uses_3d_distance():
+    uavs = np.zeros((3, 5))
+    uavs[:, 2] = [500.0, 540.0, 500.0]
+    uavs[2, 0] = 45.0
+    adj = network.adjacency(uavs, 50.0)
+    assert adj[0, 1] and adj[0, 2] and not adj[1, 2]  # sqrt(45^2 + 40^2) > 50
+    assert not adj.diagonal().any() and np.array_equal(adj, adj.T)
+    assert not network.adjacency(uavs, 0.0).any()
+
+
+@pytest.mark.parametrize("n", [1, 2, 5])
+def test_complete_graph_one_round(n):
+    source, rounds = fusion.max_consensus(np.arange(float(n))[:, None], network.complete(n))
+    assert (rounds == (1 if n > 1 else 0)).all() and (source == n - 1).all()

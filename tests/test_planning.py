@@ -1,0 +1,87 @@
+import itertools
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from uavtrack import SensorModel, planning, sensing, world
+from uavtrack.config import G
+
+
+def random_case(rng, batch=(), nu=3, nt=4):
+    uavs = np.empty(batch + (nu, 5))
+    uavs[..., :2] = rng.uniform(0, 200, batch + (nu, 2))
+    uavs[..., 2] = rng.uniform(450, 550, batch + (nu,))
+    uavs[..., 3] = 15.0
+    uavs[..., 4] = rng.uniform(-np.pi, np.pi, batch + (nu,))
+    mean = np.concatenate([rng.uniform(0, 200, batch + (nu, nt, 2)),
+                           rng.normal(0, 3, batch + (nu, nt, 2))], axis=-1)
+    return uavs, mean
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), horizon=st.integers(2, 5),
+       bank=st.floats(10, 70), discount=st.sampled_from([1.0, 0.9, 0.5]))
+def test_tree_planner_equals_exhaustive_search(seed, horizon, bank, discount):
+    rng = np.random.default_rng(seed)
+    uavs, mean = random_case(rng, batch=(2,))
+    sensor = SensorModel()
+    args = (sensor, np.radians(bank), horizon, 1.0, discount)
+    fast, slow = planning.plan(uavs, mean, *args), planning.plan_exhaustive(uavs, mean, *args)
+    assert np.array_equal(fast.value, slow.value)  # bit-identical
+    assert np.array_equal(fast.action, slow.action)
+    assert np.array_equal(fast.sequence, slow.sequence)
+
+
+def test_exhaustive_matches_a_plain_loop_over_sequences(rng):
+    # the reference itself against the most literal reading of Algorithm 1, line 2
+    uavs, mean = random_case(rng, nu=2, nt=2)
+    sensor, bank, h = SensorModel(), np.radians(45.0), 3
+    ref = planning.plan_exhaustive(uavs, mean, sensor, bank, h, 1.0)
+    actions = planning.action_set(bank)
+    for i in range(2):
+        for j in range(2):
+            best, best_seq = -np.inf, None
+            for seq in itertools.product(range(3), repeat=h):
+                state, target, total = uavs[i].copy(), mean[i, j].copy(), 0.0
+                for a in seq:
+                    state = world.fly(state, actions[a], 1.0)
+                    target = target + np.array([target[2], target[3], 0, 0])
+                    total += np.linalg.det(sensing.fisher_information(state, target, sensor))
+                if total > best * (1 + 1e-12):
+                    best, best_seq = total, seq
+            assert ref.value[i, j] == pytest.approx(best, rel=1e-9)
+            assert ref.action[i, j] == best_seq[0]
+
+
+def test_rollout_tree_size_and_positions(rng):
+    uavs, _ = random_case(rng, nu=2)
+    actions = planning.action_set(np.radians(45.0))
+    for h in range(1, 6):
+        nodes = planning.rollout_nodes(uavs, actions, h, 1.0, G)
+        assert nodes.shape == (2, (3**h - 1) // 2, 2)
+    # the deepest node reached by actions (2, 0) equals flying them with eq. (1)
+    nodes = planning.rollout_nodes(uavs, actions, 3, 1.0, G)
+    state = uavs[0]
+    for a in (2, 0, 1):
+        state = world.fly(state, actions[a], 1.0)
+    assert np.allclose(nodes[0, 1 + 3 + 2 * 3 + 0], state[:2])
+
+
+def test_planner_turns_toward_a_target_behind():
+    sensor = SensorModel()
+    uav = np.array([[100.0, 100.0, 500.0, 15.0, 0.0]])  # heading +x
+    for side, expected in ((1.0, 2), (-1.0, 0)):  # target behind-left -> +phi, behind-right -> -phi
+        mean = np.array([[[40.0, 100.0 + side * 60.0, 0.0, 0.0]]])
+        plan = planning.plan(uav, mean, sensor, np.radians(45.0), 3, 1.0)
+        assert plan.action[0, 0] == expected
+        assert plan.value[0, 0] > 0
+
+
+def test_bids_prefer_nearer_targets(rng):
+    sensor = SensorModel()
+    uav = np.array([[100.0, 100.0, 500.0, 15.0, 0.5]])
+    mean = np.array([[[110.0, 95.0, 0, 0], [250.0, 100.0, 0, 0], [100.0, 500.0, 0, 0]]])
+    value = planning.plan(uav, mean, sensor, np.radians(45.0), 3, 1.0).value[0]
+    assert value[0] > value[1] > value[2] > 0

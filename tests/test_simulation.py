@@ -1,0 +1,128 @@
+import numpy as np
+import pytest
+
+import uavtrack
+from uavtrack import network, sensing, simulation
+
+DECISIONS = ("assignment", "action", "bids", "observed", "uavs", "mean", "cov")
+
+
+def same_decisions(a, b):
+    for name in ("assignment", "action", "observed", "uavs"):
+        assert np.array_equal(getattr(a.trace, name), getattr(b.trace, name)), name
+
+
+def test_same_seed_same_result(short):
+    a = uavtrack.simulate(short, "distributed", seed=3)
+    b = uavtrack.simulate(short, "distributed", seed=3)
+    for name in DECISIONS + ("targets", "rounds", "messages"):
+        assert np.array_equal(getattr(a.trace, name), getattr(b.trace, name)), name
+    assert a.observation_rate == b.observation_rate
+    c = uavtrack.simulate(short, "distributed", seed=4)
+    assert not np.array_equal(a.trace.targets, c.trace.targets)
+
+
+def test_complete_graph_distributed_decides_as_centralized(short):
+    wide = short.model_copy(update={"comm_range": 1e7})
+    d = uavtrack.simulate(wide, "distributed", seed=1)
+    c = uavtrack.simulate(wide, "centralized", seed=1)
+    same_decisions(d, c)
+    assert np.array_equal(d.trace.mean, c.trace.mean)
+    assert d.observation_rate == c.observation_rate
+
+
+def test_no_radio_distributed_decides_as_greedy(short):
+    deaf = short.model_copy(update={"comm_range": 0.0})
+    d = uavtrack.simulate(deaf, "distributed", seed=2)
+    g = uavtrack.simulate(deaf, "greedy", seed=2)
+    same_decisions(d, g)
+    assert (d.trace.rounds == 0).all() and (d.trace.messages == 0).all()
+
+
+def test_methods_differ_when_the_radio_is_limited():
+    scenario = uavtrack.Scenario(steps=150)
+    runs = {m: uavtrack.simulate(scenario, m, seed=0) for m in uavtrack.METHODS}
+    assert not np.array_equal(runs["distributed"].trace.assignment, runs["centralized"].trace.assignment)
+    assert not np.array_equal(runs["distributed"].trace.assignment, runs["greedy"].trace.assignment)
+
+
+def test_common_random_numbers_across_methods(short):
+    runs = [uavtrack.simulate(short, m, seed=5) for m in uavtrack.METHODS]
+    for r in runs[1:]:
+        assert np.array_equal(r.trace.targets, runs[0].trace.targets)
+        assert np.array_equal(r.trace.uavs[0], runs[0].trace.uavs[0])
+
+
+def test_batch_equals_one_trial_at_a_time(short):
+    seeds = [uavtrack.trial_seed(7, t) for t in range(3)]
+    batch = uavtrack.run(short, "distributed", seeds, trace=True)
+    for t, seed in enumerate(seeds):
+        alone = uavtrack.simulate(short, "distributed", seed=seed)
+        assert np.array_equal(batch.traces[t].assignment, alone.trace.assignment)
+        assert np.array_equal(batch.traces[t].action, alone.trace.action)
+        assert np.allclose(batch.traces[t].mean, alone.trace.mean, rtol=1e-12, atol=1e-9)
+        assert batch.metrics["observation_rate"][t] == alone.observation_rate
+
+
+def test_trial_seed_is_spawned_child():
+    children = np.random.SeedSequence(11).spawn(4)
+    for t, child in enumerate(children):
+        assert np.array_equal(uavtrack.trial_seed(11, t).generate_state(4), child.generate_state(4))
+
+
+def test_metrics_agree_with_trace(short):
+    r = uavtrack.simulate(short, "centralized", seed=0)
+    tr = r.trace
+    # observation: target inside at least one UAV's disk (recomputed from the truth)
+    inside = sensing.in_view(tr.uavs[:, :, None, :], tr.targets[:, None, :, :], short.sensor)
+    assert np.array_equal(inside, tr.observed)
+    assert np.allclose(r.per_target, inside.any(axis=1).mean(axis=0))
+    assert r.observation_rate == pytest.approx(r.per_target.mean())
+    err = tr.mean[..., :2] - tr.targets[:, None, :, :2]
+    assert r.rmse == pytest.approx(np.sqrt((err**2).sum(-1).mean()))
+    assert r.rounds == pytest.approx(tr.rounds.mean())
+
+
+def test_trace_shapes_and_rounds_follow_the_radio(short):
+    r = uavtrack.simulate(short, "distributed", seed=0)
+    T, Nu, Nt = short.steps, short.n_uavs, short.n_targets
+    tr = r.trace
+    assert tr.targets.shape == (T, Nt, 4) and tr.uavs.shape == (T, Nu, 5)
+    assert tr.mean.shape == (T, Nu, Nt, 4) and tr.cov.shape == (T, Nu, Nt, 4, 4)
+    assert tr.observed.shape == (T, Nu, Nt) and tr.assignment.shape == (T, Nu)
+    adj = network.adjacency(tr.uavs, short.comm_range)
+    isolated = ~adj.any(axis=-1)
+    assert (tr.rounds[isolated] == 0).all() and (tr.rounds[~isolated] >= 1).all()
+    # altitudes: every UAV at its own constant altitude
+    assert np.allclose(tr.uavs[:, :, 2], short.altitudes())
+    assert len(set(short.altitudes())) == Nu
+
+
+def test_more_uavs_than_targets_everyone_tracks():
+    scenario = uavtrack.Scenario(n_uavs=6, n_targets=2, steps=40, comm_range=1e6)
+    r = uavtrack.simulate(scenario, "distributed", seed=0)
+    counts = np.stack([np.bincount(a, minlength=2) for a in r.trace.assignment])
+    assert (counts == 3).all()  # Remark 2: rounds of assignment cover every UAV
+
+
+def test_batch_result_metrics_shapes():
+    batch = uavtrack.run(uavtrack.Scenario(steps=20), "greedy", [0, 1])
+    assert batch.metrics["per_target"].shape == (2, 4)
+    assert batch.metrics["observation_rate"].shape == (2,)
+    assert batch.traces is None
+
+
+def test_unknown_method_and_bad_scenario():
+    with pytest.raises(ValueError, match="unknown method 'best'"):
+        uavtrack.simulate(uavtrack.Scenario(steps=5), "best")
+    with pytest.raises(TypeError, match="Scenario"):
+        uavtrack.simulate({"steps": 5})
+
+
+def test_initial_conditions_layout():
+    scenario = uavtrack.Scenario()
+    uavs, trajectory, prior, P0 = simulation.initial_conditions(scenario, np.random.default_rng(0))
+    assert np.all(np.abs(uavs[:, :2] - 100.0) <= 10.0)
+    assert trajectory.shape == (500, 4, 4)
+    assert np.allclose(np.diag(P0), [25.0, 25.0, 1.0, 1.0])
+    assert (prior[:, 2:] == 0).all()
