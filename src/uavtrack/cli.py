@@ -114,7 +114,6 @@ def run(
         summary["scenario"] = scenario.model_dump()
         typer.echo(json.dumps(summary))
         return
-    from rich.console import Console
     from rich.table import Table
 
     from rich.markup import escape
@@ -128,9 +127,52 @@ def run(
     table.add_row("consensus rounds per UAV", f"{summary['rounds']:.2f}")
     table.add_row("messages per step", f"{summary['messages']:.2f}")
     table.add_row(escape("decision time per UAV [ms]"), f"{1e3 * summary['decision_time']:.3f}")
-    Console().print(table)
+    console().print(table)
     if trace is not None:
         typer.echo(f"trace written to {trace}")
+
+
+@app.command()
+def compare(
+    config: ConfigOpt = None,
+    methods: Annotated[
+        list[MethodName] | None, typer.Option("--method", help="methods to compare (repeatable)")
+    ] = None,
+    trials: Annotated[int, typer.Option(min=1, help="Monte Carlo trials per method")] = 50,
+    seed: Annotated[int, typer.Option(min=0, help="experiment seed")] = 0,
+    set_: SetOpt = None,
+    as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
+) -> None:
+    """Run the methods on the same trials; mean and std of each metric."""
+    from .experiments import compare as run_compare
+    from .experiments import summarize
+
+    scenario = load_scenario(config, set_)
+    names = [m.value for m in (methods or list(MethodName))]
+    results = {m: summarize(v) for m, v in run_compare(scenario, names, trials, seed).items()}
+    if as_json:
+        typer.echo(json.dumps({"trials": trials, "seed": seed, "methods": results,
+                               "scenario": scenario.model_dump()}))
+        return
+    from rich.markup import escape
+    from rich.table import Table
+
+    table = Table(title=f"{trials} trials, seed {seed}")
+    for col in ("method", "observation rate", "per target", "RMSE [m]", "NEES", "rounds",
+                "messages", "decision [ms]"):
+        table.add_column(escape(col), justify="left" if col in ("method", "per target") else "right")
+    for name, r in results.items():
+        table.add_row(
+            name,
+            f"{r['observation_rate']['mean']:.4f} ± {r['observation_rate']['std']:.4f}",
+            " ".join(f"{x:.3f}" for x in r["per_target"]["mean"]),
+            f"{r['rmse']['mean']:.1f}",
+            f"{r['nees']['mean']:.1f}",
+            f"{r['rounds']['mean']:.2f}",
+            f"{r['messages']['mean']:.1f}",
+            f"{1e3 * r['decision_time']['mean']:.3f}",
+        )
+    console().print(table)
 
 
 @app.command()
@@ -144,7 +186,6 @@ def params(
     if toml:
         typer.echo(scenario.to_toml(), nl=False)
         return
-    from rich.console import Console
     from rich.table import Table
 
     table = Table("field", "value", "unit, source")
@@ -152,7 +193,14 @@ def params(
 
     for name, value, doc in scenario.describe():
         table.add_row(name, escape(str(value)), escape(doc))
-    Console(width=160).print(table)
+    console(160).print(table)
+
+
+def console(width: int = 120):
+    """A rich console; wide when printing to a file or pipe (rich would use 80 columns)."""
+    from rich.console import Console
+
+    return Console() if sys.stdout.isatty() else Console(width=width)
 
 
 def main(argv: list[str] | None = None) -> int:
