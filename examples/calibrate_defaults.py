@@ -37,16 +37,31 @@ def search(grid, n_trials):
 if __name__ == "__main__":
     print("one factor at a time around the first guess, 30 trials")
     factors = {
-        "field_size": [100, 150, 250, 300], "target.initial_velocity_std": [0.0, 0.5, 2.0],
-        "uav.bank_angle_deg": [30, 60], "uav.altitude": [350, 700], "dt": [0.5, 2.0],
-        "planner.horizon": [2, 4], "uav.start_spread": [0, 100], "uav.altitude_spacing": [0, 10],
+        "field_size": [100, 150, 250, 300],
+        "target.initial_velocity_std": [0.0, 0.5, 2.0],
+        "uav.bank_angle_deg": [30, 60],
+        "uav.altitude": [350, 700],
+        "dt": [0.5, 2.0],
+        "planner.horizon": [2, 4],
+        "uav.start_spread": [0, 100],
+        "uav.altitude_spacing": [0, 10],
     }
     search([BASE] + [{**BASE, k: v} for k, vs in factors.items() for v in vs], 30)
     print("grid, 30 trials")
     keys = ["dt", "target.initial_velocity_std", "uav.altitude", "field_size"]
-    search([dict(zip(keys, v, strict=True)) for v in
-            itertools.product([0.5, 0.75], [1.0, 2.0, 3.0], [400, 500], [200, 300])], 30)
+    search(
+        [
+            dict(zip(keys, v, strict=True))
+            for v in itertools.product([0.5, 0.75], [1.0, 2.0, 3.0], [400, 500], [200, 300])
+        ],
+        30,
+    )
     print("refinement, 50 trials")
     keys = ["dt", "target.initial_velocity_std", "uav.altitude"]
-    search([dict(zip(keys, v, strict=True)) for v in
-            itertools.product([0.5], [1.0, 1.5], [425, 450, 475])], 50)
+    search(
+        [
+            dict(zip(keys, v, strict=True))
+            for v in itertools.product([0.5], [1.0, 1.5], [425, 450, 475])
+        ],
+        50,
+    )

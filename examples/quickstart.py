@@ -1,6 +1,6 @@
 """Run the paper's method and both baselines on one trial and plot the paths.
 
-    python examples/quickstart.py
+python examples/quickstart.py
 """
 
 import matplotlib
@@ -11,9 +11,13 @@ import matplotlib.pyplot as plt
 import uavtrack
 
 scenario = uavtrack.Scenario(steps=300)  # the paper's default scenario, shortened
-results = {m: uavtrack.simulate(scenario, m, seed=1) for m in ("distributed", "centralized", "greedy")}
+results = {
+    m: uavtrack.simulate(scenario, m, seed=1) for m in ("distributed", "centralized", "greedy")
+}
 for name, r in results.items():
-    print(f"{name:12s} observation rate {r.observation_rate:.3f}  per target {r.per_target.round(3)}")
+    print(
+        f"{name:12s} observation rate {r.observation_rate:.3f}  per target {r.per_target.round(3)}"
+    )
 
 trace = results["distributed"].trace
 fig, ax = plt.subplots(figsize=(6, 6))

@@ -12,14 +12,18 @@ def brute_force_value(bids):
     """Best total of an injective assignment of the smaller side."""
     n, m = bids.shape
     if n <= m:
-        return max(sum(bids[i, c] for i, c in enumerate(cols))
-                   for cols in itertools.permutations(range(m), n))
-    return max(sum(bids[r, j] for j, r in enumerate(rows))
-               for rows in itertools.permutations(range(n), m))
+        return max(
+            sum(bids[i, c] for i, c in enumerate(cols))
+            for cols in itertools.permutations(range(m), n)
+        )
+    return max(
+        sum(bids[r, j] for j, r in enumerate(rows)) for rows in itertools.permutations(range(n), m)
+    )
 
 
 matrices = st.tuples(st.integers(1, 6), st.integers(1, 6), st.integers(0, 2**32 - 1)).map(
-    lambda t: np.random.default_rng(t[2]).random((t[0], t[1])))
+    lambda t: np.random.default_rng(t[2]).random((t[0], t[1]))
+)
 
 
 @settings(max_examples=120, deadline=None)

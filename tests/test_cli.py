@@ -15,8 +15,9 @@ def run_cli(capsys, *args):
 
 
 def test_run_json(capsys):
-    code, out, err = run_cli(capsys, "run", "--set", "steps=30", "--json", "--method", "greedy",
-                             "--seed", "4")
+    code, out, err = run_cli(
+        capsys, "run", "--set", "steps=30", "--json", "--method", "greedy", "--seed", "4"
+    )
     assert code == 0, err
     data = json.loads(out)
     assert data["method"] == "greedy" and data["seed"] == 4
@@ -27,8 +28,16 @@ def test_run_json(capsys):
 
 
 def test_run_table_and_set_nested(capsys):
-    code, out, _ = run_cli(capsys, "run", "--set", "steps=20", "--set", "sensor.half_fov_deg=10",
-                           "--set", "n_targets=2")
+    code, out, _ = run_cli(
+        capsys,
+        "run",
+        "--set",
+        "steps=20",
+        "--set",
+        "sensor.half_fov_deg=10",
+        "--set",
+        "n_targets=2",
+    )
     assert code == 0
     assert "observation rate" in out and "target 1" in out and "target 2" not in out
 
@@ -62,7 +71,10 @@ BAD = [
     (["run", "--set", "n_uavs=abc"], "n_uavs: Input should be a valid integer"),
     (["run", "--set", "comm_range=-10"], "comm_range: Input should be greater than or equal to 0"),
     (["run", "--set", "n_uavs=0"], "n_uavs: Input should be greater than or equal to 1"),
-    (["run", "--set", "sensor.half_fov_deg=90"], "sensor.half_fov_deg: Input should be less than 90"),
+    (
+        ["run", "--set", "sensor.half_fov_deg=90"],
+        "sensor.half_fov_deg: Input should be less than 90",
+    ),
     (["run", "--set", "steps"], "--set expects FIELD=VALUE"),
     (["run", "--method", "best"], "'best' is not one of"),
     (["run", "--seed", "-3"], "--seed"),
@@ -95,7 +107,9 @@ def test_malformed_config_file(capsys, tmp_path):
 
 
 def test_trace_into_missing_directory(capsys, tmp_path):
-    code, _, err = run_cli(capsys, "run", "--set", "steps=5", "--trace", str(tmp_path / "no" / "t.npz"))
+    code, _, err = run_cli(
+        capsys, "run", "--set", "steps=5", "--trace", str(tmp_path / "no" / "t.npz")
+    )
     assert code == 2 and "does not exist" in err
 
 
@@ -115,8 +129,11 @@ def test_params_lists_every_field(capsys):
 
 
 def test_console_script_exit_code():
-    proc = subprocess.run([sys.executable, "-m", "uavtrack.cli", "run", "--set", "planner.horizon=0"],
-                          capture_output=True, text=True)
+    proc = subprocess.run(
+        [sys.executable, "-m", "uavtrack.cli", "run", "--set", "planner.horizon=0"],
+        capture_output=True,
+        text=True,
+    )
     assert proc.returncode == 2
-    assert proc.stderr.strip() == (
-        "uavtrack: error: --set: planner.horizon: Input should be greater than or equal to 2 (got 0)")
+    expected = "--set: planner.horizon: Input should be greater than or equal to 2 (got 0)"
+    assert proc.stderr.strip() == f"uavtrack: error: {expected}"

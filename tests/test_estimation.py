@@ -13,8 +13,14 @@ def test_transition_and_process_noise_match_eqs_14_15_at_unit_step():
     s1, s2 = 0.16, 0.3
     Q = estimation.process_noise(1.0, s1, s2)
     # eq. (15) as printed, in the order (x, vx, y, vy), permuted to (x, y, vx, vy)
-    printed = np.array([[s1**2 / 4, s1**2 / 2, 0, 0], [s1**2 / 2, s1**2, 0, 0],
-                        [0, 0, s2**2 / 4, s2**2 / 2], [0, 0, s2**2 / 2, s2**2]])
+    printed = np.array(
+        [
+            [s1**2 / 4, s1**2 / 2, 0, 0],
+            [s1**2 / 2, s1**2, 0, 0],
+            [0, 0, s2**2 / 4, s2**2 / 2],
+            [0, 0, s2**2 / 2, s2**2],
+        ]
+    )
     order = [0, 2, 1, 3]
     assert np.allclose(Q, printed[np.ix_(order, order)])
 
@@ -23,12 +29,16 @@ def test_update_hand_computed():
     # prior P = diag(4, 4, 1, 1) predicted with dT = 1 and Q = 0:
     # per axis P(k|k-1) = [[5, 1], [1, 1]]; R = I -> S = 6, K = [5/6, 1/6]
     A, Q = estimation.transition(1.0), np.zeros((4, 4))
-    mean, cov = estimation.predict(np.array([1.0, 2.0, 1.0, -1.0]), np.diag([4.0, 4.0, 1.0, 1.0]), A, Q)
+    mean, cov = estimation.predict(
+        np.array([1.0, 2.0, 1.0, -1.0]), np.diag([4.0, 4.0, 1.0, 1.0]), A, Q
+    )
     assert np.allclose(mean, [2.0, 1.0, 1.0, -1.0])
     z = np.array([3.2, 0.4])
     post_mean, post_cov = estimation.update(mean, cov, z, np.eye(2))
     # innovation (1.2, -0.6)
-    assert np.allclose(post_mean, [2 + 5 / 6 * 1.2, 1 - 5 / 6 * 0.6, 1 + 1 / 6 * 1.2, -1 - 1 / 6 * 0.6])
+    assert np.allclose(
+        post_mean, [2 + 5 / 6 * 1.2, 1 - 5 / 6 * 0.6, 1 + 1 / 6 * 1.2, -1 - 1 / 6 * 0.6]
+    )
     # P+ = P - K S K^T: [[5 - 25/6, 1 - 5/6], [., 1 - 1/6]]
     axis = np.array([[5 / 6, 1 / 6], [1 / 6, 5 / 6]])
     assert np.allclose(post_cov[np.ix_([0, 2], [0, 2])], axis)
@@ -96,9 +106,16 @@ def nees_runs(n_runs, steps, ground_range=30.0, altitude=500.0):
             if k:
                 x = world.move_targets(x, rng.normal(0, 0.16, 2), 1.0, 2e4)
                 mean, cov = estimation.predict(mean, cov, A, Q)
-            uav = np.array([x[0] + ground_range * np.cos(0.65 * k),
-                            x[1] + ground_range * np.sin(0.65 * k), altitude])
-            zc, R = sensing.convert(uav, sensing.measure(uav, x, sensor, rng.standard_normal(2)), sensor)
+            uav = np.array(
+                [
+                    x[0] + ground_range * np.cos(0.65 * k),
+                    x[1] + ground_range * np.sin(0.65 * k),
+                    altitude,
+                ]
+            )
+            zc, R = sensing.convert(
+                uav, sensing.measure(uav, x, sensor, rng.standard_normal(2)), sensor
+            )
             mean, cov = estimation.update(mean, cov, zc, R)
             out[run, k] = estimation.nees(mean, cov, x)
     return out

@@ -76,8 +76,9 @@ def test_isolated_uavs_keep_their_own():
 @st.composite
 def geometric_graphs(draw):
     n = draw(st.integers(1, 14))
-    pts = np.array(draw(st.lists(st.tuples(st.floats(0, 100), st.floats(0, 100)),
-                                 min_size=n, max_size=n)))
+    pts = np.array(
+        draw(st.lists(st.tuples(st.floats(0, 100), st.floats(0, 100)), min_size=n, max_size=n))
+    )
     radius = draw(st.floats(0, 60))
     uavs = np.zeros((n, 5))
     uavs[:, :2] = pts

@@ -15,14 +15,19 @@ def random_case(rng, batch=(), nu=3, nt=4):
     uavs[..., 2] = rng.uniform(450, 550, batch + (nu,))
     uavs[..., 3] = 15.0
     uavs[..., 4] = rng.uniform(-np.pi, np.pi, batch + (nu,))
-    mean = np.concatenate([rng.uniform(0, 200, batch + (nu, nt, 2)),
-                           rng.normal(0, 3, batch + (nu, nt, 2))], axis=-1)
+    mean = np.concatenate(
+        [rng.uniform(0, 200, batch + (nu, nt, 2)), rng.normal(0, 3, batch + (nu, nt, 2))], axis=-1
+    )
     return uavs, mean
 
 
 @settings(max_examples=40, deadline=None)
-@given(seed=st.integers(0, 2**32 - 1), horizon=st.integers(2, 5),
-       bank=st.floats(10, 70), discount=st.sampled_from([1.0, 0.9, 0.5]))
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    horizon=st.integers(2, 5),
+    bank=st.floats(10, 70),
+    discount=st.sampled_from([1.0, 0.9, 0.5]),
+)
 def test_tree_planner_equals_exhaustive_search(seed, horizon, bank, discount):
     rng = np.random.default_rng(seed)
     uavs, mean = random_case(rng, batch=(2,))

@@ -39,7 +39,9 @@ def expected_negative_hessian(p0, h, target, sensor, step=1e-3):
     for m in range(2):
         for n in range(2):
             f = lambda dp: log_likelihood(p0 + dp, h, target, points, sensor)  # noqa: E731
-            second = (f(E[m] + E[n]) - f(E[m] - E[n]) - f(-E[m] + E[n]) + f(-E[m] - E[n])) / (4 * step**2)
+            second = (f(E[m] + E[n]) - f(E[m] - E[n]) - f(-E[m] + E[n]) + f(-E[m] - E[n])) / (
+                4 * step**2
+            )
             hess[m, n] = second.mean()
     return -hess
 
@@ -60,12 +62,24 @@ def test_fisher_information_equals_score_covariance(rng):
     sensor = SensorModel()
     p0, h, target = np.array([0.0, 0.0]), 500.0, np.array([25.0, 18.0])
     n = 400_000
-    z = sensing.measure(np.broadcast_to([*p0, h], (n, 3)), np.broadcast_to(target, (n, 2)),
-                        sensor, rng.standard_normal((n, 2)))
+    z = sensing.measure(
+        np.broadcast_to([*p0, h], (n, 3)),
+        np.broadcast_to(target, (n, 2)),
+        sensor,
+        rng.standard_normal((n, 2)),
+    )
     step = 1e-4
-    score = np.stack([(log_likelihood(p0 + e, h, target, z, sensor)
-                       - log_likelihood(p0 - e, h, target, z, sensor)) / (2 * step)
-                      for e in np.eye(2) * step], axis=-1)
+    score = np.stack(
+        [
+            (
+                log_likelihood(p0 + e, h, target, z, sensor)
+                - log_likelihood(p0 - e, h, target, z, sensor)
+            )
+            / (2 * step)
+            for e in np.eye(2) * step
+        ],
+        axis=-1,
+    )
     G = sensing.fisher_information(np.array([*p0, h]), target, sensor)
     assert np.allclose(score.T @ score / n, G, rtol=0.02, atol=0.02 * np.abs(G).max())
 
@@ -113,8 +127,12 @@ def test_measurement_noise_statistics(rng):
     sensor = SensorModel()
     uav, target = np.array([0.0, 0.0, 500.0]), np.array([20.0, -30.0])
     n = 200_000
-    z = sensing.measure(np.broadcast_to(uav, (n, 3)), np.broadcast_to(target, (n, 2)), sensor,
-                        rng.standard_normal((n, 2)))
+    z = sensing.measure(
+        np.broadcast_to(uav, (n, 3)),
+        np.broadcast_to(target, (n, 2)),
+        sensor,
+        rng.standard_normal((n, 2)),
+    )
     d = np.sqrt(20.0**2 + 30.0**2 + 500.0**2)
     sd, st = sensing.noise_std(d, sensing.edge_range(500.0, sensor), sensor)
     assert z[:, 0].mean() == pytest.approx(d, abs=4 * sd / np.sqrt(n))
@@ -131,8 +149,9 @@ def test_conversion_is_exact_without_noise_and_R_is_J_C_Jt():
     assert np.allclose(zc, target, atol=1e-9)
     d, theta = z
     r = np.sqrt(d * d - 500.0**2)
-    J = np.array([[d / r * np.cos(theta), -r * np.sin(theta)],
-                  [d / r * np.sin(theta), r * np.cos(theta)]])  # eq. (10)
+    J = np.array(
+        [[d / r * np.cos(theta), -r * np.sin(theta)], [d / r * np.sin(theta), r * np.cos(theta)]]
+    )  # eq. (10)
     sd, st = sensing.noise_std(d, sensing.edge_range(500.0, sensor), sensor)
     assert np.allclose(R, J @ np.diag([sd**2, st**2]) @ J.T, rtol=1e-12)
 
@@ -145,7 +164,9 @@ def test_converted_measurement_is_consistent_at_every_ground_range(rng, ground_r
     n = 100_000
     uav = np.broadcast_to([0.0, 0.0, 500.0], (n, 3))
     target = np.broadcast_to([ground_range * np.cos(0.4), ground_range * np.sin(0.4)], (n, 2))
-    zc, R = sensing.convert(uav, sensing.measure(uav, target, sensor, rng.standard_normal((n, 2))), sensor)
+    zc, R = sensing.convert(
+        uav, sensing.measure(uav, target, sensor, rng.standard_normal((n, 2))), sensor
+    )
     e = zc - target
     q = np.einsum("ni,ni->n", e, np.linalg.solve(R, e[..., None])[..., 0])
     assert 1.5 < q.mean() < 2.5

@@ -42,7 +42,9 @@ def test_no_radio_distributed_decides_as_greedy(short):
 def test_methods_differ_when_the_radio_is_limited():
     scenario = uavtrack.Scenario(steps=150)
     runs = {m: uavtrack.simulate(scenario, m, seed=0) for m in uavtrack.METHODS}
-    assert not np.array_equal(runs["distributed"].trace.assignment, runs["centralized"].trace.assignment)
+    assert not np.array_equal(
+        runs["distributed"].trace.assignment, runs["centralized"].trace.assignment
+    )
     assert not np.array_equal(runs["distributed"].trace.assignment, runs["greedy"].trace.assignment)
 
 

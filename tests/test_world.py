@@ -58,12 +58,21 @@ def test_bank_angle_first_moves_the_uav_one_step_later():
     state = np.array([0.0, 0.0, 500.0, 15.0, 0.0])
     left, right = world.fly(state, np.array(0.5), 1.0), world.fly(state, np.array(-0.5), 1.0)
     assert np.array_equal(left[:2], right[:2])
-    assert not np.allclose(world.fly(left, np.array(0.0), 1.0)[:2], world.fly(right, np.array(0.0), 1.0)[:2])
+    assert not np.allclose(
+        world.fly(left, np.array(0.0), 1.0)[:2], world.fly(right, np.array(0.0), 1.0)[:2]
+    )
 
 
 def test_fly_broadcasts_over_leading_axes(rng):
-    states = np.concatenate([rng.uniform(0, 100, (3, 4, 2)), np.full((3, 4, 1), 500.0),
-                             np.full((3, 4, 1), 15.0), rng.uniform(-3, 3, (3, 4, 1))], axis=-1)
+    states = np.concatenate(
+        [
+            rng.uniform(0, 100, (3, 4, 2)),
+            np.full((3, 4, 1), 500.0),
+            np.full((3, 4, 1), 15.0),
+            rng.uniform(-3, 3, (3, 4, 1)),
+        ],
+        axis=-1,
+    )
     bank = rng.choice([-0.7, 0.0, 0.7], (3, 4))
     batched = world.fly(states, bank, 1.0)
     for i in range(3):

@@ -10,7 +10,7 @@ import json
 import os
 import sys
 import tempfile
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
 from typing import Annotated, Any
 
@@ -27,7 +27,7 @@ app = typer.Typer(
 )
 
 
-class MethodName(str, Enum):
+class MethodName(StrEnum):
     distributed = "distributed"
     centralized = "centralized"
     greedy = "greedy"
@@ -114,9 +114,8 @@ def run(
         summary["scenario"] = scenario.model_dump()
         typer.echo(json.dumps(summary))
         return
-    from rich.table import Table
-
     from rich.markup import escape
+    from rich.table import Table
 
     table = Table(title=f"uavtrack run: {summary['method']}, seed {seed}", show_header=False)
     table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
@@ -151,16 +150,34 @@ def compare(
     names = [m.value for m in (methods or list(MethodName))]
     results = {m: summarize(v) for m, v in run_compare(scenario, names, trials, seed).items()}
     if as_json:
-        typer.echo(json.dumps({"trials": trials, "seed": seed, "methods": results,
-                               "scenario": scenario.model_dump()}))
+        typer.echo(
+            json.dumps(
+                {
+                    "trials": trials,
+                    "seed": seed,
+                    "methods": results,
+                    "scenario": scenario.model_dump(),
+                }
+            )
+        )
         return
     from rich.markup import escape
     from rich.table import Table
 
     table = Table(title=f"{trials} trials, seed {seed}")
-    for col in ("method", "observation rate", "per target", "RMSE [m]", "NEES", "rounds",
-                "messages", "decision [ms]"):
-        table.add_column(escape(col), justify="left" if col in ("method", "per target") else "right")
+    for col in (
+        "method",
+        "observation rate",
+        "per target",
+        "RMSE [m]",
+        "NEES",
+        "rounds",
+        "messages",
+        "decision [ms]",
+    ):
+        table.add_column(
+            escape(col), justify="left" if col in ("method", "per target") else "right"
+        )
     for name, r in results.items():
         table.add_row(
             name,

@@ -164,8 +164,7 @@ class PlannerModel(_Part):
         gt=0,
         le=1,
         description=(
-            "weight lambda^(t-1) of the t-th step's det G [-]; Algorithm 1 sums "
-            "undiscounted (1.0)"
+            "weight lambda^(t-1) of the t-th step's det G [-]; Algorithm 1 sums undiscounted (1.0)"
         ),
     )
 
@@ -178,9 +177,7 @@ class Scenario(_Part):
     """
 
     n_uavs: int = Field(5, ge=1, le=10_000, description="number of UAVs N^u; paper Sec. 7.1")
-    n_targets: int = Field(
-        4, ge=1, le=10_000, description="number of targets N^t; paper Sec. 7.1"
-    )
+    n_targets: int = Field(4, ge=1, le=10_000, description="number of targets N^t; paper Sec. 7.1")
     steps: int = Field(500, ge=1, description="simulated decision cycles; paper Sec. 7")
     dt: float = Field(
         0.5,
@@ -219,9 +216,7 @@ class Scenario(_Part):
                 f"uav.altitudes has {len(self.uav.altitudes)} entries but n_uavs is {self.n_uavs}"
             )
         if min(self.altitudes()) <= 0:
-            raise ValueError(
-                "uav.altitude and uav.altitude_spacing give a UAV an altitude <= 0"
-            )
+            raise ValueError("uav.altitude and uav.altitude_spacing give a UAV an altitude <= 0")
         return self
 
     def altitudes(self) -> list[float]:
@@ -229,7 +224,9 @@ class Scenario(_Part):
         if self.uav.altitudes is not None:
             return list(self.uav.altitudes)
         mid = (self.n_uavs - 1) / 2
-        return [self.uav.altitude + (i - mid) * self.uav.altitude_spacing for i in range(self.n_uavs)]
+        return [
+            self.uav.altitude + (i - mid) * self.uav.altitude_spacing for i in range(self.n_uavs)
+        ]
 
     # ------------------------------------------------------------------ I/O
 

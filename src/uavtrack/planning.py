@@ -63,7 +63,9 @@ def _tree(n_actions: int, horizon: int) -> tuple[np.ndarray, np.ndarray]:
     (L, horizon-1) action indices of leaf path l), with L = |A|^(h-1) leaf paths in
     lexicographic order and nodes numbered depth by depth (depth t has |A|^(t-1)).
     """
-    prefixes = np.array(list(itertools.product(range(n_actions), repeat=horizon - 1)), dtype=np.int64)
+    prefixes = np.array(
+        list(itertools.product(range(n_actions), repeat=horizon - 1)), dtype=np.int64
+    )
     prefixes = prefixes.reshape(-1, horizon - 1)
     path = np.empty((len(prefixes), horizon), dtype=np.int64)
     offset = 0

@@ -44,7 +44,9 @@ def in_view(uav: np.ndarray, target: np.ndarray, sensor: SensorModel) -> np.ndar
     return r <= observation_radius(uav[..., 2], sensor)
 
 
-def noise_std(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
+def noise_std(
+    d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel
+) -> tuple[np.ndarray, np.ndarray]:
     """Range and bearing standard deviations [m], [rad] at slant range d, eq. (3)."""
     ratio = d / d_edge
     # the exponent is capped so that far, unobserved pairs give a huge std, not inf
@@ -67,9 +69,7 @@ def measure(
     return np.stack([d + sigma_d * noise[..., 0], theta + sigma_theta * noise[..., 1]], axis=-1)
 
 
-def convert(
-    uav: np.ndarray, z: np.ndarray, sensor: SensorModel
-) -> tuple[np.ndarray, np.ndarray]:
+def convert(uav: np.ndarray, z: np.ndarray, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
     """Polar-to-Cartesian conversion and its covariance, eqs. (5)-(12).
 
     z^C = p^u + r (cos theta, sin theta) with r = sqrt(d^2 - h^2) (eq. 5), and

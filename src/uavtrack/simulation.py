@@ -40,7 +40,9 @@ class Constants:
     def of(cls, scenario: Scenario) -> Constants:
         return cls(
             A=estimation.transition(scenario.dt),
-            Q=estimation.process_noise(scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2),
+            Q=estimation.process_noise(
+                scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2
+            ),
             actions=planning.action_set(np.radians(scenario.uav.bank_angle_deg)),
             altitudes=np.array(scenario.altitudes()),
         )
@@ -95,23 +97,34 @@ def step(
     graph = network.adjacency(uavs, scenario.comm_range)
     observed, z, R = sense(uavs, targets, noise, scenario)
     mean, cov = estimation.filter_step(
-        state.mean, state.cov, observed, z, R,
+        state.mean,
+        state.cov,
+        observed,
+        z,
+        R,
         *((const.A, const.Q) if state.k > 0 else (None, None)),
     )
     fused = method.fuse(estimation.confidence(cov), graph)
     mean, cov = fusion.gather(fused.source, mean), fusion.gather(fused.source, cov)
     start = time.perf_counter()
     plan = planning.plan(
-        uavs, mean, scenario.sensor, np.radians(scenario.uav.bank_angle_deg),
-        scenario.planner.horizon, scenario.dt, scenario.planner.discount, G,
+        uavs,
+        mean,
+        scenario.sensor,
+        np.radians(scenario.uav.bank_angle_deg),
+        scenario.planner.horizon,
+        scenario.dt,
+        scenario.planner.discount,
+        G,
     )
     plan_seconds = time.perf_counter() - start
     target, assign_seconds = method.assign(plan.value, graph)
     action = np.take_along_axis(plan.action, target[..., None], axis=-1)[..., 0]
     new_uavs = world.fly(uavs, const.actions[action], scenario.dt, G)
     share = plan_seconds / (uavs.shape[0] if method.central else uavs.shape[0] * uavs.shape[1])
-    cycle = Cycle(observed, plan.value, target, action, fused.rounds, fused.messages,
-                  share + assign_seconds)
+    cycle = Cycle(
+        observed, plan.value, target, action, fused.rounds, fused.messages, share + assign_seconds
+    )
     return State(state.k + 1, new_uavs, mean, cov), cycle
 
 
@@ -251,8 +264,15 @@ def run(
         noise = np.stack([rng.standard_normal((Nu, Nt, 2)) for rng in sensor_rngs])
         before = state.uavs
         state, cycle = step(state, trajectory[:, k], noise, scenario, method, const)
-        tally.add(cycle.observed, trajectory[:, k], state.mean, state.cov, cycle.rounds,
-                  cycle.messages, cycle.decision_time)
+        tally.add(
+            cycle.observed,
+            trajectory[:, k],
+            state.mean,
+            state.cov,
+            cycle.rounds,
+            cycle.messages,
+            cycle.decision_time,
+        )
         if rec is not None:
             rec.record(k, before, state, cycle, const)
     traces = rec.traces(trajectory) if rec is not None else None
@@ -274,7 +294,9 @@ class _Recorder:
         self.messages = np.empty((B, T), dtype=np.int64)
         self.decision_time = np.empty((B, T, Nu))
 
-    def record(self, k: int, uavs: np.ndarray, state: State, cycle: Cycle, const: Constants) -> None:
+    def record(
+        self, k: int, uavs: np.ndarray, state: State, cycle: Cycle, const: Constants
+    ) -> None:
         self.uavs[:, k] = uavs
         self.mean[:, k] = state.mean
         self.cov[:, k] = state.cov
@@ -288,9 +310,19 @@ class _Recorder:
 
     def traces(self, trajectory: np.ndarray) -> list[Trace]:
         return [
-            Trace(trajectory[b], self.uavs[b], self.mean[b], self.cov[b], self.observed[b],
-                  self.bids[b], self.assignment[b], self.action[b], self.rounds[b],
-                  self.messages[b], self.decision_time[b])
+            Trace(
+                trajectory[b],
+                self.uavs[b],
+                self.mean[b],
+                self.cov[b],
+                self.observed[b],
+                self.bids[b],
+                self.assignment[b],
+                self.action[b],
+                self.rounds[b],
+                self.messages[b],
+                self.decision_time[b],
+            )
             for b in range(trajectory.shape[0])
         ]
 

@@ -75,5 +75,7 @@ def target_trajectories(
     out = np.empty(initial.shape[:-2] + (steps,) + initial.shape[-2:])
     out[..., 0, :, :] = initial
     for k in range(1, steps):
-        out[..., k, :, :] = move_targets(out[..., k - 1, :, :], accel[..., k - 1, :, :], dt, field_size)
+        out[..., k, :, :] = move_targets(
+            out[..., k - 1, :, :], accel[..., k - 1, :, :], dt, field_size
+        )
     return out
