@@ -6,6 +6,7 @@ import numpy as np
 import pytest
 
 from uavtrack import cli
+from uavtrack.files import replacing
 
 
 def run_cli(capsys, *args):
@@ -114,13 +115,14 @@ def test_trace_into_missing_directory(capsys, tmp_path):
 
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
-    def explode(f):
-        f.write(b"partial")
+    with pytest.raises(RuntimeError), replacing(tmp_path / "x.npz") as tmp:
+        tmp.write_bytes(b"partial")
         raise RuntimeError("disk full")
-
-    with pytest.raises(RuntimeError):
-        cli.atomic_write(tmp_path / "x.npz", explode)
     assert not any(tmp_path.iterdir())
+    with replacing(tmp_path / "y.json") as tmp:
+        tmp.write_text("{}")
+    assert [p.name for p in tmp_path.iterdir()] == ["y.json"]
+    assert oct((tmp_path / "y.json").stat().st_mode & 0o777) != oct(0o600)
 
 
 def test_params_lists_every_field(capsys):

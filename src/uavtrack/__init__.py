@@ -11,6 +11,7 @@ planning and neighbourhood Hungarian auctions, with centralized and greedy basel
     True
 """
 
+from ._version import __version__
 from .config import (
     EstimationModel,
     PlannerModel,
@@ -22,8 +23,6 @@ from .config import (
 )
 from .methods import METHODS, Method
 from .simulation import BatchResult, Result, Trace, run, simulate, trial_seed
-
-__version__ = "0.1.0"
 
 __all__ = [
     "METHODS",
@@ -41,4 +40,5 @@ __all__ = [
     "run",
     "simulate",
     "trial_seed",
+    "__version__",
 ]

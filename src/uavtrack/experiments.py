@@ -1,19 +1,317 @@
-"""Monte Carlo experiments: many trials of a scenario per method.
+"""Monte Carlo experiments: the paper's Section 7 and parameter sweeps, as lists of jobs.
 
-Trial t of an experiment seeded with s uses `trial_seed(s, t)`, whatever the method,
-so every method sees the same targets and noise in a trial (common random numbers)
-and differences between methods are paired.
+A job is a fixed chunk of trials of one scenario with one method. Trial t of an
+experiment seeded with s uses `trial_seed(s, t)` whatever the method, scenario or
+chunking, so
+
+* every method sees the same targets and noise in a trial (common random numbers),
+  and differences between methods are paired;
+* results do not depend on how many workers run the jobs, or on which engine.
+
+Jobs with the same scenario and method are the same job, so the r_C = 50 m point of
+Fig. 8 is Fig. 5's distributed run, computed once.
 """
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+import json
+import math
+from collections.abc import Iterable, Sequence
+from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
+from scipy import stats
 
 from .config import Scenario
 from .metrics import mean_std
 from .simulation import run, trial_seed
+
+METHOD_NAMES = ("distributed", "centralized", "greedy")
+
+PAPER_FIG5 = {
+    "distributed": (0.8031, 0.1262),
+    "centralized": (0.8048, 0.1217),
+    "greedy": (0.6664, 0.1507),
+}
+"""The paper's overall observation rates, mean and std over 50 trials (Sec. 7.1)."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The size of a reproduction of Section 7."""
+
+    trials: int = 50
+    steps: int = 500
+    chunk: int = 10
+    comm_ranges: tuple[float, ...] = (10, 20, 30, 40, 50, 60, 70, 80)
+    half_fovs: tuple[float, ...] = (5, 6, 7, 8, 9, 10)
+    timing_grid: tuple[tuple[int, int], ...] = ((3, 2), (5, 4), (8, 6), (10, 10), (20, 20))
+    timing_trials: int = 3
+    timing_steps: int = 100
+
+    @classmethod
+    def quick(cls) -> Profile:
+        """A smoke-test profile: a few short trials, coarse grids."""
+        return cls(
+            trials=4,
+            steps=60,
+            chunk=2,
+            comm_ranges=(10, 50, 80),
+            half_fovs=(5, 8),
+            timing_grid=((3, 2), (5, 4)),
+            timing_trials=1,
+            timing_steps=20,
+        )
+
+    def to_dict(self) -> dict[str, Any]:
+        return {k: _plain(getattr(self, k)) for k in self.__dataclass_fields__}
+
+
+def _plain(value):
+    if isinstance(value, tuple):
+        return [_plain(v) for v in value]
+    return value
+
+
+@dataclass(frozen=True)
+class Job:
+    """A chunk of trials (or of timing runs) of one scenario with one method."""
+
+    kind: str  # "trials" or "timing"
+    label: str  # the scenario's difference from the base, e.g. "comm_range=10"
+    method: str
+    scenario: Scenario
+    first: int
+    count: int
+    seed: int
+
+    @property
+    def key(self) -> str:
+        """File-name stem, unique within an experiment folder."""
+        span = f"t{self.first:03d}-{self.first + self.count - 1:03d}"
+        return f"{self.kind}__{self.label}__{self.method}__{span}"
+
+
+def run_job(job: Job) -> dict[str, Any]:
+    """Execute a job; returns JSON-ready per-trial metrics (this runs on the workers).
+
+    Trial jobs run their trials as one batch. Timing jobs run them one at a time, so
+    the decision time is that of one team, not a share of a batch.
+    """
+    seeds = [trial_seed(job.seed, t) for t in range(job.first, job.first + job.count)]
+    if job.kind == "trials":
+        metrics = run(job.scenario, job.method, seeds).metrics
+    else:
+        parts = [run(job.scenario, job.method, [s]).metrics for s in seeds]
+        metrics = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    return {name: np.asarray(values).tolist() for name, values in metrics.items()}
+
+
+def label_of(overrides: dict[str, Any]) -> str:
+    """Readable label of a set of overrides ('default' when empty)."""
+    if not overrides:
+        return "default"
+    return ",".join(f"{k}={_fmt(v)}" for k, v in sorted(overrides.items()))
+
+
+def _fmt(value: Any) -> str:
+    if isinstance(value, float) and value.is_integer():
+        return str(int(value))
+    return json.dumps(value) if isinstance(value, list | dict) else str(value)
+
+
+def trial_jobs(
+    base: Scenario, overrides: dict[str, Any], method: str, trials: int, chunk: int, seed: int
+) -> list[Job]:
+    """Jobs covering trials 0 .. trials-1 of base+overrides with one method."""
+    scenario = base.with_overrides(overrides)
+    label = "default" if scenario == base else label_of(overrides)
+    return [
+        Job("trials", label, method, scenario, first, min(chunk, trials - first), seed)
+        for first in range(0, trials, chunk)
+    ]
+
+
+def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
+    """Every experiment of the paper's Section 7 as jobs, grouped by experiment."""
+    base = base.with_overrides({"steps": profile.steps})
+    tj = lambda over, method: trial_jobs(base, over, method, profile.trials, profile.chunk, seed)  # noqa: E731
+    plan = {
+        "compare": [j for m in METHOD_NAMES for j in tj({}, m)],
+        "comm_range": [
+            j for r in profile.comm_ranges for j in tj({"comm_range": r}, "distributed")
+        ],
+        "fov": [
+            j for a in profile.half_fovs for j in tj({"sensor.half_fov_deg": a}, "distributed")
+        ],
+        "timing": [],
+    }
+    for nu, nt in profile.timing_grid:
+        over = {"n_uavs": nu, "n_targets": nt, "steps": profile.timing_steps}
+        scenario = base.with_overrides(over)
+        for m in METHOD_NAMES:
+            plan["timing"].append(
+                Job(
+                    "timing",
+                    label_of({"n_uavs": nu, "n_targets": nt}),
+                    m,
+                    scenario,
+                    0,
+                    profile.timing_trials,
+                    seed,
+                )
+            )
+    return plan
+
+
+def sweep_plan(
+    base: Scenario,
+    field: str,
+    values: Sequence[Any],
+    methods: Sequence[str],
+    trials: int,
+    chunk: int = 10,
+    seed: int = 0,
+) -> dict[str, list[Job]]:
+    """One field over several values, each method on the same trials."""
+    return {
+        "sweep": [
+            j
+            for v in values
+            for m in methods
+            for j in trial_jobs(base, {field: v}, m, trials, chunk, seed)
+        ]
+    }
+
+
+def unique(jobs: Iterable[Job]) -> list[Job]:
+    """Jobs without repeats (the same key is the same computation), in first-seen order."""
+    seen: dict[str, Job] = {}
+    for job in jobs:
+        seen.setdefault(job.key, job)
+    return list(seen.values())
+
+
+# ------------------------------------------------------------------ aggregation
+
+
+def collect(jobs: Sequence[Job], results: dict[str, dict[str, Any]]) -> dict[tuple[str, str], dict]:
+    """Per-trial metric arrays per (label, method), trials in order."""
+    grouped: dict[tuple[str, str], list[tuple[int, dict]]] = {}
+    for job in jobs:
+        grouped.setdefault((job.label, job.method), []).append((job.first, results[job.key]))
+    out = {}
+    for key, parts in grouped.items():
+        parts.sort(key=lambda p: p[0])
+        out[key] = {
+            name: np.concatenate([np.asarray(p[name]) for _, p in parts]) for name in parts[0][1]
+        }
+    return out
+
+
+def describe(metrics: dict[str, np.ndarray]) -> dict[str, Any]:
+    """Mean and std over trials of the rate, per target, sorted per target, and costs."""
+    rate_mean, rate_std = mean_std(metrics["observation_rate"])
+    tgt_mean, tgt_std = mean_std(metrics["per_target"])
+    srt_mean, srt_std = mean_std(np.sort(metrics["per_target"], axis=1))
+    out = {
+        "trials": int(len(metrics["observation_rate"])),
+        "mean": float(rate_mean),
+        "std": float(rate_std),
+        "per_target_mean": tgt_mean.tolist(),
+        "per_target_std": tgt_std.tolist(),
+        "sorted_mean": srt_mean.tolist(),
+        "sorted_std": srt_std.tolist(),
+    }
+    for name in ("rmse", "nees", "rounds", "messages", "decision_time"):
+        m, s = mean_std(metrics[name])
+        out[name] = {"mean": float(m), "std": float(s)}
+    return out
+
+
+def paired(a: np.ndarray, b: np.ndarray, level: float = 0.95) -> dict[str, float]:
+    """Mean of the per-trial differences a - b with a t confidence interval."""
+    diff = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    n = len(diff)
+    mean = float(diff.mean())
+    if n < 2:
+        return {"mean": mean, "ci_low": math.nan, "ci_high": math.nan, "trials": n}
+    half = float(stats.t.ppf(0.5 + level / 2, n - 1) * diff.std(ddof=1) / math.sqrt(n))
+    return {"mean": mean, "ci_low": mean - half, "ci_high": mean + half, "trials": n}
+
+
+def summarize_reproduction(
+    plan: dict[str, list[Job]], results: dict[str, dict], profile: Profile, base: Scenario
+) -> dict[str, Any]:
+    """summary.json of a reproduction: compare, paired, comm_range, fov, timing."""
+    data = {name: collect(jobs, results) for name, jobs in plan.items()}
+    compare = {m: describe(data["compare"][("default", m)]) for m in METHOD_NAMES}
+    rate = {m: data["compare"][("default", m)]["observation_rate"] for m in METHOD_NAMES}
+    pairs = {
+        f"{a} - {b}": paired(rate[a], rate[b])
+        for a, b in (
+            ("distributed", "centralized"),
+            ("distributed", "greedy"),
+            ("centralized", "greedy"),
+        )
+    }
+
+    def curve(name: str, field: str, values: Sequence[Any]) -> dict[str, Any]:
+        labels = [job.label for job in plan[name]]
+        ordered = list(dict.fromkeys(labels))
+        return {
+            "field": field,
+            "values": list(values),
+            "distributed": [describe(data[name][(lab, "distributed")]) for lab in ordered],
+        }
+
+    timing: dict[str, Any] = {
+        "grid": [list(g) for g in profile.timing_grid],
+        "steps": profile.timing_steps,
+        "trials": profile.timing_trials,
+    }
+    for m in METHOD_NAMES:
+        rows = [
+            data["timing"][(label_of({"n_uavs": nu, "n_targets": nt}), m)]["decision_time"]
+            for nu, nt in profile.timing_grid
+        ]
+        timing[m] = {
+            "mean_ms": [1e3 * float(np.mean(r)) for r in rows],
+            "std_ms": [1e3 * float(np.std(r, ddof=1)) if len(r) > 1 else 0.0 for r in rows],
+        }
+    return {
+        "compare": compare,
+        "paired": pairs,
+        "comm_range": curve("comm_range", "comm_range", profile.comm_ranges),
+        "fov": curve("fov", "sensor.half_fov_deg", profile.half_fovs),
+        "timing": timing,
+        "paper": {m: {"mean": v[0], "std": v[1]} for m, v in PAPER_FIG5.items()},
+    }
+
+
+def summarize_sweep(
+    plan: dict[str, list[Job]],
+    results: dict[str, dict],
+    field: str,
+    values: Sequence[Any],
+    methods: Sequence[str],
+) -> dict[str, Any]:
+    """summary.json of a sweep: per value and method, and paired differences."""
+    data = collect(plan["sweep"], results)
+    labels = list(dict.fromkeys(job.label for job in plan["sweep"]))
+    per_method = {m: [describe(data[(lab, m)]) for lab in labels] for m in methods}
+    pairs = {}
+    for k, a in enumerate(methods):
+        for b in methods[k + 1 :]:
+            pairs[f"{a} - {b}"] = [
+                paired(data[(lab, a)]["observation_rate"], data[(lab, b)]["observation_rate"])
+                for lab in labels
+            ]
+    return {"field": field, "values": list(values), "methods": per_method, "paired": pairs}
+
+
+# ------------------------------------------------------------------ in-process helpers
 
 
 def trials(

@@ -1,0 +1,308 @@
+"""The paper's figures (Figs. 4-9) from a summary or a trace, with matplotlib.
+
+Figs. 5-7 are grouped bar charts with standard-deviation error bars, Figs. 8-9 curves
+with error bars, as in the paper; Fig. 4 is an animation written with matplotlib's
+Pillow writer (no ffmpeg). Every figure is written to a temporary file and renamed.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+from matplotlib.patches import Circle, Ellipse  # noqa: E402
+
+from .files import replacing  # noqa: E402
+
+COLORS = {"distributed": "#1f77b4", "centralized": "#2ca02c", "greedy": "#d62728"}
+RANK_COLORS = ["#c6dbef", "#9ecae1", "#6baed6", "#3182bd", "#08519c", "#08306b"]
+
+
+def save(fig: plt.Figure, path: Path, dpi: int = 130) -> None:
+    """Save a figure atomically."""
+    try:
+        with replacing(path) as tmp:
+            fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+    finally:
+        plt.close(fig)
+
+
+def _bars(
+    ax,
+    groups: Sequence[str],
+    series: dict[str, tuple[Sequence[float], Sequence[float]]],
+    colors: dict[str, str] | Sequence[str],
+) -> None:
+    """Grouped bars with error bars: series name -> (means per group, stds per group)."""
+    n = len(series)
+    width = 0.8 / n
+    x = np.arange(len(groups))
+    for k, (name, (mean, std)) in enumerate(series.items()):
+        color = colors[name] if isinstance(colors, dict) else colors[k % len(colors)]
+        ax.bar(
+            x + (k - (n - 1) / 2) * width,
+            mean,
+            width,
+            yerr=std,
+            capsize=3,
+            label=name,
+            color=color,
+            edgecolor="black",
+            linewidth=0.5,
+            error_kw={"elinewidth": 0.8},
+        )
+    ax.set_xticks(x, groups)
+    ax.grid(axis="y", alpha=0.3)
+    ax.set_axisbelow(True)
+
+
+def _rank_names(n: int) -> list[str]:
+    names = ["lowest"] + [f"#{k + 1}" for k in range(1, n - 1)] + ["highest"]
+    return names[:n] if n > 1 else ["only"]
+
+
+def fig5(summary: dict[str, Any], path: Path) -> None:
+    """Mean (± std) observation rate per target and overall, three methods (Fig. 5)."""
+    compare = summary["compare"]
+    nt = len(next(iter(compare.values()))["per_target_mean"])
+    groups = [f"target {j + 1}" for j in range(nt)] + ["overall"]
+    series = {
+        m: (r["per_target_mean"] + [r["mean"]], r["per_target_std"] + [r["std"]])
+        for m, r in compare.items()
+    }
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    _bars(ax, groups, series, COLORS)
+    paper = summary.get("paper", {})
+    for k, m in enumerate(compare):
+        if m in paper:
+            width = 0.8 / len(compare)
+            x = nt + (k - (len(compare) - 1) / 2) * width + 0.3 * width  # beside our bar
+            ax.errorbar(
+                x,
+                paper[m]["mean"],
+                yerr=paper[m]["std"],
+                fmt="D",
+                mfc="white",
+                mec="black",
+                ecolor="gray",
+                capsize=3,
+                ms=6,
+                label="paper (overall)" if k == 0 else None,
+            )
+    ax.set_ylim(0, 1.15)
+    ax.set_ylabel("observation rate")
+    ax.set_title(f"Observation rate, {summary['compare']['distributed']['trials']} trials (Fig. 5)")
+    ax.legend(ncols=4, loc="upper center", fontsize=8)
+    save(fig, path)
+
+
+def fig6(summary: dict[str, Any], path: Path) -> None:
+    """Each trial's target rates sorted lowest to highest, averaged (Fig. 6)."""
+    compare = summary["compare"]
+    nt = len(next(iter(compare.values()))["sorted_mean"])
+    series = {m: (r["sorted_mean"], r["sorted_std"]) for m, r in compare.items()}
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    _bars(ax, _rank_names(nt), series, COLORS)
+    ax.set_ylim(0, 1.15)
+    ax.set_ylabel("observation rate")
+    ax.set_xlabel("targets of each trial, sorted by their observation rate")
+    ax.set_title("Sorted observation rates (Fig. 6)")
+    ax.legend(ncols=3, loc="upper left", fontsize=8)
+    save(fig, path)
+
+
+def fig7(summary: dict[str, Any], path: Path) -> None:
+    """Decision time per cycle over team sizes N UAVs vs M targets (Fig. 7)."""
+    timing = summary["timing"]
+    groups = [f"{n} vs {m}" for n, m in timing["grid"]]
+    series = {m: (timing[m]["mean_ms"], timing[m]["std_ms"]) for m in COLORS if m in timing}
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    _bars(ax, groups, series, COLORS)
+    ax.set_yscale("log")
+    ax.set_ylabel("decision time per UAV and cycle [ms]")
+    ax.set_xlabel("UAVs vs targets")
+    ax.set_title("Decision-making time (Fig. 7)")
+    ax.legend(ncols=3, fontsize=8)
+    save(fig, path)
+
+
+def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> None:
+    """Sorted-rank and average observation rates against a parameter (Figs. 8, 9)."""
+    values = curve["values"]
+    rows = curve["distributed"]
+    nt = len(rows[0]["sorted_mean"])
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for rank, name in enumerate(_rank_names(nt)):
+        ax.errorbar(
+            values,
+            [r["sorted_mean"][rank] for r in rows],
+            yerr=[r["sorted_std"][rank] for r in rows],
+            marker="o",
+            ms=4,
+            capsize=3,
+            color=RANK_COLORS[min(rank + 1, len(RANK_COLORS) - 1)],
+            label=f"{name} target",
+        )
+    ax.errorbar(
+        values,
+        [r["mean"] for r in rows],
+        yerr=[r["std"] for r in rows],
+        marker="s",
+        ms=5,
+        capsize=3,
+        color="black",
+        lw=2,
+        label="average",
+    )
+    ax.set_ylim(0, 1.1)
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel("observation rate")
+    ax.set_title(title)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower right")
+    save(fig, path)
+
+
+def reproduction_figures(summary: dict[str, Any], out: Path) -> list[Path]:
+    """fig5.png ... fig9.png in `out`."""
+    out = Path(out)
+    fig5(summary, out / "fig5.png")
+    fig6(summary, out / "fig6.png")
+    fig7(summary, out / "fig7.png")
+    curve_figure(
+        summary["comm_range"],
+        out / "fig8.png",
+        "communication range r_C [m]",
+        "Distributed method against the communication range (Fig. 8)",
+    )
+    curve_figure(
+        summary["fov"],
+        out / "fig9.png",
+        "half field of view alpha [deg]",
+        "Distributed method against the field of view (Fig. 9)",
+    )
+    return [out / f"fig{k}.png" for k in range(5, 10)]
+
+
+def sweep_figure(summary: dict[str, Any], path: Path) -> None:
+    """Observation rate (mean ± std) of each method against the swept field."""
+    values = summary["values"]
+    numeric = all(isinstance(v, int | float) for v in values)
+    x = values if numeric else list(range(len(values)))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    for m, rows in summary["methods"].items():
+        ax.errorbar(
+            x,
+            [r["mean"] for r in rows],
+            yerr=[r["std"] for r in rows],
+            marker="o",
+            capsize=3,
+            label=m,
+            color=COLORS.get(m),
+        )
+    if not numeric:
+        ax.set_xticks(x, [str(v) for v in values])
+    ax.set_xlabel(summary["field"])
+    ax.set_ylabel("observation rate")
+    ax.set_ylim(0, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend()
+    ax.set_title(f"Sweep of {summary['field']}")
+    save(fig, path)
+
+
+# ------------------------------------------------------------------ Fig. 4 animation
+
+
+def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: str = "") -> int:
+    """Animate a trace like the paper's Fig. 4; returns the number of frames.
+
+    UAVs are arrows along their heading with their observation disks and radio links;
+    targets are black dots; for each target the team's most confident estimate is drawn
+    with its 2-sigma ellipse; a line joins each UAV to its estimate of its target.
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+    from matplotlib.collections import LineCollection
+
+    from .network import adjacency
+    from .sensing import observation_radius
+
+    T, nu, nt = trace.observed.shape
+    frames = list(range(0, T, max(1, every)))
+    radius = observation_radius(np.array(scenario.altitudes()), scenario.sensor)
+    margin = radius.max() + 20
+    lo = min(0.0, np.min(trace.uavs[..., :2])) - margin
+    hi = max(scenario.field_size, np.max(trace.uavs[..., :2])) + margin
+    colors = plt.cm.tab10(np.arange(nu) % 10)
+    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    ax.set_xlim(lo, hi)
+    ax.set_ylim(lo, hi)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x [m]")
+    ax.set_ylabel("y [m]")
+    ax.add_patch(
+        plt.Rectangle(
+            (0, 0), scenario.field_size, scenario.field_size, fill=False, ls=":", color="gray"
+        )
+    )
+    disks = [
+        ax.add_patch(Circle((0, 0), radius[i], color=colors[i], alpha=0.12)) for i in range(nu)
+    ]
+    links = ax.add_collection(LineCollection([], colors="orange", linewidths=1.2, zorder=1))
+    ellipses = [
+        ax.add_patch(Ellipse((0, 0), 0, 0, fill=False, ls="--", color="gray")) for _ in range(nt)
+    ]
+    targets = ax.scatter(np.zeros(nt), np.zeros(nt), c="black", s=30, zorder=4)
+    names = [
+        ax.annotate(f"T{j + 1}", (0, 0), xytext=(4, 4), textcoords="offset points", fontsize=8)
+        for j in range(nt)
+    ]
+    assigned = [ax.plot([], [], color=colors[i], lw=0.8, alpha=0.8, zorder=2)[0] for i in range(nu)]
+    arrows = ax.quiver(
+        np.zeros(nu),
+        np.zeros(nu),
+        np.ones(nu),
+        np.zeros(nu),
+        color=colors,
+        angles="xy",
+        scale_units="xy",
+        scale=1,
+        width=0.012,
+        zorder=5,
+    )
+    heading = ax.set_title("", fontsize=9)
+
+    def draw(k: int) -> None:
+        uavs, mean, cov = trace.uavs[k], trace.mean[k], trace.cov[k]
+        edges = np.argwhere(np.triu(adjacency(uavs, scenario.comm_range)))
+        links.set_segments([uavs[[i, q], :2] for i, q in edges])
+        best = np.argmin(np.trace(cov, axis1=-2, axis2=-1), axis=0)  # most confident UAV
+        for j in range(nt):
+            vals, vecs = np.linalg.eigh(cov[best[j], j, :2, :2])
+            ellipses[j].set_center(mean[best[j], j, :2])
+            ellipses[j].width, ellipses[j].height = 4 * np.sqrt(np.maximum(vals[::-1], 0.0))
+            ellipses[j].angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
+            names[j].xy = trace.targets[k, j, :2]
+        targets.set_offsets(trace.targets[k, :, :2])
+        for i in range(nu):
+            disks[i].set_center(uavs[i, :2])
+            j = trace.assignment[k, i]
+            assigned[i].set_data([uavs[i, 0], mean[i, j, 0]], [uavs[i, 1], mean[i, j, 1]])
+        arrows.set_offsets(uavs[:, :2])
+        arrows.set_UVC(15 * np.cos(uavs[:, 4]), 15 * np.sin(uavs[:, 4]))
+        seen = trace.observed[: k + 1].any(axis=1).mean()
+        heading.set_text(f"{title}  step {k}  observation rate so far {seen:.2f}")
+
+    anim = FuncAnimation(fig, draw, frames=frames)
+    try:
+        with replacing(path) as tmp:
+            anim.save(tmp, writer=PillowWriter(fps=fps), dpi=80)
+    finally:
+        plt.close(fig)
+    return len(frames)

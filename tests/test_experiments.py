@@ -1,0 +1,61 @@
+import numpy as np
+import pytest
+from scipy import stats
+
+import uavtrack
+from uavtrack import experiments
+from uavtrack.experiments import Profile
+
+
+def test_reproduce_plan_shares_the_default_runs():
+    plan = experiments.reproduce_plan(uavtrack.Scenario(), Profile())
+    keys = {name: {j.key for j in jobs} for name, jobs in plan.items()}
+    # r_C = 50 m (Fig. 8) and alpha = 5 deg (Fig. 9) are Fig. 5's distributed runs
+    default = {k for k in keys["compare"] if "__distributed__" in k}
+    assert default <= keys["comm_range"] and default <= keys["fov"]
+    jobs = experiments.unique(j for group in plan.values() for j in group)
+    assert len(jobs) == len({j.key for j in jobs})
+    trial_jobs = [j for j in jobs if j.kind == "trials"]
+    # 3 methods + 7 other ranges + 5 other FOVs, 5 chunks of 10 trials each
+    assert len(trial_jobs) == (3 + 7 + 5) * 5
+    assert {j.count for j in trial_jobs} == {10}
+    assert all(j.scenario.steps == 500 for j in trial_jobs)
+
+
+def test_chunks_cover_trials_exactly_once():
+    jobs = experiments.trial_jobs(uavtrack.Scenario(), {"comm_range": 20.0}, "greedy", 23, 10, 0)
+    covered = [t for j in jobs for t in range(j.first, j.first + j.count)]
+    assert covered == list(range(23))
+    assert jobs[0].label == "comm_range=20"
+
+
+def test_results_do_not_depend_on_chunking():
+    scenario = uavtrack.Scenario(steps=40)
+    whole = experiments.run_job(experiments.trial_jobs(scenario, {}, "distributed", 4, 4, 9)[0])
+    parts = [
+        experiments.run_job(j) for j in experiments.trial_jobs(scenario, {}, "distributed", 4, 2, 9)
+    ]
+    for name in ("observation_rate", "per_target", "rounds", "messages"):
+        assert np.array_equal(np.asarray(whole[name]), np.concatenate([p[name] for p in parts]))
+    assert np.allclose(whole["rmse"], np.concatenate([p["rmse"] for p in parts]), rtol=1e-12)
+
+
+def test_paired_confidence_interval_matches_t_test(rng):
+    a, b = rng.normal(0.8, 0.05, 30), rng.normal(0.7, 0.05, 30)
+    p = experiments.paired(a, b)
+    lo, hi = stats.ttest_rel(a, b).confidence_interval(0.95)
+    assert p["mean"] == pytest.approx(np.mean(a - b))
+    assert (p["ci_low"], p["ci_high"]) == pytest.approx((lo, hi))
+
+
+def test_describe_sorted_ranks():
+    metrics = {
+        "observation_rate": np.array([0.5, 0.7]),
+        "per_target": np.array([[0.9, 0.1], [0.6, 0.8]]),
+    }
+    for name in ("rmse", "nees", "rounds", "messages", "decision_time"):
+        metrics[name] = np.zeros(2)
+    d = experiments.describe(metrics)
+    assert d["sorted_mean"] == pytest.approx([0.35, 0.85])
+    assert d["per_target_mean"] == pytest.approx([0.75, 0.45])
+    assert d["mean"] == pytest.approx(0.6) and d["std"] == pytest.approx(np.std([0.5, 0.7], ddof=1))

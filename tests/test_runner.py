@@ -1,0 +1,123 @@
+import json
+
+import pytest
+
+import uavtrack
+from uavtrack import experiments, runner
+from uavtrack.config import ScenarioError
+
+
+def small_jobs(trials=4, chunk=2):
+    scenario = uavtrack.Scenario(steps=25)
+    return [
+        j
+        for m in ("distributed", "greedy")
+        for j in experiments.trial_jobs(scenario, {}, m, trials, chunk, seed=3)
+    ]
+
+
+def manifest(**extra):
+    return {
+        "kind": "test",
+        "seed": 3,
+        "plan": {"trials": 4},
+        "scenario": uavtrack.Scenario().model_dump(),
+        **extra,
+    }
+
+
+def without_timing(metrics):
+    return {k: v for k, v in metrics.items() if k != "decision_time"}
+
+
+def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
+    jobs = small_jobs()
+    store = runner.Store(tmp_path / "out", manifest())
+    seen = []
+
+    def stop_after_two(job):
+        seen.append(job.key)
+        if len(seen) == 2:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        runner.execute(jobs, store, workers=1, progress=False, on_result=stop_after_two)
+    assert sorted(p.stem for p in store.raw.glob("*.json")) == sorted(seen)
+    assert not list(store.raw.glob(".*"))  # no temporary files left
+    ran = []
+    monkeypatch.setattr(
+        runner, "run_job", lambda job: ran.append(job.key) or experiments.run_job(job)
+    )
+    again = runner.Store(tmp_path / "out", manifest())
+    skipped, failed = runner.execute(jobs, again, workers=1, progress=False)
+    assert skipped == 2 and not failed
+    assert sorted(ran) == sorted(j.key for j in jobs if j.key not in seen)
+    assert all(again.done(j) for j in jobs)
+
+
+def test_failed_job_is_recorded_and_others_finish(tmp_path, monkeypatch):
+    jobs = small_jobs()
+    bad = jobs[1].key
+
+    def flaky(job):
+        if job.key == bad:
+            raise RuntimeError("sensor exploded")
+        return experiments.run_job(job)
+
+    monkeypatch.setattr(runner, "run_job", flaky)
+    store = runner.Store(tmp_path / "out", manifest())
+    skipped, failed = runner.execute(jobs, store, workers=1, progress=False)
+    assert [j.key for j in failed] == [bad]
+    record = json.loads((store.failed / f"{bad}.json").read_text())
+    assert "sensor exploded" in record["error"]
+    assert all(store.done(j) for j in jobs if j.key != bad) and not store.done(jobs[1])
+    # the next run retries only the failed job and clears its record
+    monkeypatch.setattr(runner, "run_job", experiments.run_job)
+    skipped, failed = runner.execute(jobs, store, workers=1, progress=False)
+    assert skipped == len(jobs) - 1 and not failed
+    assert not (store.failed / f"{bad}.json").exists()
+
+
+def test_store_refuses_other_scenario_seed_or_code(tmp_path, monkeypatch):
+    runner.Store(tmp_path / "out", manifest())
+    other = manifest()
+    other["scenario"]["comm_range"] = 10.0
+    with pytest.raises(ScenarioError, match=r"different scenario \(comm_range 50.0, now 10.0\)"):
+        runner.Store(tmp_path / "out", other)
+    with pytest.raises(ScenarioError, match="different seed"):
+        runner.Store(tmp_path / "out", {**manifest(), "seed": 4})
+    monkeypatch.setattr(runner, "code_hash", lambda: "0123456789abcdef")
+    with pytest.raises(ScenarioError, match="different uavtrack code"):
+        runner.Store(tmp_path / "out", manifest())
+    (tmp_path / "junk").mkdir()
+    (tmp_path / "junk" / "notes.txt").write_text("mine")
+    with pytest.raises(ScenarioError, match="not an uavtrack results folder"):
+        runner.Store(tmp_path / "junk", manifest())
+
+
+def collect(store, jobs):
+    return {j.key: without_timing(store.load(j)) for j in jobs}
+
+
+def test_same_results_with_any_number_of_workers(tmp_path):
+    jobs = small_jobs()
+    one = runner.Store(tmp_path / "one", manifest())
+    runner.execute(jobs, one, workers=1, progress=False)
+    two = runner.Store(tmp_path / "two", manifest())
+    runner.execute(jobs, two, workers=2, progress=False)
+    assert collect(one, jobs) == collect(two, jobs)
+
+
+def test_dask_local_cluster_gives_the_local_results(tmp_path):
+    pytest.importorskip("dask.distributed")
+    jobs = small_jobs(trials=2, chunk=1)
+    local = runner.Store(tmp_path / "local", manifest())
+    runner.execute(jobs, local, workers=1, progress=False)
+    dask = runner.Store(tmp_path / "dask", manifest())
+    runner.execute(jobs, dask, engine="dask", workers=2, progress=False)
+    assert collect(local, jobs) == collect(dask, jobs)
+
+
+def test_code_hash_is_stable():
+    assert runner.code_hash() == runner.code_hash()
+    assert len(runner.code_hash()) == 16
