@@ -44,7 +44,10 @@ flip = np.zeros_like(observed)
 flip[1:] = ((np.sign(v[1:]) != np.sign(v[:-1])) & (np.abs(v[1:]) > 0.5)).any(-1)
 recent = np.array([flip[max(0, k - 15) : k + 1].any(axis=0) for k in range(len(flip))])
 print("\ndefault trial, centralized, seed 0: NEES of the fused estimate (4 if consistent)")
-for name, mask in (("observed, no wall in the last 15 steps", observed & ~recent),
-                   ("observed, after a wall", observed & recent), ("not observed", ~observed)):
+for name, mask in (
+    ("observed, no wall in the last 15 steps", observed & ~recent),
+    ("observed, after a wall", observed & recent),
+    ("not observed", ~observed),
+):
     print(f"  {name:40s} {q[mask].mean():8.2f}  ({mask.sum()} target-steps)")
 print(f"  {'all':40s} {q.mean():8.2f}")

@@ -132,3 +132,14 @@ def test_nees_inside_chi_square_band():
     overall = runs.mean()
     lo_all, hi_all = chi2.ppf([0.005, 0.995], 4 * n_runs) / n_runs
     assert lo_all < overall < hi_all
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.data())
+def test_nees_closed_form_equals_solve(data):
+    P = spd(data.draw, 4, data.draw(st.floats(0.01, 100)))
+    e = np.array(data.draw(st.lists(st.floats(-20, 20), min_size=4, max_size=4)))
+    expected = e @ np.linalg.solve(P, e)
+    assert estimation.nees(np.zeros(4), P, e) == pytest.approx(expected, rel=1e-7, abs=1e-9)
+    stacked = estimation.nees(np.zeros((3, 4)), np.stack([P] * 3), np.stack([e] * 3))
+    assert stacked.shape == (3,) and np.allclose(stacked, expected, rtol=1e-7, atol=1e-9)

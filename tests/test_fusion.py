@@ -1,3 +1,5 @@
+from contextlib import contextmanager
+
 import networkx as nx
 import numpy as np
 import pytest
@@ -89,10 +91,26 @@ def geometric_graphs(draw):
     return adj, confidence
 
 
+@contextmanager
+def rounds_on(kind):
+    """Simulate rounds on N x N arrays ("dense") or on edge lists ("sparse")."""
+    saved = fusion.SPARSE_FROM
+    fusion.SPARSE_FROM = 10**9 if kind == "dense" else 1
+    try:
+        yield
+    finally:
+        fusion.SPARSE_FROM = saved
+
+
+@pytest.mark.parametrize("kind", ["dense", "sparse"])
 @settings(max_examples=150, deadline=None)
-@given(geometric_graphs())
-def test_max_consensus_on_random_geometric_graphs(case):
-    adj, confidence = case
+@given(case=geometric_graphs())
+def test_max_consensus_on_random_geometric_graphs(kind, case):
+    with rounds_on(kind):
+        check_max_consensus(*case)
+
+
+def check_max_consensus(adj, confidence):
     source, rounds = fusion.max_consensus(confidence, adj)
     ecc = eccentricities(adj)
     # D_i, learned by the flooding protocol, is i's eccentricity in its component
@@ -111,9 +129,15 @@ def test_max_consensus_on_random_geometric_graphs(case):
         assert fusion.consensus_rounds(probe, adj, rounds)[i, 0] == far
 
 
+@pytest.mark.parametrize("kind", ["dense", "sparse"])
 @settings(max_examples=30, deadline=None)
-@given(st.lists(geometric_graphs(), min_size=2, max_size=4))
-def test_batched_consensus_equals_one_graph_at_a_time(cases):
+@given(cases=st.lists(geometric_graphs(), min_size=2, max_size=4))
+def test_batched_consensus_equals_one_graph_at_a_time(kind, cases):
+    with rounds_on(kind):
+        check_batched(cases)
+
+
+def check_batched(cases):
     n = min(a.shape[0] for a, _ in cases)
     m = min(c.shape[1] for _, c in cases)
     adj = np.stack([a[:n, :n] for a, _ in cases])
@@ -157,3 +181,18 @@ def test_adjacency_uses_3d_distance():
 def test_complete_graph_one_round(n):
     source, rounds = fusion.max_consensus(np.arange(float(n))[:, None], network.complete(n))
     assert (rounds == (1 if n > 1 else 0)).all() and (source == n - 1).all()
+
+
+def test_large_team_uses_edge_lists_and_agrees_with_dense(rng):
+    uavs = np.zeros((2, 60, 5))
+    uavs[..., :2] = rng.uniform(0, 300, (2, 60, 2))
+    adj = network.adjacency(uavs, 50.0)
+    confidence = rng.random((2, 60, 7))
+    rounds, _ = fusion.eccentricity(adj)
+    assert fusion.SPARSE_FROM <= 60
+    sparse = fusion.consensus_rounds(confidence, adj, rounds)
+    with rounds_on("dense"):
+        dense = fusion.consensus_rounds(confidence, adj, rounds)
+    assert np.array_equal(sparse, dense)
+    for b in range(2):
+        assert np.array_equal(sparse[b], component_max_index(confidence[b], adj[b]))

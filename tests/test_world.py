@@ -117,3 +117,24 @@ def test_targets_stay_in_field_and_walls_reflect(rng):
     assert np.allclose(out, [2.0, 25.0, 3.0, 0.0])
     out = world.move_targets(np.array([49.0, 25.0, 3.0, 1.0]), np.zeros(2), 1.0, 50.0)
     assert np.allclose(out, [48.0, 26.0, -3.0, 1.0])
+
+
+def test_trajectories_equal_step_model_until_a_wall(rng):
+    start = np.column_stack([rng.uniform(400, 600, (5, 2)), rng.normal(0, 1, (5, 2))])
+    accel = rng.normal(0, 0.16, (30, 5, 2))
+    path = world.target_trajectories(start, accel, 0.5, 1000.0)
+    state = start
+    for k in range(30):
+        state = world.move_targets(state, accel[k], 0.5, 1000.0)
+        assert np.allclose(path[k + 1], state, atol=1e-9)
+
+
+def test_trajectories_are_the_fold_of_the_free_path(rng):
+    start = np.array([[10.0, 190.0, -4.0, 3.0]])
+    accel = rng.normal(0, 0.3, (200, 1, 2))
+    folded = world.target_trajectories(start, accel, 1.0, 200.0)
+    free = world.target_trajectories(start, accel, 1.0, 1e9)  # no wall within reach
+    fold = np.mod(free[..., :2], 400.0)
+    assert np.allclose(folded[..., :2], np.where(fold > 200.0, 400.0 - fold, fold))
+    assert np.allclose(np.abs(folded[..., 2:]), np.abs(free[..., 2:]))
+    assert (folded[..., :2] >= 0).all() and (folded[..., :2] <= 200.0).all()

@@ -23,15 +23,27 @@ def hungarian(bids: np.ndarray) -> np.ndarray:
     gets a distinct column, and with n > m every column is used once per round.
     Returns (n,) column per row.
     """
+    _check(bids)
+    return _solve(bids)
+
+
+def _check(bids: np.ndarray) -> None:
     if not np.isfinite(bids).all():
         raise ValueError("bids must be finite")
-    n = bids.shape[0]
-    choice = np.full(n, -1, dtype=np.int64)
+
+
+def _solve(bids: np.ndarray) -> np.ndarray:
+    n, m = bids.shape
+    if n <= m:  # one round
+        return linear_sum_assignment(bids, maximize=True)[1]
+    choice = np.empty(n, dtype=np.int64)
     left = np.arange(n)
     while left.size:
         rows, cols = linear_sum_assignment(bids[left], maximize=True)
         choice[left[rows]] = cols
-        left = np.delete(left, rows)
+        keep = np.ones(left.size, dtype=bool)
+        keep[rows] = False
+        left = left[keep]
     return choice
 
 
@@ -47,33 +59,50 @@ def neighbourhood(bids: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
 def neighbourhood_timed(bids: np.ndarray, adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """`neighbourhood`, also returning the seconds each UAV's own solve takes, (..., N).
 
-    UAVs with the same closed neighbourhood solve the same problem; it is solved once
-    and its time charged to each of them, as each would solve it on its own processor.
+    A UAV without neighbours solves a one-row problem: its best bid (the lowest target
+    on ties, as the Hungarian solver does). UAVs with the same closed neighbourhood
+    solve the same problem; it is solved once and its time charged to each of them, as
+    each would solve it on its own processor.
     """
-    flat_bids = bids.reshape((-1,) + bids.shape[-2:])
-    flat_adj = adjacency.reshape((-1,) + adjacency.shape[-2:])
+    _check(bids)
     n = bids.shape[-2]
-    out = np.empty(flat_bids.shape[:2], dtype=np.int64)
-    seconds = np.empty(flat_bids.shape[:2])
-    for b in range(flat_bids.shape[0]):
-        solved: dict[bytes, tuple[np.ndarray, float]] = {}
-        for i in range(n):
-            members = flat_adj[b, i].copy()
-            members[i] = True
-            key = members.tobytes()
-            if key not in solved:
-                start = time.perf_counter()
-                choice = hungarian(flat_bids[b, members])
-                solved[key] = choice, time.perf_counter() - start
-            choice, seconds[b, i] = solved[key]
-            out[b, i] = choice[np.count_nonzero(members[:i])]
+    flat_bids = bids.reshape((-1,) + bids.shape[-2:])
+    flat_adj = adjacency.reshape(-1, n, n)
+    start = time.perf_counter()
+    out = np.argmax(flat_bids, axis=-1)
+    alone = ~flat_adj.any(axis=-1)
+    seconds = np.full(out.shape, (time.perf_counter() - start) / out.size)
+    members = flat_adj | np.eye(n, dtype=bool)
+    solved: dict[bytes, tuple[np.ndarray, float]] = {}
+    trial = -1
+    for b, i in zip(*np.nonzero(~alone), strict=True):  # in order of trial, then UAV
+        if b != trial:
+            solved, trial = {}, b
+        key = members[b, i].tobytes()
+        if key not in solved:
+            start = time.perf_counter()
+            solved[key] = _solve(flat_bids[b, members[b, i]]), time.perf_counter() - start
+        choice, seconds[b, i] = solved[key]
+        out[b, i] = choice[np.count_nonzero(members[b, i, :i])]
     return out.reshape(bids.shape[:-1]), seconds.reshape(bids.shape[:-1])
 
 
 def centralized(bids: np.ndarray) -> np.ndarray:
     """One global assignment over all UAVs (the centralized baseline). Returns (..., N)."""
+    return centralized_timed(bids)[0]
+
+
+def centralized_timed(bids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """`centralized`, also returning the seconds of each global solve, (...,)."""
+    _check(bids)
     flat = bids.reshape((-1,) + bids.shape[-2:])
-    return np.stack([hungarian(b) for b in flat]).reshape(bids.shape[:-1])
+    out = np.empty(flat.shape[:2], dtype=np.int64)
+    seconds = np.empty(flat.shape[0])
+    for b in range(flat.shape[0]):
+        start = time.perf_counter()
+        out[b] = _solve(flat[b])
+        seconds[b] = time.perf_counter() - start
+    return out.reshape(bids.shape[:-1]), seconds.reshape(bids.shape[:-2])
 
 
 def greedy(bids: np.ndarray) -> np.ndarray:

@@ -7,6 +7,8 @@ covariances ``(..., 4, 4)``. The measurement is the converted position z^C = H s
 
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 
 
@@ -37,10 +39,21 @@ def process_noise(dt: float, sigma_1: float, sigma_2: float) -> np.ndarray:
 def predict(
     mean: np.ndarray, cov: np.ndarray, A: np.ndarray, Q: np.ndarray
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Prediction, eq. (23): s(k|k-1) = A s(k-1), P(k|k-1) = A P(k-1) A^T + Q."""
-    mean = mean @ A.T
-    cov = A @ cov @ A.T + Q
+    """Prediction, eq. (23): s(k|k-1) = A s(k-1), P(k|k-1) = A P(k-1) A^T + Q.
+
+    All filters at once: vec(A P A^T) = (A kron A) vec(P), one matrix product for the
+    whole stack.
+    """
+    shape = cov.shape
+    mean = (mean.reshape(-1, 4) @ A.T).reshape(mean.shape)
+    cov = (cov.reshape(-1, 16) @ _kron(A.tobytes()).T).reshape(shape) + Q
     return mean, cov
+
+
+@lru_cache(maxsize=8)
+def _kron(A_bytes: bytes) -> np.ndarray:
+    A = np.frombuffer(A_bytes).reshape(4, 4)
+    return np.kron(A, A)
 
 
 def update(
@@ -48,20 +61,29 @@ def update(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Measurement update with z = H s + v, v ~ N(0, R), eq. (25).
 
-    The gain uses the predicted covariance, K = P H^T (H P H^T + R)^-1 (the printed
-    eq. 25 shows the previous posterior there; the standard filter is meant), and the
-    covariance is updated in Joseph form (I - KH) P (I - KH)^T + K R K^T, which keeps
-    it symmetric positive definite.
+    The gain uses the predicted covariance, K = P H^T S^-1 with S = H P H^T + R (the
+    printed eq. 25 shows the previous posterior in S; the standard filter is meant).
+    The covariance is P - K S K^T = P - K (P H^T)^T, symmetrised, which keeps it
+    symmetric positive definite; S^-1 is the closed-form 2 x 2 inverse.
 
     mean: (..., 4); cov: (..., 4, 4); z: (..., 2); R: (..., 2, 2).
     """
-    S = cov[..., :2, :2] + R
-    K = np.swapaxes(np.linalg.solve(S, np.swapaxes(cov[..., :, :2], -1, -2)), -1, -2)
-    innovation = z - mean[..., :2]
-    mean = mean + np.einsum("...ij,...j->...i", K, innovation)
-    IKH = np.broadcast_to(np.eye(4), cov.shape).copy()
-    IKH[..., :, :2] -= K
-    cov = IKH @ cov @ np.swapaxes(IKH, -1, -2) + K @ R @ np.swapaxes(K, -1, -2)
+    PHt = cov[..., :, :2]  # (..., 4, 2) = P H^T
+    s11 = cov[..., 0, 0] + R[..., 0, 0]
+    s12 = cov[..., 0, 1] + R[..., 0, 1]
+    s22 = cov[..., 1, 1] + R[..., 1, 1]
+    inv_det = 1.0 / (s11 * s22 - s12 * s12)
+    i11, i12, i22 = (
+        (s22 * inv_det)[..., None],
+        (-s12 * inv_det)[..., None],
+        (s11 * inv_det)[..., None],
+    )
+    K0 = PHt[..., 0] * i11 + PHt[..., 1] * i12  # columns of K, (..., 4)
+    K1 = PHt[..., 0] * i12 + PHt[..., 1] * i22
+    nu = z - mean[..., :2]
+    mean = mean + K0 * nu[..., 0, None] + K1 * nu[..., 1, None]
+    KSKt = K0[..., :, None] * PHt[..., None, :, 0] + K1[..., :, None] * PHt[..., None, :, 1]
+    cov = cov - 0.5 * (KSKt + np.swapaxes(KSKt, -1, -2))
     return mean, cov
 
 
@@ -97,6 +119,34 @@ def confidence(cov: np.ndarray) -> np.ndarray:
 
 
 def nees(mean: np.ndarray, cov: np.ndarray, truth: np.ndarray) -> np.ndarray:
-    """Normalised estimation error squared e^T P^-1 e, e = truth - mean. Returns (...)."""
+    """Normalised estimation error squared e^T P^-1 e, e = truth - mean. Returns (...).
+
+    For the 4-D state it is computed elementwise by blocks: with P = [[A, B], [B^T, C]]
+    (2 x 2 blocks) and e = (e1, e2), e^T P^-1 e = e1^T A^-1 e1 + f^T S^-1 f where
+    f = e2 - B^T A^-1 e1 and S = C - B^T A^-1 B (the Schur complement).
+    """
     e = truth - mean
-    return np.einsum("...i,...i->...", e, np.linalg.solve(cov, e[..., None])[..., 0])
+    if e.shape[-1] != 4:
+        e = np.broadcast_to(e, np.broadcast_shapes(e.shape, cov.shape[:-1]))
+        return np.einsum("...i,...i->...", e, np.linalg.solve(cov, e[..., None])[..., 0])
+    shape = np.broadcast_shapes(e.shape[:-1], cov.shape[:-2])
+    # component-major copies: each P_ij and e_i a contiguous row
+    P = np.ascontiguousarray(np.broadcast_to(cov, shape + (4, 4)).reshape(-1, 16).T)
+    e0, e1, e2, e3 = np.ascontiguousarray(np.broadcast_to(e, shape + (4,)).reshape(-1, 4).T)
+    a11, a12, a22 = P[0], P[1], P[5]
+    p02, p12, p03, p13 = P[2], P[6], P[3], P[7]
+    inv_det = 1.0 / (a11 * a22 - a12 * a12)
+
+    def solve_a(x0, x1):  # A^-1 (x0, x1)
+        return (a22 * x0 - a12 * x1) * inv_det, (a11 * x1 - a12 * x0) * inv_det
+
+    u0, u1 = solve_a(e0, e1)  # A^-1 e1
+    b0, b1 = solve_a(p02, p12)  # A^-1 B, first column
+    c0, c1 = solve_a(p03, p13)  # second column
+    f0 = e2 - (p02 * u0 + p12 * u1)
+    f1 = e3 - (p03 * u0 + p13 * u1)
+    s11 = P[10] - (p02 * b0 + p12 * b1)
+    s12 = P[11] - (p02 * c0 + p12 * c1)
+    s22 = P[15] - (p03 * c0 + p13 * c1)
+    second = (s22 * f0 * f0 - 2.0 * s12 * f0 * f1 + s11 * f1 * f1) / (s11 * s22 - s12 * s12)
+    return (e0 * u0 + e1 * u1 + second).reshape(shape)

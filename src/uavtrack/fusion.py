@@ -13,7 +13,9 @@ tuple to neighbours still iterating: on the path m - j - i, j needs one round bu
 needs two, and receives m's value only through j. Messages travel along edges only,
 so nothing crosses from one component to another.
 
-All functions broadcast over leading (trial) axes.
+All functions broadcast over leading (trial) axes. A round is simulated on the dense
+N x N neighbour relation for small teams and on the list of edges for large ones
+(`SPARSE_FROM` UAVs); both compute the same thing.
 """
 
 from __future__ import annotations
@@ -23,6 +25,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from .network import closed
+
+SPARSE_FROM = 24
+"""Team size from which consensus rounds run on edge lists rather than N x N arrays."""
 
 
 @dataclass(frozen=True)
@@ -53,19 +58,23 @@ def eccentricity(adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     adjacency: (..., N, N) bool, symmetric. Returns (D (..., N) int, messages (...,)):
     messages counts one per edge direction in every round the receiver still runs.
     """
-    links = closed(adjacency).astype(np.float32)
-    known = np.broadcast_to(np.eye(adjacency.shape[-1], dtype=bool), adjacency.shape).copy()
-    D = np.full(adjacency.shape[:-1], -1, dtype=np.int64)
     degree = adjacency.sum(axis=-1)
-    messages = np.zeros(adjacency.shape[:-2], dtype=np.int64)
-    r = 0
-    while (D < 0).any():
+    D = np.zeros(adjacency.shape[:-1], dtype=np.int64)
+    if not degree.any():  # nobody hears anybody: round 1 teaches nothing
+        return D, np.zeros(adjacency.shape[:-2], dtype=np.int64)
+    links = closed(adjacency)
+    weights = links.astype(np.float64)
+    known = links  # K(1): each UAV and its neighbours
+    running = degree > 0  # isolated UAVs learned nothing in round 1: D = 0
+    messages = degree.sum(axis=-1)  # round 1: every receiver runs
+    r = 1
+    while running.any():
         r += 1
-        running = D < 0
-        messages += (degree * running).sum(axis=-1)
-        grown = (links @ known.astype(np.float32)) > 0
-        learned = (grown & ~known).any(axis=-1)
-        D = np.where(running & ~learned, r - 1, D)
+        messages = messages + (degree * running).sum(axis=-1)
+        grown = (weights @ known.astype(np.float64)) > 0
+        stopped = running & ~(grown != known).any(axis=-1)
+        D[stopped] = r - 1
+        running &= ~stopped
         known = grown
     return D, messages
 
@@ -82,18 +91,49 @@ def consensus_rounds(
     confidence: (..., N, M); adjacency: (..., N, N) bool; rounds: (..., N) int.
     Returns source (..., N, M): index of the UAV whose initial tuple i holds.
     """
-    n = adjacency.shape[-1]
-    links = closed(adjacency)
-    source = np.broadcast_to(np.arange(n)[:, None], confidence.shape).copy()
-    gamma = confidence.copy()
-    for t in range(1, int(rounds.max(initial=0)) + 1):
-        # offer[..., i, l, j]: what neighbour l offers i for target j (-inf off the graph)
-        offer = np.where(links[..., :, :, None], gamma[..., None, :, :], -np.inf)
-        best = np.argmax(offer, axis=-2)  # (..., N, M), first maximum = lowest index
-        active = (rounds >= t)[..., None]
-        source = np.where(active, np.take_along_axis(source, best, axis=-2), source)
-        gamma = np.where(active, np.take_along_axis(gamma, best, axis=-2), gamma)
-    return source
+    lead = confidence.shape[:-2]
+    n, m = confidence.shape[-2:]
+    gamma = confidence.reshape(-1, n, m)
+    adj = adjacency.reshape(-1, n, n)
+    todo = rounds.reshape(-1, n)
+    source = _identity(gamma.shape)
+    total = int(todo.max(initial=0))
+    if total:
+        step = _sparse_round(adj) if n >= SPARSE_FROM else _dense_round(adj)
+        b = np.arange(gamma.shape[0])[:, None, None]
+        j = np.arange(m)
+        for t in range(1, total + 1):
+            best = step(gamma)  # (B, N, M) neighbour chosen by each UAV, per target
+            active = (todo >= t)[..., None]
+            source = np.where(active, source[b, best, j], source)
+            gamma = np.where(active, gamma[b, best, j], gamma)
+    return source.reshape(lead + (n, m))
+
+
+def _dense_round(adj: np.ndarray):
+    """best[b, i, j] = argmax over i's closed neighbourhood of gamma[b, :, j]."""
+    mask = np.where(closed(adj), 0.0, -np.inf)[..., None]  # (B, N, N, 1)
+
+    def best(gamma: np.ndarray) -> np.ndarray:
+        return np.argmax(gamma[:, None, :, :] + mask, axis=-2)  # first maximum = lowest index
+
+    return best
+
+
+def _sparse_round(adj: np.ndarray):
+    """The same on edge lists: segment maxima over each UAV's incoming edges."""
+    B, n, _ = adj.shape
+    b, receiver, sender = np.nonzero(closed(adj))  # sorted by (b, receiver), self-edges included
+    starts = np.flatnonzero(np.r_[True, (b[1:] != b[:-1]) | (receiver[1:] != receiver[:-1])])
+    row = b * n + receiver
+
+    def best(gamma: np.ndarray) -> np.ndarray:
+        offered = gamma[b, sender]  # (E, M)
+        top = np.maximum.reduceat(offered, starts, axis=0)  # (B*N, M)
+        lowest = np.where(offered == top[row], sender[:, None], n)
+        return np.minimum.reduceat(lowest, starts, axis=0).reshape(B, n, -1)
+
+    return best
 
 
 def max_consensus(confidence: np.ndarray, adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -107,8 +147,18 @@ def max_consensus(confidence: np.ndarray, adjacency: np.ndarray) -> tuple[np.nda
     return result.source, result.rounds
 
 
+def _identity(shape: tuple[int, ...]) -> np.ndarray:
+    """source[..., i, j] = i: every UAV holds its own estimates."""
+    source = np.empty(shape, dtype=np.int64)
+    source[...] = np.arange(shape[-2])[:, None]
+    return source
+
+
 def fuse(confidence: np.ndarray, adjacency: np.ndarray) -> Consensus:
     """The fusion phase with its bookkeeping: protocol for D_i, then the rounds."""
+    if not adjacency.any():  # nobody hears anybody: no rounds, no messages
+        zeros = np.zeros(adjacency.shape[:-1], dtype=np.int64)
+        return Consensus(_identity(confidence.shape), zeros, zeros[..., 0], zeros[..., 0])
     rounds, protocol_messages = eccentricity(adjacency)
     source = consensus_rounds(confidence, adjacency, rounds)
     messages = (adjacency.sum(axis=-1) * rounds).sum(axis=-1)
@@ -118,8 +168,7 @@ def fuse(confidence: np.ndarray, adjacency: np.ndarray) -> Consensus:
 def gather(source: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Pick values[..., source[i, j], j, ...] for every (i, j).
 
-    source: (..., N, M); values: (..., N, M, *event). Returns (..., N, M, *event).
+    source: (B, N, M); values: (B, N, M, *event). Returns (B, N, M, *event).
     """
-    extra = values.ndim - source.ndim
-    index = source.reshape(source.shape + (1,) * extra)
-    return np.take_along_axis(values, index, axis=-2 - extra)
+    b = np.arange(source.shape[0])[:, None, None]
+    return values[b, source, np.arange(source.shape[-1])]

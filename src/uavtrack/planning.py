@@ -13,9 +13,11 @@ Two facts make this cheap without changing its result:
 * the rollouts do not depend on the target: they are computed once per UAV;
 * under eq. (1) the position at k+t depends only on the first t-1 actions, so the
   |A|^h sequences visit only 1 + |A| + ... + |A|^(h-1) distinct positions (13 for
-  h = 3, against 81 sequence-steps). det G is evaluated once per position, and each
-  sequence's score is the sum along its path, added in the same order as an
-  exhaustive search adds it, so the choice is bit-identical to `plan_exhaustive`.
+  h = 3, against 81 sequence-steps). det G is evaluated once per position (det G has
+  a closed form in the slant range, `sensing.fisher_det`) and each sequence's score
+  is the sum along its path; the tree's positions come in closed form from index
+  tables, with no loop over sequences. The choices equal `plan_exhaustive`'s, which
+  flies every sequence step by step (the scores agree to round-off).
 
 Sequences are numbered lexicographically with the first action most significant,
 actions ordered (-phi, 0, +phi); ties go to the lowest number. The last action of a
@@ -31,9 +33,8 @@ from functools import cache
 import numpy as np
 
 from .config import G, SensorModel
-from .estimation import transition
 from .sensing import edge_range, fisher_det
-from .world import HEADING, V, X, Y, fly, wrap_angle
+from .world import HEADING, V, X, Y, fly
 
 
 def action_set(bank_angle: float) -> np.ndarray:
@@ -55,62 +56,80 @@ class Plan:
     sequence: np.ndarray
 
 
-@cache
-def _tree(n_actions: int, horizon: int) -> tuple[np.ndarray, np.ndarray]:
-    """Paths of the relevant-prefix tree.
+@dataclass(frozen=True)
+class Tree:
+    """The relevant-prefix tree of |A|^h sequences, as index tables.
 
-    Returns (path (L, horizon) node index of each leaf path at depth t, prefixes
-    (L, horizon-1) action indices of leaf path l), with L = |A|^(h-1) leaf paths in
-    lexicographic order and nodes numbered depth by depth (depth t has |A|^(t-1)).
+    Nodes are numbered depth by depth; depth t (the position at k+t+1) has |A|^t nodes,
+    one per choice of the first t actions.
+
+    depth (K,): depth of each node; counts (K, h, |A|): how often each action occurs
+    among a node's actions before step s (its heading at step s is psi + counts @ turn);
+    steps (K, h): 1 where step s lies on the node's path (s <= depth); path (L, h): the
+    node at each depth of leaf path l (L = |A|^(h-1), lexicographic); first (L,): the
+    first action of leaf path l.
     """
-    prefixes = np.array(
-        list(itertools.product(range(n_actions), repeat=horizon - 1)), dtype=np.int64
-    )
-    prefixes = prefixes.reshape(-1, horizon - 1)
-    path = np.empty((len(prefixes), horizon), dtype=np.int64)
-    offset = 0
-    for t in range(horizon):
-        # node of depth t+1 reached by the first t actions
-        code = np.zeros(len(prefixes), dtype=np.int64)
-        for a in range(t):
-            code = code * n_actions + prefixes[:, a]
-        path[:, t] = offset + code
-        offset += n_actions**t
-    return path, prefixes
+
+    depth: np.ndarray
+    counts: np.ndarray
+    steps: np.ndarray
+    path: np.ndarray
+    first: np.ndarray
+
+
+@cache
+def tree(n_actions: int, horizon: int) -> Tree:
+    """Index tables of the rollout tree (cached per |A| and h)."""
+    prefixes = [p for t in range(horizon) for p in itertools.product(range(n_actions), repeat=t)]
+    depth = np.array([len(p) for p in prefixes])
+    counts = np.zeros((len(prefixes), horizon, n_actions))
+    for node, prefix in enumerate(prefixes):
+        for s in range(1, horizon):
+            for a in prefix[:s]:
+                counts[node, s, a] += 1
+    steps = (np.arange(horizon) <= depth[:, None]).astype(float)
+    index = {p: k for k, p in enumerate(prefixes)}
+    leaves = list(itertools.product(range(n_actions), repeat=horizon - 1))
+    path = np.array([[index[leaf[:t]] for t in range(horizon)] for leaf in leaves], dtype=np.int64)
+    first = np.array([leaf[0] if leaf else 0 for leaf in leaves], dtype=np.int64)
+    return Tree(depth, counts, steps, path, first)
 
 
 def rollout_nodes(
     uavs: np.ndarray, actions: np.ndarray, horizon: int, dt: float, g: float = G
 ) -> np.ndarray:
-    """Ground positions of every node of the rollout tree, eq. (1).
+    """Ground positions of every node of the rollout tree, eq. (1), in closed form.
 
-    uavs: (..., Nu, 5). Returns (..., Nu, n_nodes, 2), nodes depth by depth: depth t
-    (position at k+t) holds |A|^(t-1) nodes, one per choice of the first t-1 actions.
+    uavs: (..., Nu, 5). Returns (..., Nu, K, 2), K = 1 + |A| + ... + |A|^(h-1).
     """
-    n = len(actions)
-    turn = g * dt * np.tan(actions) / uavs[..., V][..., None]  # (..., Nu, |A|)
-    step = uavs[..., V] * dt  # (..., Nu)
-    heading = uavs[..., HEADING][..., None]  # (..., Nu, 1) nodes of the current depth
-    pos = uavs[..., [X, Y]][..., None, :]  # (..., Nu, 1, 2)
-    levels = []
-    for t in range(horizon):
-        pos = pos + step[..., None, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
-        levels.append(pos)
-        if t < horizon - 1:
-            heading = wrap_angle(heading[..., :, None] + turn[..., None, :])
-            heading = heading.reshape(heading.shape[:-2] + (-1,))
-            pos = np.repeat(pos, n, axis=-2)
-    return np.concatenate(levels, axis=-2)
+    east, north = _rollout(uavs, actions, horizon, dt, g)
+    out = np.empty(east.shape + (2,))
+    out[..., 0], out[..., 1] = east, north
+    return out
+
+
+def _rollout(uavs, actions, horizon, dt, g):
+    """Node coordinates (x, y), each (..., Nu, K).
+
+    The position at k+t+1 is p + V dT sum_{s<=t} (cos psi_s, sin psi_s), and
+    psi_s = psi + (g dT / V) sum of tan(phi) over the node's first s actions.
+    """
+    t = tree(len(actions), horizon)
+    tangents = t.counts @ np.tan(actions)  # (K, h) sum of tan(phi) before each step
+    heading = uavs[..., HEADING, None, None] + tangents * (g * dt / uavs[..., V, None, None])
+    step = (uavs[..., V] * dt)[..., None]
+    east = uavs[..., X, None] + step * (np.cos(heading) * t.steps).sum(axis=-1)
+    north = uavs[..., Y, None] + step * (np.sin(heading) * t.steps).sum(axis=-1)
+    return east, north
 
 
 def predict_positions(mean: np.ndarray, horizon: int, dt: float) -> np.ndarray:
-    """Predicted target positions H A^t s for t = 1..h.
+    """Predicted target positions H A^t s = p + t dT v for t = 1..h (eq. 14).
 
     mean: (..., 4). Returns (..., h, 2).
     """
-    A = transition(dt)
-    powers = np.stack([np.linalg.matrix_power(A, t)[:2] for t in range(1, horizon + 1)])
-    return np.einsum("tij,...j->...ti", powers, mean)
+    lead = dt * np.arange(1, horizon + 1)[:, None]
+    return mean[..., None, :2] + lead * mean[..., None, 2:]
 
 
 def plan(
@@ -128,24 +147,19 @@ def plan(
     uavs: (..., Nu, 5); mean: (..., Nu, Nt, 4) each UAV's fused estimates.
     """
     actions = action_set(bank_angle)
-    n = len(actions)
-    path, prefixes = _tree(n, horizon)
-    nodes = rollout_nodes(uavs, actions, horizon, dt, g)  # (..., Nu, K, 2)
-    targets = predict_positions(mean, horizon, dt)  # (..., Nu, Nt, h, 2)
-    depth = np.concatenate([np.full(n**t, t) for t in range(horizon)])  # (K,)
-    # ground offset of target j at the node's time from each node: (..., Nu, Nt, K, 2)
-    delta = targets[..., depth, :] - nodes[..., None, :, :]
-    h = uavs[..., 2][..., None, None]
-    d = np.sqrt(np.einsum("...k,...k->...", delta, delta) + h * h)
-    det = fisher_det(d, edge_range(h, sensor), sensor)  # (..., Nu, Nt, K)
-    det = det * discount ** depth.astype(float)
-    score = det[..., path[:, 0]]
-    for t in range(1, horizon):
-        score = score + det[..., path[:, t]]  # left to right, as the exhaustive sum
-    best = np.argmax(score, axis=-1)  # (..., Nu, Nt) first maximum = lowest sequence
-    value = np.take_along_axis(score, best[..., None], axis=-1)[..., 0]
-    first = prefixes[best, 0] if horizon > 1 else np.zeros_like(best)
-    return Plan(value=value, action=first, sequence=best * n)
+    t = tree(len(actions), horizon)
+    east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)
+    lead = dt * (t.depth + 1.0)  # time from now to each node
+    dx = mean[..., 0, None] + lead * mean[..., 2, None] - east[..., None, :]  # (..., Nu, Nt, K)
+    dy = mean[..., 1, None] + lead * mean[..., 3, None] - north[..., None, :]
+    h = uavs[..., 2, None, None]
+    d = np.sqrt(dx * dx + dy * dy + h * h)
+    det = fisher_det(d, edge_range(h, sensor), sensor)
+    if discount != 1.0:
+        det = det * discount ** t.depth.astype(float)
+    score = det[..., t.path].sum(axis=-1)  # (..., Nu, Nt, L) sum along each leaf path
+    best = np.argmax(score, axis=-1)  # first maximum = lowest sequence
+    return Plan(value=score.max(axis=-1), action=t.first[best], sequence=best * len(actions))
 
 
 def plan_exhaustive(

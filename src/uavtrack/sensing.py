@@ -34,14 +34,14 @@ def relative(uav: np.ndarray, target: np.ndarray) -> tuple[np.ndarray, np.ndarra
     Returns (delta (..., 2) target minus UAV, ground range r, slant range d).
     """
     delta = target[..., :2] - uav[..., :2]
-    r2 = np.einsum("...k,...k->...", delta, delta)
+    r2 = delta[..., 0] ** 2 + delta[..., 1] ** 2
     return delta, np.sqrt(r2), np.sqrt(r2 + uav[..., 2] ** 2)
 
 
 def in_view(uav: np.ndarray, target: np.ndarray, sensor: SensorModel) -> np.ndarray:
     """Whether each target is inside each UAV's observation disk X_i (Sec. 4)."""
-    _, r, _ = relative(uav, target)
-    return r <= observation_radius(uav[..., 2], sensor)
+    dx, dy = target[..., 0] - uav[..., 0], target[..., 1] - uav[..., 1]
+    return dx * dx + dy * dy <= observation_radius(uav[..., 2], sensor) ** 2
 
 
 def noise_std(
@@ -65,8 +65,10 @@ def measure(
     """
     delta, _, d = relative(uav, target)
     sigma_d, sigma_theta = noise_std(d, edge_range(uav[..., 2], sensor), sensor)
-    theta = np.arctan2(delta[..., 1], delta[..., 0])
-    return np.stack([d + sigma_d * noise[..., 0], theta + sigma_theta * noise[..., 1]], axis=-1)
+    z = np.empty(d.shape + (2,))
+    z[..., 0] = d + sigma_d * noise[..., 0]
+    z[..., 1] = np.arctan2(delta[..., 1], delta[..., 0]) + sigma_theta * noise[..., 1]
+    return z
 
 
 def convert(uav: np.ndarray, z: np.ndarray, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
@@ -91,7 +93,9 @@ def convert(uav: np.ndarray, z: np.ndarray, sensor: SensorModel) -> tuple[np.nda
     d, theta = z[..., 0], z[..., 1]
     r = np.sqrt(np.maximum(d * d - h * h, 0.0))
     cos, sin = np.cos(theta), np.sin(theta)
-    zc = np.stack([uav[..., 0] + r * cos, uav[..., 1] + r * sin], axis=-1)
+    zc = np.empty(z.shape)
+    zc[..., 0] = uav[..., 0] + r * cos
+    zc[..., 1] = uav[..., 1] + r * sin
     sigma_d, sigma_theta = noise_std(d, edge_range(h, sensor), sensor)
     r_lin = np.maximum(r, np.sqrt(2.0 * h * sigma_d))
     # J = [[d/r cos, -r sin], [d/r sin, r cos]] (eq. 10); R = J diag(sd^2, st^2) J^T (eq. 12)
@@ -138,16 +142,19 @@ def fisher_det(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.nda
     """det G as a function of the slant range alone.
 
     u is orthogonal to w, |u|^2 = r^2/d^2 and |w|^2 = 1/r^2, so
-    det G = a b |u|^2 |w|^2 = a b / d^2 (also the limit at r = 0).
+    det G = a b / d^2 (also the limit at r = 0), with b = (d_O / (k_theta d))^2.
     """
-    a, b = _fisher_coefficients(d, d_edge, sensor)
-    return a * b / (d * d)
+    k_r = sensor.k_r
+    grow = expit(d * (k_r / d_edge) - k_r)
+    d2 = d * d
+    a = ((1.0 - grow) * (1.0 / sensor.k_d)) ** 2 + (2.0 * (k_r / d_edge) ** 2) * grow**2 + 2.0 / d2
+    return a * (d_edge / sensor.k_theta) ** 2 / (d2 * d2)
 
 
 def _fisher_coefficients(d, d_edge, sensor: SensorModel):
     # with x = k_r (d/d_O - 1): 1/sigma_d = expit(-x) / k_d and
     # sigma_d'/sigma_d = k_r/d_O expit(x), both finite however far the target is
-    x = sensor.k_r * (d / d_edge - 1.0)
-    a = (expit(-x) / sensor.k_d) ** 2 + 2.0 * (sensor.k_r / d_edge * expit(x)) ** 2 + 2.0 / d**2
+    grow = expit(sensor.k_r * (d / d_edge - 1.0))
+    a = ((1.0 - grow) / sensor.k_d) ** 2 + 2.0 * (sensor.k_r / d_edge * grow) ** 2 + 2.0 / (d * d)
     b = (d_edge / (sensor.k_theta * d)) ** 2
     return a, b

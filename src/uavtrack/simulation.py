@@ -26,6 +26,9 @@ from .config import G, Scenario
 from .methods import Method, get
 from .metrics import Tally
 
+NOISE_BLOCK = 64
+"""Steps of sensor noise drawn at once per trial (a draw of n normals equals n draws of 1)."""
+
 
 @dataclass(frozen=True)
 class Constants:
@@ -105,7 +108,8 @@ def step(
         *((const.A, const.Q) if state.k > 0 else (None, None)),
     )
     fused = method.fuse(estimation.confidence(cov), graph)
-    mean, cov = fusion.gather(fused.source, mean), fusion.gather(fused.source, cov)
+    if fused.rounds.any():  # otherwise every UAV kept its own estimates
+        mean, cov = fusion.gather(fused.source, mean), fusion.gather(fused.source, cov)
     start = time.perf_counter()
     plan = planning.plan(
         uavs,
@@ -139,8 +143,9 @@ def sense(
     """
     observed = sensing.in_view(uavs[:, :, None, :], targets[:, None, :, :], scenario.sensor)
     b, i, j = np.nonzero(observed)
-    z = sensing.measure(uavs[b, i], targets[b, j], scenario.sensor, noise[b, i, j])
-    zc, R = sensing.convert(uavs[b, i], z, scenario.sensor)
+    seen_by = uavs[b, i]
+    z = sensing.measure(seen_by, targets[b, j], scenario.sensor, noise[b, i, j])
+    zc, R = sensing.convert(seen_by, z, scenario.sensor)
     return observed, zc, R
 
 
@@ -261,9 +266,14 @@ def run(
     tally = Tally(B, Nu, Nt)
     rec = _Recorder(B, T, Nu, Nt) if trace else None
     for k in range(T):
-        noise = np.stack([rng.standard_normal((Nu, Nt, 2)) for rng in sensor_rngs])
+        if k % NOISE_BLOCK == 0:  # the same numbers as one draw per step, fewer calls
+            noise = np.stack(
+                [rng.standard_normal((NOISE_BLOCK, Nu, Nt, 2)) for rng in sensor_rngs], axis=1
+            )
         before = state.uavs
-        state, cycle = step(state, trajectory[:, k], noise, scenario, method, const)
+        state, cycle = step(
+            state, trajectory[:, k], noise[k % NOISE_BLOCK], scenario, method, const
+        )
         tally.add(
             cycle.observed,
             trajectory[:, k],

@@ -24,11 +24,12 @@ def fly(uavs: np.ndarray, bank: np.ndarray, dt: float, g: float = G) -> np.ndarr
 
     uavs: (..., 5); bank: (...,) bank angles [rad]. Returns (..., 5).
     """
-    speed, heading = uavs[..., V], uavs[..., HEADING]
+    step = uavs[..., V] * dt
+    heading = uavs[..., HEADING]
     out = uavs.copy()
-    out[..., X] += speed * dt * np.cos(heading)
-    out[..., Y] += speed * dt * np.sin(heading)
-    out[..., HEADING] = wrap_angle(heading + g * dt * np.tan(bank) / speed)
+    out[..., X] += step * np.cos(heading)
+    out[..., Y] += step * np.sin(heading)
+    out[..., HEADING] = wrap_angle(heading + (g * dt) * np.tan(bank) / uavs[..., V])
     return out
 
 
@@ -66,16 +67,23 @@ def move_targets(
 def target_trajectories(
     initial: np.ndarray, accel: np.ndarray, dt: float, field_size: float
 ) -> np.ndarray:
-    """All target states over a run.
+    """All target states over a run, the walls acting as mirrors.
 
-    initial: (..., Nt, 4) states at step 0; accel: (..., T-1, Nt, 2) accelerations.
+    The free nearly-constant-velocity path driven by `accel` (eq. 13, Gamma as in
+    `move_targets`) is computed in closed form with cumulative sums and folded into the
+    field: the position is its mirror image in [0, L], and each velocity component is
+    reversed while the free path is in an odd mirror cell. Between reflections this is
+    the NCV model; after one, the drawn accelerations act mirrored, which leaves the
+    process's distribution unchanged (the noise is symmetric).
+
+    initial: (..., Nt, 4) states at step 0 inside the field; accel: (..., T-1, Nt, 2).
     Returns (..., T, Nt, 4), element k the targets at step k.
     """
-    steps = accel.shape[-3] + 1
-    out = np.empty(initial.shape[:-2] + (steps,) + initial.shape[-2:])
-    out[..., 0, :, :] = initial
-    for k in range(1, steps):
-        out[..., k, :, :] = move_targets(
-            out[..., k - 1, :, :], accel[..., k - 1, :, :], dt, field_size
-        )
-    return out
+    p0, v0 = initial[..., None, :, :2], initial[..., None, :, 2:]
+    vel = np.concatenate([v0, v0 + dt * np.cumsum(accel, axis=-3)], axis=-3)
+    moves = vel[..., :-1, :, :] * dt + 0.5 * dt**2 * accel
+    free = np.concatenate([p0, p0 + np.cumsum(moves, axis=-3)], axis=-3)
+    folded = np.mod(free, 2.0 * field_size)
+    pos = np.where(folded > field_size, 2.0 * field_size - folded, folded)
+    mirrored = np.mod(np.floor_divide(free, field_size), 2) == 1
+    return np.concatenate([pos, np.where(mirrored, -vel, vel)], axis=-1)
