@@ -16,9 +16,9 @@ def test_reproduce_plan_shares_the_default_runs():
     jobs = experiments.unique(j for group in plan.values() for j in group)
     assert len(jobs) == len({j.key for j in jobs})
     trial_jobs = [j for j in jobs if j.kind == "trials"]
-    # 3 methods + 7 other ranges + 5 other FOVs, 5 chunks of 10 trials each
-    assert len(trial_jobs) == (3 + 7 + 5) * 5
-    assert {j.count for j in trial_jobs} == {10}
+    # 3 methods + 7 other ranges + 5 other FOVs, 2 chunks of 25 trials each
+    assert len(trial_jobs) == (3 + 7 + 5) * 2
+    assert {j.count for j in trial_jobs} == {25}
     assert all(j.scenario.steps == 500 for j in trial_jobs)
 
 
@@ -59,3 +59,14 @@ def test_describe_sorted_ranks():
     assert d["sorted_mean"] == pytest.approx([0.35, 0.85])
     assert d["per_target_mean"] == pytest.approx([0.75, 0.45])
     assert d["mean"] == pytest.approx(0.6) and d["std"] == pytest.approx(np.std([0.5, 0.7], ddof=1))
+
+
+def test_resized_team_keeps_the_altitude_spread():
+    base = uavtrack.Scenario()
+    big = experiments.resized(base, 21, 30)
+    assert (big.n_uavs, big.n_targets) == (21, 30)
+    assert min(big.altitudes()) == pytest.approx(415.0) and max(big.altitudes()) == pytest.approx(
+        435.0
+    )
+    assert len(set(big.altitudes())) == 21
+    assert experiments.resized(base, 5, 4) == base

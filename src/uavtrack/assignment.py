@@ -60,9 +60,9 @@ def neighbourhood_timed(bids: np.ndarray, adjacency: np.ndarray) -> tuple[np.nda
     """`neighbourhood`, also returning the seconds each UAV's own solve takes, (..., N).
 
     A UAV without neighbours solves a one-row problem: its best bid (the lowest target
-    on ties, as the Hungarian solver does). UAVs with the same closed neighbourhood
-    solve the same problem; it is solved once and its time charged to each of them, as
-    each would solve it on its own processor.
+    on ties, as the Hungarian solver does). UAVs of a trial with the same closed
+    neighbourhood solve the same problem; it is solved once and its time charged to
+    each of them, as each would solve it on its own processor.
     """
     _check(bids)
     n = bids.shape[-2]
@@ -70,21 +70,47 @@ def neighbourhood_timed(bids: np.ndarray, adjacency: np.ndarray) -> tuple[np.nda
     flat_adj = adjacency.reshape(-1, n, n)
     start = time.perf_counter()
     out = np.argmax(flat_bids, axis=-1)
-    alone = ~flat_adj.any(axis=-1)
     seconds = np.full(out.shape, (time.perf_counter() - start) / out.size)
-    members = flat_adj | np.eye(n, dtype=bool)
-    solved: dict[bytes, tuple[np.ndarray, float]] = {}
-    trial = -1
-    for b, i in zip(*np.nonzero(~alone), strict=True):  # in order of trial, then UAV
-        if b != trial:
-            solved, trial = {}, b
-        key = members[b, i].tobytes()
-        if key not in solved:
+    b, i = np.nonzero(flat_adj.any(axis=-1))  # UAVs with neighbours
+    if b.size:
+        members = flat_adj[b, i]
+        members[np.arange(b.size), i] = True  # closed neighbourhoods, (K, N)
+        first, which = _distinct(b, members)
+        row = np.cumsum(members, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
+        choice = np.empty((first.size, n), dtype=np.int64)
+        cost = np.empty(first.size)
+        for u, k in enumerate(first):  # one solve per distinct problem
             start = time.perf_counter()
-            solved[key] = _solve(flat_bids[b, members[b, i]]), time.perf_counter() - start
-        choice, seconds[b, i] = solved[key]
-        out[b, i] = choice[np.count_nonzero(members[b, i, :i])]
+            solved = _solve(flat_bids[b[k], members[k]])
+            cost[u] = time.perf_counter() - start
+            choice[u, : solved.size] = solved
+        out[b, i] = choice[which, row]
+        seconds[b, i] = cost[which]
     return out.reshape(bids.shape[:-1]), seconds.reshape(bids.shape[:-1])
+
+
+def _distinct(trial: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Group equal (trial, neighbourhood) rows: (first row of each group, group of each row)."""
+    if trial.size <= 8:  # a few rows: a dictionary beats numpy's set routines
+        groups: dict[tuple[int, bytes], int] = {}
+        first, which = [], np.empty(trial.size, dtype=np.int64)
+        for k in range(trial.size):
+            key = (int(trial[k]), members[k].tobytes())
+            if key not in groups:
+                groups[key] = len(first)
+                first.append(k)
+            which[k] = groups[key]
+        return np.array(first), which
+    n = members.shape[1]
+    if n + int(trial.max()).bit_length() <= 62:  # the neighbourhood as an integer bitmask
+        keys = (trial << n) | (members @ (1 << np.arange(n, dtype=np.int64)))
+        _, first, which = np.unique(keys, return_index=True, return_inverse=True)
+    else:
+        keys = np.concatenate(
+            [trial[:, None], np.packbits(members, axis=1)], axis=1, dtype=np.int64
+        )
+        _, first, which = np.unique(keys, axis=0, return_index=True, return_inverse=True)
+    return first, which.reshape(-1)
 
 
 def centralized(bids: np.ndarray) -> np.ndarray:

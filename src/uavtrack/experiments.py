@@ -43,7 +43,7 @@ class Profile:
 
     trials: int = 50
     steps: int = 500
-    chunk: int = 10
+    chunk: int = 25
     comm_ranges: tuple[float, ...] = (10, 20, 30, 40, 50, 60, 70, 80)
     half_fovs: tuple[float, ...] = (5, 6, 7, 8, 9, 10)
     timing_grid: tuple[tuple[int, int], ...] = ((3, 2), (5, 4), (8, 6), (10, 10), (20, 20))
@@ -148,8 +148,7 @@ def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str,
         "timing": [],
     }
     for nu, nt in profile.timing_grid:
-        over = {"n_uavs": nu, "n_targets": nt, "steps": profile.timing_steps}
-        scenario = base.with_overrides(over)
+        scenario = resized(base, nu, nt).with_overrides({"steps": profile.timing_steps})
         for m in METHOD_NAMES:
             plan["timing"].append(
                 Job(
@@ -163,6 +162,22 @@ def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str,
                 )
             )
     return plan
+
+
+def resized(base: Scenario, n_uavs: int, n_targets: int) -> Scenario:
+    """`base` with another team size, keeping the spread of its altitudes."""
+    heights = base.altitudes()
+    spread = max(heights) - min(heights)
+    spacing = spread / (n_uavs - 1) if n_uavs > 1 else 0.0
+    return base.with_overrides(
+        {
+            "n_uavs": n_uavs,
+            "n_targets": n_targets,
+            "uav.altitudes": None,
+            "uav.altitude": (max(heights) + min(heights)) / 2,
+            "uav.altitude_spacing": spacing,
+        }
+    )
 
 
 def sweep_plan(

@@ -61,19 +61,15 @@ class Tree:
     """The relevant-prefix tree of |A|^h sequences, as index tables.
 
     Nodes are numbered depth by depth; depth t (the position at k+t+1) has |A|^t nodes,
-    one per choice of the first t actions.
+    one per choice of the first t actions, numbered parent * |A| + action.
 
-    depth (K,): depth of each node; counts (K, h, |A|): how often each action occurs
-    among a node's actions before step s (its heading at step s is psi + counts @ turn);
-    steps (K, h): 1 where step s lies on the node's path (s <= depth); path (L, h): the
-    node at each depth of leaf path l (L = |A|^(h-1), lexicographic); first (L,): the
-    first action of leaf path l.
+    depth (K,): depth of each node; counts (K, |A|): how often each action occurs among
+    the node's actions; first (L,): the first action of each of the L = |A|^(h-1) paths
+    to the deepest nodes, in lexicographic order.
     """
 
     depth: np.ndarray
     counts: np.ndarray
-    steps: np.ndarray
-    path: np.ndarray
     first: np.ndarray
 
 
@@ -82,17 +78,12 @@ def tree(n_actions: int, horizon: int) -> Tree:
     """Index tables of the rollout tree (cached per |A| and h)."""
     prefixes = [p for t in range(horizon) for p in itertools.product(range(n_actions), repeat=t)]
     depth = np.array([len(p) for p in prefixes])
-    counts = np.zeros((len(prefixes), horizon, n_actions))
-    for node, prefix in enumerate(prefixes):
-        for s in range(1, horizon):
-            for a in prefix[:s]:
-                counts[node, s, a] += 1
-    steps = (np.arange(horizon) <= depth[:, None]).astype(float)
-    index = {p: k for k, p in enumerate(prefixes)}
-    leaves = list(itertools.product(range(n_actions), repeat=horizon - 1))
-    path = np.array([[index[leaf[:t]] for t in range(horizon)] for leaf in leaves], dtype=np.int64)
+    counts = np.array(
+        [np.bincount(np.array(p, dtype=int), minlength=n_actions) for p in prefixes], dtype=float
+    )
+    leaves = itertools.product(range(n_actions), repeat=horizon - 1)
     first = np.array([leaf[0] if leaf else 0 for leaf in leaves], dtype=np.int64)
-    return Tree(depth, counts, steps, path, first)
+    return Tree(depth, counts, first)
 
 
 def rollout_nodes(
@@ -109,18 +100,29 @@ def rollout_nodes(
 
 
 def _rollout(uavs, actions, horizon, dt, g):
-    """Node coordinates (x, y), each (..., Nu, K).
+    """Node coordinates (x, y), each (..., Nu, K), level by level.
 
-    The position at k+t+1 is p + V dT sum_{s<=t} (cos psi_s, sin psi_s), and
-    psi_s = psi + (g dT / V) sum of tan(phi) over the node's first s actions.
+    A node at depth t is its parent moved by V dT (cos psi, sin psi), psi the heading
+    after the node's t actions: psi = psi_k + (g dT / V) times the sum of tan(phi) over
+    them. Nodes of depth t are numbered parent * |A| + action.
     """
-    t = tree(len(actions), horizon)
-    tangents = t.counts @ np.tan(actions)  # (K, h) sum of tan(phi) before each step
-    heading = uavs[..., HEADING, None, None] + tangents * (g * dt / uavs[..., V, None, None])
+    n = len(actions)
+    t = tree(n, horizon)
+    tangents = t.counts @ np.tan(actions)  # (K,) sum of tan(phi) over each node's actions
+    heading = uavs[..., HEADING, None] + tangents * (g * dt / uavs[..., V, None])  # (..., Nu, K)
     step = (uavs[..., V] * dt)[..., None]
-    east = uavs[..., X, None] + step * (np.cos(heading) * t.steps).sum(axis=-1)
-    north = uavs[..., Y, None] + step * (np.sin(heading) * t.steps).sum(axis=-1)
-    return east, north
+    out = []
+    for base, trig in ((uavs[..., X, None], np.cos), (uavs[..., Y, None], np.sin)):
+        moves = step * trig(heading)
+        level = base + moves[..., :1]
+        levels, offset = [level], 1
+        for depth in range(1, horizon):
+            children = moves[..., offset : offset + n**depth].reshape(moves.shape[:-1] + (-1, n))
+            level = (level[..., :, None] + children).reshape(moves.shape[:-1] + (-1,))
+            levels.append(level)
+            offset += n**depth
+        out.append(np.concatenate(levels, axis=-1))
+    return out[0], out[1]
 
 
 def predict_positions(mean: np.ndarray, horizon: int, dt: float) -> np.ndarray:
@@ -157,7 +159,14 @@ def plan(
     det = fisher_det(d, edge_range(h, sensor), sensor)
     if discount != 1.0:
         det = det * discount ** t.depth.astype(float)
-    score = det[..., t.path].sum(axis=-1)  # (..., Nu, Nt, L) sum along each leaf path
+    n, score, offset = len(actions), det[..., :1], 1  # depth 1 has a single node
+    for depth in range(1, horizon):  # every path so far continues with each action
+        level = det[..., offset : offset + n**depth]  # node code = parent * n + action
+        offset += n**depth
+        score = (score[..., :, None] + level.reshape(level.shape[:-1] + (-1, n))).reshape(
+            level.shape
+        )
+    # score: (..., Nu, Nt, L), the sum along each of the L = n^(h-1) leaf paths, lexicographic
     best = np.argmax(score, axis=-1)  # first maximum = lowest sequence
     return Plan(value=score.max(axis=-1), action=t.first[best], sequence=best * len(actions))
 

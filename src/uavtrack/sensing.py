@@ -145,9 +145,11 @@ def fisher_det(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.nda
     det G = a b / d^2 (also the limit at r = 0), with b = (d_O / (k_theta d))^2.
     """
     k_r = sensor.k_r
-    grow = expit(d * (k_r / d_edge) - k_r)
+    # e = exp(-x), x = k_r (d/d_O - 1): grow = 1/(1+e) = expit(x) and 1 - grow = e grow
+    e = np.exp(np.minimum(k_r - d * (k_r / d_edge), 700.0))
+    grow = 1.0 / (1.0 + e)
     d2 = d * d
-    a = ((1.0 - grow) * (1.0 / sensor.k_d)) ** 2 + (2.0 * (k_r / d_edge) ** 2) * grow**2 + 2.0 / d2
+    a = (e * grow * (1.0 / sensor.k_d)) ** 2 + (2.0 * (k_r / d_edge) ** 2) * grow**2 + 2.0 / d2
     return a * (d_edge / sensor.k_theta) ** 2 / (d2 * d2)
 
 

@@ -1,0 +1,319 @@
+"""Speed measurements (`uavtrack bench`), each case beside its reference in the same run.
+
+Every case checks that ours and the reference compute the same thing, then times
+them with interleaved repeats (ours, reference, ours, ...) after a warm-up and reports
+medians, so that a machine whose speed drifts affects both alike. BLAS threads are
+pinned to 1 (`uavtrack bench` sets the environment before numpy loads).
+"""
+
+from __future__ import annotations
+
+import itertools
+import os
+import platform
+import statistics
+import time
+from collections.abc import Callable
+from functools import partial
+from typing import Any
+
+import numpy as np
+
+from . import estimation, planning, sensing, world
+from .config import Scenario
+from .experiments import resized
+from .methods import get
+from .simulation import Constants, State, run, simulate, step, trial_seed
+
+
+def timed(
+    ours: Callable[[], Any], reference: Callable[[], Any] | None, repeats: int, number: int = 1
+) -> tuple[float, float | None]:
+    """Median seconds per call of ours and the reference, interleaved after a warm-up."""
+    runs = [(ours, [])] + ([(reference, [])] if reference is not None else [])
+    for fn, _ in runs:
+        fn()
+    for _ in range(repeats):
+        for fn, times in runs:
+            start = time.perf_counter()
+            for _ in range(number):
+                fn()
+            times.append((time.perf_counter() - start) / number)
+    medians = [statistics.median(times) for _, times in runs]
+    return medians[0], (medians[1] if reference is not None else None)
+
+
+def case(
+    name: str,
+    ours_s: float,
+    reference_s: float | None = None,
+    per: float = 1.0,
+    unit: str = "call",
+    **extra: Any,
+) -> dict[str, Any]:
+    """One result: median seconds per `unit`, with the reference's and the speedup."""
+    out: dict[str, Any] = {"name": name, "median_s": ours_s / per, "unit": unit}
+    if reference_s is not None:
+        out["reference_median_s"] = reference_s / per
+        out["speedup"] = reference_s / ours_s
+    out.update(extra)
+    return out
+
+
+def team(n_uavs: int, n_targets: int, **fields: Any) -> Scenario:
+    """The default scenario with another team size, keeping its altitude spread."""
+    return resized(Scenario(**fields), n_uavs, n_targets)
+
+
+# ------------------------------------------------------------------ cases
+
+
+def kalman_case(n_filters: int, repeats: int) -> dict[str, Any]:
+    """One predict + update of n filters: ours batched against filterpy, one object each."""
+    from filterpy.kalman import KalmanFilter
+
+    rng = np.random.default_rng(0)
+    A, Q = estimation.transition(0.5), estimation.process_noise(0.5, 0.16, 0.16)
+    mean = rng.normal(0, 50, (n_filters, 4))
+    L = rng.normal(size=(n_filters, 4, 4))
+    cov = L @ np.swapaxes(L, -1, -2) + np.eye(4)
+    z = mean[:, :2] + rng.normal(size=(n_filters, 2))
+    M = rng.normal(size=(n_filters, 2, 2))
+    R = M @ np.swapaxes(M, -1, -2) + 0.1 * np.eye(2)
+    filters = []
+    for _ in range(n_filters):
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        kf.F, kf.Q, kf.H = A, Q, np.eye(2, 4)
+        filters.append(kf)
+
+    def ours():
+        return estimation.update(*estimation.predict(mean, cov, A, Q), z, R)
+
+    def reference():
+        out_x, out_P = np.empty_like(mean), np.empty_like(cov)
+        for k, kf in enumerate(filters):
+            kf.x, kf.P = mean[k].copy(), cov[k].copy()
+            kf.predict()
+            kf.update(z[k], R=R[k])
+            out_x[k], out_P[k] = kf.x, kf.P
+        return out_x, out_P
+
+    (m1, P1), (m2, P2) = ours(), reference()
+    equal = bool(
+        np.allclose(m1, m2, rtol=1e-9, atol=1e-9) and np.allclose(P1, P2, rtol=1e-9, atol=1e-9)
+    )
+    if not equal:
+        raise AssertionError("Kalman filter and filterpy disagree")
+    t_ours, t_ref = timed(ours, reference, repeats)
+    return case(
+        f"kalman predict+update, {n_filters} filters",
+        t_ours,
+        t_ref,
+        per=n_filters,
+        unit="filter",
+        reference="filterpy.kalman.KalmanFilter",
+        equal_outputs=equal,
+    )
+
+
+def plan_by_sequence(uavs, mean, sensor, bank_angle, horizon, dt, g=9.81):
+    """Reference: a plain loop over the |A|^h sequences, each flown step by step with eq. (1)
+    (vectorised over UAVs and targets)."""
+    actions = planning.action_set(bank_angle)
+    best = np.full(mean.shape[:-1], -np.inf)
+    first = np.zeros(mean.shape[:-1], dtype=np.int64)
+    h = uavs[..., 2, None]
+    for sequence in itertools.product(range(len(actions)), repeat=horizon):
+        state, total = uavs, 0.0
+        for t, a in enumerate(sequence):
+            state = world.fly(state, np.full(uavs.shape[:-1], actions[a]), dt, g)
+            target = mean[..., :2] + (t + 1) * dt * mean[..., 2:]
+            d = np.sqrt(((target - state[..., None, :2]) ** 2).sum(-1) + h * h)
+            total = total + sensing.fisher_det(d, sensing.edge_range(h, sensor), sensor)
+        better = total > best
+        best = np.where(better, total, best)
+        first = np.where(better, sequence[0], first)
+    return best, first
+
+
+def planner_case(
+    n_uavs: int, n_targets: int, repeats: int, horizon: int = 3
+) -> list[dict[str, Any]]:
+    """Planner per sequence-step against a per-sequence loop and the exhaustive search."""
+    scenario = team(n_uavs, n_targets, steps=12)
+    trace = simulate(scenario, "distributed", seed=1).trace
+    uavs, mean = trace.uavs[-1], trace.mean[-1]
+    args = (scenario.sensor, np.radians(scenario.uav.bank_angle_deg), horizon, scenario.dt)
+    ours = planning.plan(uavs, mean, *args)
+    loop_value, loop_first = plan_by_sequence(uavs, mean, *args)
+    exhaustive = planning.plan_exhaustive(uavs, mean, *args)
+    equal = bool(
+        np.array_equal(ours.action, loop_first)
+        and np.array_equal(ours.action, exhaustive.action)
+        and np.allclose(ours.value, loop_value, rtol=1e-12)
+    )
+    if not equal:
+        raise AssertionError("planner choices differ from exhaustive search")
+    per = n_uavs * n_targets * 3**horizon * horizon
+    t_ours, t_loop = timed(
+        lambda: planning.plan(uavs, mean, *args),
+        lambda: plan_by_sequence(uavs, mean, *args),
+        repeats,
+    )
+    _, t_exh = timed(lambda: None, lambda: planning.plan_exhaustive(uavs, mean, *args), repeats)
+    size = f"{n_uavs} UAVs x {n_targets} targets, h = {horizon}"
+    return [
+        case(
+            f"planner vs per-sequence loop, {size}",
+            t_ours,
+            t_loop,
+            per=per,
+            unit="sequence-step",
+            reference="loop over the 3^h sequences",
+            equal_choices=equal,
+        ),
+        case(
+            f"planner vs vectorised exhaustive, {size}",
+            t_ours,
+            t_exh,
+            per=per,
+            unit="sequence-step",
+            reference="planning.plan_exhaustive",
+            equal_choices=equal,
+        ),
+    ]
+
+
+def cycle_cases(sizes, methods, repeats: int) -> list[dict[str, Any]]:
+    """One decision cycle (step) of each method, from a state in the middle of a run."""
+    out = []
+    for n_uavs, n_targets in sizes:
+        scenario = team(n_uavs, n_targets, steps=24)
+        trace = simulate(scenario, "distributed", seed=2).trace
+        k = 20
+        const = Constants.of(scenario)
+        state = State(k, trace.uavs[k][None], trace.mean[k - 1][None], trace.cov[k - 1][None])
+        noise = np.random.default_rng(3).standard_normal((1, n_uavs, n_targets, 2))
+        targets = trace.targets[k][None]
+        for name in methods:
+            cycle = partial(step, state, targets, noise, scenario, get(name), const)
+            t, _ = timed(cycle, None, repeats)
+            out.append(
+                case(
+                    f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets",
+                    t,
+                    unit="cycle",
+                    method=name,
+                    n_uavs=n_uavs,
+                    n_targets=n_targets,
+                    real_time_factor=scenario.dt / t,
+                )
+            )
+    return out
+
+
+def trial_case(repeats: int) -> dict[str, Any]:
+    """A full default trial, one at a time."""
+    scenario = Scenario()
+    t, _ = timed(lambda: simulate(scenario, "distributed", seed=0, trace=False), None, repeats)
+    return case(
+        f"default trial, distributed, {scenario.steps} steps",
+        t,
+        unit="trial",
+        steps_per_second=scenario.steps / t,
+    )
+
+
+def batch_case(trials: int, steps: int, repeats: int) -> dict[str, Any]:
+    """A configuration of trials as one batch against the same trials one at a time."""
+    scenario = Scenario(steps=steps)
+    seeds = [trial_seed(0, t) for t in range(trials)]
+    batched = run(scenario, "distributed", seeds).metrics
+    alone = [run(scenario, "distributed", [s]).metrics for s in seeds]
+    equal = bool(
+        all(
+            np.array_equal(batched["per_target"][t], alone[t]["per_target"][0])
+            for t in range(trials)
+        )
+    )
+    if not equal:
+        raise AssertionError("batched and one-at-a-time trials disagree")
+    t_batch, t_alone = timed(
+        lambda: run(scenario, "distributed", seeds),
+        lambda: [run(scenario, "distributed", [s]) for s in seeds],
+        repeats,
+    )
+    return case(
+        f"{trials} trials x {steps} steps, batched vs one at a time",
+        t_batch,
+        t_alone,
+        unit="configuration",
+        equal_results=equal,
+    )
+
+
+# ------------------------------------------------------------------ the whole bench
+
+
+def machine() -> dict[str, Any]:
+    import scipy
+
+    try:
+        blas = np.show_config(mode="dicts")["Build Dependencies"]["blas"]["name"]
+    except Exception:  # numpy < 2 or a build without the record
+        blas = "unknown"
+    try:
+        cores = len(os.sched_getaffinity(0))
+    except AttributeError:
+        cores = os.cpu_count()
+    from . import __version__
+
+    return {
+        "platform": platform.platform(),
+        "processor": platform.processor() or platform.machine(),
+        "cores": cores,
+        "python": platform.python_version(),
+        "numpy": np.__version__,
+        "scipy": scipy.__version__,
+        "blas": blas,
+        "uavtrack": __version__,
+        "threads": {
+            name: os.environ.get(name)
+            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
+        },
+        "date": time.strftime("%Y-%m-%d %H:%M:%S"),
+    }
+
+
+def bench(quick: bool = False, progress: Callable[[str], None] | None = None) -> dict[str, Any]:
+    """Run every case; returns {'machine': ..., 'cases': [...]}."""
+    say = progress or (lambda _: None)
+    repeats = 3 if quick else 9
+    cases: list[dict[str, Any]] = []
+    try:
+        import filterpy  # noqa: F401
+
+        say("Kalman filter against filterpy")
+        cases.append(kalman_case(100, repeats))
+    except ImportError:
+        cases.append(
+            {
+                "name": "kalman predict+update, 100 filters",
+                "skipped": 'filterpy is not installed (pip install "uavtrack[bench]")',
+            }
+        )
+    say("planner")
+    for size in ((5, 4), (20, 20)) if quick else ((5, 4), (20, 20), (100, 100)):
+        cases.extend(planner_case(*size, repeats=repeats))
+    say("decision cycles")
+    sizes = (
+        ((5, 4), (20, 20), (100, 100))
+        if quick
+        else ((5, 4), (10, 10), (20, 20), (50, 50), (100, 100))
+    )
+    cases.extend(cycle_cases(sizes, ("distributed", "centralized", "greedy"), repeats))
+    say("a default trial")
+    cases.append(trial_case(3 if quick else 5))
+    say("batched trials")
+    cases.append(batch_case(10, 100, 2) if quick else batch_case(50, 500, 3))
+    return {"machine": machine(), "quick": quick, "cases": cases}

@@ -1,0 +1,90 @@
+"""`uavtrack bench`: BLAS threads are pinned before numpy loads."""
+
+from __future__ import annotations
+
+import os
+import sys
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..files import write_json
+from . import app, console, writable_target
+
+
+@app.command()
+def bench(
+    quick: Annotated[bool, typer.Option(help="small profile (under a minute)")] = False,
+    json_out: Annotated[
+        Path | None, typer.Option("--json", help="write the results as JSON")
+    ] = None,
+) -> None:
+    """Speed of the building blocks and whole runs, each beside its reference."""
+    if json_out is not None:
+        writable_target(json_out, "--json")
+    pinning = pin_threads()  # before numpy loads
+    from ..bench import bench as run_bench
+
+    results = run_bench(quick, progress=lambda what: print(f"bench: {what}", file=sys.stderr))
+    results["machine"]["thread_pinning"] = pinning
+    if json_out is not None:
+        write_json(json_out, results)
+    from rich.markup import escape
+    from rich.table import Table
+
+    table = Table(
+        title=f"uavtrack bench{' --quick' if quick else ''} "
+        f"({results['machine']['cores']} cores, BLAS threads: {pinning})"
+    )
+    for col in ("case", "ours", "reference", "speedup"):
+        table.add_column(col, justify="left" if col == "case" else "right")
+    for c in results["cases"]:
+        if "skipped" in c:
+            table.add_row(escape(c["name"]), "skipped", escape(c["skipped"]), "")
+            continue
+        ref = c.get("reference_median_s")
+        table.add_row(
+            escape(c["name"]),
+            f"{_si(c['median_s'])} / {c['unit']}",
+            "" if ref is None else f"{_si(ref)} / {c['unit']}",
+            "" if ref is None else f"{c['speedup']:.1f}x",
+        )
+    console(140).print(table)
+    if json_out is not None:
+        typer.echo(f"wrote {json_out}")
+
+
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+
+
+def pin_threads() -> str:
+    """Pin BLAS threads to 1; returns how ('environment', 'threadpoolctl' or 'not pinned').
+
+    Through the environment when numpy is not loaded yet (the command line), else
+    with threadpoolctl when it is installed.
+    """
+    loaded = "numpy" in sys.modules
+    for name in THREAD_VARIABLES:
+        os.environ[name] = "1"
+    if not loaded:
+        return "environment"
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return "not pinned (numpy was loaded first and threadpoolctl is missing)"
+    threadpool_limits(1)
+    return "threadpoolctl"
+
+
+def _si(seconds: float) -> str:
+    for unit, scale in (("s", 1.0), ("ms", 1e-3), ("us", 1e-6), ("ns", 1e-9)):
+        if seconds >= scale:
+            return f"{seconds / scale:.3g} {unit}"
+    return f"{seconds / 1e-9:.3g} ns"
