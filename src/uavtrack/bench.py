@@ -1,8 +1,9 @@
 """Speed measurements (`uavtrack bench`), each case beside its reference in the same run.
 
 Every case checks that ours and the reference compute the same thing, then times
-them with interleaved repeats (ours, reference, ours, ...) after a warm-up and reports
-medians, so that a machine whose speed drifts affects both alike. BLAS threads are
+them after a warm-up in blocks of consecutive calls, alternating ours and the
+reference, and reports medians, so that a machine whose speed drifts affects both
+alike. BLAS threads are
 pinned to 1 (`uavtrack bench` sets the environment before numpy loads).
 """
 
@@ -13,6 +14,7 @@ import os
 import platform
 import statistics
 import time
+import timeit
 from collections.abc import Callable
 from functools import partial
 from typing import Any
@@ -26,21 +28,25 @@ from .methods import get
 from .simulation import Constants, State, run, simulate, step, trial_seed
 
 
-def timed(
-    ours: Callable[[], Any], reference: Callable[[], Any] | None, repeats: int, number: int = 1
-) -> tuple[float, float | None]:
-    """Median seconds per call of ours and the reference, interleaved after a warm-up."""
-    runs = [(ours, [])] + ([(reference, [])] if reference is not None else [])
-    for fn, _ in runs:
-        fn()
+def timed(*functions: Callable[[], Any], repeats: int, block: float = 0.05) -> list[float]:
+    """Median seconds per call of each function.
+
+    Each sample is a block of consecutive calls lasting about `block` seconds (sized
+    from a warm-up call), as a function called every cycle runs; samples of the
+    functions alternate, so a drift of the machine's speed affects all alike.
+    """
+    runs = []
+    for fn in functions:
+        start = time.perf_counter()
+        fn()  # warm-up, and the size of a block
+        runs.append((fn, max(1, round(block / max(time.perf_counter() - start, 1e-9))), []))
     for _ in range(repeats):
-        for fn, times in runs:
+        for fn, number, times in runs:
             start = time.perf_counter()
             for _ in range(number):
                 fn()
             times.append((time.perf_counter() - start) / number)
-    medians = [statistics.median(times) for _, times in runs]
-    return medians[0], (medians[1] if reference is not None else None)
+    return [statistics.median(times) for _, _, times in runs]
 
 
 def case(
@@ -104,7 +110,7 @@ def kalman_case(n_filters: int, repeats: int) -> dict[str, Any]:
     )
     if not equal:
         raise AssertionError("Kalman filter and filterpy disagree")
-    t_ours, t_ref = timed(ours, reference, repeats)
+    t_ours, t_ref = timed(ours, reference, repeats=repeats)
     return case(
         f"kalman predict+update, {n_filters} filters",
         t_ours,
@@ -155,12 +161,12 @@ def planner_case(
     if not equal:
         raise AssertionError("planner choices differ from exhaustive search")
     per = n_uavs * n_targets * 3**horizon * horizon
-    t_ours, t_loop = timed(
+    t_ours, t_loop, t_exh = timed(
         lambda: planning.plan(uavs, mean, *args),
         lambda: plan_by_sequence(uavs, mean, *args),
-        repeats,
+        lambda: planning.plan_exhaustive(uavs, mean, *args),
+        repeats=repeats,
     )
-    _, t_exh = timed(lambda: None, lambda: planning.plan_exhaustive(uavs, mean, *args), repeats)
     size = f"{n_uavs} UAVs x {n_targets} targets, h = {horizon}"
     return [
         case(
@@ -197,7 +203,7 @@ def cycle_cases(sizes, methods, repeats: int) -> list[dict[str, Any]]:
         targets = trace.targets[k][None]
         for name in methods:
             cycle = partial(step, state, targets, noise, scenario, get(name), const)
-            t, _ = timed(cycle, None, repeats)
+            (t,) = timed(cycle, repeats=repeats)
             out.append(
                 case(
                     f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets",
@@ -215,7 +221,7 @@ def cycle_cases(sizes, methods, repeats: int) -> list[dict[str, Any]]:
 def trial_case(repeats: int) -> dict[str, Any]:
     """A full default trial, one at a time."""
     scenario = Scenario()
-    t, _ = timed(lambda: simulate(scenario, "distributed", seed=0, trace=False), None, repeats)
+    (t,) = timed(lambda: simulate(scenario, "distributed", seed=0, trace=False), repeats=repeats)
     return case(
         f"default trial, distributed, {scenario.steps} steps",
         t,
@@ -241,7 +247,7 @@ def batch_case(trials: int, steps: int, repeats: int) -> dict[str, Any]:
     t_batch, t_alone = timed(
         lambda: run(scenario, "distributed", seeds),
         lambda: [run(scenario, "distributed", [s]) for s in seeds],
-        repeats,
+        repeats=repeats,
     )
     return case(
         f"{trials} trials x {steps} steps, batched vs one at a time",
@@ -268,7 +274,10 @@ def machine() -> dict[str, Any]:
         cores = os.cpu_count()
     from . import __version__
 
+    tiny = np.ones(20)
+    call = min(timeit.repeat(lambda: tiny + tiny, number=20000, repeat=5)) / 20000
     return {
+        "numpy_call_s": call,  # one small numpy call: scales every absolute time here
         "platform": platform.platform(),
         "processor": platform.processor() or platform.machine(),
         "cores": cores,

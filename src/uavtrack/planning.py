@@ -152,10 +152,17 @@ def plan(
     t = tree(len(actions), horizon)
     east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)
     lead = dt * (t.depth + 1.0)  # time from now to each node
-    dx = mean[..., 0, None] + lead * mean[..., 2, None] - east[..., None, :]  # (..., Nu, Nt, K)
-    dy = mean[..., 1, None] + lead * mean[..., 3, None] - north[..., None, :]
+    dx = lead * mean[..., 2, None]  # (..., Nu, Nt, K): target minus node, along x
+    dx += mean[..., 0, None]
+    dx -= east[..., None, :]
+    dy = lead * mean[..., 3, None]
+    dy += mean[..., 1, None]
+    dy -= north[..., None, :]
     h = uavs[..., 2, None, None]
-    d = np.sqrt(dx * dx + dy * dy + h * h)
+    np.square(dx, out=dx)
+    dx += np.square(dy, out=dy)
+    dx += h * h
+    d = np.sqrt(dx, out=dx)
     det = fisher_det(d, edge_range(h, sensor), sensor)
     if discount != 1.0:
         det = det * discount ** t.depth.astype(float)

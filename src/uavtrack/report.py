@@ -20,6 +20,15 @@ def _ci(p: dict[str, float]) -> str:
     return f"{p['mean']:+.4f} [{p['ci_low']:+.4f}, {p['ci_high']:+.4f}]"
 
 
+def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[str]:
+    """A table of mean ± std per method over `columns`, from `{key}_mean` and `{key}_std`."""
+    lines = ["| method | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
+    for m, r in results.items():
+        cells = (_pm(a, b, 3) for a, b in zip(r[f"{key}_mean"], r[f"{key}_std"], strict=True))
+        lines.append(f"| {m} | " + " | ".join(cells) + " |")
+    return lines
+
+
 def parameter_table(scenario: Scenario) -> list[str]:
     lines = ["| field | value | unit and source |", "|---|---|---|"]
     for name, value, doc in scenario.describe():
@@ -51,21 +60,8 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
             f"{r['mean'] - p['mean']:+.4f} |"
         )
     nt = len(c["distributed"]["per_target_mean"])
-    out += [
-        "",
-        "Per target (mean ± std):",
-        "",
-        "| method | " + " | ".join(f"target {j + 1}" for j in range(nt)) + " |",
-        "|---|" + "---|" * nt,
-    ]
-    for m, r in c.items():
-        out.append(
-            f"| {m} | "
-            + " | ".join(
-                _pm(a, b, 3) for a, b in zip(r["per_target_mean"], r["per_target_std"], strict=True)
-            )
-            + " |"
-        )
+    out += ["", "Per target (mean ± std):", ""]
+    out += _per_method(c, [f"target {j + 1}" for j in range(nt)], "per_target")
     out += [
         "",
         "Paired differences of the overall rate (same trials, same targets and noise), "
@@ -94,17 +90,8 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         "",
         "## Fig. 6: target rates sorted within each trial",
         "",
-        "| method | " + " | ".join(f"rank {k + 1}" for k in range(nt)) + " |",
-        "|---|" + "---|" * nt,
     ]
-    for m, r in c.items():
-        out.append(
-            f"| {m} | "
-            + " | ".join(
-                _pm(a, b, 3) for a, b in zip(r["sorted_mean"], r["sorted_std"], strict=True)
-            )
-            + " |"
-        )
+    out += _per_method(c, [f"rank {k + 1}" for k in range(nt)], "sorted")
     t = summary["timing"]
     out += [
         "",

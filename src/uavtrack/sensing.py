@@ -145,12 +145,28 @@ def fisher_det(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.nda
     det G = a b / d^2 (also the limit at r = 0), with b = (d_O / (k_theta d))^2.
     """
     k_r = sensor.k_r
-    # e = exp(-x), x = k_r (d/d_O - 1): grow = 1/(1+e) = expit(x) and 1 - grow = e grow
-    e = np.exp(np.minimum(k_r - d * (k_r / d_edge), 700.0))
-    grow = 1.0 / (1.0 + e)
-    d2 = d * d
-    a = (e * grow * (1.0 / sensor.k_d)) ** 2 + (2.0 * (k_r / d_edge) ** 2) * grow**2 + 2.0 / d2
-    return a * (d_edge / sensor.k_theta) ** 2 / (d2 * d2)
+    # e = exp(-x), x = k_r (d/d_O - 1): grow = 1/(1+e) = expit(x) and 1 - grow = e grow;
+    # computed in place, as the planner calls this on large arrays
+    shape = np.broadcast_shapes(np.shape(d), np.shape(d_edge))
+    e, grow, d2 = np.empty(shape), np.empty(shape), np.empty(shape)
+    np.multiply(d, k_r / d_edge, out=e)
+    np.subtract(k_r, e, out=e)
+    np.minimum(e, 700.0, out=e)
+    np.exp(e, out=e)
+    np.add(e, 1.0, out=grow)
+    np.reciprocal(grow, out=grow)
+    np.multiply(e, grow, out=e)  # 1 - grow
+    np.multiply(e, 1.0 / sensor.k_d, out=e)
+    np.square(e, out=e)  # 1 / sigma_d^2
+    np.square(grow, out=grow)
+    np.multiply(grow, 2.0 * (k_r / d_edge) ** 2, out=grow)  # 2 (sigma_d' / sigma_d)^2
+    np.add(e, grow, out=e)
+    np.multiply(d, d, out=d2)
+    np.add(e, np.divide(2.0, d2, out=grow), out=e)  # a
+    np.multiply(d2, d2, out=d2)
+    np.multiply(e, (d_edge / sensor.k_theta) ** 2, out=e)
+    np.divide(e, d2, out=e)
+    return e if shape else e[()]
 
 
 def _fisher_coefficients(d, d_edge, sensor: SensorModel):

@@ -47,22 +47,15 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
     workers = workers or default_workers()
     try:
         skipped, failed = execute(jobs, store, engine.value, workers, address, progress)
-    except KeyboardInterrupt:
+    except (KeyboardInterrupt, EngineError) as exc:
+        interrupted = isinstance(exc, KeyboardInterrupt)
         saved = sum(store.done(job) for job in jobs)
         print(
-            f"uavtrack: interrupted; {saved} of {len(jobs)} jobs are saved in {store.raw}; "
-            "run the same command again to finish",
+            f"uavtrack: {'interrupted' if interrupted else exc}; {saved} of {len(jobs)} jobs "
+            f"are saved in {store.raw}; run the same command again to finish",
             file=sys.stderr,
         )
-        raise typer.Exit(130) from None
-    except EngineError as exc:
-        saved = sum(store.done(job) for job in jobs)
-        print(
-            f"uavtrack: {exc}; {saved} of {len(jobs)} jobs are saved in {store.raw}; "
-            "run the same command again to finish",
-            file=sys.stderr,
-        )
-        raise typer.Exit(1) from None
+        raise typer.Exit(130 if interrupted else 1) from None
     if failed:
         for job in failed:
             print(
