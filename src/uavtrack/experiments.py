@@ -24,7 +24,7 @@ import numpy as np
 from scipy import stats
 
 from .config import Scenario
-from .metrics import mean_std
+from .metrics import mean_std, sorted_rates
 from .simulation import run, trial_seed
 
 METHOD_NAMES = ("distributed", "centralized", "greedy")
@@ -229,7 +229,7 @@ def describe(metrics: dict[str, np.ndarray]) -> dict[str, Any]:
     """Mean and std over trials of the rate, per target, sorted per target, and costs."""
     rate_mean, rate_std = mean_std(metrics["observation_rate"])
     tgt_mean, tgt_std = mean_std(metrics["per_target"])
-    srt_mean, srt_std = mean_std(np.sort(metrics["per_target"], axis=1))
+    srt_mean, srt_std = mean_std(sorted_rates(metrics["per_target"]))
     out = {
         "trials": int(len(metrics["observation_rate"])),
         "mean": float(rate_mean),

@@ -29,6 +29,14 @@ def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[s
     return lines
 
 
+def _by_value(field: str, values: list, columns: list[str], cell) -> list[str]:
+    """A table with one row per value of `field` and `cell(row, column)` in each column."""
+    lines = [f"| {field} | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
+    for k, v in enumerate(values):
+        lines.append(f"| {v} | " + " | ".join(cell(k, c) for c in columns) + " |")
+    return lines
+
+
 def parameter_table(scenario: Scenario) -> list[str]:
     lines = ["| field | value | unit and source |", "|---|---|---|"]
     for name, value, doc in scenario.describe():
@@ -161,28 +169,14 @@ def sweep(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> 
         "",
         "Observation rate, mean ± std over trials:",
         "",
-        f"| {field} | " + " | ".join(methods) + " |",
-        "|---|" + "---|" * len(methods),
     ]
-    for k, v in enumerate(summary["values"]):
-        out.append(
-            f"| {v} | "
-            + " | ".join(
-                _pm(summary["methods"][m][k]["mean"], summary["methods"][m][k]["std"])
-                for m in methods
-            )
-            + " |"
-        )
+    rows = summary["methods"]
+    out += _by_value(
+        field, summary["values"], methods, lambda k, m: _pm(rows[m][k]["mean"], rows[m][k]["std"])
+    )
     if summary["paired"]:
-        names = list(summary["paired"])
-        out += [
-            "",
-            "Paired differences (same trials), mean [95% CI]:",
-            "",
-            f"| {field} | " + " | ".join(names) + " |",
-            "|---|" + "---|" * len(names),
-        ]
-        for k, v in enumerate(summary["values"]):
-            out.append(f"| {v} | " + " | ".join(_ci(summary["paired"][n][k]) for n in names) + " |")
+        pairs = summary["paired"]
+        out += ["", "Paired differences (same trials), mean [95% CI]:", ""]
+        out += _by_value(field, summary["values"], list(pairs), lambda k, n: _ci(pairs[n][k]))
     out += ["", "![sweep](sweep.png)", "", "## Base scenario", ""] + parameter_table(scenario)
     return "\n".join(out) + "\n"

@@ -37,7 +37,6 @@ class Constants:
     A: np.ndarray
     Q: np.ndarray
     actions: np.ndarray
-    altitudes: np.ndarray
 
     @classmethod
     def of(cls, scenario: Scenario) -> Constants:
@@ -47,7 +46,6 @@ class Constants:
                 scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2
             ),
             actions=planning.action_set(np.radians(scenario.uav.bank_angle_deg)),
-            altitudes=np.array(scenario.altitudes()),
         )
 
 
