@@ -20,8 +20,8 @@ from .estimation import nees
 class Tally:
     """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets).
 
-    NEES needs a 4 x 4 solve per estimate; the estimates are buffered and solved in
-    blocks of about 4000 filters (few calls, and the block stays in cache).
+    NEES is computed in blocks of steps covering about 4000 filters: few numpy calls,
+    and the block stays in cache.
     """
 
     batch: int

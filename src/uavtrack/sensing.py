@@ -12,7 +12,6 @@ where d is the 3-D range and theta the bearing in the inertial frame.
 from __future__ import annotations
 
 import numpy as np
-from scipy.special import expit
 
 from .config import SensorModel
 
@@ -129,7 +128,9 @@ def fisher_information(uav: np.ndarray, target: np.ndarray, sensor: SensorModel)
     uav: (..., >=3); target: (..., >=2). Returns (..., 2, 2).
     """
     delta, r, d = relative(uav, target)
-    a, b = _fisher_coefficients(d, edge_range(uav[..., 2], sensor), sensor)
+    d_edge = edge_range(uav[..., 2], sensor)
+    a, _ = _range_coefficient(d, d_edge, sensor)
+    b = (d_edge / (sensor.k_theta * d)) ** 2
     u = -delta / d[..., None]
     r2 = np.where(r > 0, r * r, 1.0)
     w = np.stack([delta[..., 1], -delta[..., 0]], axis=-1) / r2[..., None]
@@ -144,35 +145,36 @@ def fisher_det(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.nda
     u is orthogonal to w, |u|^2 = r^2/d^2 and |w|^2 = 1/r^2, so
     det G = a b / d^2 (also the limit at r = 0), with b = (d_O / (k_theta d))^2.
     """
+    a, d2 = _range_coefficient(d, d_edge, sensor)
+    np.multiply(d2, d2, out=d2)
+    np.multiply(a, (d_edge / sensor.k_theta) ** 2, out=a)
+    np.divide(a, d2, out=a)
+    return a if a.shape else a[()]
+
+
+def _range_coefficient(d, d_edge, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
+    """a = 1/sigma_d^2 + 2 (sigma_d'/sigma_d)^2 + 2/d^2 of `fisher_information`, and d^2.
+
+    With e = exp(-x), x = k_r (d/d_O - 1): 1/sigma_d = (1 - grow)/k_d and
+    sigma_d'/sigma_d = k_r/d_O grow, where grow = 1/(1+e) = expit(x) and 1 - grow =
+    e grow, finite however far the target is. Computed in place, as the planner calls
+    this on large arrays; both results are new arrays (0-d for scalar input).
+    """
     k_r = sensor.k_r
-    # e = exp(-x), x = k_r (d/d_O - 1): grow = 1/(1+e) = expit(x) and 1 - grow = e grow;
-    # computed in place, as the planner calls this on large arrays
     shape = np.broadcast_shapes(np.shape(d), np.shape(d_edge))
-    e, grow, d2 = np.empty(shape), np.empty(shape), np.empty(shape)
-    np.multiply(d, k_r / d_edge, out=e)
-    np.subtract(k_r, e, out=e)
-    np.minimum(e, 700.0, out=e)
-    np.exp(e, out=e)
-    np.add(e, 1.0, out=grow)
+    a, grow, d2 = np.empty(shape), np.empty(shape), np.empty(shape)
+    np.multiply(d, k_r / d_edge, out=a)
+    np.subtract(k_r, a, out=a)
+    np.minimum(a, 700.0, out=a)
+    np.exp(a, out=a)  # e
+    np.add(a, 1.0, out=grow)
     np.reciprocal(grow, out=grow)
-    np.multiply(e, grow, out=e)  # 1 - grow
-    np.multiply(e, 1.0 / sensor.k_d, out=e)
-    np.square(e, out=e)  # 1 / sigma_d^2
+    np.multiply(a, grow, out=a)  # 1 - grow
+    np.multiply(a, 1.0 / sensor.k_d, out=a)
+    np.square(a, out=a)  # 1 / sigma_d^2
     np.square(grow, out=grow)
     np.multiply(grow, 2.0 * (k_r / d_edge) ** 2, out=grow)  # 2 (sigma_d' / sigma_d)^2
-    np.add(e, grow, out=e)
+    np.add(a, grow, out=a)
     np.multiply(d, d, out=d2)
-    np.add(e, np.divide(2.0, d2, out=grow), out=e)  # a
-    np.multiply(d2, d2, out=d2)
-    np.multiply(e, (d_edge / sensor.k_theta) ** 2, out=e)
-    np.divide(e, d2, out=e)
-    return e if shape else e[()]
-
-
-def _fisher_coefficients(d, d_edge, sensor: SensorModel):
-    # with x = k_r (d/d_O - 1): 1/sigma_d = expit(-x) / k_d and
-    # sigma_d'/sigma_d = k_r/d_O expit(x), both finite however far the target is
-    grow = expit(sensor.k_r * (d / d_edge - 1.0))
-    a = ((1.0 - grow) / sensor.k_d) ** 2 + 2.0 * (sensor.k_r / d_edge * grow) ** 2 + 2.0 / (d * d)
-    b = (d_edge / (sensor.k_theta * d)) ** 2
-    return a, b
+    np.add(a, np.divide(2.0, d2, out=grow), out=a)
+    return a, d2
