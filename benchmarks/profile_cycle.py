@@ -26,9 +26,12 @@ def profile(method_name: str = "distributed", batch: int = 1) -> dict[str, float
     nu, nt = scenario.n_uavs, scenario.n_targets
     trajectory = np.stack([d[1] for d in drawn])
     prior = np.stack([d[2] for d in drawn])[:, None]
-    state = simulation.State(0, np.stack([d[0] for d in drawn]),
-                             np.broadcast_to(prior, (batch, nu, nt, 4)).copy(),
-                             np.broadcast_to(drawn[0][3], (batch, nu, nt, 4, 4)).copy())
+    state = simulation.State(
+        0,
+        np.stack([d[0] for d in drawn]),
+        np.broadcast_to(prior, (batch, nu, nt, 4)).copy(),
+        np.broadcast_to(drawn[0][3], (batch, nu, nt, 4, 4)).copy(),
+    )
     tally = metrics.Tally(batch, nu, nt)
     spent: dict[str, float] = defaultdict(float)
     clock = time.perf_counter
@@ -43,22 +46,29 @@ def profile(method_name: str = "distributed", batch: int = 1) -> dict[str, float
         spent["graph"] += -t + (t := clock())
         observed, z, R = simulation.sense(state.uavs, targets, noise[k % block], scenario)
         spent["sensing"] += -t + (t := clock())
-        mean, cov = estimation.filter_step(state.mean, state.cov, observed, z, R,
-                                           *((const.A, const.Q) if k else (None, None)))
+        mean, cov = estimation.filter_step(
+            state.mean, state.cov, observed, z, R, *((const.A, const.Q) if k else (None, None))
+        )
         spent["filter"] += -t + (t := clock())
         fused = method.fuse(estimation.confidence(cov), graph)
         if fused.rounds.any():
             mean, cov = fusion.gather(fused.source, mean), fusion.gather(fused.source, cov)
         spent["fusion"] += -t + (t := clock())
-        plan = planning.plan(state.uavs, mean, scenario.sensor,
-                             np.radians(scenario.uav.bank_angle_deg), scenario.planner.horizon,
-                             scenario.dt)
+        plan = planning.plan(
+            state.uavs,
+            mean,
+            scenario.sensor,
+            np.radians(scenario.uav.bank_angle_deg),
+            scenario.planner.horizon,
+            scenario.dt,
+        )
         spent["planning"] += -t + (t := clock())
         target, seconds = method.assign(plan.value, graph)
         spent["auction"] += -t + (t := clock())
         action = np.take_along_axis(plan.action, target[..., None], axis=-1)[..., 0]
-        state = simulation.State(k + 1, world.fly(state.uavs, const.actions[action], scenario.dt),
-                                 mean, cov)
+        state = simulation.State(
+            k + 1, world.fly(state.uavs, const.actions[action], scenario.dt), mean, cov
+        )
         spent["control"] += -t + (t := clock())
         tally.add(observed, targets, mean, cov, fused.rounds, fused.messages, seconds)
         spent["metrics"] += -t + (t := clock())

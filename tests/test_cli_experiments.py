@@ -1,4 +1,11 @@
+import errno
 import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
 
 import pytest
 from PIL import Image
@@ -127,3 +134,288 @@ def test_animate(tmp_path, capsys):
     with Image.open(out) as im:
         assert im.n_frames == 4
     assert [p.name for p in tmp_path.iterdir()] == ["run.gif"]
+
+
+def tiny_sweep(out, *extra):
+    return [
+        "sweep",
+        "comm_range",
+        "10",
+        "50",
+        "--trials",
+        "2",
+        "--steps",
+        "15",
+        "--method",
+        "distributed",
+        "--out",
+        str(out),
+        "--no-progress",
+        "--workers",
+        "1",
+        *extra,
+    ]
+
+
+def test_tampered_job_files_are_set_aside_and_recomputed(tmp_path, capsys):
+    out = tmp_path / "s"
+    assert cli.main(tiny_sweep(out)) == 0
+    clean = json.loads((out / "summary.json").read_text())
+    files = sorted((out / "raw").glob("*.json"))
+    edited, truncated, empty = files[0], files[1], files[0]
+    record = json.loads(edited.read_text())
+    record["metrics"]["observation_rate"] = [1.0, 1.0]  # a hand edit
+    edited.write_text(json.dumps(record))
+    truncated.write_text(truncated.read_text()[:40])
+    capsys.readouterr()
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 0, err
+    assert err.count("set aside") == 2 and "checksum" in err and "unreadable" in err
+    again = json.loads((out / "summary.json").read_text())
+    assert again["methods"] == clean["methods"]  # the edit did not reach the results
+    assert {p.name for p in (out / "failed").glob("*.rejected.json")} == {
+        f"{edited.stem}.rejected.json",
+        f"{truncated.stem}.rejected.json",
+    }
+    empty.write_text("")
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 0 and "set aside" in err and "Traceback" not in err
+
+
+def test_a_job_file_of_another_seed_is_not_used(tmp_path, capsys):
+    one, two = tmp_path / "one", tmp_path / "two"
+    assert cli.main(tiny_sweep(one)) == 0
+    assert cli.main(tiny_sweep(two, "--seed", "1")) == 0
+    name = sorted((one / "raw").glob("*.json"))[0].name
+    shutil.copy(two / "raw" / name, one / "raw" / name)  # same job key, other seed
+    capsys.readouterr()
+    code, _, err = run_cli(capsys, *tiny_sweep(one))
+    assert code == 0 and "made for another seed (1, this job has 0)" in err
+
+
+def test_a_second_run_on_a_locked_folder_is_refused(tmp_path, capsys):
+    from uavtrack import runner
+
+    out = tmp_path / "s"
+    with runner.Store(out, {"kind": "sweep"}):
+        code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 2 and f"{out} is in use by another uavtrack run (pid {os.getpid()})" in err
+    assert err.count("\n") == 1
+
+
+@pytest.mark.parametrize(
+    "values,message",
+    [
+        (["dt", "0.5", "0.5"], "0.5 is given twice"),
+        (["comm_range", "10", "10.0", "80"], "10 and 10.0 are the same value once read (10.0)"),
+    ],
+)
+def test_sweep_refuses_repeated_values_before_any_work(tmp_path, capsys, values, message):
+    out = tmp_path / "s"
+    code, _, err = run_cli(capsys, "sweep", *values, "--out", str(out))
+    assert code == 2 and message in err and not out.exists()
+
+
+def test_one_trial_writes_valid_json_with_nulls(tmp_path, capsys):
+    out = tmp_path / "one"
+    code, _, err = run_cli(
+        capsys, "reproduce", "--quick", "--trials", "1", "--out", str(out), "--no-progress"
+    )
+    assert code == 0, err
+
+    def refuse(constant):
+        raise ValueError(constant)
+
+    summary = json.loads((out / "summary.json").read_text(), parse_constant=refuse)
+    assert summary["compare"]["distributed"]["std"] is None
+    assert summary["paired"]["distributed - greedy"]["ci_low"] is None
+    report = (out / "report.md").read_text()
+    assert "needs at least two trials" in report and "± n/a" in report
+
+
+@pytest.mark.parametrize("where", ["file", "proc", "raw-unwritable"])
+def test_unusable_output_folders_are_refused_before_any_work(tmp_path, capsys, where):
+    if where == "file":
+        out = tmp_path / "f"
+        out.write_text("mine")
+    elif where == "proc":
+        out = Path("/proc/uavtrack-results")
+    else:
+        out = tmp_path / "s"
+        assert cli.main(tiny_sweep(out)) == 0
+        shutil.rmtree(out / "raw")
+        (out / "raw").symlink_to("/proc/self/fdinfo")  # a folder nobody may write in
+    capsys.readouterr()
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 2 and err.count("\n") == 1 and "Traceback" not in err
+    expected = {
+        "file": "exists and is not a folder",
+        "proc": "cannot create it",
+        "raw-unwritable": "cannot write in it",
+    }[where]
+    assert f"results folder {out}" in err and expected in err
+    if where == "file":
+        assert out.read_text() == "mine"
+
+
+def test_animate_into_a_folder_is_refused(tmp_path, capsys):
+    folder = tmp_path / "movie.gif"
+    folder.mkdir()
+    code, _, err = run_cli(capsys, "animate", "--out", str(folder), "--set", "steps=5")
+    assert code == 2 and "is a directory" in err and not any(folder.iterdir())
+
+
+def test_a_full_disk_ends_the_run_in_one_line(tmp_path, capsys, monkeypatch):
+    from uavtrack import files
+
+    def full(path, text):
+        raise OSError(errno.ENOSPC, "No space left on device", str(path))
+
+    monkeypatch.setattr(files, "write_text", full)
+    code, _, err = run_cli(capsys, *tiny_sweep(tmp_path / "s"))
+    assert code == 1 and err.count("\n") == 1
+    assert "No space left on device" in err and err.startswith("uavtrack: error: cannot write")
+
+
+def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, capsys, monkeypatch):
+    from uavtrack import experiments
+
+    real = experiments.run
+
+    def broken(*args, **kwargs):
+        result = real(*args, **kwargs)
+        result.metrics["rmse"][:] = float("nan")
+        return result
+
+    monkeypatch.setattr(experiments, "run", broken)
+    out = tmp_path / "s"
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 1 and "jobs failed" in err
+    assert not list((out / "raw").glob("*.json"))
+    record = json.loads(next((out / "failed").glob("*.json")).read_text())
+    assert "metric rmse is not finite" in record["error"]
+
+
+def test_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
+    pytest.importorskip("dask.distributed")
+    code, _, err = run_cli(
+        capsys, *tiny_sweep(tmp_path / "s", "--engine", "dask", "--address", "tcp://127.0.0.1:9")
+    )
+    assert code == 2 and err.count("\n") == 1
+    assert "--address tcp://127.0.0.1:9: no Dask scheduler answers there" in err
+
+
+def test_workers_are_capped_at_the_cores(tmp_path, capsys):
+    code, _, err = run_cli(capsys, *tiny_sweep(tmp_path / "s", "--workers", "1000"))
+    assert code == 0 and "--workers 1000 capped at" in err
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert summary["settings"]["workers"] <= os.cpu_count()
+
+
+def children(pid):
+    """Pids of the processes whose parent is `pid` (from /proc)."""
+    out = []
+    for entry in Path("/proc").iterdir():
+        if entry.name.isdigit():
+            try:
+                stat = (entry / "stat").read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
+                out.append(int(entry.name))
+    return out
+
+
+def alive(pid):
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != "Z"
+
+
+def test_workers_exit_with_a_killed_parent(tmp_path):
+    proc = subprocess.Popen(
+        [
+            sys.executable,
+            "-m",
+            "uavtrack.cli",
+            "reproduce",
+            "--quick",
+            "--trials",
+            "40",
+            "--workers",
+            "2",
+            "--out",
+            str(tmp_path / "r"),
+            "--no-progress",
+        ],
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+    )
+    deadline = time.monotonic() + 60
+    workers = []
+    while time.monotonic() < deadline and len(workers) < 2:
+        time.sleep(0.2)
+        workers = children(proc.pid)
+    assert len(workers) >= 2, "no worker processes started"
+    proc.kill()
+    proc.wait()
+    deadline = time.monotonic() + 10
+    while time.monotonic() < deadline and any(alive(w) for w in workers):
+        time.sleep(0.2)
+    assert not any(alive(w) for w in workers)
+
+
+def test_reproduce_applies_set_steps(tmp_path, capsys):
+    out = tmp_path / "r"
+    code, _, err = run_cli(
+        capsys,
+        "reproduce",
+        "--quick",
+        "--trials",
+        "2",
+        "--set",
+        "steps=7",
+        "--out",
+        str(out),
+        "--no-progress",
+    )
+    assert code == 0, err
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["plan"]["steps"] == 7 and manifest["scenario"]["steps"] == 7
+    code, _, err = run_cli(
+        capsys, "reproduce", "--quick", "--steps", "8", "--set", "steps=7", "--out", str(out)
+    )
+    assert code == 2 and "disagree" in err
+
+
+def test_sweep_of_negative_values_and_messages_name_the_sweep(tmp_path, capsys):
+    code, _, err = run_cli(
+        capsys,
+        "sweep",
+        "--trials",
+        "2",
+        "--steps",
+        "10",
+        "--method",
+        "greedy",
+        "--out",
+        str(tmp_path / "s"),
+        "--no-progress",
+        "--workers",
+        "1",
+        "uav.altitude_spacing",
+        "--",
+        "-5",
+        "0",
+        "5",
+    )
+    assert code == 0, err
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert summary["values"] == [-5.0, 0.0, 5.0] and summary["unit"] == "m"
+    code, _, err = run_cli(capsys, "sweep", "dt", "--", "-1")
+    assert code == 2 and err.startswith("uavtrack: error: sweep value dt=-1: dt:")
+    assert "--set" not in err
+    code, _, err = run_cli(capsys, "sweep", "dt", "--", "0.5", "--trials", "2")
+    assert code == 2 and "put options before '--'" in err

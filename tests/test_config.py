@@ -1,10 +1,13 @@
 import math
+import re
 
+import numpy as np
 import pytest
 from pydantic import ValidationError
 
 import uavtrack
 from uavtrack import Scenario, ScenarioError, SensorModel
+from uavtrack.config import parse_value
 
 
 def test_defaults_are_the_paper_experiment():
@@ -61,7 +64,10 @@ def test_overrides_dotted():
         ({"sensor.nope": 1}, "unknown scenario field 'sensor.nope'"),
         ({"planner.horizon": 1}, "planner.horizon: Input should be greater than or equal to 2"),
         ({"uav.altitudes": [1.0]}, "uav.altitudes has 1 entries but n_uavs is 5"),
-        ({"uav.altitude": 10, "uav.altitude_spacing": 10}, "altitude <= 0"),
+        (
+            {"uav.altitude": 10, "uav.altitude_spacing": 10},
+            "put the 5 UAVs between -10 and 30 m, outside",
+        ),
     ],
 )
 def test_bad_values_name_the_field(overrides, message):
@@ -86,3 +92,79 @@ def test_bad_files(tmp_path):
 def test_scenario_is_frozen():
     with pytest.raises(ValidationError, match="frozen"):
         uavtrack.Scenario().n_uavs = 3
+
+
+@pytest.mark.parametrize(
+    "overrides,message",
+    [
+        ({"field_size": math.inf}, "field_size: Input should be a finite number"),
+        ({"dt": math.inf}, "dt: Input should be a finite number"),
+        ({"dt": 1e308}, "dt: Input should be less than or equal to 10"),
+        ({"comm_range": 1e308}, "comm_range: Input should be less than or equal to 100000"),
+        ({"uav.altitude": 1e308}, "uav.altitude: Input should be less than or equal to 20000"),
+        ({"sensor.k_d": math.inf}, "sensor.k_d: Input should be a finite number"),
+        ({"uav.speed": math.inf}, "uav.speed: Input should be a finite number"),
+        ({"target.sigma_1": math.inf}, "target.sigma_1: Input should be a finite number"),
+        ({"target.sigma_1": math.nan}, "target.sigma_1: Input should be a finite number"),
+        (
+            {"uav.altitudes": [400.0, 410.0, math.nan, 430.0, 440.0]},
+            "uav.altitudes.2: Input should be a finite number",
+        ),
+        ({"uav.altitudes": [400.0, 0.0, 1, 2, 3]}, "uav.altitudes.1: Input should be greater"),
+        ({"steps": 10**8}, "steps: Input should be less than or equal to 10000000"),
+        ({"n_uavs": True}, "n_uavs: Input should be a valid integer"),
+        ({"n_uavs": 5.0}, "n_uavs: Input should be a valid integer"),
+        ({"n_uavs": "5"}, "n_uavs: Input should be a valid integer"),
+        ({"dt": True}, "dt: Input should be a valid number"),
+        ({"dt": "0.5"}, "dt: Input should be a valid number"),
+    ],
+)
+def test_non_finite_absurd_and_mistyped_values_are_refused(overrides, message):
+    with pytest.raises(ScenarioError, match=message.replace("(", r"\(")) as info:
+        Scenario().with_overrides(overrides)
+    assert "\n" not in str(info.value)
+
+
+def test_numbers_of_any_kind_are_accepted():
+    s = Scenario(n_uavs=np.int64(3), dt=np.float32(0.25), comm_range=40)
+    assert (s.n_uavs, s.dt, s.comm_range) == (3, 0.25, 40.0)
+    assert type(s.n_uavs) is int and type(s.comm_range) is float
+
+
+def test_every_float_field_has_a_documented_finite_range():
+    for name, _, doc in Scenario().describe():
+        # every field names its range beside its unit, e.g. "[m], (0, 100000]"
+        assert re.search(r"[\[(][^\]()]*, [^\]()]*[\])]|\d+ to \d+", doc), name
+
+
+def test_altitudes_are_frozen():
+    s = Scenario(n_uavs=2, uav={"altitudes": [300.0, 320.0]})
+    assert s.uav.altitudes == (300.0, 320.0)
+    with pytest.raises(TypeError):
+        s.uav.altitudes[0] = 1.0  # a tuple: validation cannot be bypassed in place
+    assert Scenario.from_dict(s.to_dict()) == s
+
+
+def test_override_errors_name_their_origin():
+    with pytest.raises(ScenarioError, match=r"^sweep value dt=-1: dt: Input should be greater"):
+        Scenario().with_overrides({"dt": -1}, origin="sweep value dt=-1")
+
+
+def test_negative_altitude_spacing_reverses_the_order():
+    s = Scenario().with_overrides({"uav.altitude_spacing": -5})
+    assert s.altitudes() == [435.0, 430.0, 425.0, 420.0, 415.0]
+
+
+def test_units_digest_and_value():
+    s = Scenario()
+    assert s.unit("comm_range") == "m" and s.unit("sensor.half_fov_deg") == "deg"
+    assert s.unit("planner.discount") == "" and s.value("sensor.k_d") == 0.1056
+    assert s.digest() == Scenario().digest() != s.with_overrides({"dt": 0.25}).digest()
+    with pytest.raises(ScenarioError, match="unknown scenario field 'nope'"):
+        s.unit("nope")
+
+
+def test_parse_value_refuses_line_breaks():
+    assert parse_value("[1, 2]") == [1, 2] and parse_value("abc") == "abc"
+    with pytest.raises(ScenarioError, match="spans several lines"):
+        parse_value("5\nn_uavs = 3")

@@ -53,12 +53,15 @@ def test_describe_sorted_ranks():
         "observation_rate": np.array([0.5, 0.7]),
         "per_target": np.array([[0.9, 0.1], [0.6, 0.8]]),
     }
-    for name in ("rmse", "nees", "rounds", "messages", "decision_time"):
+    for name in ("rmse", "rmse_best", "nees", "nees_best", "rounds", "messages"):
         metrics[name] = np.zeros(2)
+    metrics["decision_time_ms"] = np.array([0.5, np.nan])  # measured for trial 0 only
     d = experiments.describe(metrics)
     assert d["sorted_mean"] == pytest.approx([0.35, 0.85])
     assert d["per_target_mean"] == pytest.approx([0.75, 0.45])
     assert d["mean"] == pytest.approx(0.6) and d["std"] == pytest.approx(np.std([0.5, 0.7], ddof=1))
+    assert d["decision_time_ms"]["mean"] == 0.5 and d["decision_time_ms"]["trials"] == 1
+    assert np.isnan(d["decision_time_ms"]["std"])  # one value: no spread
 
 
 def test_resized_team_keeps_the_altitude_spread():

@@ -196,3 +196,13 @@ def test_large_team_uses_edge_lists_and_agrees_with_dense(rng):
     assert np.array_equal(sparse, dense)
     for b in range(2):
         assert np.array_equal(sparse[b], component_max_index(confidence[b], adj[b]))
+
+
+def test_self_loops_in_a_given_adjacency_are_ignored():
+    # UAV 2 is isolated; a diagonal marked True must not make it its own neighbour
+    adj = graph(3, [(0, 1)]) | np.eye(3, dtype=bool)
+    confidence = np.array([[1.0], [5.0], [9.0]])
+    source, rounds = fusion.max_consensus(confidence, adj)
+    assert rounds.tolist() == [1, 1, 0]
+    assert source[:, 0].tolist() == [1, 1, 2]
+    assert fusion.fuse(confidence, adj).messages == 2

@@ -90,3 +90,15 @@ def test_bids_prefer_nearer_targets(rng):
     mean = np.array([[[110.0, 95.0, 0, 0], [250.0, 100.0, 0, 0], [100.0, 500.0, 0, 0]]])
     value = planning.plan(uav, mean, sensor, np.radians(45.0), 3, 1.0).value[0]
     assert value[0] > value[1] > value[2] > 0
+
+
+def test_planning_in_blocks_of_uavs_equals_one_pass(monkeypatch):
+    rng = np.random.default_rng(3)
+    uavs, mean = random_case(rng, batch=(2,), nu=7, nt=5)
+    args = (SensorModel(), np.radians(45), 4, 0.5)
+    whole = planning.plan(uavs, mean, *args)
+    # a working memory of one UAV's pairs forces a block per UAV
+    monkeypatch.setattr(planning, "CHUNK_BYTES", 5 * planning.floats_per_pair(3, 4) * 8)
+    blocks = planning.plan(uavs, mean, *args)
+    for name in ("value", "action", "sequence"):
+        assert np.array_equal(getattr(whole, name), getattr(blocks, name)), name

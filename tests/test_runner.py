@@ -4,7 +4,7 @@ import pytest
 
 import uavtrack
 from uavtrack import experiments, runner
-from uavtrack.config import ScenarioError
+from uavtrack.errors import UsageError
 
 
 def small_jobs(trials=4, chunk=2):
@@ -27,12 +27,11 @@ def manifest(**extra):
 
 
 def without_timing(metrics):
-    return {k: v for k, v in metrics.items() if k != "decision_time"}
+    return {k: v for k, v in metrics.items() if k != "decision_time_ms"}
 
 
 def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
     jobs = small_jobs()
-    store = runner.Store(tmp_path / "out", manifest())
     seen = []
 
     def stop_after_two(job):
@@ -40,7 +39,7 @@ def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
         if len(seen) == 2:
             raise KeyboardInterrupt
 
-    with pytest.raises(KeyboardInterrupt):
+    with runner.Store(tmp_path / "out", manifest()) as store, pytest.raises(KeyboardInterrupt):
         runner.execute(jobs, store, workers=1, progress=False, on_result=stop_after_two)
     assert sorted(p.stem for p in store.raw.glob("*.json")) == sorted(seen)
     assert not list(store.raw.glob(".*"))  # no temporary files left
@@ -48,11 +47,11 @@ def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
     monkeypatch.setattr(
         runner, "run_job", lambda job: ran.append(job.key) or experiments.run_job(job)
     )
-    again = runner.Store(tmp_path / "out", manifest())
-    skipped, failed = runner.execute(jobs, again, workers=1, progress=False)
-    assert skipped == 2 and not failed
-    assert sorted(ran) == sorted(j.key for j in jobs if j.key not in seen)
-    assert all(again.done(j) for j in jobs)
+    with runner.Store(tmp_path / "out", manifest()) as again:
+        skipped, failed = runner.execute(jobs, again, workers=1, progress=False)
+        assert skipped == 2 and not failed
+        assert sorted(ran) == sorted(j.key for j in jobs if j.key not in seen)
+        assert all(again.done(j) for j in jobs)
 
 
 def test_failed_job_is_recorded_and_others_finish(tmp_path, monkeypatch):
@@ -79,19 +78,19 @@ def test_failed_job_is_recorded_and_others_finish(tmp_path, monkeypatch):
 
 
 def test_store_refuses_other_scenario_seed_or_code(tmp_path, monkeypatch):
-    runner.Store(tmp_path / "out", manifest())
+    runner.Store(tmp_path / "out", manifest()).close()
     other = manifest()
     other["scenario"]["comm_range"] = 10.0
-    with pytest.raises(ScenarioError, match=r"different scenario \(comm_range 50.0, now 10.0\)"):
+    with pytest.raises(UsageError, match=r"different scenario \(comm_range 50.0, now 10.0\)"):
         runner.Store(tmp_path / "out", other)
-    with pytest.raises(ScenarioError, match="different seed"):
+    with pytest.raises(UsageError, match="different seed"):
         runner.Store(tmp_path / "out", {**manifest(), "seed": 4})
     monkeypatch.setattr(runner, "code_hash", lambda: "0123456789abcdef")
-    with pytest.raises(ScenarioError, match="different uavtrack code"):
+    with pytest.raises(UsageError, match="different uavtrack code"):
         runner.Store(tmp_path / "out", manifest())
     (tmp_path / "junk").mkdir()
     (tmp_path / "junk" / "notes.txt").write_text("mine")
-    with pytest.raises(ScenarioError, match="not an uavtrack results folder"):
+    with pytest.raises(UsageError, match="not an uavtrack results folder"):
         runner.Store(tmp_path / "junk", manifest())
 
 

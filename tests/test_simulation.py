@@ -1,8 +1,10 @@
+import tracemalloc
+
 import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import network, sensing, simulation
+from uavtrack import estimation, network, sensing, simulation
 
 DECISIONS = ("assignment", "action", "bids", "observed", "uavs", "mean", "cov")
 
@@ -23,7 +25,7 @@ def test_same_seed_same_result(short):
 
 
 def test_complete_graph_distributed_decides_as_centralized(short):
-    wide = short.model_copy(update={"comm_range": 1e7})
+    wide = short.model_copy(update={"comm_range": 1e5})
     d = uavtrack.simulate(wide, "distributed", seed=1)
     c = uavtrack.simulate(wide, "centralized", seed=1)
     same_decisions(d, c)
@@ -101,7 +103,7 @@ def test_trace_shapes_and_rounds_follow_the_radio(short):
 
 
 def test_more_uavs_than_targets_everyone_tracks():
-    scenario = uavtrack.Scenario(n_uavs=6, n_targets=2, steps=40, comm_range=1e6)
+    scenario = uavtrack.Scenario(n_uavs=6, n_targets=2, steps=40, comm_range=1e5)
     r = uavtrack.simulate(scenario, "distributed", seed=0)
     counts = np.stack([np.bincount(a, minlength=2) for a in r.trace.assignment])
     assert (counts == 3).all()  # Remark 2: rounds of assignment cover every UAV
@@ -128,3 +130,90 @@ def test_initial_conditions_layout():
     assert trajectory.shape == (500, 4, 4)
     assert np.allclose(np.diag(P0), [25.0, 25.0, 1.0, 1.0])
     assert (prior[:, 2:] == 0).all()
+
+
+def test_numpy_integer_seed_is_kept_and_bad_seeds_refused(short):
+    r = uavtrack.simulate(short.model_copy(update={"steps": 5}), seed=np.int64(3), trace=False)
+    assert r.seed == 3 and type(r.seed) is int
+    assert (
+        r.observation_rate
+        == uavtrack.simulate(short.model_copy(update={"steps": 5}), seed=3).observation_rate
+    )
+    with pytest.raises(ValueError, match="seed must be >= 0"):
+        uavtrack.simulate(short, seed=-1)
+    with pytest.raises(TypeError, match="seed must be an integer"):
+        uavtrack.simulate(short, seed=1.5)
+
+
+def test_run_without_seeds_says_so(short):
+    with pytest.raises(ValueError, match="seeds is empty"):
+        uavtrack.run(short, "distributed", [])
+
+
+def test_decision_time_is_measured_alone_never_in_a_batch():
+    scenario = uavtrack.Scenario(steps=10)
+    alone = uavtrack.run(scenario, "distributed", [0], trace=True)
+    assert (alone.metrics["decision_time_ms"] > 0).all()
+    assert (alone.traces[0].decision_time_ms > 0).all()
+    batch = uavtrack.run(scenario, "distributed", [0, 1], trace=True)
+    assert np.isnan(batch.metrics["decision_time_ms"]).all()
+    assert np.isnan(batch.traces[0].decision_time_ms).all()
+
+
+def test_best_estimate_metrics_agree_with_the_trace(short):
+    r = uavtrack.simulate(short, "distributed", seed=1)
+    tr = r.trace
+    conf = 1.0 / np.trace(tr.cov, axis1=-2, axis2=-1)  # (T, Nu, Nt)
+    best = np.argmax(conf, axis=1)
+    steps, targets = np.meshgrid(np.arange(short.steps), np.arange(short.n_targets), indexing="ij")
+    err = tr.mean[steps, best, targets, :2] - tr.targets[..., :2]
+    assert r.rmse_best == pytest.approx(np.sqrt((err**2).sum(-1).mean()), rel=1e-12)
+    q = estimation.nees(tr.mean[steps, best, targets], tr.cov[steps, best, targets], tr.targets)
+    assert r.nees_best == pytest.approx(q.mean(), rel=1e-9)
+    assert r.rmse_best <= r.rmse  # the most confident estimate is the one the team would use
+
+
+def test_centralized_best_estimate_is_every_uavs_estimate(short):
+    # the central node gives every UAV the team's most confident estimate
+    r = uavtrack.simulate(short, "centralized", seed=2, trace=False)
+    assert r.rmse_best == pytest.approx(r.rmse, rel=1e-12)
+    assert r.nees_best == pytest.approx(r.nees, rel=1e-12)
+
+
+def test_progress_is_called_once_per_step(short):
+    calls = []
+    uavtrack.simulate(short, trace=False, progress=calls.append)
+    assert calls == list(range(1, short.steps + 1))
+
+
+@pytest.mark.parametrize(
+    "fields,batch,trace",
+    [
+        ({"n_uavs": 50, "n_targets": 50, "steps": 20, "uav": {"altitude_spacing": 0.4}}, 1, False),
+        ({"n_uavs": 20, "n_targets": 20, "steps": 600, "uav": {"altitude_spacing": 1}}, 1, True),
+        ({"n_uavs": 10, "n_targets": 4, "steps": 2000}, 4, False),
+        ({"n_uavs": 30, "n_targets": 30, "steps": 5, "planner": {"horizon": 6}}, 1, False),
+    ],
+)
+def test_memory_estimate_bounds_the_measured_peak(fields, batch, trace):
+    scenario = uavtrack.Scenario(**fields)
+    tracemalloc.start()
+    try:
+        uavtrack.run(scenario, "distributed", list(range(batch)), trace=trace)
+        peak = tracemalloc.get_traced_memory()[1]
+    finally:
+        tracemalloc.stop()
+    estimate = sum(simulation.memory_estimate(scenario, batch, trace).values())
+    assert 0.9 * peak <= estimate <= 4 * peak
+
+
+def test_a_run_that_cannot_fit_is_refused_naming_the_field(monkeypatch):
+    monkeypatch.setattr(simulation, "available_memory", lambda: 50 * 2**20)
+    big = uavtrack.Scenario(n_uavs=100, n_targets=100, uav={"altitude_spacing": 0.2})
+    with pytest.raises(uavtrack.ScenarioError, match=r"needs about .* MiB .* reduce n_targets"):
+        uavtrack.simulate(big, trace=False)
+    with pytest.raises(uavtrack.ScenarioError, match=r"reduce steps \(or run without a trace\)"):
+        uavtrack.simulate(big)
+    long = uavtrack.Scenario(steps=2_000_000)
+    with pytest.raises(uavtrack.ScenarioError, match="reduce steps"):
+        uavtrack.run(long, "distributed", [0, 1])

@@ -9,40 +9,83 @@ the action set; everything else is an assumption, chosen for physical consistenc
 
 from __future__ import annotations
 
+import hashlib
+import json
 import math
+import re
 import tomllib
+from numbers import Integral, Real
 from pathlib import Path
-from typing import Any
+from typing import Annotated, Any
 
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    ValidationError,
+    model_validator,
+)
+
+from .errors import UsageError
 
 G = 9.81
 """Gravitational acceleration [m/s^2], eq. (1)."""
 
 
-class ScenarioError(ValueError):
+class ScenarioError(UsageError):
     """A scenario, config file or override that cannot be used; the message is one line."""
 
 
+def _integer(value: Any) -> Any:
+    """Integers of any kind (numpy's too) become int; anything else is left to fail."""
+    if isinstance(value, Integral) and not isinstance(value, bool):
+        return int(value)
+    return value
+
+
+def _real(value: Any) -> Any:
+    """Real numbers of any kind (ints, numpy floats) become float; bools and text fail."""
+    if isinstance(value, Real) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+Int = Annotated[int, BeforeValidator(_integer), Strict()]
+"""An integer field: true, 5.0 or "5" are refused rather than read as 1 or 5."""
+Float = Annotated[float, BeforeValidator(_real), Strict()]
+"""A float field: ints are accepted, booleans and text are refused; inf and NaN too."""
+
+
 class _Part(BaseModel):
-    model_config = ConfigDict(extra="forbid", frozen=True, validate_default=True)
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False
+    )
 
 
 class SensorModel(_Part):
     """Range-bearing sensor with a distance-dependent noise (eq. 2-4)."""
 
-    k_d: float = Field(0.1056, gt=0, description="range-noise scale [m]; paper eq. (3), Sec. 7")
-    k_r: float = Field(
-        10.07, ge=0, description="range-noise growth rate [-]; paper eq. (3), Sec. 7"
+    k_d: Float = Field(
+        0.1056, gt=0, le=1000, description="range-noise scale [m], (0, 1000]; paper eq. (3), Sec. 7"
     )
-    k_theta: float = Field(
-        0.01, gt=0, description="bearing-noise scale [rad]; paper eq. (3), Sec. 7"
+    k_r: Float = Field(
+        10.07,
+        ge=0,
+        le=100,
+        description="range-noise growth rate [-], [0, 100]; paper eq. (3), Sec. 7",
     )
-    half_fov_deg: float = Field(
+    k_theta: Float = Field(
+        0.01, gt=0, le=1, description="bearing-noise scale [rad], (0, 1]; paper eq. (3), Sec. 7"
+    )
+    half_fov_deg: Float = Field(
         5.0,
         gt=0,
         lt=90,
-        description="half field of view alpha [deg]; paper Sec. 7.1 (FOV 2*alpha = 10 deg)",
+        description=(
+            "half field of view alpha [deg], (0, 90); paper Sec. 7.1 (FOV 2*alpha = 10 deg)"
+        ),
     )
 
     @property
@@ -51,76 +94,85 @@ class SensorModel(_Part):
         return math.radians(self.half_fov_deg)
 
 
+MAX_ALTITUDE = 20_000.0
+"""Highest flight altitude accepted [m] (above any fixed-wing UAV's ceiling)."""
+
+
 class UAVModel(_Part):
     """Fixed-wing UAVs at constant speed and altitude, bank-angle actions (eq. 1)."""
 
-    speed: float = Field(15.0, gt=0, description="airspeed V [m/s]; paper Sec. 7")
-    bank_angle_deg: float = Field(
+    speed: Float = Field(15.0, gt=0, le=300, description="airspeed V [m/s], (0, 300]; paper Sec. 7")
+    bank_angle_deg: Float = Field(
         45.0,
         gt=0,
         lt=90,
         description=(
-            "bank angle phi of the action set {-phi, 0, +phi} [deg]; assumed: the paper does "
-            "not give it; 45 deg, a usual limit for small fixed-wing UAVs, gives a turn radius "
-            "V^2/(g tan phi) = 22.9 m, inside the 37 m observation disk"
+            "bank angle phi of the action set {-phi, 0, +phi} [deg], (0, 90); assumed: the "
+            "paper does not give it; 45 deg, a usual limit for small fixed-wing UAVs, gives a "
+            "turn radius V^2/(g tan phi) = 22.9 m, inside the 37 m observation disk"
         ),
     )
-    altitude: float = Field(
+    altitude: Float = Field(
         425.0,
         gt=0,
+        le=MAX_ALTITUDE,
         description=(
-            "mean flight altitude [m]; assumed: the observation radius h tan(alpha) must exceed "
-            "the turn radius for a UAV to orbit a target in view (37 m against 23 m at 425 m); "
-            "calibrated with dt against the paper's Fig. 5 (see README)"
+            "mean flight altitude [m], (0, 20000]; assumed: the observation radius h tan(alpha) "
+            "must exceed the turn radius for a UAV to orbit a target in view (37 m against "
+            "23 m at 425 m); calibrated with dt against the paper's Fig. 5 (see README)"
         ),
     )
-    altitude_spacing: float = Field(
+    altitude_spacing: Float = Field(
         5.0,
-        ge=0,
+        ge=-1000,
+        le=1000,
         description=(
-            "altitude difference between consecutive UAVs [m]; assumed: the paper flies each "
-            "UAV at its own altitude; 5 m keeps the team's spread (20 m for 5 UAVs) well "
-            "inside r_C = 50 m; results barely depend on it (0 to 10 m tried)"
+            "altitude difference between consecutive UAVs [m], [-1000, 1000] (negative: UAV 0 "
+            "flies highest); assumed: the paper flies each UAV at its own altitude; 5 m keeps "
+            "the team's spread (20 m for 5 UAVs) well inside r_C = 50 m; results barely "
+            "depend on it (0 to 10 m tried)"
         ),
     )
-    altitudes: list[float] | None = Field(
+    altitudes: tuple[Annotated[Float, Field(gt=0, le=MAX_ALTITUDE)], ...] | None = Field(
         None,
         description=(
-            "explicit per-UAV altitudes [m], overriding altitude and altitude_spacing; "
-            "length n_uavs"
+            "explicit per-UAV altitudes [m], each in (0, 20000], overriding altitude and "
+            "altitude_spacing; length n_uavs; not set by default"
         ),
     )
-    start_spread: float = Field(
+    start_spread: Float = Field(
         20.0,
         ge=0,
+        le=100_000,
         description=(
-            "side of the square around the field centre where UAVs start [m]; assumed: the "
-            "team takes off together"
+            "side of the square around the field centre where UAVs start [m], [0, 100000]; "
+            "assumed: the team takes off together"
         ),
     )
-
-    @model_validator(mode="after")
-    def _positive_altitudes(self) -> UAVModel:
-        if self.altitudes is not None and any(h <= 0 for h in self.altitudes):
-            raise ValueError("every altitude must be > 0")
-        return self
 
 
 class TargetModel(_Part):
     """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
 
-    sigma_1: float = Field(
-        0.16, ge=0, description="acceleration-noise std along x [m/s^2]; paper eq. (15), Sec. 7"
+    sigma_1: Float = Field(
+        0.16,
+        ge=0,
+        le=10,
+        description="acceleration-noise std along x [m/s^2], [0, 10]; paper eq. (15), Sec. 7",
     )
-    sigma_2: float = Field(
-        0.16, ge=0, description="acceleration-noise std along y [m/s^2]; paper eq. (15), Sec. 7"
+    sigma_2: Float = Field(
+        0.16,
+        ge=0,
+        le=10,
+        description="acceleration-noise std along y [m/s^2], [0, 10]; paper eq. (15), Sec. 7",
     )
-    initial_velocity_std: float = Field(
+    initial_velocity_std: Float = Field(
         1.0,
         ge=0,
+        le=50,
         description=(
-            "std of each initial velocity component [m/s]; assumed: slow ground vehicles or "
-            "pedestrians; the paper says only that targets move randomly"
+            "std of each initial velocity component [m/s], [0, 50]; assumed: slow ground "
+            "vehicles or pedestrians; the paper says only that targets move randomly"
         ),
     )
 
@@ -128,20 +180,22 @@ class TargetModel(_Part):
 class EstimationModel(_Part):
     """Initial belief shared by all UAVs (the paper does not say how filters start)."""
 
-    initial_position_std: float = Field(
+    initial_position_std: Float = Field(
         5.0,
         gt=0,
+        le=10_000,
         description=(
-            "std of the initial position cue and of the prior [m]; assumed: every UAV starts "
-            "with a cue of each target (a consistent Gaussian prior around the truth)"
+            "std of the initial position cue and of the prior [m], (0, 10000]; assumed: every "
+            "UAV starts with a cue of each target (a consistent Gaussian prior around the truth)"
         ),
     )
-    initial_velocity_std: float = Field(
+    initial_velocity_std: Float = Field(
         1.0,
         gt=0,
+        le=100,
         description=(
-            "prior velocity std [m/s]; assumed: equal to the targets' initial velocity "
-            "spread, so the prior is consistent"
+            "prior velocity std [m/s], (0, 100]; assumed: equal to the targets' initial "
+            "velocity spread, so the prior is consistent"
         ),
     )
 
@@ -149,22 +203,23 @@ class EstimationModel(_Part):
 class PlannerModel(_Part):
     """Receding-horizon action search (Algorithm 1, lines 1-4)."""
 
-    horizon: int = Field(
+    horizon: Int = Field(
         3,
         ge=2,
         le=10,
         description=(
-            "planning horizon h [steps]; assumed: the paper does not give it; 3 steps (1.5 s) "
-            "keeps the search at 27 sequences per target; under eq. (1) the bank angle "
+            "planning horizon h [steps], 2 to 10; assumed: the paper does not give it; 3 steps "
+            "(1.5 s) keeps the search at 27 sequences per target; under eq. (1) the bank angle "
             "chosen at step k first moves the UAV at k+2, so h >= 2"
         ),
     )
-    discount: float = Field(
+    discount: Float = Field(
         1.0,
         gt=0,
         le=1,
         description=(
-            "weight lambda^(t-1) of the t-th step's det G [-]; Algorithm 1 sums undiscounted (1.0)"
+            "weight lambda^(t-1) of the t-th step's det G [-], (0, 1]; Algorithm 1 sums "
+            "undiscounted (1.0)"
         ),
     )
 
@@ -176,27 +231,38 @@ class Scenario(_Part):
     FOV 10 deg, 500 steps) completed with the assumptions documented per field.
     """
 
-    n_uavs: int = Field(5, ge=1, le=10_000, description="number of UAVs N^u; paper Sec. 7.1")
-    n_targets: int = Field(4, ge=1, le=10_000, description="number of targets N^t; paper Sec. 7.1")
-    steps: int = Field(500, ge=1, description="simulated decision cycles; paper Sec. 7")
-    dt: float = Field(
+    n_uavs: Int = Field(
+        5, ge=1, le=10_000, description="number of UAVs N^u, 1 to 10000; paper Sec. 7.1"
+    )
+    n_targets: Int = Field(
+        4, ge=1, le=10_000, description="number of targets N^t, 1 to 10000; paper Sec. 7.1"
+    )
+    steps: Int = Field(
+        500, ge=1, le=10_000_000, description="simulated decision cycles, 1 to 10^7; paper Sec. 7"
+    )
+    dt: Float = Field(
         0.5,
         gt=0,
+        le=10,
         description=(
-            "time step Delta T [s]; assumed: 2 Hz decisions, a common rate for small fixed-wing "
-            "UAVs; the paper does not give it; calibrated with uav.altitude against the "
-            "paper's Fig. 5 (see README)"
+            "time step Delta T [s], (0, 10]; assumed: 2 Hz decisions, a common rate for small "
+            "fixed-wing UAVs; the paper does not give it; calibrated with uav.altitude against "
+            "the paper's Fig. 5 (see README)"
         ),
     )
-    comm_range: float = Field(
-        50.0, ge=0, description="communication range r_C, 3-D distance [m]; paper Sec. 7.1"
+    comm_range: Float = Field(
+        50.0,
+        ge=0,
+        le=100_000,
+        description="communication range r_C, 3-D distance [m], [0, 100000]; paper Sec. 7.1",
     )
-    field_size: float = Field(
+    field_size: Float = Field(
         200.0,
         gt=0,
+        le=100_000,
         description=(
-            "side of the square field the targets move in [m]; assumed: the paper does not "
-            "give it; it sets how often r_C connects the UAVs that compete for a target"
+            "side of the square field the targets move in [m], (0, 100000]; assumed: the paper "
+            "does not give it; it sets how often r_C connects the UAVs that compete for a target"
         ),
     )
     uav: UAVModel = Field(default_factory=UAVModel, description="UAV kinematics (eq. 1)")
@@ -215,8 +281,15 @@ class Scenario(_Part):
             raise ValueError(
                 f"uav.altitudes has {len(self.uav.altitudes)} entries but n_uavs is {self.n_uavs}"
             )
-        if min(self.altitudes()) <= 0:
-            raise ValueError("uav.altitude and uav.altitude_spacing give a UAV an altitude <= 0")
+        heights = self.altitudes()
+        if min(heights) <= 0 or max(heights) > MAX_ALTITUDE:
+            lowest, highest = min(heights), max(heights)
+            raise ValueError(
+                f"uav.altitude {self.uav.altitude:g} m and uav.altitude_spacing "
+                f"{self.uav.altitude_spacing:g} m put the {self.n_uavs} UAVs between "
+                f"{lowest:g} and {highest:g} m, outside (0, {MAX_ALTITUDE:g}] m; "
+                "make uav.altitude_spacing smaller or uav.altitude higher"
+            )
         return self
 
     def altitudes(self) -> list[float]:
@@ -243,16 +316,43 @@ class Scenario(_Part):
         except ValidationError as exc:
             raise ScenarioError(f"{origin}: {describe_errors(exc)}") from None
 
-    def with_overrides(self, overrides: dict[str, Any]) -> Scenario:
-        """A copy with dotted fields replaced, e.g. ``{"sensor.half_fov_deg": 10}``."""
+    def with_overrides(self, overrides: dict[str, Any], origin: str = "override") -> Scenario:
+        """A copy with dotted fields replaced, e.g. ``{"sensor.half_fov_deg": 10}``.
+
+        `origin` names where the values came from in error messages (``--set``, a sweep).
+        """
         data = self.model_dump()
         for dotted, value in overrides.items():
             set_dotted(data, dotted, value)
-        return Scenario.from_dict(data, origin="--set")
+        return Scenario.from_dict(data, origin=origin)
+
+    def to_dict(self) -> dict[str, Any]:
+        """The scenario as plain JSON types (lists for tuples); `from_dict` reads it back."""
+        return self.model_dump(mode="json")
+
+    def digest(self) -> str:
+        """A short SHA-256 of the scenario's canonical JSON: equal scenarios, equal digests."""
+        text = json.dumps(self.to_dict(), sort_keys=True, separators=(",", ":"))
+        return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+    def value(self, dotted: str) -> Any:
+        """The value of a dotted field, e.g. ``value("sensor.half_fov_deg")``."""
+        node: Any = self
+        for key in dotted.split("."):
+            node = getattr(node, key)
+        return node
+
+    def unit(self, dotted: str) -> str:
+        """The unit of a dotted field as written in its description (``m``, ``deg``), or ''."""
+        for name, _, doc in self.describe():
+            if name == dotted:
+                found = re.search(r"\[([^\]]+)\]", doc)
+                return found.group(1) if found and found.group(1) != "-" else ""
+        raise ScenarioError(f"unknown scenario field '{dotted}'")
 
     def to_toml(self) -> str:
         """The scenario as TOML text (round-trips through `from_toml`)."""
-        return dump_toml(self.model_dump(exclude_none=True))
+        return dump_toml(self.model_dump(mode="json", exclude_none=True))
 
     def describe(self) -> list[tuple[str, Any, str]]:
         """Every leaf field as (dotted name, value, description)."""
@@ -312,8 +412,14 @@ def describe_errors(exc: ValidationError) -> str:
     return "; ".join(parts)
 
 
-def parse_value(text: str) -> Any:
-    """Read a command-line value as TOML (numbers, booleans, lists), else as a string."""
+def parse_value(text: str, where: str = "value") -> Any:
+    """Read a command-line value as TOML (numbers, booleans, lists), else as a string.
+
+    A value is one line: text after a line break would otherwise be read as more TOML
+    or dropped. `where` names the value in the error message.
+    """
+    if "\n" in text or "\r" in text:
+        raise ScenarioError(f"{where}: value {text!r} spans several lines; give it on one line")
     try:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:

@@ -16,15 +16,15 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 from scipy import stats
 
-from .config import Scenario
-from .metrics import mean_std, sorted_rates
+from .config import Scenario, ScenarioError
+from .metrics import METRICS, mean_std, sorted_rates
 from .simulation import run, trial_seed
 
 METHOD_NAMES = ("distributed", "centralized", "greedy")
@@ -97,7 +97,8 @@ def run_job(job: Job) -> dict[str, Any]:
     """Execute a job; returns JSON-ready per-trial metrics (this runs on the workers).
 
     Trial jobs run their trials as one batch. Timing jobs run them one at a time, so
-    the decision time is that of one team, not a share of a batch.
+    the decision time is that of one team, not a share of a batch. A result that is not
+    finite (a scenario that broke the numerics) raises instead of being saved.
     """
     seeds = [trial_seed(job.seed, t) for t in range(job.first, job.first + job.count)]
     if job.kind == "trials":
@@ -105,7 +106,19 @@ def run_job(job: Job) -> dict[str, Any]:
     else:
         parts = [run(job.scenario, job.method, [s]).metrics for s in seeds]
         metrics = {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+    check_finite(metrics, job.key)
     return {name: np.asarray(values).tolist() for name, values in metrics.items()}
+
+
+def check_finite(metrics: dict[str, np.ndarray], what: str) -> None:
+    """Raise if a metric other than an unmeasured decision time is NaN or infinite."""
+    for name, values in metrics.items():
+        values = np.asarray(values, dtype=float)
+        bad = ~np.isfinite(values)
+        if name == "decision_time_ms":
+            bad &= ~np.isnan(values)  # NaN: not measured inside a batch
+        if bad.any():
+            raise FloatingPointError(f"{what}: metric {name} is not finite ({values[bad][0]})")
 
 
 def label_of(overrides: dict[str, Any]) -> str:
@@ -122,15 +135,48 @@ def _fmt(value: Any) -> str:
 
 
 def trial_jobs(
-    base: Scenario, overrides: dict[str, Any], method: str, trials: int, chunk: int, seed: int
+    base: Scenario,
+    overrides: dict[str, Any],
+    method: str,
+    trials: int,
+    chunk: int,
+    seed: int,
+    origin: str = "override",
 ) -> list[Job]:
     """Jobs covering trials 0 .. trials-1 of base+overrides with one method."""
-    scenario = base.with_overrides(overrides)
+    scenario = base.with_overrides(overrides, origin=origin)
     label = "default" if scenario == base else label_of(overrides)
     return [
         Job("trials", label, method, scenario, first, min(chunk, trials - first), seed)
         for first in range(0, trials, chunk)
     ]
+
+
+def sweep_values(base: Scenario, field: str, values: Sequence[Any]) -> list[Any]:
+    """The values of a sweep as the scenario holds them (10 -> 10.0 for a float field).
+
+    Each value is validated, its error naming the sweep; two values that are equal once
+    validated (``10`` and ``10.0``) are refused, as they would be one configuration.
+    """
+    if not values:
+        raise ScenarioError(f"sweep {field}: give at least one value")
+    out: list[Any] = []
+    for raw in values:
+        scenario = base.with_overrides({field: raw}, origin=f"sweep value {field}={raw!r}")
+        value = scenario.value(field)
+        value = list(value) if isinstance(value, tuple) else value
+        if value in out:
+            first = values[out.index(value)]
+            same = (
+                f"{raw!r} is given twice,"
+                if repr(first) == repr(raw)
+                else f"{first!r} and {raw!r} are"
+            )
+            raise ScenarioError(
+                f"sweep {field}: {same} the same value once read ({value!r}); give each value once"
+            )
+        out.append(value)
+    return out
 
 
 def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
@@ -190,12 +236,15 @@ def sweep_plan(
     seed: int = 0,
 ) -> dict[str, list[Job]]:
     """One field over several values, each method on the same trials."""
+    values = sweep_values(base, field, values)
     return {
         "sweep": [
             j
             for v in values
             for m in methods
-            for j in trial_jobs(base, {field: v}, m, trials, chunk, seed)
+            for j in trial_jobs(
+                base, {field: v}, m, trials, chunk, seed, origin=f"sweep value {field}={v!r}"
+            )
         ]
     }
 
@@ -239,9 +288,15 @@ def describe(metrics: dict[str, np.ndarray]) -> dict[str, Any]:
         "sorted_mean": srt_mean.tolist(),
         "sorted_std": srt_std.tolist(),
     }
-    for name in ("rmse", "nees", "rounds", "messages", "decision_time"):
+    for name in METRICS:
+        if name in ("observation_rate", "per_target"):
+            continue
         m, s = mean_std(metrics[name])
-        out[name] = {"mean": float(m), "std": float(s)}
+        out[name] = {
+            "mean": float(m),
+            "std": float(s),
+            "trials": int(np.sum(~np.isnan(np.asarray(metrics[name], dtype=float)))),
+        }
     return out
 
 
@@ -288,12 +343,14 @@ def summarize_reproduction(
     }
     for m in METHOD_NAMES:
         rows = [
-            data["timing"][(label_of({"n_uavs": nu, "n_targets": nt}), m)]["decision_time"]
+            mean_std(
+                data["timing"][(label_of({"n_uavs": nu, "n_targets": nt}), m)]["decision_time_ms"]
+            )
             for nu, nt in profile.timing_grid
         ]
         timing[m] = {
-            "mean_ms": [1e3 * float(np.mean(r)) for r in rows],
-            "std_ms": [1e3 * float(np.std(r, ddof=1)) if len(r) > 1 else 0.0 for r in rows],
+            "mean_ms": [float(mean) for mean, _ in rows],
+            "std_ms": [float(std) for _, std in rows],
         }
     return {
         "compare": compare,
@@ -330,24 +387,59 @@ def summarize_sweep(
 
 
 def trials(
-    scenario: Scenario, method: str, n_trials: int, seed: int = 0, first: int = 0
+    scenario: Scenario,
+    method: str,
+    n_trials: int,
+    seed: int = 0,
+    first: int = 0,
+    chunk: int = 25,
+    progress: Callable[[int], None] | None = None,
 ) -> dict[str, np.ndarray]:
-    """Per-trial metrics of trials first .. first+n_trials-1, run as one batch."""
-    seeds = [trial_seed(seed, t) for t in range(first, first + n_trials)]
-    return run(scenario, method, seeds).metrics
+    """Per-trial metrics of trials first .. first+n_trials-1.
+
+    The first trial runs alone, so its decision time is measured (see
+    `metrics.METRICS`); the others run in batches of `chunk`, which bounds the memory
+    whatever the number of trials. Results equal one batch of them all. `progress`, if
+    given, is called with the trial-steps done since its last call.
+    """
+    spans = [(first, 1)] + [
+        (t, min(chunk, first + n_trials - t)) for t in range(first + 1, first + n_trials, chunk)
+    ]
+    parts = []
+    for start, count in spans:
+        seeds = [trial_seed(seed, t) for t in range(start, start + count)]
+        done = [0]
+
+        def advance(k: int, count: int = count, done: list = done) -> None:
+            if progress is not None:
+                progress((k - done[0]) * count)
+                done[0] = k
+
+        parts.append(run(scenario, method, seeds, progress=advance).metrics)
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
 
 
 def compare(
-    scenario: Scenario, methods: Iterable[str], n_trials: int, seed: int = 0
+    scenario: Scenario,
+    methods: Iterable[str],
+    n_trials: int,
+    seed: int = 0,
+    progress: Callable[[int], None] | None = None,
 ) -> dict[str, dict[str, np.ndarray]]:
     """Per-trial metrics of each method on the same trials."""
-    return {m: trials(scenario, m, n_trials, seed) for m in methods}
+    return {m: trials(scenario, m, n_trials, seed, progress=progress) for m in methods}
 
 
 def summarize(metrics: dict[str, np.ndarray]) -> dict[str, object]:
-    """Mean and standard deviation over trials of each metric (JSON-ready)."""
+    """Mean and standard deviation over trials of each metric (JSON-ready; NaN: null).
+
+    A decision time is averaged over the trials where it was measured (`trials` says
+    how many); a standard deviation needs two values.
+    """
     out: dict[str, object] = {"trials": int(len(metrics["observation_rate"]))}
     for name, values in metrics.items():
         mean, std = mean_std(values)
         out[name] = {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()}
+        if name == "decision_time_ms":
+            out[name]["trials"] = int(np.sum(~np.isnan(np.asarray(values, dtype=float))))
     return out

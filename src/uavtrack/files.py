@@ -1,12 +1,16 @@
-"""Atomic file output: write to a temporary file beside the target, then rename it.
+"""File output that never leaves a partial or misplaced file.
 
-A reader (or a rerun after an interruption) therefore sees either the old file or the
-complete new one, never a partial file.
+Every file is written to a temporary file beside its target and renamed over it, so a
+reader (or a rerun after an interruption) sees either the old file or the complete new
+one. The target must be a regular file or not exist yet: a directory, a device or a
+pipe given as an output is refused, never replaced. JSON is strict: NaN and infinity,
+which JSON cannot represent, are written as null.
 """
 
 from __future__ import annotations
 
 import json
+import math
 import os
 import tempfile
 from collections.abc import Iterator
@@ -14,8 +18,29 @@ from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
+from .errors import UsageError
+
 _UMASK = os.umask(0)
 os.umask(_UMASK)
+
+
+def check_output(path: str | Path, option: str) -> Path:
+    """Refuse early an output file that cannot be written, before any long computation.
+
+    The target must be a regular file or not exist, and its folder must exist and be
+    writable. `option` names the argument in the message (``--trace``).
+    """
+    path = Path(path).expanduser()
+    if path.is_dir():
+        raise UsageError(f"{option}: {path} is a directory; give a file name")
+    if path.exists() and not path.is_file():
+        raise UsageError(f"{option}: {path} exists and is not a regular file")
+    parent = path.resolve().parent
+    if not parent.is_dir():
+        raise UsageError(f"{option}: directory {parent} does not exist")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UsageError(f"{option}: directory {parent} is not writable")
+    return path
 
 
 @contextmanager
@@ -23,27 +48,64 @@ def replacing(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path in `path`'s folder; on success it replaces `path`.
 
     The temporary name keeps the target's suffix, so writers that choose a format by
-    extension (matplotlib, Pillow) work. On any exception the temporary file is removed.
+    extension (matplotlib, Pillow) work. On any exception the temporary file is removed;
+    an OSError (a full disk) names `path`.
     """
     path = Path(path)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.stem}.", suffix=path.suffix)
+    if path.exists() and not path.is_file():
+        raise UsageError(f"{path} exists and is not a regular file; not replacing it")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=path.suffix)
     os.close(fd)
     try:
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+    except OSError as exc:
+        Path(tmp).unlink(missing_ok=True)
+        if exc.filename is None or exc.filename == tmp:  # name the file the user asked for
+            raise OSError(exc.errno, exc.strerror or str(exc), str(path)) from None
+        raise
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
 
 
+def plain(data: Any) -> Any:
+    """`data` with numpy scalars and arrays as Python values and non-finite floats as None."""
+    if isinstance(data, dict):
+        return {str(k): plain(v) for k, v in data.items()}
+    if isinstance(data, list | tuple):
+        return [plain(v) for v in data]
+    if hasattr(data, "tolist"):  # numpy arrays and scalars
+        return plain(data.tolist())
+    if isinstance(data, float) and not math.isfinite(data):
+        return None
+    return data
+
+
+def dumps(data: Any, indent: int | None = None) -> str:
+    """Strict JSON text of `data` (see `plain`)."""
+    return json.dumps(plain(data), indent=indent, allow_nan=False)
+
+
 def write_json(path: str | Path, data: Any) -> None:
-    """JSON, atomically."""
-    with replacing(path) as tmp:
-        tmp.write_text(json.dumps(data, indent=1), encoding="utf-8")
+    """JSON, atomically (non-finite numbers as null)."""
+    write_text(path, dumps(data, indent=1))
 
 
 def write_text(path: str | Path, text: str) -> None:
     """Text, atomically."""
     with replacing(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def write_npz(path: str | Path, arrays: dict[str, Any]) -> None:
+    """A compressed .npz archive at exactly `path`, atomically.
+
+    numpy appends ``.npz`` to a file *name* that lacks it, so the archive is written
+    through an open file object, which numpy leaves alone.
+    """
+    import numpy as np
+
+    with replacing(path) as tmp, open(tmp, "wb") as handle:
+        np.savez_compressed(handle, **arrays)

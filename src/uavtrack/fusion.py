@@ -24,7 +24,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .network import closed
+from .network import closed, without_self_loops
 
 SPARSE_FROM = 24
 """Team size from which consensus rounds run on edge lists rather than N x N arrays."""
@@ -55,9 +55,11 @@ def eccentricity(adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     shows its ball has covered its component, so i stops with D_i = r - 1: it needs no
     knowledge of the team size.
 
-    adjacency: (..., N, N) bool, symmetric. Returns (D (..., N) int, messages (...,)):
-    messages counts one per edge direction in every round the receiver still runs.
+    adjacency: (..., N, N) bool, symmetric; the diagonal is ignored. Returns (D (..., N)
+    int, messages (...,)): messages counts one per edge direction in every round the
+    receiver still runs.
     """
+    adjacency = without_self_loops(adjacency)
     degree = adjacency.sum(axis=-1)
     D = np.zeros(adjacency.shape[:-1], dtype=np.int64)
     if not degree.any():  # nobody hears anybody: round 1 teaches nothing
@@ -88,8 +90,8 @@ def consensus_rounds(
     per target, the tuple of highest confidence among itself and its neighbours (ties
     go to the lowest index); UAVs past their rounds keep their tuple and keep sending.
 
-    confidence: (..., N, M); adjacency: (..., N, N) bool; rounds: (..., N) int.
-    Returns source (..., N, M): index of the UAV whose initial tuple i holds.
+    confidence: (..., N, M); adjacency: (..., N, N) bool (diagonal ignored); rounds:
+    (..., N) int. Returns source (..., N, M): index of the UAV whose initial tuple i holds.
     """
     lead = confidence.shape[:-2]
     n, m = confidence.shape[-2:]
@@ -140,8 +142,8 @@ def max_consensus(confidence: np.ndarray, adjacency: np.ndarray) -> tuple[np.nda
     """Max-consensus with per-UAV stopping, Algorithm 2 lines 15-25.
 
     confidence: (..., N, M) floats (gamma = 1/trace P); adjacency: (..., N, N) symmetric
-    bool. Returns (source (..., N, M), rounds (..., N)): source[i, j] is the UAV whose
-    estimate of target j UAV i holds after the protocol, rounds[i] = D_i.
+    bool, diagonal ignored. Returns (source (..., N, M), rounds (..., N)): source[i, j]
+    is the UAV whose estimate of target j UAV i holds after the protocol, rounds[i] = D_i.
     """
     result = fuse(confidence, adjacency)
     return result.source, result.rounds
@@ -155,7 +157,11 @@ def _identity(shape: tuple[int, ...]) -> np.ndarray:
 
 
 def fuse(confidence: np.ndarray, adjacency: np.ndarray) -> Consensus:
-    """The fusion phase with its bookkeeping: protocol for D_i, then the rounds."""
+    """The fusion phase with its bookkeeping: protocol for D_i, then the rounds.
+
+    A user-given adjacency may mark a UAV as its own neighbour; the diagonal is ignored.
+    """
+    adjacency = without_self_loops(adjacency)
     if not adjacency.any():  # nobody hears anybody: no rounds, no messages
         zeros = np.zeros(adjacency.shape[:-1], dtype=np.int64)
         return Consensus(_identity(confidence.shape), zeros, zeros[..., 0], zeros[..., 0])

@@ -34,3 +34,13 @@ def closed(adj: np.ndarray) -> np.ndarray:
     """Closed neighbourhoods: each UAV is its own neighbour, (..., N, N) bool."""
     n = adj.shape[-1]
     return adj | np.eye(n, dtype=bool)
+
+
+def without_self_loops(adj: np.ndarray) -> np.ndarray:
+    """The relation with its diagonal cleared: a UAV is not its own radio neighbour."""
+    n = adj.shape[-1]
+    if not adj[..., np.arange(n), np.arange(n)].any():
+        return adj
+    out = adj.copy()
+    out[..., np.arange(n), np.arange(n)] = False
+    return out

@@ -134,6 +134,23 @@ def predict_positions(mean: np.ndarray, horizon: int, dt: float) -> np.ndarray:
     return mean[..., None, :2] + lead * mean[..., None, 2:]
 
 
+CHUNK_BYTES = 64 * 2**20
+"""Working memory of one planning pass; larger problems are planned a block of UAVs at a time."""
+
+
+def floats_per_pair(n_actions: int, horizon: int) -> int:
+    """Floats the planner holds at its peak per (UAV, target) pair: the tree's K nodes
+    (offsets, ranges and three temporaries of det G) and the L leaf scores, twice."""
+    K = sum(n_actions**t for t in range(horizon))
+    return 5 * K + 2 * n_actions ** (horizon - 1)
+
+
+def memory(rows: int, n_targets: int, n_actions: int, horizon: int) -> int:
+    """Peak bytes of `plan` for `rows` UAVs (trials times team) and `n_targets` targets."""
+    per_row = n_targets * floats_per_pair(n_actions, horizon) * 8
+    return min(rows * per_row, max(CHUNK_BYTES, per_row)) + rows * n_targets * 3 * 8
+
+
 def plan(
     uavs: np.ndarray,
     mean: np.ndarray,
@@ -146,8 +163,39 @@ def plan(
 ) -> Plan:
     """Algorithm 1 lines 1-4 for every UAV and target, on the shared-prefix tree.
 
-    uavs: (..., Nu, 5); mean: (..., Nu, Nt, 4) each UAV's fused estimates.
+    uavs: (..., Nu, 5); mean: (..., Nu, Nt, 4) each UAV's fused estimates. Every
+    (UAV, target) pair is scored on its own, so planning a block of UAVs at a time (to
+    bound the memory, `CHUNK_BYTES`) gives the same result bit for bit.
     """
+    lead, nt = uavs.shape[:-1], mean.shape[-2]
+    per_row = nt * floats_per_pair(3, horizon) * 8
+    rows = int(np.prod(lead))
+    if rows * per_row <= CHUNK_BYTES:
+        return _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g)
+    flat_uavs, flat_mean = uavs.reshape(rows, 5), mean.reshape(rows, nt, 4)
+    block = max(1, CHUNK_BYTES // per_row)
+    parts = [
+        _plan(
+            flat_uavs[r : r + block],
+            flat_mean[r : r + block],
+            sensor,
+            bank_angle,
+            horizon,
+            dt,
+            discount,
+            g,
+        )
+        for r in range(0, rows, block)
+    ]
+    return Plan(
+        *(
+            np.concatenate([getattr(p, name) for p in parts]).reshape(lead + (nt,))
+            for name in ("value", "action", "sequence")
+        )
+    )
+
+
+def _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g) -> Plan:
     actions = action_set(bank_angle)
     t = tree(len(actions), horizon)
     east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)

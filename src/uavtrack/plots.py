@@ -7,7 +7,7 @@ Pillow writer (no ffmpeg). Every figure is written to a temporary file and renam
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -23,6 +23,12 @@ from .files import replacing  # noqa: E402
 
 COLORS = {"distributed": "#1f77b4", "centralized": "#2ca02c", "greedy": "#d62728"}
 RANK_COLORS = ["#c6dbef", "#9ecae1", "#6baed6", "#3182bd", "#08519c", "#08306b"]
+
+
+def _num(values) -> np.ndarray:
+    """Numbers from a summary, null (None: not computable, e.g. a std of one trial) as NaN,
+    which matplotlib leaves out."""
+    return np.array([np.nan if v is None else v for v in np.atleast_1d(values)], dtype=float)
 
 
 def save(fig: plt.Figure, path: Path, dpi: int = 130) -> None:
@@ -48,9 +54,9 @@ def _bars(
         color = colors[name] if isinstance(colors, dict) else colors[k % len(colors)]
         ax.bar(
             x + (k - (n - 1) / 2) * width,
-            mean,
+            _num(mean),
             width,
-            yerr=std,
+            yerr=_num(std),
             capsize=3,
             label=name,
             color=color,
@@ -72,7 +78,7 @@ def fig5(summary: dict[str, Any], path: Path) -> None:
     """Mean (± std) observation rate per target and overall, three methods (Fig. 5)."""
     compare = summary["compare"]
     nt = len(next(iter(compare.values()))["per_target_mean"])
-    groups = [f"target {j + 1}" for j in range(nt)] + ["overall"]
+    groups = [f"target {j}" for j in range(nt)] + ["overall"]
     series = {
         m: (r["per_target_mean"] + [r["mean"]], r["per_target_std"] + [r["std"]])
         for m, r in compare.items()
@@ -87,7 +93,7 @@ def fig5(summary: dict[str, Any], path: Path) -> None:
             ax.errorbar(
                 x,
                 paper[m]["mean"],
-                yerr=paper[m]["std"],
+                yerr=_num(paper[m]["std"]),
                 fmt="D",
                 mfc="white",
                 mec="black",
@@ -126,14 +132,16 @@ def fig7(summary: dict[str, Any], path: Path) -> None:
     fig, ax = plt.subplots(figsize=(8, 4.5))
     _bars(ax, groups, series, COLORS)
     ax.set_yscale("log")
-    plain = matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}")
-    ax.yaxis.set_major_formatter(plain)
-    ax.yaxis.set_minor_formatter(plain)
-    ax.tick_params(axis="y", which="minor", labelsize=7)
+    # labels at 1, 2 and 5 of each decade only: every minor tick labelled would overlap
+    ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
+    ax.yaxis.set_major_formatter(matplotlib.ticker.FuncFormatter(lambda v, _: f"{v:g}"))
+    ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
+    low, high = ax.get_ylim()
+    ax.set_ylim(low, high * 3)  # room above the bars for the legend
     ax.set_ylabel("decision time per UAV and cycle [ms]")
     ax.set_xlabel("UAVs vs targets")
     ax.set_title("Decision-making time (Fig. 7)")
-    ax.legend(ncols=3, fontsize=8)
+    ax.legend(ncols=3, fontsize=8, loc="upper left")
     save(fig, path)
 
 
@@ -146,8 +154,8 @@ def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> 
     for rank, name in enumerate(_rank_names(nt)):
         ax.errorbar(
             values,
-            [r["sorted_mean"][rank] for r in rows],
-            yerr=[r["sorted_std"][rank] for r in rows],
+            _num([r["sorted_mean"][rank] for r in rows]),
+            yerr=_num([r["sorted_std"][rank] for r in rows]),
             marker="o",
             ms=4,
             capsize=3,
@@ -156,8 +164,8 @@ def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> 
         )
     ax.errorbar(
         values,
-        [r["mean"] for r in rows],
-        yerr=[r["std"] for r in rows],
+        _num([r["mean"] for r in rows]),
+        yerr=_num([r["std"] for r in rows]),
         marker="s",
         ms=5,
         capsize=3,
@@ -204,8 +212,8 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
     for m, rows in summary["methods"].items():
         ax.errorbar(
             x,
-            [r["mean"] for r in rows],
-            yerr=[r["std"] for r in rows],
+            _num([r["mean"] for r in rows]),
+            yerr=_num([r["std"] for r in rows]),
             marker="o",
             capsize=3,
             label=m,
@@ -213,7 +221,8 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
         )
     if not numeric:
         ax.set_xticks(x, [str(v) for v in values])
-    ax.set_xlabel(summary["field"])
+    unit = summary.get("unit")
+    ax.set_xlabel(f"{summary['field']} [{unit}]" if unit else summary["field"])
     ax.set_ylabel("observation rate")
     ax.set_ylim(0, 1.05)
     ax.grid(alpha=0.3)
@@ -225,15 +234,27 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
 # ------------------------------------------------------------------ Fig. 4 animation
 
 
-def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: str = "") -> int:
+def animate(
+    trace,
+    scenario,
+    path: Path,
+    every: int = 2,
+    fps: int = 10,
+    title: str = "",
+    progress: Callable[[int], None] | None = None,
+) -> int:
     """Animate a trace like the paper's Fig. 4; returns the number of frames.
 
-    UAVs are arrows along their heading with their observation disks and radio links;
-    targets are black dots; for each target the team's most confident estimate is drawn
-    with its 2-sigma ellipse; a line joins each UAV to its estimate of its target.
+    UAVs (numbered from 0) are arrows along their heading, each in its own colour with
+    its observation disk; radio links are dashed grey lines; targets (numbered from 0)
+    are black dots; for each target the team's most confident estimate is drawn with its
+    2-sigma ellipse; a line in the UAV's colour joins it to its estimate of its assigned
+    target. Frames are 1000 x 800 pixels, the legend on the right. `progress`, if given,
+    is called once per frame.
     """
     from matplotlib.animation import FuncAnimation, PillowWriter
     from matplotlib.collections import LineCollection
+    from matplotlib.lines import Line2D
 
     from .network import adjacency
     from .sensing import observation_radius
@@ -245,7 +266,8 @@ def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: s
     lo = min(0.0, np.min(trace.uavs[..., :2])) - margin
     hi = max(scenario.field_size, np.max(trace.uavs[..., :2])) + margin
     colors = plt.cm.tab10(np.arange(nu) % 10)
-    fig, ax = plt.subplots(figsize=(6.5, 6.5))
+    fig, ax = plt.subplots(figsize=(10, 8))
+    fig.subplots_adjust(left=0.08, right=0.7, top=0.94, bottom=0.08)  # the legend on the right
     ax.set_xlim(lo, hi)
     ax.set_ylim(lo, hi)
     ax.set_aspect("equal")
@@ -259,14 +281,28 @@ def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: s
     disks = [
         ax.add_patch(Circle((0, 0), radius[i], color=colors[i], alpha=0.12)) for i in range(nu)
     ]
-    links = ax.add_collection(LineCollection([], colors="orange", linewidths=1.2, zorder=1))
+    links = ax.add_collection(
+        LineCollection([], colors="dimgray", linestyles="--", linewidths=1.0, zorder=1)
+    )
     ellipses = [
-        ax.add_patch(Ellipse((0, 0), 0, 0, fill=False, ls="--", color="gray")) for _ in range(nt)
+        ax.add_patch(Ellipse((0, 0), 0, 0, fill=False, ls="--", color="black", lw=0.8))
+        for _ in range(nt)
     ]
     targets = ax.scatter(np.zeros(nt), np.zeros(nt), c="black", s=30, zorder=4)
     names = [
-        ax.annotate(f"T{j + 1}", (0, 0), xytext=(4, 4), textcoords="offset points", fontsize=8)
+        ax.annotate(f"T{j}", (0, 0), xytext=(4, 4), textcoords="offset points", fontsize=8)
         for j in range(nt)
+    ]
+    uav_names = [
+        ax.annotate(
+            f"U{i}",
+            (0, 0),
+            xytext=(-12, -12),
+            textcoords="offset points",
+            fontsize=7,
+            color=colors[i],
+        )
+        for i in range(nu)
     ]
     assigned = [ax.plot([], [], color=colors[i], lw=0.8, alpha=0.8, zorder=2)[0] for i in range(nu)]
     arrows = ax.quiver(
@@ -278,10 +314,21 @@ def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: s
         angles="xy",
         scale_units="xy",
         scale=1,
-        width=0.012,
+        width=0.008,
         zorder=5,
     )
-    heading = ax.set_title("", fontsize=9)
+    legend = [
+        Line2D(
+            [], [], marker=r"$\rightarrow$", ls="", color=colors[0], ms=12, label="UAV Ui, heading"
+        ),
+        Circle((0, 0), 1, color=colors[0], alpha=0.2, label="observation disk"),
+        Line2D([], [], color="dimgray", ls="--", label="radio link"),
+        Line2D([], [], marker="o", ls="", color="black", ms=5, label="target Tj (truth)"),
+        Line2D([], [], color="black", ls="--", lw=0.8, label="team's best estimate, 2\u03c3"),
+        Line2D([], [], color=colors[0], lw=0.8, label="UAV to its assigned target's estimate"),
+    ]
+    ax.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    heading = ax.set_title("", fontsize=10)
 
     def draw(k: int) -> None:
         uavs, mean, cov = trace.uavs[k], trace.mean[k], trace.cov[k]
@@ -297,6 +344,7 @@ def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: s
         targets.set_offsets(trace.targets[k, :, :2])
         for i in range(nu):
             disks[i].set_center(uavs[i, :2])
+            uav_names[i].xy = uavs[i, :2]
             j = trace.assignment[k, i]
             assigned[i].set_data([uavs[i, 0], mean[i, j, 0]], [uavs[i, 1], mean[i, j, 1]])
         arrows.set_offsets(uavs[:, :2])
@@ -305,9 +353,15 @@ def animate(trace, scenario, path: Path, every: int = 2, fps: int = 10, title: s
         heading.set_text(f"{title}  step {k}  observation rate so far {seen:.2f}")
 
     anim = FuncAnimation(fig, draw, frames=frames)
+    callback = (lambda done, total: progress(1)) if progress is not None else None
     try:
         with replacing(path) as tmp:
-            anim.save(tmp, writer=PillowWriter(fps=fps), dpi=80)
+            anim.save(
+                tmp,
+                writer=PillowWriter(fps=fps),
+                dpi=100,
+                progress_callback=callback,
+            )
     finally:
         plt.close(fig)
     return len(frames)

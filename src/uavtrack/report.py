@@ -12,19 +12,39 @@ PAPER_NOTE = (
 )
 
 
-def _pm(mean: float, std: float, digits: int = 4) -> str:
-    return f"{mean:.{digits}f} ± {std:.{digits}f}"
+NA_NOTE = (
+    "n/a: a standard deviation or a confidence interval needs at least two trials; "
+    "summary.json holds null there."
+)
 
 
-def _ci(p: dict[str, float]) -> str:
-    return f"{p['mean']:+.4f} [{p['ci_low']:+.4f}, {p['ci_high']:+.4f}]"
+def _missing(value: float | None) -> bool:
+    return value is None or value != value  # None or NaN
+
+
+def pm(mean: float | None, std: float | None, digits: int = 4) -> str:
+    """``mean ± std``; n/a for what could not be computed."""
+    if _missing(mean):
+        return "n/a"
+    spread = "n/a" if _missing(std) else f"{std:.{digits}f}"
+    return f"{mean:.{digits}f} ± {spread}"
+
+
+def ci(p: dict[str, float], negate: bool = False) -> str:
+    """``mean [low, high]`` of a paired difference (of its negation if `negate`)."""
+    mean, low, high = p["mean"], p["ci_low"], p["ci_high"]
+    if negate:
+        mean, low, high = -mean, -high, -low
+    if _missing(low) or _missing(high):
+        return f"{mean:+.4f} [n/a]"
+    return f"{mean:+.4f} [{low:+.4f}, {high:+.4f}]"
 
 
 def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[str]:
     """A table of mean ± std per method over `columns`, from `{key}_mean` and `{key}_std`."""
     lines = ["| method | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
     for m, r in results.items():
-        cells = (_pm(a, b, 3) for a, b in zip(r[f"{key}_mean"], r[f"{key}_std"], strict=True))
+        cells = (pm(a, b, 3) for a, b in zip(r[f"{key}_mean"], r[f"{key}_std"], strict=True))
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
     return lines
 
@@ -40,7 +60,8 @@ def _by_value(field: str, values: list, columns: list[str], cell) -> list[str]:
 def parameter_table(scenario: Scenario) -> list[str]:
     lines = ["| field | value | unit and source |", "|---|---|---|"]
     for name, value, doc in scenario.describe():
-        lines.append(f"| `{name}` | {value} | {doc} |")
+        shown = "not set" if value is None else list(value) if isinstance(value, tuple) else value
+        lines.append(f"| `{name}` | {shown} | {doc} |")
     return lines
 
 
@@ -56,6 +77,7 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         f"engine {info['engine']}, {info['workers']} workers; {info['seconds']:.0f} s "
         f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
         "",
+        *([NA_NOTE, ""] if trials < 2 else []),
         "## Fig. 5: observation rate, 5 UAVs and 4 targets, r_C = 50 m, FOV 10°",
         "",
         "| method | ours (mean ± std) | paper (mean ± std) | ours − paper |",
@@ -64,12 +86,12 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
     for m, r in c.items():
         p = paper[m]
         out.append(
-            f"| {m} | {_pm(r['mean'], r['std'])} | {_pm(p['mean'], p['std'])} | "
+            f"| {m} | {pm(r['mean'], r['std'])} | {pm(p['mean'], p['std'])} | "
             f"{r['mean'] - p['mean']:+.4f} |"
         )
     nt = len(c["distributed"]["per_target_mean"])
     out += ["", "Per target (mean ± std):", ""]
-    out += _per_method(c, [f"target {j + 1}" for j in range(nt)], "per_target")
+    out += _per_method(c, [f"target {j}" for j in range(nt)], "per_target")
     out += [
         "",
         "Paired differences of the overall rate (same trials, same targets and noise), "
@@ -79,17 +101,22 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         "|---|---|",
     ]
     for name, p in summary["paired"].items():
-        out.append(f"| {name} | {_ci(p)} |")
+        out.append(f"| {name} | {ci(p)} |")
     out += [
         "",
-        "Estimation and cost, mean over trials:",
+        "Estimation and cost, mean over trials. *Best*: the team's best estimate of each "
+        "target (the estimate of the UAV most confident in it); *all*: every UAV's fused "
+        "estimate, including the stale ones of UAVs cut off from the team. NEES is 4 for a "
+        "consistent filter; targets turning at the walls raise it.",
         "",
-        "| method | RMSE [m] | NEES | rounds per UAV | messages per step |",
-        "|---|---|---|---|---|",
+        "| method | RMSE best [m] | RMSE all [m] | NEES best | NEES all | rounds per UAV | "
+        "messages per step |",
+        "|---|---|---|---|---|---|---|",
     ]
     for m, r in c.items():
         out.append(
-            f"| {m} | {r['rmse']['mean']:.2f} | {r['nees']['mean']:.2f} | "
+            f"| {m} | {r['rmse_best']['mean']:.2f} | {r['rmse']['mean']:.2f} | "
+            f"{r['nees_best']['mean']:.2f} | {r['nees']['mean']:.2f} | "
             f"{r['rounds']['mean']:.2f} | {r['messages']['mean']:.2f} |"
         )
     out += [
@@ -137,7 +164,7 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         ]
         for v, r in zip(curve["values"], curve["distributed"], strict=True):
             out.append(
-                f"| {v} | {_pm(r['mean'], r['std'], 3)} | "
+                f"| {v} | {pm(r['mean'], r['std'], 3)} | "
                 + " | ".join(f"{a:.3f}" for a in r["sorted_mean"])
                 + " |"
             )
@@ -167,16 +194,19 @@ def sweep(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> 
         f"{trials} trials per point, {scenario.steps} steps, seed {info['seed']}; "
         f"{info['seconds']:.0f} s.",
         "",
+        *([NA_NOTE, ""] if trials < 2 else []),
         "Observation rate, mean ± std over trials:",
         "",
     ]
     rows = summary["methods"]
+    unit = summary.get("unit")
+    header = f"{field} [{unit}]" if unit else field
     out += _by_value(
-        field, summary["values"], methods, lambda k, m: _pm(rows[m][k]["mean"], rows[m][k]["std"])
+        header, summary["values"], methods, lambda k, m: pm(rows[m][k]["mean"], rows[m][k]["std"])
     )
     if summary["paired"]:
         pairs = summary["paired"]
         out += ["", "Paired differences (same trials), mean [95% CI]:", ""]
-        out += _by_value(field, summary["values"], list(pairs), lambda k, n: _ci(pairs[n][k]))
+        out += _by_value(header, summary["values"], list(pairs), lambda k, n: ci(pairs[n][k]))
     out += ["", "![sweep](sweep.png)", "", "## Base scenario", ""] + parameter_table(scenario)
     return "\n".join(out) + "\n"

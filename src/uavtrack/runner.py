@@ -8,16 +8,27 @@ again skips the finished jobs. A job that raises is recorded in ``failed/`` with
 error and the others go on; it is retried on the next run. A folder made with a
 different scenario, plan or code is refused rather than mixed.
 
-Engines: ``local`` runs jobs in joblib worker processes; ``dask`` submits them to a
-Dask cluster (`--address`) or to a `LocalCluster` it starts. Results always come back
-to this process, which writes them, so workers need no shared file system.
+Each job file names what it holds (job key, seed, scenario digest, code hash) and
+carries a SHA-256 of its content. A file that does not match its job (edited,
+truncated, copied from another folder) is never used: it is moved to ``failed/`` with
+the reason and the job is computed again. One run at a time holds the folder: an
+exclusive lock (``flock`` on ``.lock``, which records the holder's pid) is taken for the
+whole run, and a second run on the same folder is refused.
+
+Engines: ``local`` runs jobs in worker processes (joblib's loky executor); ``dask``
+submits them to a Dask cluster (`--address`) or to a `LocalCluster` it starts. Results
+always come back to this process, which writes them, so workers need no shared file
+system. Local workers exit within a second if this process dies, even by SIGKILL.
 """
 
 from __future__ import annotations
 
+import errno
+import fcntl
 import hashlib
 import json
 import os
+import threading
 import time
 import traceback
 from collections.abc import Callable, Iterator, Sequence
@@ -25,9 +36,12 @@ from pathlib import Path
 from typing import Any
 
 from ._version import __version__
-from .config import ScenarioError
+from .errors import RunError, UsageError
 from .experiments import Job, run_job
-from .files import write_json
+from .files import dumps, write_json
+from .progress import bar
+
+LOCK = ".lock"
 
 
 def code_hash() -> str:
@@ -40,50 +54,195 @@ def code_hash() -> str:
     return digest.hexdigest()[:16]
 
 
-class Store:
-    """An experiment folder: manifest, finished jobs in raw/, failures in failed/."""
+def checksum(body: dict[str, Any]) -> str:
+    """SHA-256 of the canonical JSON of a job file's body."""
+    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
+    return hashlib.sha256(text.encode()).hexdigest()
 
-    def __init__(self, root: Path, manifest: dict[str, Any]) -> None:
+
+class Store:
+    """An experiment folder: manifest, finished jobs in raw/, failures in failed/.
+
+    Use it as a context manager: the folder is locked from opening to closing.
+    """
+
+    def __init__(self, root: str | Path, manifest: dict[str, Any]) -> None:
         self.root = Path(root)
         self.raw = self.root / "raw"
         self.failed = self.root / "failed"
         self.manifest = {**manifest, "uavtrack": __version__, "code": code_hash()}
-        path = self.root / "manifest.json"
-        if path.exists():
-            try:
-                old = json.loads(path.read_text(encoding="utf-8"))
-            except (OSError, ValueError) as exc:
-                raise ScenarioError(f"{path} is unreadable ({exc}); use another --out") from None
-            problem = mismatch(old, self.manifest)
-            if problem:
-                raise ScenarioError(
-                    f"{self.root} holds results made with {problem}; "
-                    "use another --out or remove the folder"
-                )
-        elif self.root.exists() and any(self.root.iterdir()):
-            raise ScenarioError(f"{self.root} is not empty and is not an uavtrack results folder")
-        self.raw.mkdir(parents=True, exist_ok=True)
-        self.failed.mkdir(exist_ok=True)
-        if not path.exists():
-            write_json(path, self.manifest)
+        self.set_aside: list[tuple[str, str]] = []  # (job key, reason) of rejected files
+        self._valid: dict[str, dict[str, Any]] = {}
+        self._lock = None
+        self._open()
+
+    # ------------------------------------------------------------ opening
+
+    def _open(self) -> None:
+        root = self.root
+        if root.exists() and not root.is_dir():
+            raise UsageError(f"results folder {root} exists and is not a folder")
+        path = root / "manifest.json"
+        if root.is_dir() and not path.exists():
+            foreign = [p.name for p in root.iterdir() if p.name not in (LOCK, "raw", "failed")]
+            if foreign:
+                raise UsageError(f"{root} is not empty and is not an uavtrack results folder")
+        try:
+            root.mkdir(parents=True, exist_ok=True)
+        except OSError as exc:
+            raise UsageError(f"results folder {root}: cannot create it ({_reason(exc)})") from None
+        self._lock = _take_lock(root)
+        try:
+            if path.exists():
+                self._check_manifest(path)
+            for folder in (self.raw, self.failed):
+                _check_writable(folder)
+            if not path.exists():
+                write_json(path, self.manifest)
+        except BaseException:
+            self.close()
+            raise
+
+    def _check_manifest(self, path: Path) -> None:
+        try:
+            old = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            raise UsageError(f"{path} is unreadable ({_reason(exc)}); use another --out") from None
+        problem = mismatch(old, self.manifest)
+        if problem:
+            raise UsageError(
+                f"{self.root} holds results made with {problem}; "
+                "use another --out or remove the folder"
+            )
+
+    def close(self) -> None:
+        """Release the folder's lock."""
+        if self._lock is not None:
+            self._lock.close()  # closing the descriptor releases the flock
+            self._lock = None
+
+    def __enter__(self) -> Store:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    # ------------------------------------------------------------ job files
 
     def path(self, job: Job) -> Path:
         return self.raw / f"{job.key}.json"
 
+    def identity(self, job: Job) -> dict[str, Any]:
+        """What a job file must name to be used for `job`."""
+        return {
+            **describe_job(job),
+            "key": job.key,
+            "scenario": job.scenario.digest(),
+            "code": self.manifest["code"],
+        }
+
     def done(self, job: Job) -> bool:
-        return self.path(job).exists()
+        """Whether a valid result of `job` is stored; an invalid file is set aside."""
+        if job.key in self._valid:
+            return True
+        path = self.path(job)
+        if not path.exists():
+            return False
+        problem, record = self._read(job, path)
+        if problem:
+            self._set_aside(job, path, problem)
+            return False
+        self._valid[job.key] = record["metrics"]
+        return True
+
+    def _read(self, job: Job, path: Path) -> tuple[str, dict[str, Any]]:
+        """(problem, record): problem is '' when the file is `job`'s intact result."""
+        try:
+            record = json.loads(path.read_text(encoding="utf-8"))
+        except (OSError, ValueError) as exc:
+            return f"unreadable ({_reason(exc)})", {}
+        if not isinstance(record, dict) or set(record) != {"job", "seconds", "metrics", "sha256"}:
+            return "not a job file of this uavtrack version", {}
+        body = {k: record[k] for k in ("job", "seconds", "metrics")}
+        try:
+            if checksum(body) != record["sha256"]:
+                return "its content does not match its checksum (edited or corrupted)", {}
+        except (TypeError, ValueError):
+            return "its content does not match its checksum (edited or corrupted)", {}
+        expected = self.identity(job)
+        for field in ("key", "seed", "first", "count", "method", "scenario", "code"):
+            if record["job"].get(field) != expected[field]:
+                return (
+                    f"it was made for another {field} ({record['job'].get(field)!r}, "
+                    f"this job has {expected[field]!r})"
+                ), {}
+        return "", record
+
+    def _set_aside(self, job: Job, path: Path, problem: str) -> None:
+        target = self.failed / f"{job.key}.rejected.json"
+        os.replace(path, target)
+        write_json(
+            self.failed / f"{job.key}.json",
+            {"job": describe_job(job), "error": f"{path.name} set aside: {problem}"},
+        )
+        self.set_aside.append((job.key, problem))
 
     def save(self, job: Job, metrics: dict[str, Any], seconds: float) -> None:
-        write_json(
-            self.path(job), {"job": describe_job(job), "seconds": seconds, "metrics": metrics}
-        )
+        record = {"job": self.identity(job), "seconds": seconds, "metrics": metrics}
+        body = json.loads(dumps(record))  # the plain JSON types the file will hold
+        write_json(self.path(job), {**body, "sha256": checksum(body)})
+        self._valid[job.key] = body["metrics"]
         (self.failed / f"{job.key}.json").unlink(missing_ok=True)
 
     def fail(self, job: Job, error: str) -> None:
         write_json(self.failed / f"{job.key}.json", {"job": describe_job(job), "error": error})
 
     def load(self, job: Job) -> dict[str, Any]:
-        return json.loads(self.path(job).read_text(encoding="utf-8"))["metrics"]
+        if not self.done(job):
+            raise RunError(f"the result of job {job.key} is missing from {self.raw}")
+        return self._valid[job.key]
+
+
+def _take_lock(root: Path):
+    """Open and exclusively lock ``root/.lock``; refuse if another process holds it."""
+    path = root / LOCK
+    try:
+        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 (held until close)
+    except OSError as exc:
+        raise UsageError(f"results folder {root}: cannot write in it ({_reason(exc)})") from None
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError as exc:
+        if exc.errno not in (errno.EWOULDBLOCK, errno.EACCES):
+            handle.close()
+            raise UsageError(f"results folder {root}: cannot lock it ({_reason(exc)})") from None
+        handle.seek(0)
+        holder = handle.read().strip() or "unknown"
+        handle.close()
+        raise UsageError(
+            f"results folder {root} is in use by another uavtrack run (pid {holder}); "
+            "wait for it to finish or use another --out"
+        ) from None
+    handle.seek(0)
+    handle.truncate()
+    handle.write(str(os.getpid()))
+    handle.flush()
+    return handle
+
+
+def _check_writable(folder: Path) -> None:
+    """Create `folder` if needed and prove that files can be written in it."""
+    try:
+        folder.mkdir(exist_ok=True)
+        probe = folder / f".probe-{os.getpid()}"
+        probe.write_bytes(b"")
+        probe.unlink()
+    except OSError as exc:
+        raise UsageError(f"results folder {folder}: cannot write in it ({_reason(exc)})") from None
+
+
+def _reason(exc: BaseException) -> str:
+    return exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
 
 
 def describe_job(job: Job) -> dict[str, Any]:
@@ -139,25 +298,52 @@ def guarded(job: Job) -> tuple[str, dict[str, Any] | None, str | None, float]:
         return job.key, None, traceback.format_exc(limit=8), time.perf_counter() - start
 
 
-class EngineError(RuntimeError):
+class EngineError(RunError):
     """The engine lost a worker or its cluster; finished jobs are saved."""
 
 
+def exit_with_parent(parent: int) -> None:
+    """Worker initialiser: end this process within a second once `parent` is gone.
+
+    A worker whose parent dies (even by SIGKILL) is adopted by another process, so its
+    parent pid changes; a daemon thread watches for that.
+    """
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
+
+
 def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
-    """Run jobs in joblib worker processes; yield results as they finish."""
+    """Run jobs in worker processes; yield results as they finish."""
     if workers == 1:
         for job in jobs:
             yield guarded(job)
         return
-    from joblib import Parallel, delayed
+    from concurrent.futures import as_completed
+
+    from joblib.externals.loky import get_reusable_executor
     from joblib.externals.loky.process_executor import TerminatedWorkerError
 
+    executor = get_reusable_executor(
+        max_workers=workers, timeout=30, initializer=exit_with_parent, initargs=(os.getpid(),)
+    )
+    futures = [executor.submit(guarded, job) for job in jobs]
     try:
-        yield from Parallel(n_jobs=workers, return_as="generator_unordered")(
-            delayed(guarded)(job) for job in jobs
-        )
-    except TerminatedWorkerError as exc:
-        raise EngineError(f"a worker process died ({str(exc).splitlines()[-2].strip()})") from None
+        for future in as_completed(futures):
+            try:
+                yield future.result()
+            except TerminatedWorkerError as exc:
+                lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+                raise EngineError(f"a worker process died ({lines[-1]})") from None
+    finally:
+        if not all(f.done() for f in futures):  # interrupted or failed: stop the workers now
+            for future in futures:
+                future.cancel()
+            executor.shutdown(wait=True, kill_workers=True)
 
 
 def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[tuple]:
@@ -165,12 +351,22 @@ def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Itera
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise ScenarioError('--engine dask needs Dask: pip install "uavtrack[dask]"') from None
+        raise UsageError('--engine dask needs Dask: pip install "uavtrack[dask]"') from None
     if address:
-        cluster, client = None, Client(address, timeout="20s")
+        try:
+            cluster, client = None, Client(address, timeout="10s")
+        except (OSError, TimeoutError, ValueError, TypeError) as exc:
+            reason = " ".join(str(exc).split()) or type(exc).__name__
+            raise UsageError(
+                f"--address {address}: no Dask scheduler answers there ({reason[:160]})"
+            ) from None
     else:
         cluster = LocalCluster(
-            n_workers=workers, threads_per_worker=1, processes=True, dashboard_address=None
+            n_workers=workers,
+            threads_per_worker=1,
+            processes=True,
+            dashboard_address=None,
+            death_timeout=5,
         )
         client = Client(cluster)
     from distributed.scheduler import KilledWorker
@@ -200,31 +396,40 @@ def execute(
     on_result: Callable[[Job], None] | None = None,
 ) -> tuple[int, list[Job]]:
     """Run the jobs not yet in the store. Returns (jobs skipped, jobs that failed)."""
-    workers = workers or default_workers()
+    workers = workers or available_cores()
     todo = [job for job in jobs if not store.done(job)]
     skipped = len(jobs) - len(todo)
     by_key = {job.key: job for job in todo}
     failed: list[Job] = []
     if not todo:
         return skipped, failed
+    workers = min(workers, len(todo))
     stream = (
         local_engine(todo, workers) if engine == "local" else dask_engine(todo, workers, address)
     )
-    with _progress(progress, len(jobs), skipped) as advance:
-        for key, metrics, error, seconds in stream:
-            job = by_key[key]
-            if error is None:
-                store.save(job, metrics, seconds)
-            else:
-                store.fail(job, error)
-                failed.append(job)
-            advance()
-            if on_result is not None:
-                on_result(job)
+    try:
+        with bar(len(jobs), "jobs", "jobs", enabled=progress, completed=skipped) as advance:
+            for key, metrics, error, seconds in stream:
+                job = by_key[key]
+                if error is None:
+                    try:
+                        store.save(job, metrics, seconds)
+                    except OSError as exc:
+                        raise RunError(
+                            f"cannot save job {job.key} in {store.raw}: {_reason(exc)}"
+                        ) from None
+                else:
+                    store.fail(job, error)
+                    failed.append(job)
+                advance()
+                if on_result is not None:
+                    on_result(job)
+    finally:
+        stream.close()  # stops the workers when leaving early
     return skipped, failed
 
 
-def default_workers() -> int:
+def available_cores() -> int:
     """The cores this process may use."""
     try:
         return len(os.sched_getaffinity(0))
@@ -232,46 +437,11 @@ def default_workers() -> int:
         return os.cpu_count() or 1
 
 
-class _progress:
-    """A rich progress bar: jobs done of total, rate, time left (a no-op when disabled)."""
-
-    def __init__(self, enabled: bool, total: int, done: int) -> None:
-        self.enabled, self.total, self.done = enabled, total, done
-
-    def __enter__(self) -> Callable[[], None]:
-        if not self.enabled:
-            return lambda: None
-        from rich.progress import (
-            BarColumn,
-            MofNCompleteColumn,
-            Progress,
-            TextColumn,
-            TimeElapsedColumn,
-            TimeRemainingColumn,
-        )
-
-        self.bar = Progress(
-            TextColumn("[bold]jobs"),
-            BarColumn(),
-            MofNCompleteColumn(),
-            TextColumn("{task.fields[rate]}"),
-            TextColumn("elapsed"),
-            TimeElapsedColumn(),
-            TextColumn("left"),
-            TimeRemainingColumn(),
-            transient=False,
-        )
-        self.bar.start()
-        self.task = self.bar.add_task("jobs", total=self.total, completed=self.done, rate="")
-        self.start, self.fresh = time.perf_counter(), 0
-
-        def advance() -> None:
-            self.fresh += 1
-            rate = self.fresh / max(time.perf_counter() - self.start, 1e-9)
-            self.bar.update(self.task, advance=1, rate=f"{rate:.2f} jobs/s")
-
-        return advance
-
-    def __exit__(self, *exc) -> None:
-        if self.enabled:
-            self.bar.stop()
+def resolve_workers(requested: int | None) -> tuple[int, str]:
+    """Workers to start, at most the cores available, and a note when capped."""
+    cores = available_cores()
+    if requested is None:
+        return cores, ""
+    if requested > cores:
+        return cores, f"--workers {requested} capped at {cores}, the cores available"
+    return requested, ""

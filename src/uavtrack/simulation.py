@@ -15,16 +15,18 @@ batch.
 
 from __future__ import annotations
 
+import os
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
+from numbers import Integral
 
 import numpy as np
 
 from . import estimation, fusion, network, planning, sensing, world
-from .config import G, Scenario
+from .config import G, Scenario, ScenarioError
 from .methods import Method, get
-from .metrics import Tally
+from .metrics import METRICS, Tally
 
 NOISE_BLOCK = 64
 """Steps of sensor noise drawn at once per trial (a draw of n normals equals n draws of 1)."""
@@ -69,7 +71,8 @@ class Cycle:
 
     observed (B, Nu, Nt); bids (B, Nu, Nt); target (B, Nu) assigned target;
     action (B, Nu) index of the bank angle flown; rounds (B, Nu) D_i;
-    messages (B,) consensus messages; decision_time (B, Nu) seconds per UAV.
+    messages (B,) consensus messages; decision_time (B, Nu) seconds of planning and
+    assignment per UAV (see `metrics.METRICS["decision_time_ms"]`).
     """
 
     observed: np.ndarray
@@ -215,7 +218,8 @@ class Trace:
     targets (T, Nt, 4) truth; uavs (T, Nu, 5) at the time of the cycle; mean
     (T, Nu, Nt, 4) and cov (T, Nu, Nt, 4, 4) each UAV's fused estimate; observed
     (T, Nu, Nt); bids (T, Nu, Nt); assignment (T, Nu) target index; action (T, Nu)
-    bank angle flown [rad]; rounds (T, Nu) D_i; messages (T,); decision_time (T, Nu) [s].
+    bank angle flown [rad]; rounds (T, Nu) D_i; messages (T,); decision_time_ms (T, Nu)
+    [ms] (NaN in the traces of a batch, where it is not measured).
     """
 
     targets: np.ndarray
@@ -228,7 +232,7 @@ class Trace:
     action: np.ndarray
     rounds: np.ndarray
     messages: np.ndarray
-    decision_time: np.ndarray
+    decision_time_ms: np.ndarray
 
     def arrays(self) -> dict[str, np.ndarray]:
         return {name: getattr(self, name) for name in self.__dataclass_fields__}
@@ -249,9 +253,20 @@ def run(
     method: str | Method = "distributed",
     seeds: Sequence[int | np.random.SeedSequence] = (0,),
     trace: bool = False,
+    progress: Callable[[int], None] | None = None,
 ) -> BatchResult:
-    """Run len(seeds) independent trials as one batch (leading axis B)."""
+    """Run len(seeds) independent trials as one batch (leading axis B).
+
+    `progress`, if given, is called with the number of steps done after every step.
+    Decision times are measured only for a single trial (see `metrics.METRICS`).
+    """
     method = get(method)
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
+    seeds = list(seeds)
+    if not seeds:
+        raise ValueError("seeds is empty: give at least one seed (one per trial)")
+    check_memory(scenario, len(seeds), trace)
     const = Constants.of(scenario)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
@@ -260,9 +275,10 @@ def run(
     trajectory = np.stack([d[1] for d in drawn])  # (B, T, Nt, 4)
     mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
     cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
+    del drawn  # the per-trial copies of the trajectories
     state = State(0, uavs, mean, cov)
-    tally = Tally(B, Nu, Nt)
-    rec = _Recorder(B, T, Nu, Nt) if trace else None
+    tally = Tally(B, Nu, Nt, timed=B == 1)
+    rec = _Recorder(B, T, Nu, Nt, timed=B == 1) if trace else None
     for k in range(T):
         if k % NOISE_BLOCK == 0:  # the same numbers as one draw per step, fewer calls
             noise = np.stack(
@@ -283,14 +299,77 @@ def run(
         )
         if rec is not None:
             rec.record(k, before, state, cycle, const)
+        if progress is not None:
+            progress(k + 1)
     traces = rec.traces(trajectory) if rec is not None else None
     return BatchResult(method.name, scenario, tally.summary(), traces)
+
+
+def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, int]:
+    """Bytes a batch of `batch` trials needs at its peak, by the field that drives each part.
+
+    The parts are the target trajectories (steps x n_targets), the per-step work of the
+    cycle (n_uavs x n_targets, with the planner's tree of 3^h sequences and the N x N
+    radio graph), and the trace (steps x n_uavs x n_targets). The estimate is checked
+    against measured peaks in the tests.
+    """
+    T, Nu, Nt = scenario.steps, scenario.n_uavs, scenario.n_targets
+    f = 8  # bytes per float
+    parts = {
+        "steps": batch * T * Nt * 4 * f * 2 + T * Nt * 2 * f * 8,
+        "planner.horizon": planning.memory(batch * Nu, Nt, 3, scenario.planner.horizon),
+        "n_uavs": batch * Nu * Nu * f * (8 + (Nt if Nu < fusion.SPARSE_FROM else 3 * Nt)),
+        "n_targets": batch * Nu * Nt * f * (20 * 6 + NOISE_BLOCK * 2 * 2),
+    }
+    if trace:
+        parts["steps"] += batch * T * (Nu * Nt * (4 + 16 + 1 + 1) + Nu * 9) * f
+    return parts
+
+
+def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> None:
+    """Refuse, with a one-line ScenarioError, a run that cannot fit in the memory available."""
+    parts = memory_estimate(scenario, batch, trace)
+    need, have = sum(parts.values()), available_memory()
+    if need <= 0.9 * have:
+        return
+    field = max(parts, key=parts.get)
+    hint = {
+        "steps": "steps (or run without a trace)" if trace else "steps",
+        "planner.horizon": "planner.horizon (or n_uavs, n_targets)",
+        "n_uavs": "n_uavs",
+        "n_targets": "n_targets (or n_uavs)",
+    }[field]
+    trials = f" for {batch} trials at once" if batch > 1 else ""
+    raise ScenarioError(
+        f"this run needs about {_size(need)} of memory{trials} and {_size(have)} are "
+        f"available; reduce {hint}"
+    )
+
+
+def _size(n: float) -> str:
+    return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
+
+
+def available_memory() -> int:
+    """Bytes of memory available to new allocations (MemAvailable on Linux)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as info:
+            for line in info:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 2**62  # unknown: do not refuse
 
 
 class _Recorder:
     """Preallocated per-step arrays for traces."""
 
-    def __init__(self, B: int, T: int, Nu: int, Nt: int) -> None:
+    def __init__(self, B: int, T: int, Nu: int, Nt: int, timed: bool) -> None:
+        self.timed = timed
         self.uavs = np.empty((B, T, Nu, 5))
         self.mean = np.empty((B, T, Nu, Nt, 4))
         self.cov = np.empty((B, T, Nu, Nt, 4, 4))
@@ -300,7 +379,7 @@ class _Recorder:
         self.action = np.empty((B, T, Nu))
         self.rounds = np.empty((B, T, Nu), dtype=np.int64)
         self.messages = np.empty((B, T), dtype=np.int64)
-        self.decision_time = np.empty((B, T, Nu))
+        self.decision_time_ms = np.full((B, T, Nu), np.nan)
 
     def record(
         self, k: int, uavs: np.ndarray, state: State, cycle: Cycle, const: Constants
@@ -314,7 +393,8 @@ class _Recorder:
         self.action[:, k] = const.actions[cycle.action]
         self.rounds[:, k] = cycle.rounds
         self.messages[:, k] = cycle.messages
-        self.decision_time[:, k] = cycle.decision_time
+        if self.timed:
+            self.decision_time_ms[:, k] = 1e3 * cycle.decision_time
 
     def traces(self, trajectory: np.ndarray) -> list[Trace]:
         return [
@@ -329,7 +409,7 @@ class _Recorder:
                 self.action[b],
                 self.rounds[b],
                 self.messages[b],
-                self.decision_time[b],
+                self.decision_time_ms[b],
             )
             for b in range(trajectory.shape[0])
         ]
@@ -339,9 +419,10 @@ class _Recorder:
 class Result:
     """One trial: the paper's metric, the estimation quality, costs, and the trace.
 
-    observation_rate: mean over targets of per_target (Sec. 7); per_target (Nt,);
-    rmse [m] and nees [-] of the fused estimates; rounds: mean D_i per step;
-    messages: consensus messages per step; decision_time: mean seconds per UAV per cycle.
+    The metrics are those of `metrics.METRICS` (units and meaning there):
+    observation_rate (Sec. 7); per_target (Nt,); rmse and nees over every UAV's fused
+    estimate; rmse_best and nees_best of the team's best estimate; rounds: mean D_i per
+    UAV and step; messages per step; decision_time_ms per UAV and cycle.
     """
 
     method: str
@@ -350,25 +431,21 @@ class Result:
     observation_rate: float
     per_target: np.ndarray
     rmse: float
+    rmse_best: float
     nees: float
+    nees_best: float
     rounds: float
     messages: float
-    decision_time: float
+    decision_time_ms: float
     trace: Trace | None = field(default=None, repr=False)
 
     def summary(self) -> dict:
-        """JSON-ready metrics."""
-        return {
-            "method": self.method,
-            "seed": self.seed,
-            "observation_rate": float(self.observation_rate),
-            "per_target": [float(x) for x in self.per_target],
-            "rmse": float(self.rmse),
-            "nees": float(self.nees),
-            "rounds": float(self.rounds),
-            "messages": float(self.messages),
-            "decision_time": float(self.decision_time),
-        }
+        """JSON-ready metrics (the names of `metrics.METRICS`)."""
+        out = {"method": self.method, "seed": self.seed}
+        for name in METRICS:
+            value = getattr(self, name)
+            out[name] = [float(x) for x in value] if name == "per_target" else float(value)
+        return out
 
 
 def simulate(
@@ -376,23 +453,27 @@ def simulate(
     method: str | Method = "distributed",
     seed: int | np.random.SeedSequence = 0,
     trace: bool = True,
+    progress: Callable[[int], None] | None = None,
 ) -> Result:
-    """Simulate one trial of `scenario` with `method` ("distributed", "centralized", "greedy")."""
+    """Simulate one trial of `scenario` with `method` ("distributed", "centralized", "greedy").
+
+    `seed` is an integer (numpy's too) or a `numpy.random.SeedSequence`, such as
+    `trial_seed(seed, t)`; `progress` as in `run`.
+    """
     scenario = Scenario() if scenario is None else scenario
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
-    batch = run(scenario, method, [seed], trace=trace)
+    if isinstance(seed, Integral) and not isinstance(seed, bool):
+        seed = int(seed)
+        if seed < 0:
+            raise ValueError(f"seed must be >= 0, got {seed}")
+    elif not isinstance(seed, np.random.SeedSequence):
+        raise TypeError(f"seed must be an integer or a SeedSequence, not {type(seed).__name__}")
+    batch = run(scenario, method, [seed], trace=trace, progress=progress)
     m = {name: values[0] for name, values in batch.metrics.items()}
     return Result(
         method=batch.method,
         seed=seed if isinstance(seed, int) else None,
         scenario=scenario,
-        observation_rate=float(m["observation_rate"]),
         per_target=m["per_target"],
-        rmse=float(m["rmse"]),
-        nees=float(m["nees"]),
-        rounds=float(m["rounds"]),
-        messages=float(m["messages"]),
-        decision_time=float(m["decision_time"]),
         trace=batch.traces[0] if trace else None,
+        **{name: float(m[name]) for name in METRICS if name != "per_target"},
     )

@@ -1,12 +1,13 @@
 """Command line: ``uavtrack run | compare | reproduce | sweep | animate | bench | params``.
 
-Bad input of any kind ends with one line ``uavtrack: error: ...`` on stderr and exit
-code 2, and leaves no partial output file.
+Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
+``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130
+interrupted (Ctrl-C; finished work is kept, no partial file is left).
 """
 
 from __future__ import annotations
 
-import json
+import math
 import os
 import sys
 from enum import StrEnum
@@ -14,17 +15,59 @@ from pathlib import Path
 from typing import Annotated, Any
 
 import typer
+from typer import core as typer_core
 from typer.exceptions import TyperException
 
+from .._version import __version__
 from ..config import Scenario, ScenarioError, parse_value
-from ..files import replacing
+from ..errors import Interrupted, RunError, UsageError
+from ..files import check_output, dumps, write_npz
+from ..progress import bar, on_terminal
+
+
+def _plain_argument_help() -> None:
+    """Show positional arguments as ``FIELD VALUE...`` in help, not ``{FIELD} <str>``."""
+    argument = typer_core.TyperArgument
+    if hasattr(argument, "display_type_rich"):
+        argument.display_type_rich = lambda self, ctx: None
+    if hasattr(argument, "_usage_display_name"):
+
+        def usage(self) -> str:
+            name = self.display_name_raw
+            many = self.nargs != 1 and not name.endswith("...")
+            return (name + ("..." if many else "")) if self.required else f"[{name}]"
+
+        argument._usage_display_name = usage
+
+
+_plain_argument_help()
+
+
+def _version(value: bool) -> None:
+    if value:
+        typer.echo(f"uavtrack {__version__}")
+        raise typer.Exit()
+
 
 app = typer.Typer(
     add_completion=False,
     pretty_exceptions_enable=False,
     rich_markup_mode=None,
+    context_settings={"help_option_names": ["-h", "--help"]},
     help="Distributed multi-UAV cooperative multi-target tracking.",
 )
+
+
+@app.callback()
+def _root(
+    version: Annotated[
+        bool,
+        typer.Option(
+            "--version", is_eager=True, callback=_version, help="Show the version and exit."
+        ),
+    ] = False,
+) -> None:
+    """Distributed multi-UAV cooperative multi-target tracking (see README.md)."""
 
 
 class MethodName(StrEnum):
@@ -35,22 +78,32 @@ class MethodName(StrEnum):
 
 ConfigOpt = Annotated[
     Path | None,
-    typer.Option("--config", help="scenario TOML file (missing fields keep their defaults)"),
+    typer.Option(
+        "--config",
+        metavar="FILE",
+        help="scenario TOML file (missing fields keep their defaults)",
+    ),
 ]
 SetOpt = Annotated[
     list[str] | None,
     typer.Option(
         "--set",
         metavar="FIELD=VALUE",
-        help="override a scenario field, dotted for nested ones (sensor.half_fov_deg=10)",
+        help="override a scenario field, dotted for nested ones (sensor.half_fov_deg=10); "
+        "repeatable; values are read as TOML",
     ),
 ]
+MethodOpt = Annotated[
+    MethodName,
+    typer.Option(metavar="METHOD", help="distributed, centralized or greedy"),
+]
+SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
 
 
 def load_scenario(config: Path | None, overrides: list[str] | None) -> Scenario:
     """The scenario from an optional TOML file and FIELD=VALUE overrides."""
     scenario = Scenario.from_toml(config) if config is not None else Scenario()
-    return scenario.with_overrides(parse_overrides(overrides or []))
+    return scenario.with_overrides(parse_overrides(overrides or []), origin="--set")
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
@@ -60,91 +113,131 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
         name, sep, text = item.partition("=")
         if not sep or not name.strip():
             raise ScenarioError(f"--set expects FIELD=VALUE, got {item!r}")
-        out[name.strip()] = parse_value(text.strip())
+        out[name.strip()] = parse_value(text.strip(), where=f"--set {name.strip()}")
     return out
 
 
-def writable_target(path: Path, option: str) -> Path:
-    """Check early that an output file can be created, before any long computation."""
-    parent = path.expanduser().resolve().parent
-    if not parent.is_dir():
-        raise ScenarioError(f"{option}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK):
-        raise ScenarioError(f"{option}: directory {parent} is not writable")
-    return path
+def steps_bar(scenario: Scenario, trials: int = 1, label: str = "steps"):
+    """A progress bar over trial-steps, shown when stderr is a terminal."""
+    return bar(scenario.steps * trials, label, label, enabled=on_terminal())
+
+
+RUN_ROWS = (
+    ("rmse_best", "position RMSE, team's best estimate [m]", "{:.2f}"),
+    ("rmse", "position RMSE, every UAV's estimate [m]", "{:.2f}"),
+    ("nees_best", "NEES, team's best estimate (4 if consistent)", "{:.2f}"),
+    ("nees", "NEES, every UAV's estimate (4 if consistent)", "{:.2f}"),
+    ("rounds", "consensus rounds per UAV and step", "{:.2f}"),
+    ("messages", "messages per step", "{:.2f}"),
+    ("decision_time_ms", "decision time per UAV and cycle [ms]", "{:.3f}"),
+)
+CAPTION = (
+    "Team's best estimate: per target, the estimate of the UAV most confident in it. "
+    "Every UAV's estimate includes the stale ones of UAVs cut off from the team. NEES above "
+    "4 comes mostly from targets turning at the walls, which the filter cannot predict."
+)
 
 
 @app.command()
 def run(
     config: ConfigOpt = None,
-    method: Annotated[MethodName, typer.Option(help="decision method")] = MethodName.distributed,
-    seed: Annotated[int, typer.Option(min=0, help="random seed of the trial")] = 0,
+    method: MethodOpt = MethodName.distributed,
+    seed: SeedOpt = 0,
     set_: SetOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
     trace: Annotated[
-        Path | None, typer.Option("--trace", help="write the per-step trace to this .npz file")
+        Path | None,
+        typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
 ) -> None:
     """Simulate one trial and print its metrics."""
-    import numpy as np
-
     from ..simulation import simulate
 
     scenario = load_scenario(config, set_)
     if trace is not None:
-        writable_target(trace, "--trace")
-    result = simulate(scenario, method.value, seed=seed, trace=trace is not None)
+        check_output(trace, "--trace")
+    with steps_bar(scenario) as advance:
+        result = simulate(
+            scenario,
+            method.value,
+            seed=seed,
+            trace=trace is not None,
+            progress=lambda _: advance(1),
+        )
     if trace is not None:
-        with replacing(trace) as tmp:
-            np.savez_compressed(tmp, **result.trace.arrays())
+        write_npz(trace, result.trace.arrays())
     summary = result.summary()
     if as_json:
-        summary["scenario"] = scenario.model_dump()
-        typer.echo(json.dumps(summary))
+        summary["scenario"] = scenario.to_dict()
+        typer.echo(dumps(summary))
         return
     from rich.markup import escape
     from rich.table import Table
 
-    table = Table(title=f"uavtrack run: {summary['method']}, seed {seed}", show_header=False)
+    table = Table(
+        title=f"uavtrack run: {summary['method']}, seed {seed}, {scenario.steps} steps",
+        caption=CAPTION,
+        caption_justify="left",
+        show_header=False,
+    )
     table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
     for j, rate in enumerate(summary["per_target"]):
         table.add_row(f"  target {j}", f"{rate:.4f}")
-    table.add_row(escape("position RMSE [m]"), f"{summary['rmse']:.2f}")
-    table.add_row("NEES (4 if consistent)", f"{summary['nees']:.2f}")
-    table.add_row("consensus rounds per UAV", f"{summary['rounds']:.2f}")
-    table.add_row("messages per step", f"{summary['messages']:.2f}")
-    table.add_row(escape("decision time per UAV [ms]"), f"{1e3 * summary['decision_time']:.3f}")
+    for key, label, fmt in RUN_ROWS:
+        table.add_row(escape(label), fmt.format(summary[key]))
     console().print(table)
     if trace is not None:
         typer.echo(f"trace written to {trace}")
+
+
+COMPARE_COLUMNS = (
+    ("rmse_best", "RMSE best [m]", "{:.1f}"),
+    ("rmse", "RMSE all [m]", "{:.1f}"),
+    ("nees_best", "NEES best", "{:.1f}"),
+    ("rounds", "rounds", "{:.2f}"),
+    ("messages", "messages", "{:.1f}"),
+    ("decision_time_ms", "decision [ms]", "{:.3f}"),
+)
 
 
 @app.command()
 def compare(
     config: ConfigOpt = None,
     methods: Annotated[
-        list[MethodName] | None, typer.Option("--method", help="methods to compare (repeatable)")
+        list[MethodName] | None,
+        typer.Option(
+            "--method", metavar="METHOD", help="a method to compare (repeatable) [all three]"
+        ),
     ] = None,
-    trials: Annotated[int, typer.Option(min=1, help="Monte Carlo trials per method")] = 50,
-    seed: Annotated[int, typer.Option(min=0, help="experiment seed")] = 0,
+    trials: Annotated[
+        int, typer.Option(min=1, metavar="N", help="Monte Carlo trials per method")
+    ] = 50,
+    steps: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="steps per trial [the scenario's]")
+    ] = None,
+    seed: Annotated[
+        int, typer.Option(min=0, metavar="N", help="experiment seed (trial t uses its t-th child)")
+    ] = 0,
     set_: SetOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
 ) -> None:
-    """Run the methods on the same trials; mean and std of each metric."""
+    """Run the methods on the same trials, in this process; mean and std of each metric."""
     from ..experiments import compare as run_compare
     from ..experiments import summarize
 
-    scenario = load_scenario(config, set_)
-    names = [m.value for m in (methods or list(MethodName))]
-    results = {m: summarize(v) for m, v in run_compare(scenario, names, trials, seed).items()}
+    scenario = with_steps(load_scenario(config, set_), steps, set_)
+    names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
+    with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
+        raw = run_compare(scenario, names, trials, seed, progress=advance)
+    results = {m: summarize(v) for m, v in raw.items()}
     if as_json:
         typer.echo(
-            json.dumps(
+            dumps(
                 {
                     "trials": trials,
                     "seed": seed,
                     "methods": results,
-                    "scenario": scenario.model_dump(),
+                    "scenario": scenario.to_dict(),
                 }
             )
         )
@@ -152,32 +245,37 @@ def compare(
     from rich.markup import escape
     from rich.table import Table
 
-    table = Table(title=f"{trials} trials, seed {seed}")
-    for col in (
-        "method",
-        "observation rate",
-        "per target",
-        "RMSE [m]",
-        "NEES",
-        "rounds",
-        "messages",
-        "decision [ms]",
-    ):
-        table.add_column(
-            escape(col), justify="left" if col in ("method", "per target") else "right"
-        )
+    table = Table(
+        title=f"{trials} trials of {scenario.steps} steps, seed {seed} (mean over trials)",
+        caption="best: the team's best estimate of each target; all: every UAV's estimate. "
+        "Decision time: trial 0, run alone.",
+        caption_justify="left",
+    )
+    table.add_column("method")
+    table.add_column("observation rate ± std", justify="right")
+    table.add_column("per target 0, 1, ...")
+    for _, label, _ in COMPARE_COLUMNS:
+        table.add_column(escape(label), justify="right")
     for name, r in results.items():
+        rate = r["observation_rate"]
+        spread = "" if math.isnan(rate["std"]) else f" ± {rate['std']:.4f}"
         table.add_row(
             name,
-            f"{r['observation_rate']['mean']:.4f} ± {r['observation_rate']['std']:.4f}",
+            f"{rate['mean']:.4f}{spread}",
             " ".join(f"{x:.3f}" for x in r["per_target"]["mean"]),
-            f"{r['rmse']['mean']:.1f}",
-            f"{r['nees']['mean']:.1f}",
-            f"{r['rounds']['mean']:.2f}",
-            f"{r['messages']['mean']:.1f}",
-            f"{1e3 * r['decision_time']['mean']:.3f}",
+            *(fmt.format(r[key]["mean"]) for key, _, fmt in COMPARE_COLUMNS),
         )
     console().print(table)
+
+
+def with_steps(scenario: Scenario, steps: int | None, set_: list[str] | None) -> Scenario:
+    """Apply ``--steps``; refuse it when ``--set steps=...`` says something else."""
+    if steps is None:
+        return scenario
+    given = parse_overrides(set_ or []).get("steps")
+    if given is not None and given != steps:
+        raise ScenarioError(f"--steps {steps} and --set steps={given} disagree; give one of them")
+    return scenario.with_overrides({"steps": steps}, origin="--steps")
 
 
 @app.command()
@@ -186,18 +284,20 @@ def params(
     set_: SetOpt = None,
     toml: Annotated[bool, typer.Option("--toml", help="print the scenario as TOML")] = False,
 ) -> None:
-    """Show every scenario parameter with its value, unit and source."""
+    """Show every scenario parameter with its value, unit, range and source."""
     scenario = load_scenario(config, set_)
     if toml:
         typer.echo(scenario.to_toml(), nl=False)
         return
+    from rich.markup import escape
     from rich.table import Table
 
-    table = Table("field", "value", "unit, source")
-    from rich.markup import escape
-
+    table = Table("field", "value", "unit, range, source")
     for name, value, doc in scenario.describe():
-        table.add_row(name, escape(str(value)), escape(doc))
+        shown = (
+            "not set" if value is None else str(list(value) if isinstance(value, tuple) else value)
+        )
+        table.add_row(name, escape(shown), escape(doc))
     console(160).print(table)
 
 
@@ -209,27 +309,66 @@ def console(width: int = 120):
 
 
 def main(argv: list[str] | None = None) -> int:
-    """Console entry point; returns the exit code (2 for any bad input)."""
+    """Console entry point; returns the exit code (see the module docstring)."""
     argv = sys.argv[1:] if argv is None else list(argv)
     try:
         # without standalone mode typer returns exit codes (typer.Exit, Ctrl-C -> 130)
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
+        code = code if isinstance(code, int) else 0
+        if code == 130:
+            return interrupted("no partial file was left")
+        sys.stdout.flush()  # a full or closed stdout shows here, not at interpreter exit
+        return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
         return fail(exc.format_message())
-    except ScenarioError as exc:
+    except UsageError as exc:
         return fail(str(exc))
-    except typer.Abort:
-        fail("interrupted; finished jobs are kept, run the same command again to finish")
-        return 130
+    except Interrupted as exc:
+        return interrupted(str(exc))
+    except KeyboardInterrupt:
+        return interrupted("no partial file was left")
+    except RunError as exc:
+        return fail(str(exc), code=1)
     except typer.Exit as exc:
         return exc.exit_code
-    return code if isinstance(code, int) else 0
+    except MemoryError:
+        return fail("out of memory; make the scenario smaller (see uavtrack params)", code=1)
+    except OSError as exc:
+        return fail(os_error(exc), code=1)
 
 
-def fail(message: str) -> int:
+def os_error(exc: OSError) -> str:
+    """An OSError as one line: what could not be done, where, and why.
+
+    Files are written through `files`, which names them in its errors; an error with no
+    file name comes from writing the standard output.
+    """
+    reason = exc.strerror or str(exc)
+    if exc.filename is not None:
+        return f"cannot write {exc.filename}: {reason}"
+    _silence_stdout()
+    return f"cannot write standard output: {reason}"
+
+
+def _silence_stdout() -> None:
+    """Point stdout at /dev/null, so Python's final flush of a broken stdout stays quiet."""
+    try:
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, sys.stdout.fileno())
+        os.close(null)
+    except (OSError, ValueError):
+        pass
+
+
+def fail(message: str, code: int = 2) -> int:
     message = " ".join(message.split()).replace("Value error, ", "")
     print(f"uavtrack: error: {message}", file=sys.stderr)
-    return 2
+    return code
+
+
+def interrupted(kept: str) -> int:
+    print(f"uavtrack: interrupted; {kept}", file=sys.stderr)
+    return 130
 
 
 # the other commands register themselves on `app`

@@ -9,20 +9,20 @@ from typing import Annotated
 
 import typer
 
-from ..files import write_json
-from . import app, console, writable_target
+from ..files import check_output, write_json
+from . import app, console
 
 
 @app.command()
 def bench(
-    quick: Annotated[bool, typer.Option(help="small profile (under a minute)")] = False,
+    quick: Annotated[bool, typer.Option("--quick", help="small profile (under a minute)")] = False,
     json_out: Annotated[
-        Path | None, typer.Option("--json", help="write the results as JSON")
+        Path | None, typer.Option("--json", metavar="FILE", help="write the results as JSON")
     ] = None,
 ) -> None:
     """Speed of the building blocks and whole runs, each beside its reference."""
     if json_out is not None:
-        writable_target(json_out, "--json")
+        check_output(json_out, "--json")
     pinning = pin_threads()  # before numpy loads
     from ..bench import bench as run_bench
 

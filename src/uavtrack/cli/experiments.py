@@ -3,15 +3,27 @@
 from __future__ import annotations
 
 import sys
+from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from ..config import ScenarioError, parse_value
-from ..files import write_json, write_text
-from . import ConfigOpt, MethodName, SetOpt, app, console, load_scenario, writable_target
+from ..config import ScenarioError, parse_value, read_toml
+from ..errors import Interrupted, UsageError
+from ..files import check_output, write_json, write_text
+from . import (
+    ConfigOpt,
+    MethodName,
+    MethodOpt,
+    SetOpt,
+    app,
+    console,
+    load_scenario,
+    parse_overrides,
+    steps_bar,
+)
 
 
 class EngineName(StrEnum):
@@ -19,75 +31,138 @@ class EngineName(StrEnum):
     dask = "dask"
 
 
-OutOpt = Annotated[Path | None, typer.Option("--out", help="results folder")]
 WorkersOpt = Annotated[
-    int | None, typer.Option(min=1, help="parallel workers (default: the cores available)")
+    int | None,
+    typer.Option(
+        min=1, metavar="N", help="parallel workers, at most the cores available [the cores]"
+    ),
 ]
-EngineOpt = Annotated[EngineName, typer.Option(help="local processes (joblib) or a Dask cluster")]
+EngineOpt = Annotated[
+    EngineName,
+    typer.Option(metavar="ENGINE", help="local (worker processes) or dask (a Dask cluster)"),
+]
 AddressOpt = Annotated[
     str | None,
-    typer.Option(help="Dask scheduler address (with --engine dask; default: a LocalCluster)"),
+    typer.Option(
+        metavar="ADDRESS",
+        help="Dask scheduler address, with --engine dask [a LocalCluster of --workers]",
+    ),
 ]
-SeedOpt = Annotated[int, typer.Option(min=0, help="experiment seed (trial t uses its t-th child)")]
+SeedOpt = Annotated[
+    int, typer.Option(min=0, metavar="N", help="experiment seed (trial t uses its t-th child)")
+]
 ProgressOpt = Annotated[bool, typer.Option("--progress/--no-progress", help="show a progress bar")]
+StepsOpt = Annotated[int | None, typer.Option(min=1, metavar="N", help="steps per trial [500]")]
 
 
-def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress) -> tuple:
-    """Execute a plan into `out`; returns (results by job key, info) or exits 1 on failures."""
+def note(message: str) -> None:
+    print(f"uavtrack: note: {message}", file=sys.stderr)
+
+
+@contextmanager
+def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress):
+    """Execute a plan into `out`; yields (results by job key, info) with the folder locked,
+    so the caller writes its summary, figures and report under the same lock.
+
+    Raises Interrupted on Ctrl-C and RunError when jobs failed; finished jobs are kept.
+    """
     import time
 
+    from ..errors import RunError
     from ..experiments import unique
-    from ..runner import EngineError, Store, default_workers, execute
+    from ..runner import Store, execute, resolve_workers
+    from ..simulation import available_memory, check_memory, memory_estimate
 
     jobs = unique(j for group in plan.values() for j in group)
     if address and engine != EngineName.dask:
-        raise ScenarioError("--address needs --engine dask")
-    store = Store(out, manifest)
+        raise UsageError("--address needs --engine dask")
+    workers, capped = resolve_workers(workers)
+    if capped:
+        note(capped)
+    for job in jobs:  # refuse what cannot fit before any work
+        check_memory(job.scenario, job.count)
+    largest = max(sum(memory_estimate(j.scenario, j.count).values()) for j in jobs)
+    fits = max(1, int(0.9 * available_memory() // max(largest, 1)))
+    if workers > fits:
+        note(f"{workers} workers would not fit in memory; using {fits}")
+        workers = fits
     start = time.perf_counter()
-    workers = workers or default_workers()
-    try:
-        skipped, failed = execute(jobs, store, engine.value, workers, address, progress)
-    except (KeyboardInterrupt, EngineError) as exc:
-        interrupted = isinstance(exc, KeyboardInterrupt)
-        saved = sum(store.done(job) for job in jobs)
-        print(
-            f"uavtrack: {'interrupted' if interrupted else exc}; {saved} of {len(jobs)} jobs "
-            f"are saved in {store.raw}; run the same command again to finish",
-            file=sys.stderr,
-        )
-        raise typer.Exit(130 if interrupted else 1) from None
-    if failed:
-        for job in failed:
-            print(
-                f"uavtrack: job {job.key} failed (see {store.failed / job.key}.json)",
-                file=sys.stderr,
+    with Store(out, manifest) as store:
+        try:
+            skipped, failed = execute(jobs, store, engine.value, workers, address, progress)
+        except KeyboardInterrupt:
+            saved = sum(store.done(job) for job in jobs)
+            raise Interrupted(
+                f"{saved} of {len(jobs)} jobs are saved in {store.raw}; "
+                "run the same command again to finish"
+            ) from None
+        except RunError as exc:
+            saved = sum(store.done(job) for job in jobs)
+            raise RunError(
+                f"{exc}; {saved} of {len(jobs)} jobs are saved in {store.raw}; "
+                "run the same command again to finish"
+            ) from None
+        for key, reason in store.set_aside:
+            note(f"job file {key}.json was set aside in {store.failed} ({reason}) and recomputed")
+        if failed:
+            for job in failed:
+                print(
+                    f"uavtrack: job {job.key} failed (see {store.failed / job.key}.json)",
+                    file=sys.stderr,
+                )
+            raise RunError(
+                f"{len(failed)} of {len(jobs)} jobs failed; the others are saved in "
+                f"{store.raw}; run the same command again to retry"
             )
-        print(
-            f"uavtrack: {len(failed)} of {len(jobs)} jobs failed; the others are saved in "
-            f"{store.raw}; run the same command again to retry",
-            file=sys.stderr,
-        )
-        raise typer.Exit(1)
-    info = {
-        "seconds": time.perf_counter() - start,
-        "jobs_run": len(jobs) - skipped,
-        "jobs_skipped": skipped,
-        "engine": engine.value,
-        "workers": workers,
-        "command": "uavtrack " + " ".join(sys.argv[1:]),
-    }
-    return {job.key: store.load(job) for job in jobs}, info
+        info = {
+            "seconds": time.perf_counter() - start,
+            "jobs_run": len(jobs) - skipped,
+            "jobs_skipped": skipped,
+            "engine": engine.value,
+            "workers": workers,
+            "command": "uavtrack " + " ".join(sys.argv[1:]),
+        }
+        yield {job.key: store.load(job) for job in jobs}, info
+
+
+def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | None) -> int | None:
+    """Steps asked for by ``--steps``, ``--set steps=`` or the config file, in that order;
+    two of them that disagree are refused."""
+    given = {}
+    if steps is not None:
+        given["--steps"] = steps
+    overrides = parse_overrides(set_ or [])
+    if "steps" in overrides:
+        given["--set steps"] = overrides["steps"]
+    if config is not None and "steps" in read_toml(config):
+        given[f"{config} steps"] = read_toml(config)["steps"]
+    values = list(given.items())
+    for (name, value), (other, was) in zip(values[1:], values, strict=False):
+        if value != was:
+            raise ScenarioError(f"{other} = {was!r} and {name} = {value!r} disagree; give one")
+    return values[0][1] if values else None
 
 
 @app.command()
 def reproduce(
-    out: OutOpt = None,
-    trials: Annotated[int | None, typer.Option(min=1, help="trials per configuration [50]")] = None,
-    steps: Annotated[int | None, typer.Option(min=1, help="steps per trial [500]")] = None,
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            metavar="DIR",
+            help="results folder [results/reproduce; results/reproduce-quick with --quick]",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="trials per configuration [50]")
+    ] = None,
+    steps: StepsOpt = None,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
-    quick: Annotated[bool, typer.Option(help="small profile for smoke tests")] = False,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="small profile for smoke tests: 4 trials x 60 steps")
+    ] = False,
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
@@ -99,32 +174,37 @@ def reproduce(
     from .. import plots, report
     from ..experiments import Profile, reproduce_plan, summarize_reproduction
 
+    scenario = load_scenario(config, set_)
+    steps = explicit_steps(config, set_, steps)
     profile = Profile.quick() if quick else Profile()
     profile = replace(
         profile, **{k: v for k, v in (("trials", trials), ("steps", steps)) if v is not None}
     )
     profile = replace(profile, chunk=min(profile.chunk, profile.trials))
     out = out or Path("results") / ("reproduce-quick" if quick else "reproduce")
-    scenario = load_scenario(config, set_).with_overrides({"steps": profile.steps})
+    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     plan = reproduce_plan(scenario, profile, seed)
     manifest = {
         "kind": "reproduce",
         "seed": seed,
         "plan": profile.to_dict(),
-        "scenario": scenario.model_dump(),
+        "scenario": scenario.to_dict(),
     }
-    results, info = run_jobs(plan, out, manifest, engine, workers, address, progress)
-    info["seed"] = seed
-    summary = summarize_reproduction(plan, results, profile, scenario)
-    summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
-    write_json(out / "summary.json", summary)
-    plots.reproduction_figures(summary, out)
-    write_text(out / "report.md", report.reproduction(summary, scenario, info))
+    with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
+        info["seed"] = seed
+        summary = summarize_reproduction(plan, results, profile, scenario)
+        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
+        write_json(out / "summary.json", summary)
+        plots.reproduction_figures(summary, out)
+        write_text(out / "report.md", report.reproduction(summary, scenario, info))
     _print_reproduction(summary, out, info)
 
 
 def _print_reproduction(summary: dict, out: Path, info: dict) -> None:
+    from rich.markup import escape
     from rich.table import Table
+
+    from ..report import ci, pm
 
     table = Table(title="Fig. 5: overall observation rate (mean ± std)")
     for col in ("method", "ours", "paper", "paired difference to distributed [95% CI]"):
@@ -132,14 +212,8 @@ def _print_reproduction(summary: dict, out: Path, info: dict) -> None:
     for m, r in summary["compare"].items():
         p = summary["paper"][m]
         pair = summary["paired"].get(f"distributed - {m}")
-        diff = (
-            ""
-            if pair is None
-            else (f"{-pair['mean']:+.4f} [{-pair['ci_high']:+.4f}, {-pair['ci_low']:+.4f}]")
-        )
-        table.add_row(
-            m, f"{r['mean']:.4f} ± {r['std']:.4f}", f"{p['mean']:.4f} ± {p['std']:.4f}", diff
-        )
+        diff = "" if pair is None else ci(pair, negate=True)
+        table.add_row(m, pm(r["mean"], r["std"]), pm(p["mean"], p["std"]), escape(diff))
     console().print(table)
     typer.echo(
         f"wrote {out}/summary.json, report.md, fig5.png ... fig9.png "
@@ -150,13 +224,25 @@ def _print_reproduction(summary: dict, out: Path, info: dict) -> None:
 
 @app.command()
 def sweep(
-    field: Annotated[str, typer.Argument(help="scenario field, dotted for nested ones")],
-    values: Annotated[list[str], typer.Argument(help="values to try (read as TOML)")],
+    field: Annotated[str, typer.Argument(metavar="FIELD", help="scenario field, dotted")],
+    values: Annotated[
+        list[str],
+        typer.Argument(
+            metavar="VALUE...", help="values to try, read as TOML; negative ones after --"
+        ),
+    ],
     methods: Annotated[
-        list[MethodName] | None, typer.Option("--method", help="methods (repeatable) [all]")
+        list[MethodName] | None,
+        typer.Option("--method", metavar="METHOD", help="a method to run (repeatable) [all three]"),
     ] = None,
-    trials: Annotated[int, typer.Option(min=1, help="trials per value and method")] = 20,
-    out: OutOpt = None,
+    trials: Annotated[
+        int, typer.Option(min=1, metavar="N", help="trials per value and method")
+    ] = 20,
+    steps: StepsOpt = None,
+    out: Annotated[
+        Path | None,
+        typer.Option("--out", metavar="DIR", help="results folder [results/sweep-FIELD]"),
+    ] = None,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -167,40 +253,54 @@ def sweep(
 ) -> None:
     """Vary one scenario field; every method on the same trials at every value."""
     from .. import plots, report
-    from ..experiments import summarize_sweep, sweep_plan
+    from ..experiments import summarize_sweep, sweep_plan, sweep_values
 
     scenario = load_scenario(config, set_)
-    parsed = [parse_value(v) for v in values]
-    names = [m.value for m in (methods or list(MethodName))]
+    steps = explicit_steps(config, set_, steps)
+    if steps is not None:
+        scenario = scenario.with_overrides({"steps": steps}, origin="--steps")
+    if field == "steps" and steps is not None:
+        raise UsageError("sweep steps: --steps and --set steps do not apply; sweep one of them")
+    for text in values:
+        if text.startswith("--"):
+            raise UsageError(
+                f"sweep: {text!r} came after '--', where only values go; put options before '--'"
+            )
+    parsed = sweep_values(
+        scenario, field, [parse_value(v, where=f"sweep value {field}") for v in values]
+    )
+    names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
     plan = sweep_plan(scenario, field, parsed, names, trials, chunk=10, seed=seed)
     out = out or Path("results") / f"sweep-{field}"
     manifest = {
         "kind": "sweep",
         "seed": seed,
-        "scenario": scenario.model_dump(),
+        "scenario": scenario.to_dict(),
         "plan": {"field": field, "values": parsed, "methods": names, "trials": trials},
     }
-    results, info = run_jobs(plan, out, manifest, engine, workers, address, progress)
-    info["seed"] = seed
-    summary = summarize_sweep(plan, results, field, parsed, names)
-    summary["settings"] = info
-    write_json(out / "summary.json", summary)
-    plots.sweep_figure(summary, out / "sweep.png")
-    write_text(out / "report.md", report.sweep(summary, scenario, info))
+    with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
+        info["seed"] = seed
+        summary = summarize_sweep(plan, results, field, parsed, names)
+        summary["unit"] = scenario.unit(field)
+        summary["settings"] = info
+        write_json(out / "summary.json", summary)
+        plots.sweep_figure(summary, out / "sweep.png")
+        write_text(out / "report.md", report.sweep(summary, scenario, info))
 
+    from rich.markup import escape
     from rich.table import Table
 
+    from ..report import pm
+
+    unit = f" [{summary['unit']}]" if summary["unit"] else ""
     table = Table(title=f"observation rate against {field} (mean ± std, {trials} trials)")
-    table.add_column(field)
+    table.add_column(escape(f"{field}{unit}"))
     for m in names:
         table.add_column(m)
     for k, v in enumerate(parsed):
         table.add_row(
             str(v),
-            *(
-                f"{summary['methods'][m][k]['mean']:.4f} ± {summary['methods'][m][k]['std']:.4f}"
-                for m in names
-            ),
+            *(pm(summary["methods"][m][k]["mean"], summary["methods"][m][k]["std"]) for m in names),
         )
     console().print(table)
     typer.echo(f"wrote {out}/summary.json, report.md, sweep.png ({info['seconds']:.1f} s)")
@@ -208,24 +308,36 @@ def sweep(
 
 @app.command()
 def animate(
-    out: Annotated[Path, typer.Option("--out", help="GIF file to write")],
+    out: Annotated[Path, typer.Option("--out", metavar="FILE", help="GIF file to write")],
     config: ConfigOpt = None,
-    method: Annotated[MethodName, typer.Option(help="decision method")] = MethodName.distributed,
-    seed: Annotated[int, typer.Option(min=0, help="random seed of the trial")] = 0,
+    method: MethodOpt = MethodName.distributed,
+    seed: Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")] = 0,
     set_: SetOpt = None,
-    every: Annotated[int, typer.Option(min=1, help="draw every k-th step")] = 2,
-    fps: Annotated[int, typer.Option(min=1, max=60, help="frames per second")] = 10,
+    every: Annotated[int, typer.Option(min=1, metavar="K", help="draw every K-th step")] = 2,
+    fps: Annotated[
+        int, typer.Option(min=1, max=60, metavar="F", help="frames per second, 1 to 60")
+    ] = 10,
 ) -> None:
     """Animate one trial like the paper's Figure 4, as a GIF."""
     from .. import plots
+    from ..progress import bar, on_terminal
     from ..simulation import simulate
 
     if out.suffix.lower() != ".gif":
-        raise ScenarioError(f"--out must name a .gif file, got {out}")
-    writable_target(out, "--out")
+        raise UsageError(f"--out must name a .gif file, got {out}")
+    check_output(out, "--out")
     scenario = load_scenario(config, set_)
-    result = simulate(scenario, method.value, seed=seed)
-    frames = plots.animate(
-        result.trace, scenario, out, every=every, fps=fps, title=f"{method.value}, seed {seed}"
-    )
+    with steps_bar(scenario) as advance:
+        result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))
+    frames = len(range(0, scenario.steps, every))
+    with bar(frames, "frames", "frames", enabled=on_terminal()) as advance:
+        plots.animate(
+            result.trace,
+            scenario,
+            out,
+            every=every,
+            fps=fps,
+            title=f"{method.value}, seed {seed}",
+            progress=advance,
+        )
     typer.echo(f"wrote {out} ({frames} frames, observation rate {result.observation_rate:.3f})")

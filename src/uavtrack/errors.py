@@ -1,0 +1,22 @@
+"""The two kinds of failure the command line tells apart.
+
+* `UsageError`: the input cannot be used (a field out of range, a file that cannot be
+  written, a folder in use); nothing was computed. The command line exits with 2.
+* `RunError`: the input was fine but the run could not finish (a worker died, the disk
+  filled up); what was finished is kept. The command line exits with 1.
+
+An interrupted run (`Interrupted`, exit code 130) is a `RunError` whose message says
+what was kept. All carry a one-line message meant for the user.
+"""
+
+
+class UsageError(ValueError):
+    """Bad input: the message names what is wrong, in one line."""
+
+
+class RunError(RuntimeError):
+    """A run that could not finish; finished work is kept. The message is one line."""
+
+
+class Interrupted(RunError):
+    """The user interrupted a run (Ctrl-C); the message says what was kept."""

@@ -1,0 +1,59 @@
+import json
+import os
+
+import numpy as np
+import pytest
+
+from uavtrack import files
+from uavtrack.errors import UsageError
+
+
+@pytest.mark.parametrize("name", ["run.trace", "t", "T.NPZ", "with space.npz"])
+def test_npz_lands_at_exactly_the_path_given(tmp_path, name):
+    path = tmp_path / name
+    path.write_text("earlier content")
+    files.write_npz(path, {"a": np.arange(3), "b": np.eye(2)})
+    assert sorted(p.name for p in tmp_path.iterdir()) == [name]  # nothing hidden beside it
+    with np.load(path) as npz:
+        assert np.array_equal(npz["a"], np.arange(3)) and np.array_equal(npz["b"], np.eye(2))
+
+
+def test_outputs_that_are_not_regular_files_are_refused(tmp_path):
+    fifo = tmp_path / "pipe"
+    os.mkfifo(fifo)
+    folder = tmp_path / "folder"
+    folder.mkdir()
+    for path, message in (
+        (fifo, "exists and is not a regular file"),
+        (folder, "is a directory"),
+        ("/dev/null", "exists and is not a regular file"),
+        (tmp_path / "missing" / "x.npz", "does not exist"),
+    ):
+        with pytest.raises(UsageError, match=message):
+            files.check_output(path, "--trace")
+    with pytest.raises(UsageError, match="not a regular file"), files.replacing(fifo):
+        pass
+    assert fifo.exists() and not fifo.is_file()  # left alone
+
+
+def test_json_is_strict_and_writes_null_for_non_finite(tmp_path):
+    data = {"a": float("nan"), "b": [1.0, float("inf")], "c": np.float64(2.5), "d": np.arange(2)}
+    text = files.dumps(data)
+    assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.5, "d": [0, 1]}
+    files.write_json(tmp_path / "x.json", data)
+
+    def refuse(constant):
+        raise ValueError(constant)
+
+    assert json.loads((tmp_path / "x.json").read_text(), parse_constant=refuse)["a"] is None
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    with pytest.raises(RuntimeError), files.replacing(tmp_path / "x.npz") as tmp:
+        tmp.write_bytes(b"partial")
+        raise RuntimeError("disk full")
+    assert not any(tmp_path.iterdir())
+    with files.replacing(tmp_path / "y.json") as tmp:
+        tmp.write_text("{}")
+    assert [p.name for p in tmp_path.iterdir()] == ["y.json"]
+    assert (tmp_path / "y.json").stat().st_mode & 0o777 != 0o600
