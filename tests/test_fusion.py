@@ -1,5 +1,3 @@
-from contextlib import contextmanager
-
 import networkx as nx
 import numpy as np
 import pytest
@@ -91,27 +89,15 @@ def geometric_graphs(draw):
     return adj, confidence
 
 
-@contextmanager
-def rounds_on(kind):
-    """Simulate rounds on N x N arrays ("dense") or on edge lists ("sparse")."""
-    saved = fusion.SPARSE_FROM
-    fusion.SPARSE_FROM = 10**9 if kind == "dense" else 1
-    try:
-        yield
-    finally:
-        fusion.SPARSE_FROM = saved
-
-
-@pytest.mark.parametrize("kind", ["dense", "sparse"])
+@pytest.mark.parametrize("form", ["dense", "edges"])
 @settings(max_examples=150, deadline=None)
 @given(case=geometric_graphs())
-def test_max_consensus_on_random_geometric_graphs(kind, case):
-    with rounds_on(kind):
-        check_max_consensus(*case)
+def test_max_consensus_on_random_geometric_graphs(form, case):
+    check_max_consensus(*case, form)
 
 
-def check_max_consensus(adj, confidence):
-    source, rounds = fusion.max_consensus(confidence, adj)
+def check_max_consensus(adj, confidence, form):
+    source, rounds = fusion.max_consensus(confidence, adj, form)
     ecc = eccentricities(adj)
     # D_i, learned by the flooding protocol, is i's eccentricity in its component
     assert np.array_equal(rounds, ecc)
@@ -125,26 +111,25 @@ def check_max_consensus(adj, confidence):
         probe[far] = 1.0
         fewer = rounds.copy()
         fewer[i] -= 1
-        assert fusion.consensus_rounds(probe, adj, fewer)[i, 0] != far
-        assert fusion.consensus_rounds(probe, adj, rounds)[i, 0] == far
+        assert fusion.consensus_rounds(probe, adj, fewer, form)[i, 0] != far
+        assert fusion.consensus_rounds(probe, adj, rounds, form)[i, 0] == far
 
 
-@pytest.mark.parametrize("kind", ["dense", "sparse"])
+@pytest.mark.parametrize("form", ["dense", "edges"])
 @settings(max_examples=30, deadline=None)
 @given(cases=st.lists(geometric_graphs(), min_size=2, max_size=4))
-def test_batched_consensus_equals_one_graph_at_a_time(kind, cases):
-    with rounds_on(kind):
-        check_batched(cases)
+def test_batched_consensus_equals_one_graph_at_a_time(form, cases):
+    check_batched(cases, form)
 
 
-def check_batched(cases):
+def check_batched(cases, form):
     n = min(a.shape[0] for a, _ in cases)
     m = min(c.shape[1] for _, c in cases)
     adj = np.stack([a[:n, :n] for a, _ in cases])
     conf = np.stack([c[:n, :m] for _, c in cases])
-    batched = fusion.fuse(conf, adj)
+    batched = fusion.fuse(conf, adj, form)
     for b in range(len(cases)):
-        alone = fusion.fuse(conf[b], adj[b])
+        alone = fusion.fuse(conf[b], adj[b], form)
         assert np.array_equal(batched.source[b], alone.source)
         assert np.array_equal(batched.rounds[b], alone.rounds)
         assert batched.messages[b] == alone.messages
@@ -189,10 +174,10 @@ def test_large_team_uses_edge_lists_and_agrees_with_dense(rng):
     adj = network.adjacency(uavs, 50.0)
     confidence = rng.random((2, 60, 7))
     rounds, _ = fusion.eccentricity(adj)
-    assert fusion.SPARSE_FROM <= 60
+    assert network.SPARSE_FROM <= 60 and network.links(adj).edges
     sparse = fusion.consensus_rounds(confidence, adj, rounds)
-    with rounds_on("dense"):
-        dense = fusion.consensus_rounds(confidence, adj, rounds)
+    dense = fusion.consensus_rounds(confidence, adj, rounds, "dense")
+    assert np.array_equal(fusion.eccentricity(adj, "dense")[0], rounds)
     assert np.array_equal(sparse, dense)
     for b in range(2):
         assert np.array_equal(sparse[b], component_max_index(confidence[b], adj[b]))

@@ -1,5 +1,6 @@
 import json
 
+import numpy as np
 import pytest
 
 import uavtrack
@@ -120,3 +121,22 @@ def test_dask_local_cluster_gives_the_local_results(tmp_path):
 def test_code_hash_is_stable():
     assert runner.code_hash() == runner.code_hash()
     assert len(runner.code_hash()) == 16
+
+
+def test_fault_realisations_do_not_depend_on_the_workers(tmp_path):
+    scenario = uavtrack.Scenario(steps=25).with_overrides(
+        {"faults.loss": 0.3, "faults.failure_rate": 0.01, "faults.position_std": 2.0}
+    )
+    jobs = experiments.trial_jobs(scenario, {}, "distributed", 4, 1, seed=3)
+    with runner.Store(tmp_path / "one", manifest()) as one:
+        runner.execute(jobs, one, workers=1, progress=False)
+        a = collect(one, jobs)
+    with runner.Store(tmp_path / "two", manifest()) as two:
+        runner.execute(jobs, two, workers=2, progress=False)
+        b = collect(two, jobs)
+    assert a == b
+    whole = experiments.run_job(experiments.trial_jobs(scenario, {}, "distributed", 4, 4, 3)[0])
+    assert (
+        np.concatenate([a[j.key]["observation_rate"] for j in jobs]).tolist()
+        == whole["observation_rate"]
+    )

@@ -1,10 +1,14 @@
+import hashlib
+import json
 import tracemalloc
+from pathlib import Path
 
 import numpy as np
 import pytest
 
 import uavtrack
 from uavtrack import estimation, network, sensing, simulation
+from uavtrack.equivalence import assert_same_trace
 
 DECISIONS = ("assignment", "action", "bids", "observed", "uavs", "mean", "cov")
 
@@ -217,3 +221,38 @@ def test_a_run_that_cannot_fit_is_refused_naming_the_field(monkeypatch):
     long = uavtrack.Scenario(steps=2_000_000)
     with pytest.raises(uavtrack.ScenarioError, match="reduce steps"):
         uavtrack.run(long, "distributed", [0, 1])
+
+
+def test_no_faults_reproduce_the_stored_results_bit_for_bit():
+    # per-trial metrics and trace digests stored before the fault model existed
+    reference = json.loads(
+        (Path(__file__).parent / "data" / "reference_200_steps.json").read_text()
+    )
+    scenario = uavtrack.Scenario(steps=200)
+    for method, stored in reference["trials"].items():
+        seeds = [uavtrack.trial_seed(0, t) for t in range(8)]
+        metrics = uavtrack.run(scenario, method, seeds).metrics
+        for name, values in stored.items():
+            assert np.array_equal(metrics[name], np.asarray(values)), (method, name)
+        trace = uavtrack.simulate(scenario, method, seed=0).trace
+        for name, digest in reference["traces"][method].items():
+            data = np.ascontiguousarray(getattr(trace, name)).tobytes()
+            assert hashlib.sha256(data).hexdigest() == digest, (method, name)
+
+
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_the_general_path_with_harmless_faults_equals_the_fault_free_path(short, method):
+    # a failure after the run switches every stage to its fault-aware form
+    general = short.with_overrides({"faults.failures": [[0, 10**6]]})
+    assert_same_trace(
+        uavtrack.simulate(short, method, seed=2).trace,
+        uavtrack.simulate(general, method, seed=2).trace,
+        atol=0,
+    )
+
+
+def test_faults_do_not_change_targets_or_sensor_noise(short):
+    lossy = short.with_overrides({"faults.loss": 0.3, "faults.position_std": 2.0})
+    a = uavtrack.simulate(short, "greedy", seed=9).trace
+    b = uavtrack.simulate(lossy, "greedy", seed=9).trace
+    assert np.array_equal(a.targets, b.targets) and np.array_equal(a.uavs[0], b.uavs[0])

@@ -2,14 +2,19 @@
 
 UAV i receives the bid vectors V_q of its one-hop neighbours q, solves the
 assignment over itself and them (Hungarian algorithm, maximising the sum of bids),
-and keeps its own row. When the neighbourhood has more UAVs than targets, the
-assignment is repeated on the UAVs left over until each has a target (Remark 2).
+and keeps its own row (`local`). When the neighbourhood has more UAVs than targets,
+the assignment is repeated on the UAVs left over until each has a target (Remark 2).
 Ties break deterministically toward lower indices.
+
+`neighbourhood` is the driver that runs every UAV's rule for a batch of trials: UAVs
+that see the same problem (the same members with the same bids) share one solve, and
+the driver measures how long each solve takes; the rules themselves never time.
 """
 
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -25,6 +30,12 @@ def hungarian(bids: np.ndarray) -> np.ndarray:
     """
     _check(bids)
     return _solve(bids)
+
+
+def local(bids: np.ndarray, me: int, solve: Callable | None = None) -> int:
+    """One UAV's auction (Algorithm 1 lines 5-9): its target from the bids of its closed
+    neighbourhood, (n, m) with its own row at `me` and the others in index order."""
+    return int((solve or hungarian)(bids)[me])
 
 
 def _check(bids: np.ndarray) -> None:
@@ -47,55 +58,78 @@ def _solve(bids: np.ndarray) -> np.ndarray:
     return choice
 
 
-def neighbourhood(bids: np.ndarray, adjacency: np.ndarray) -> np.ndarray:
-    """Distributed auction: each UAV solves its own neighbourhood and keeps its row.
-
-    bids: (..., N, M); adjacency: (..., N, N) bool (no self-loops needed).
-    Returns (..., N) the target each UAV takes.
-    """
-    return neighbourhood_timed(bids, adjacency)[0]
-
-
-def neighbourhood_timed(bids: np.ndarray, adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`neighbourhood`, also returning the seconds each UAV's own solve takes, (..., N).
-
-    A UAV without neighbours solves a one-row problem: its best bid (the lowest target
-    on ties, as the Hungarian solver does). UAVs of a trial with the same closed
-    neighbourhood solve the same problem; it is solved once and its time charged to
-    each of them, as each would solve it on its own processor.
-    """
-    _check(bids)
+def neighbourhood(
+    bids: np.ndarray, adjacency: np.ndarray, solve: Callable | None = None
+) -> np.ndarray:
+    """Distributed auction on a graph: each UAV solves its own neighbourhood and keeps
+    its row. bids: (..., N, M); adjacency: (..., N, N) bool (no self-loops needed).
+    Returns (..., N) the target each UAV takes."""
     n = bids.shape[-2]
-    flat_bids = bids.reshape((-1,) + bids.shape[-2:])
-    flat_adj = adjacency.reshape(-1, n, n)
+    members = adjacency.reshape(-1, n, n) | np.eye(n, dtype=bool)
+    target, _ = auction(bids.reshape((-1,) + bids.shape[-2:]), members, solve)
+    return target.reshape(bids.shape[:-1])
+
+
+def auction(
+    bids: np.ndarray, members: np.ndarray, solve: Callable | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Every UAV's `local` rule over the members of its closed neighbourhood, for B trials.
+
+    bids: (B, N, M), the bids every receiver holds of every UAV, or (B, N, N, M), each
+    receiver's own view [trial, receiver, sender] (when messages are lost or late, UAVs
+    hold different bids of the same neighbour). members: (B, N, N) bool [trial,
+    receiver, sender], the UAVs in each receiver's auction; a receiver is always a
+    member of its own. solve: the neighbourhood problem's solver (default `hungarian`).
+
+    Returns (target (B, N), seconds (B, N)): the time of the solve each UAV needed,
+    charged to every UAV that shares it, as each would solve it on its own processor.
+    A UAV alone takes its best bid (the lowest target on ties, as the solver does).
+    """
+    solve = solve or _solve
+    _check(bids)
+    B, n = members.shape[:2]
+    views = bids.ndim == 4
+    own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
     start = time.perf_counter()
-    out = np.argmax(flat_bids, axis=-1)
-    seconds = np.full(out.shape, (time.perf_counter() - start) / out.size)
-    b, i = np.nonzero(flat_adj.any(axis=-1))  # UAVs with neighbours
-    if b.size:
-        members = flat_adj[b, i]
-        members[np.arange(b.size), i] = True  # closed neighbourhoods, (K, N)
-        first, which = _distinct(b, members)
-        row = np.cumsum(members, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
-        choice = np.empty((first.size, n), dtype=np.int64)
-        cost = np.empty(first.size)
-        for u, k in enumerate(first):  # one solve per distinct problem
-            start = time.perf_counter()
-            solved = _solve(flat_bids[b[k], members[k]])
-            cost[u] = time.perf_counter() - start
-            choice[u, : solved.size] = solved
-        out[b, i] = choice[which, row]
-        seconds[b, i] = cost[which]
-    return out.reshape(bids.shape[:-1]), seconds.reshape(bids.shape[:-1])
+    out = np.argmax(own, axis=-1)
+    seconds = np.full(out.shape, (time.perf_counter() - start) / max(out.size, 1))
+    idx = np.arange(n)
+    members = members.copy()
+    members[:, idx, idx] = True
+    b, i = np.nonzero(members.sum(axis=-1) > 1)  # UAVs with others in their auction
+    if not b.size:
+        return out, seconds
+    rows = members[b, i]  # (K, N)
+    if views:
+        first, which = _distinct(b, rows, bids[b, i])
+    else:
+        first, which = _distinct(b, rows)
+    row = np.cumsum(rows, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
+    choice = np.empty((first.size, n), dtype=np.int64)
+    cost = np.empty(first.size)
+    for u, k in enumerate(first):  # one solve per distinct problem
+        problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
+        start = time.perf_counter()
+        solved = solve(problem)
+        cost[u] = time.perf_counter() - start
+        choice[u, : solved.size] = solved
+    out[b, i] = choice[which, row]
+    seconds[b, i] = cost[which]
+    return out, seconds
 
 
-def _distinct(trial: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Group equal (trial, neighbourhood) rows: (first row of each group, group of each row)."""
-    if trial.size <= 8:  # a few rows: a dictionary beats numpy's set routines
-        groups: dict[tuple[int, bytes], int] = {}
+def _distinct(
+    trial: np.ndarray, members: np.ndarray, views: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """Group equal (trial, neighbourhood[, bids held]) rows: (first row of each group,
+    group of each row)."""
+    if views is not None or trial.size <= 8:  # a dictionary: few rows, or bids in the key
+        groups: dict[tuple, int] = {}
         first, which = [], np.empty(trial.size, dtype=np.int64)
         for k in range(trial.size):
             key = (int(trial[k]), members[k].tobytes())
+            if views is not None:
+                key += (views[k][members[k]].tobytes(),)
             if key not in groups:
                 groups[key] = len(first)
                 first.append(k)
@@ -113,22 +147,26 @@ def _distinct(trial: np.ndarray, members: np.ndarray) -> tuple[np.ndarray, np.nd
     return first, which.reshape(-1)
 
 
-def centralized(bids: np.ndarray) -> np.ndarray:
-    """One global assignment over all UAVs (the centralized baseline). Returns (..., N)."""
-    return centralized_timed(bids)[0]
+def centralized(
+    bids: np.ndarray, members: np.ndarray | None = None
+) -> tuple[np.ndarray, np.ndarray]:
+    """One global assignment per trial over the member UAVs (all by default).
 
-
-def centralized_timed(bids: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """`centralized`, also returning the seconds of each global solve, (...,)."""
+    bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
+    out; seconds (B,) of each trial's solve).
+    """
     _check(bids)
-    flat = bids.reshape((-1,) + bids.shape[-2:])
-    out = np.empty(flat.shape[:2], dtype=np.int64)
-    seconds = np.empty(flat.shape[0])
-    for b in range(flat.shape[0]):
-        start = time.perf_counter()
-        out[b] = _solve(flat[b])
-        seconds[b] = time.perf_counter() - start
-    return out.reshape(bids.shape[:-1]), seconds.reshape(bids.shape[:-2])
+    B, n, _ = bids.shape
+    members = np.ones((B, n), dtype=bool) if members is None else members
+    out = np.full((B, n), -1, dtype=np.int64)
+    seconds = np.zeros(B)
+    for b in range(B):
+        rows = np.flatnonzero(members[b])
+        if rows.size:
+            start = time.perf_counter()
+            out[b, rows] = _solve(bids[b, rows])
+            seconds[b] = time.perf_counter() - start
+    return out, seconds
 
 
 def greedy(bids: np.ndarray) -> np.ndarray:

@@ -25,7 +25,7 @@ from . import estimation, planning, sensing, world
 from .config import Scenario
 from .experiments import resized
 from .methods import get
-from .simulation import Constants, State, run, simulate, step, trial_seed
+from .simulation import Constants, Context, State, run, simulate, step, trial_seed
 
 
 def timed(*functions: Callable[[], Any], repeats: int, block: float = 0.05) -> list[float]:
@@ -198,11 +198,16 @@ def cycle_cases(sizes, methods, repeats: int) -> list[dict[str, Any]]:
         trace = simulate(scenario, "distributed", seed=2).trace
         k = 20
         const = Constants.of(scenario)
-        state = State(k, trace.uavs[k][None], trace.mean[k - 1][None], trace.cov[k - 1][None])
+        mean, cov = estimation.predict(trace.mean[k - 1], trace.cov[k - 1], const.A, const.Q)
+        alive = np.ones((1, n_uavs), dtype=bool)
+        state = State(
+            k, trace.uavs[k][None], mean[None], cov[None], alive, trace.assignment[k - 1][None]
+        )
         noise = np.random.default_rng(3).standard_normal((1, n_uavs, n_targets, 2))
         targets = trace.targets[k][None]
         for name in methods:
-            cycle = partial(step, state, targets, noise, scenario, get(name), const)
+            ctx = Context.of(scenario, get(name), [trial_seed(0, 0)])
+            cycle = partial(step, state, targets, noise, ctx)
             (t,) = timed(cycle, repeats=repeats)
             out.append(
                 case(

@@ -224,6 +224,128 @@ class PlannerModel(_Part):
     )
 
 
+Bool = Annotated[bool, Strict()]
+"""A boolean field: true or false only (not 1 or "yes")."""
+
+
+class FaultModel(_Part):
+    """Faults the paper leaves open (Sec. 8); every default means "no fault".
+
+    Realised per trial from its own random stream (`uavtrack.faults`), the same for
+    every method, so differences between methods stay paired.
+    """
+
+    loss: Float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description=(
+            "probability [-], [0, 1], that one radio message is lost (each directed link, "
+            "round and protocol: beacons, D_i flooding, consensus tuples, bids, uploads, "
+            "downloads); beyond the paper (Sec. 8); independent unless burst_length > 1"
+        ),
+    )
+    burst_length: Float = Field(
+        1.0,
+        ge=1,
+        le=1000,
+        description=(
+            "mean length of a link's loss bursts [cycles], [1, 1000]; beyond the paper; 1: "
+            "independent losses; "
+            "above 1: a Gilbert-Elliott channel per directed link with the same long-run "
+            "loss, which needs burst_length >= 1 / (1 - loss)"
+        ),
+    )
+    delay: Int = Field(
+        0,
+        ge=0,
+        le=50,
+        description=(
+            "cycles by which every message arrives late [cycles], 0 to 50; beyond the paper; a "
+            "message of round r of cycle k is received in round r of cycle k + delay"
+        ),
+    )
+    round_budget: Int | None = Field(
+        None,
+        ge=1,
+        le=1000,
+        description=(
+            "most rounds a cycle has time for, in the D_i flooding and in the consensus "
+            "[rounds], 1 to 1000; beyond the paper; not set: unlimited, as the paper"
+        ),
+    )
+    failure_rate: Float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description=(
+            "probability [-], [0, 1], per UAV and cycle, that a UAV fails for good (it no "
+            "longer senses, sends or counts as observing); beyond the paper"
+        ),
+    )
+    failures: tuple[tuple[Annotated[Int, Field(ge=0)], Annotated[Int, Field(ge=0)]], ...] = Field(
+        (),
+        description=(
+            "explicit failures as [uav, step] pairs [-], uav in [0, n_uavs), step in [0, "
+            "steps): the UAV is down from that step on; beyond the paper; none by default"
+        ),
+    )
+    position_std: Float = Field(
+        0.0,
+        ge=0,
+        le=1000,
+        description=(
+            "standard deviation of each UAV's own position error per axis (GPS) [m], "
+            "[0, 1000], drawn per UAV and cycle; beyond the paper; the UAV converts its "
+            "measurements and plans from where it believes it is"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _bursts(self) -> FaultModel:
+        if self.burst_length > 1 and 0 < self.loss < 1:
+            least = 1.0 / (1.0 - self.loss)
+            if self.burst_length < least:
+                raise ValueError(
+                    f"burst_length {self.burst_length:g} is shorter than {least:.3g}, the mean "
+                    f"burst of independent losses at loss {self.loss:g}; use burst_length 1 "
+                    f"(independent) or at least {least:.3g}"
+                )
+        return self
+
+
+class RobustModel(_Part):
+    """Mechanisms against faults, beyond the paper; off by default (the paper as printed)."""
+
+    extra_rounds: Int = Field(
+        0,
+        ge=0,
+        le=100,
+        description=(
+            "consensus rounds run beyond the D_i a UAV learned [rounds], 0 to 100; beyond the "
+            "paper: lost flooding messages make D_i too small; 0: the paper's rule"
+        ),
+    )
+    stale: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: time-stamp consensus tuples and predict stale ones "
+            "forward to "
+            "the current step before comparing them, and drop from the auction a neighbour "
+            "whose bid did not arrive this cycle (instead of using its last bid); false: the "
+            "paper's protocol, which has no time stamps"
+        ),
+    )
+    position_noise: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: each UAV adds its own position-error variance "
+            "(faults.position_std^2, as its GPS reports it) to the covariance R of every "
+            "converted measurement, which the conversion of eq. (5) otherwise ignores"
+        ),
+    )
+
+
 class Scenario(_Part):
     """Every parameter of one simulated mission.
 
@@ -274,6 +396,12 @@ class Scenario(_Part):
     planner: PlannerModel = Field(
         default_factory=PlannerModel, description="planning (Algorithm 1)"
     )
+    faults: FaultModel = Field(
+        default_factory=FaultModel, description="communication faults, failures, GPS error"
+    )
+    robust: RobustModel = Field(
+        default_factory=RobustModel, description="robustness mechanisms (off: the paper)"
+    )
 
     @model_validator(mode="after")
     def _altitude_count(self) -> Scenario:
@@ -281,6 +409,12 @@ class Scenario(_Part):
             raise ValueError(
                 f"uav.altitudes has {len(self.uav.altitudes)} entries but n_uavs is {self.n_uavs}"
             )
+        for uav, _ in self.faults.failures:
+            if uav >= self.n_uavs:
+                raise ValueError(
+                    f"faults.failures names UAV {uav}, which does not exist "
+                    f"(n_uavs is {self.n_uavs}: UAVs 0 to {self.n_uavs - 1})"
+                )
         heights = self.altitudes()
         if min(heights) <= 0 or max(heights) > MAX_ALTITUDE:
             lowest, highest = min(heights), max(heights)

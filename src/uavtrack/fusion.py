@@ -8,14 +8,21 @@ this is the fewest rounds after which i holds its component's maximum.
 
 The UAVs do not read the global graph: D_i is learned by a flooding protocol in
 which each UAV sends its neighbours the set of UAV identifiers it knows to be within
-reach (`eccentricity`). A UAV that has finished its rounds keeps relaying its final
+reach (`learn_depth`). A UAV that has finished its rounds keeps relaying its final
 tuple to neighbours still iterating: on the path m - j - i, j needs one round but i
-needs two, and receives m's value only through j. Messages travel along edges only,
+needs two, and receives m's value only through j. Messages travel along links only,
 so nothing crosses from one component to another.
 
-All functions broadcast over leading (trial) axes. A round is simulated on the dense
-N x N neighbour relation for small teams and on the list of edges for large ones
-(`SPARSE_FROM` UAVs); both compute the same thing.
+The module has two layers:
+
+* the per-round, per-receiver rules `flood` and `adopt`: what one UAV does with what
+  it received, given ``delivered``, the links its messages crossed (`network.Links`, in
+  the dense or the edge-list form);
+* the drivers `learn_depth` and `consensus`, which run rounds over a `radio.Radio`
+  (with its faults: lost and late messages, a round budget) and count messages.
+
+`eccentricity`, `consensus_rounds`, `fuse` and `max_consensus` run the same drivers on
+a plain graph with a perfect radio. All functions broadcast over a leading trial axis.
 """
 
 from __future__ import annotations
@@ -24,21 +31,214 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .network import closed, without_self_loops
+from . import network
+from .faults import Faults
+from .radio import Radio, RadioState
 
-SPARSE_FROM = 24
-"""Team size from which consensus rounds run on edge lists rather than N x N arrays."""
+# ------------------------------------------------------------------ the rules
+
+
+def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.ndarray:
+    """One round of the D_i protocol for every receiver: K_i <- K_i united with the
+    sets K_q offered by the senders whose message was delivered.
+
+    known, offered: (B, N, N) bool [trial, UAV, identifier]. Returns (B, N, N) bool.
+    """
+    if delivered.edges:  # the segments are the B x N receivers in order
+        heard = np.logical_or.reduceat(
+            offered[delivered.trial, delivered.sender], delivered.starts, axis=0
+        )
+        return known | heard.reshape(known.shape)
+    grown = np.matmul(delivered.dense.astype(np.float64), offered.astype(np.float64)) > 0
+    return known | grown
+
+
+def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.ndarray:
+    """One round of eq. (27) for every receiver: per target, the sender whose tuple has
+    the highest confidence among the receiver itself (its own current tuple) and the
+    senders whose message was delivered (their offered tuple); ties go to the lowest
+    sender index.
+
+    own, offered: (B, N, M) confidences. Returns (B, N, M) the chosen sender (the
+    receiver's own index: keep its tuple).
+    """
+    n = own.shape[1]
+    if delivered.edges:  # the segments are the B x N receivers in order
+        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        values = np.where(delivered.own[:, None], own[t, i], offered[t, q])  # (E, M)
+        top = np.maximum.reduceat(values, delivered.starts, axis=0)
+        lowest = np.where(values == top[delivered.segment], q[:, None], n)
+        return np.minimum.reduceat(lowest, delivered.starts, axis=0).reshape(own.shape)
+    values = np.where(delivered.dense[..., None], offered[:, None, :, :], -np.inf)
+    idx = np.arange(n)
+    values[:, idx, idx] = own  # the receiver's own current tuple
+    return np.argmax(values, axis=-2)  # first maximum = lowest index
+
+
+def pick(own: dict, offered: dict, best: np.ndarray) -> dict:
+    """The tuples the receivers adopt: field by field, own[i] where best is i, else
+    offered[best]. Fields are arrays (B, N, M, ...)."""
+    B, n, m = best.shape
+    b, j = np.arange(B)[:, None, None], np.arange(m)
+    keep = best == np.arange(n)[:, None]
+    out = {}
+    for name, value in own.items():
+        chosen = offered[name][b, best, j]
+        mask = keep.reshape(keep.shape + (1,) * (value.ndim - 3))
+        out[name] = np.where(mask, value, chosen)
+    return out
+
+
+# ------------------------------------------------------------------ the drivers
+
+
+@dataclass(frozen=True)
+class Depth:
+    """Outcome of the D_i protocol: depth (B, N) rounds learned; sent and delivered (B,)
+    messages (one per link into a receiver still running, per round)."""
+
+    depth: np.ndarray
+    sent: np.ndarray
+    delivered: np.ndarray
+
+
+def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) -> Depth:
+    """D_i learned by flooding known identifiers to neighbours (Remark 1).
+
+    After round r UAV i knows K_i(r), the UAVs within r hops: K_i(r) = K_i(r-1) united
+    with the K_l(r-1) its neighbours l sent. The first round that teaches i nothing new
+    shows its ball has covered its component, so i stops with D_i = r - 1: it needs no
+    knowledge of the team size. A lost message can make that happen early. With a
+    round `budget`, a UAV still learning after `budget` rounds takes D_i = budget.
+
+    running: (B, N) bool, the UAVs taking part (the living).
+    """
+    B, n = running.shape
+    known = np.zeros((B, n, n), dtype=bool)
+    idx = np.arange(n)
+    known[:, idx, idx] = running  # K(0): each UAV knows itself
+    depth = np.zeros((B, n), dtype=np.int64)
+    sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
+    running = running.copy()
+    r = 0
+    while running.any():
+        r += 1
+        radio.send("flood", {"known": known})
+        inbox = radio.receive("flood", r)
+        if inbox is None:  # nothing in flight yet: nothing to learn
+            depth[running] = r - 1
+            break
+        sent += (inbox.links.incoming() * running).sum(axis=1)
+        delivered += (inbox.delivered.incoming() * running).sum(axis=1)
+        grown = flood(known, inbox.content["known"], inbox.delivered)
+        stopped = running & ~(grown != known).any(axis=-1)
+        depth[stopped] = r - 1
+        running &= ~stopped
+        known = grown
+        if budget is not None and r >= budget:
+            depth[running] = budget
+            break
+    return Depth(depth, sent, delivered)
+
+
+@dataclass(frozen=True)
+class Outcome:
+    """Outcome of the consensus rounds: tuples (dict of (B, N, M, ...) arrays), sent and
+    delivered (B,) messages."""
+
+    tuples: dict
+    sent: np.ndarray
+    delivered: np.ndarray
+
+
+def consensus(
+    radio: Radio,
+    tuples: dict,
+    rounds: np.ndarray,
+    score=None,
+    receive=None,
+) -> Outcome:
+    """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
+
+    In round t every UAV transmits its current tuple; UAV i with t <= rounds[i] adopts,
+    per target, the tuple of highest confidence among its own and those delivered to it
+    (`adopt`); UAVs past their rounds keep their tuple and keep transmitting.
+
+    tuples: {"gamma": (B, N, M) confidence, ...}: any fields travel with the tuple
+    (an index of the UAV whose estimate it is, or the estimate itself). score(tuples)
+    gives the confidences compared (default tuples["gamma"]); receive(tuples) turns
+    what arrives into what is compared and adopted (default: as it is).
+    """
+    score = score or (lambda t: t["gamma"])
+    B, n = rounds.shape
+    sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
+    for r in range(1, int(rounds.max(initial=0)) + 1):
+        radio.send("consensus", tuples)
+        inbox = radio.receive("consensus", r)
+        active = rounds >= r
+        if inbox is None:
+            continue
+        offered = inbox.content if receive is None else receive(inbox.content)
+        sent += (inbox.links.incoming() * active).sum(axis=1)
+        delivered += (inbox.delivered.incoming() * active).sum(axis=1)
+        best = adopt(score(tuples), score(offered), inbox.delivered)
+        best = np.where(active[..., None], best, np.arange(n)[:, None])
+        tuples = pick(tuples, offered, best)
+    return Outcome(tuples, sent, delivered)
+
+
+# ------------------------------------------------------------------ on a plain graph
+
+
+def perfect_radio(adjacency: np.ndarray, form: str = "auto") -> Radio:
+    """A radio without faults over a batch of graphs (B, N, N) (diagonal ignored)."""
+    from .config import FaultModel
+
+    adj = network.without_self_loops(adjacency)
+    faults = Faults(FaultModel(), np.zeros((adj.shape[0], 2), dtype=np.uint32), adj.shape[-1])
+    alive = np.ones(adj.shape[:2], dtype=bool)
+    return Radio(0, network.links(adj, form), alive, faults, RadioState())
+
+
+def _flat(adjacency: np.ndarray) -> np.ndarray:
+    return adjacency.reshape((-1,) + adjacency.shape[-2:])
+
+
+def eccentricity(adjacency: np.ndarray, form: str = "auto") -> tuple[np.ndarray, np.ndarray]:
+    """D_i of every UAV learned by `learn_depth` on a graph with a perfect radio.
+
+    adjacency: (..., N, N) bool, symmetric; the diagonal is ignored. Returns (D (..., N)
+    int, messages (...,)): one per link into a receiver still running, per round.
+    """
+    lead = adjacency.shape[:-2]
+    radio = perfect_radio(_flat(adjacency), form)
+    out = learn_depth(radio, np.ones(radio.now.alive.shape, dtype=bool))
+    return out.depth.reshape(adjacency.shape[:-1]), out.sent.reshape(lead)
+
+
+def consensus_rounds(
+    confidence: np.ndarray, adjacency: np.ndarray, rounds: np.ndarray, form: str = "auto"
+) -> np.ndarray:
+    """Max-consensus (27) on a graph with a perfect radio, UAV i for rounds[i] rounds.
+
+    confidence: (..., N, M); adjacency: (..., N, N) bool (diagonal ignored); rounds:
+    (..., N) int. Returns source (..., N, M): index of the UAV whose initial tuple i holds.
+    """
+    radio = perfect_radio(_flat(adjacency), form)
+    n, m = confidence.shape[-2:]
+    gamma = confidence.reshape(-1, n, m)
+    out = consensus(radio, {"gamma": gamma, "source": identity(gamma.shape)}, rounds.reshape(-1, n))
+    return out.tuples["source"].reshape(confidence.shape)
 
 
 @dataclass(frozen=True)
 class Consensus:
-    """Outcome of one fusion phase.
+    """Outcome of one fusion phase on a graph.
 
     source: (..., N, M) index of the UAV whose local estimate of target j UAV i holds.
     rounds: (..., N) D_i, the rounds UAV i ran.
-    messages: (...,) tuples sent over the radio (one per edge direction and round in
-        which the receiver still iterates; each carries M estimates).
-    protocol_messages: (...,) messages of the eccentricity protocol.
+    messages: (...,) tuples sent (one per link into a receiver still iterating, per round).
+    protocol_messages: (...,) messages of the D_i protocol.
     """
 
     source: np.ndarray
@@ -47,128 +247,43 @@ class Consensus:
     protocol_messages: np.ndarray
 
 
-def eccentricity(adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """D_i learned by flooding known identifiers to neighbours (Remark 1, APSP).
+def fuse(confidence: np.ndarray, adjacency: np.ndarray, form: str = "auto") -> Consensus:
+    """The fusion phase on a graph: the D_i protocol, then the rounds.
 
-    After round r UAV i knows K_i(r), the UAVs within r hops: K_i(r) = K_i(r-1) united
-    with the K_l(r-1) its neighbours l sent. The first round that teaches i nothing new
-    shows its ball has covered its component, so i stops with D_i = r - 1: it needs no
-    knowledge of the team size.
-
-    adjacency: (..., N, N) bool, symmetric; the diagonal is ignored. Returns (D (..., N)
-    int, messages (...,)): messages counts one per edge direction in every round the
-    receiver still runs.
+    A user-given adjacency may mark a UAV as its own neighbour; the diagonal is ignored.
     """
-    adjacency = without_self_loops(adjacency)
-    degree = adjacency.sum(axis=-1)
-    D = np.zeros(adjacency.shape[:-1], dtype=np.int64)
-    if not degree.any():  # nobody hears anybody: round 1 teaches nothing
-        return D, np.zeros(adjacency.shape[:-2], dtype=np.int64)
-    links = closed(adjacency)
-    weights = links.astype(np.float64)
-    known = links  # K(1): each UAV and its neighbours
-    running = degree > 0  # isolated UAVs learned nothing in round 1: D = 0
-    messages = degree.sum(axis=-1)  # round 1: every receiver runs
-    r = 1
-    while running.any():
-        r += 1
-        messages = messages + (degree * running).sum(axis=-1)
-        grown = (weights @ known.astype(np.float64)) > 0
-        stopped = running & ~(grown != known).any(axis=-1)
-        D[stopped] = r - 1
-        running &= ~stopped
-        known = grown
-    return D, messages
-
-
-def consensus_rounds(
-    confidence: np.ndarray, adjacency: np.ndarray, rounds: np.ndarray
-) -> np.ndarray:
-    """Run the max-consensus update (27), UAV i for rounds[i] rounds.
-
-    In round t every UAV sends its current tuple; UAV i with t <= rounds[i] adopts,
-    per target, the tuple of highest confidence among itself and its neighbours (ties
-    go to the lowest index); UAVs past their rounds keep their tuple and keep sending.
-
-    confidence: (..., N, M); adjacency: (..., N, N) bool (diagonal ignored); rounds:
-    (..., N) int. Returns source (..., N, M): index of the UAV whose initial tuple i holds.
-    """
-    lead = confidence.shape[:-2]
+    radio = perfect_radio(_flat(adjacency), form)
     n, m = confidence.shape[-2:]
     gamma = confidence.reshape(-1, n, m)
-    adj = adjacency.reshape(-1, n, n)
-    todo = rounds.reshape(-1, n)
-    source = _identity(gamma.shape)
-    total = int(todo.max(initial=0))
-    if total:
-        step = _sparse_round(adj) if n >= SPARSE_FROM else _dense_round(adj)
-        b = np.arange(gamma.shape[0])[:, None, None]
-        j = np.arange(m)
-        for t in range(1, total + 1):
-            best = step(gamma)  # (B, N, M) neighbour chosen by each UAV, per target
-            active = (todo >= t)[..., None]
-            source = np.where(active, source[b, best, j], source)
-            gamma = np.where(active, gamma[b, best, j], gamma)
-    return source.reshape(lead + (n, m))
+    depth = learn_depth(radio, np.ones(gamma.shape[:2], dtype=bool))
+    out = consensus(radio, {"gamma": gamma, "source": identity(gamma.shape)}, depth.depth)
+    lead = adjacency.shape[:-2]
+    return Consensus(
+        out.tuples["source"].reshape(confidence.shape),
+        depth.depth.reshape(lead + (n,)),
+        out.sent.reshape(lead),
+        depth.sent.reshape(lead),
+    )
 
 
-def _dense_round(adj: np.ndarray):
-    """best[b, i, j] = argmax over i's closed neighbourhood of gamma[b, :, j]."""
-    mask = np.where(closed(adj), 0.0, -np.inf)[..., None]  # (B, N, N, 1)
-
-    def best(gamma: np.ndarray) -> np.ndarray:
-        return np.argmax(gamma[:, None, :, :] + mask, axis=-2)  # first maximum = lowest index
-
-    return best
-
-
-def _sparse_round(adj: np.ndarray):
-    """The same on edge lists: segment maxima over each UAV's incoming edges."""
-    B, n, _ = adj.shape
-    b, receiver, sender = np.nonzero(closed(adj))  # sorted by (b, receiver), self-edges included
-    starts = np.flatnonzero(np.r_[True, (b[1:] != b[:-1]) | (receiver[1:] != receiver[:-1])])
-    row = b * n + receiver
-
-    def best(gamma: np.ndarray) -> np.ndarray:
-        offered = gamma[b, sender]  # (E, M)
-        top = np.maximum.reduceat(offered, starts, axis=0)  # (B*N, M)
-        lowest = np.where(offered == top[row], sender[:, None], n)
-        return np.minimum.reduceat(lowest, starts, axis=0).reshape(B, n, -1)
-
-    return best
-
-
-def max_consensus(confidence: np.ndarray, adjacency: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+def max_consensus(
+    confidence: np.ndarray, adjacency: np.ndarray, form: str = "auto"
+) -> tuple[np.ndarray, np.ndarray]:
     """Max-consensus with per-UAV stopping, Algorithm 2 lines 15-25.
 
     confidence: (..., N, M) floats (gamma = 1/trace P); adjacency: (..., N, N) symmetric
     bool, diagonal ignored. Returns (source (..., N, M), rounds (..., N)): source[i, j]
     is the UAV whose estimate of target j UAV i holds after the protocol, rounds[i] = D_i.
     """
-    result = fuse(confidence, adjacency)
+    result = fuse(confidence, adjacency, form)
     return result.source, result.rounds
 
 
-def _identity(shape: tuple[int, ...]) -> np.ndarray:
+def identity(shape: tuple[int, ...]) -> np.ndarray:
     """source[..., i, j] = i: every UAV holds its own estimates."""
     source = np.empty(shape, dtype=np.int64)
     source[...] = np.arange(shape[-2])[:, None]
     return source
-
-
-def fuse(confidence: np.ndarray, adjacency: np.ndarray) -> Consensus:
-    """The fusion phase with its bookkeeping: protocol for D_i, then the rounds.
-
-    A user-given adjacency may mark a UAV as its own neighbour; the diagonal is ignored.
-    """
-    adjacency = without_self_loops(adjacency)
-    if not adjacency.any():  # nobody hears anybody: no rounds, no messages
-        zeros = np.zeros(adjacency.shape[:-1], dtype=np.int64)
-        return Consensus(_identity(confidence.shape), zeros, zeros[..., 0], zeros[..., 0])
-    rounds, protocol_messages = eccentricity(adjacency)
-    source = consensus_rounds(confidence, adjacency, rounds)
-    messages = (adjacency.sum(axis=-1) * rounds).sum(axis=-1)
-    return Consensus(source, rounds, messages, protocol_messages)
 
 
 def gather(source: np.ndarray, values: np.ndarray) -> np.ndarray:

@@ -35,8 +35,19 @@ METRICS: dict[str, tuple[str, str]] = {
         "stale estimates included",
     ),
     "nees_best": ("", "NEES of the team's best estimate (4 when consistent)"),
-    "rounds": ("", "consensus rounds D_i per UAV and step"),
-    "messages": ("", "radio messages per step: consensus tuples (and uploads for centralized)"),
+    "rounds": ("", "consensus rounds per UAV and step (D_i, plus robust.extra_rounds)"),
+    "messages": (
+        "",
+        "radio messages sent per step, all protocols: beacons, D_i flooding, consensus "
+        "tuples and bids (distributed), flooding and tuples (greedy), uploads and "
+        "downloads (centralized); one per link into a receiver that needs it",
+    ),
+    "delivered": ("", "radio messages per step that arrived (messages minus those lost)"),
+    "conflicts": (
+        "",
+        "targets per step followed by two or more UAVs while another target has none",
+    ),
+    "failed": ("", "UAVs failed by the end of the trial (faults)"),
     "decision_time_ms": (
         "ms",
         "wall time per cycle of one UAV's own planning and assignment (distributed, greedy) "
@@ -49,11 +60,13 @@ METRICS: dict[str, tuple[str, str]] = {
 
 @dataclass
 class Tally:
-    """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets).
+    """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets), fed
+    one `simulation.Cycle` at a time.
 
-    NEES is computed in blocks of steps covering about 4000 filters: few numpy calls,
-    and the block stays in cache. Decision times are kept only when `timed` (one trial
-    alone); otherwise they are NaN.
+    Failed UAVs count in nothing: their estimates leave the RMSE and NEES, their rounds
+    the mean. NEES is computed in blocks of steps covering about 4000 filters: few
+    numpy calls, and the block stays in cache. Decision times are kept only when
+    `timed` (one trial alone); otherwise they are NaN.
     """
 
     batch: int
@@ -68,47 +81,74 @@ class Tally:
 
     def __post_init__(self) -> None:
         self.observed = np.zeros((self.batch, self.n_targets))
-        names = ("squared_error", "squared_error_best", "nees", "nees_best", "rounds")
-        self.sums = {name: np.zeros(self.batch) for name in names + ("messages", "decision")}
+        names = (
+            "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
+            "delivered", "conflicts", "decision", "pairs", "best", "alive",
+        )  # fmt: skip
+        self.sums = {name: np.zeros(self.batch) for name in names}
+        self.failed = np.zeros(self.batch)
         self._pending = []
         self._block = int(np.clip(4096 // (self.batch * self.n_uavs * self.n_targets), 1, 64))
 
-    def add(
-        self,
-        observed: np.ndarray,
-        truth: np.ndarray,
-        mean: np.ndarray,
-        cov: np.ndarray,
-        rounds: np.ndarray,
-        messages: np.ndarray,
-        decision_time: np.ndarray,
-    ) -> None:
-        """Add one step. observed (B, Nu, Nt); truth (B, Nt, 4); mean (B, Nu, Nt, 4);
-        cov (B, Nu, Nt, 4, 4); rounds (B, Nu); messages (B,); decision_time (B, Nu) [s]."""
+    def add(self, cycle, truth: np.ndarray) -> None:
+        """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
+        s = self.sums
         self.steps += 1
-        self.observed += observed.any(axis=1)
+        alive = cycle.alive
+        everyone = bool(alive.all())
+        mean, cov = cycle.mean, cycle.cov
+        self.observed += cycle.observed.any(axis=1)
         err = mean[..., :2] - truth[:, None, :, :2]
-        self.sums["squared_error"] += (err * err).sum(axis=(1, 2, 3))
+        squared = err * err
+        if not everyone:
+            squared = squared * alive[:, :, None, None]
+        s["squared_error"] += squared.sum(axis=(1, 2, 3))
+        s["pairs"] += alive.sum(axis=1) * self.n_targets
         # the team's best estimate of each target: its most confident UAV (lowest on ties)
-        best = np.argmax(confidence(cov), axis=1)[:, None, :]  # (B, 1, Nt)
+        gamma = confidence(cov)
+        if not everyone:
+            gamma = np.where(alive[..., None], gamma, -np.inf)
+        best = np.argmax(gamma, axis=1)[:, None, :]  # (B, 1, Nt)
+        anyone = alive.any(axis=1)
         best_mean = np.take_along_axis(mean, best[..., None], axis=1)[:, 0]
         best_cov = np.take_along_axis(cov, best[..., None, None], axis=1)[:, 0]
         err = best_mean[..., :2] - truth[..., :2]
-        self.sums["squared_error_best"] += (err * err).sum(axis=(1, 2))
-        self._pending.append((mean, cov, best_mean, best_cov, truth))
+        s["squared_error_best"] += np.where(anyone, (err * err).sum(axis=(1, 2)), 0.0)
+        s["best"] += anyone * self.n_targets
+        self._pending.append((mean, cov, best_mean, best_cov, truth, None if everyone else alive))
         if len(self._pending) == self._block:
             self._flush()
-        self.sums["rounds"] += rounds.mean(axis=1)
-        self.sums["messages"] += messages
-        self.sums["decision"] += decision_time.mean(axis=1)
+        if everyone:
+            s["rounds"] += cycle.rounds.mean(axis=1)
+        else:
+            s["rounds"] += np.where(
+                anyone, (cycle.rounds * alive).sum(axis=1) / np.maximum(alive.sum(axis=1), 1), 0
+            )
+        s["alive"] += anyone
+        s["messages"] += cycle.messages
+        s["delivered"] += cycle.delivered
+        s["conflicts"] += cycle.conflicts
+        s["decision"] += cycle.decision_time_ms.mean(axis=1)
+        self.failed = (~alive).sum(axis=1).astype(float)
 
     def _flush(self) -> None:
         if self._pending:
+            masks = [p[5] for p in self._pending]
             mean, cov, best_mean, best_cov, truth = (
-                np.stack(parts) for parts in zip(*self._pending, strict=True)
+                np.stack(parts) for parts in list(zip(*self._pending, strict=True))[:5]
             )
-            self.sums["nees"] += nees(mean, cov, truth[:, :, None]).sum(axis=(0, 2, 3))
-            self.sums["nees_best"] += nees(best_mean, best_cov, truth).sum(axis=(0, 2))
+            q = nees(mean, cov, truth[:, :, None])  # (S, B, Nu, Nt)
+            if any(m is not None for m in masks):
+                alive = np.stack(
+                    [np.ones(q.shape[1:3], dtype=bool) if m is None else m for m in masks]
+                )
+                q = q * alive[..., None]
+                anyone = alive.any(axis=2)  # (S, B)
+                best = np.where(anyone[..., None], nees(best_mean, best_cov, truth), 0.0)
+            else:
+                best = nees(best_mean, best_cov, truth)
+            self.sums["nees"] += q.sum(axis=(0, 2, 3))
+            self.sums["nees_best"] += best.sum(axis=(0, 2))
             self._pending = []
 
     def per_target(self) -> np.ndarray:
@@ -118,11 +158,12 @@ class Tally:
     def summary(self) -> dict[str, np.ndarray]:
         """Per-trial metrics of `METRICS`, each an array over the batch (per_target (B, Nt))."""
         self._flush()
-        pairs = self.steps * self.n_uavs * self.n_targets
-        targets = self.steps * self.n_targets
         per_target = self.per_target()
         s = self.sums
-        decision = 1e3 * s["decision"] / self.steps if self.timed else np.full(self.batch, np.nan)
+        pairs, targets = np.maximum(s["pairs"], 1), np.maximum(s["best"], 1)
+        decision = (
+            1e3 * 0 + s["decision"] / self.steps if self.timed else np.full(self.batch, np.nan)
+        )
         return {
             "observation_rate": per_target.mean(axis=1),
             "per_target": per_target,
@@ -130,8 +171,11 @@ class Tally:
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,
             "nees_best": s["nees_best"] / targets,
-            "rounds": s["rounds"] / self.steps,
+            "rounds": s["rounds"] / np.maximum(s["alive"], 1),
             "messages": s["messages"] / self.steps,
+            "delivered": s["delivered"] / self.steps,
+            "conflicts": s["conflicts"] / self.steps,
+            "failed": self.failed,
             "decision_time_ms": decision,
         }
 

@@ -70,7 +70,10 @@ class Store:
         self.root = Path(root)
         self.raw = self.root / "raw"
         self.failed = self.root / "failed"
-        self.manifest = {**manifest, "uavtrack": __version__, "code": code_hash()}
+        # as JSON holds it (tuples as lists), so a manifest read back compares equal
+        self.manifest = json.loads(
+            dumps({**manifest, "uavtrack": __version__, "code": code_hash()})
+        )
         self.set_aside: list[tuple[str, str]] = []  # (job key, reason) of rejected files
         self._valid: dict[str, dict[str, Any]] = {}
         self._lock = None

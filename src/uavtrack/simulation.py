@@ -2,15 +2,13 @@
 
     truth -> sensing -> local filter -> max-consensus -> planning -> auction -> control
 
-`step` is one cycle for a batch of independent trials (leading axis B); `run`
+`step` is one cycle for a batch of independent trials (leading axis B), one call per
+stage; an environment can hand in the actions to fly instead of the method's. `run`
 iterates it; `simulate` is one trial with its full trace.
 
-Randomness: each trial has its own `numpy.random.SeedSequence`, split into a truth
-stream (initial layout, target accelerations) and a sensor stream (measurement
-noise, one standard-normal pair per UAV-target pair per step, whether or not the
-pair is in view). The methods therefore see the same targets and the same noise in
-a trial (common random numbers), and a trial gives the same result alone or in a
-batch.
+Every field a cycle records is declared once, in `Cycle`: the trace (`Trace`, the same
+fields stacked over the steps), the recorder and the metrics (`metrics.Tally`) are
+derived from it.
 """
 
 from __future__ import annotations
@@ -18,18 +16,25 @@ from __future__ import annotations
 import os
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields, make_dataclass
+from functools import cache
 from numbers import Integral
 
 import numpy as np
 
-from . import estimation, fusion, network, planning, sensing, world
+from . import estimation, network, planning, sensing, world
 from .config import G, Scenario, ScenarioError
-from .methods import Method, get
+from .faults import Faults, trial_key
+from .methods import Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
+from .radio import Radio, RadioState
+from .world import initial_conditions, streams, trial_seed  # noqa: F401 (public here too)
 
 NOISE_BLOCK = 64
 """Steps of sensor noise drawn at once per trial (a draw of n normals equals n draws of 1)."""
+
+STRAIGHT = 1
+"""Index of the zero bank angle in the action set (-phi, 0, +phi): a failed UAV's."""
 
 
 @dataclass(frozen=True)
@@ -52,67 +57,38 @@ class Constants:
 
 
 @dataclass(frozen=True)
-class State:
-    """What persists between cycles, for B trials.
+class Context:
+    """What a run fixes: the scenario, the method, derived constants, the fault
+    realisation of its trials and the methods' settings."""
 
-    uavs: (B, Nu, 5); mean: (B, Nu, Nt, 4) and cov: (B, Nu, Nt, 4, 4), each UAV's
-    fused belief s_bar, P_bar after the last cycle (the prior before the first).
-    """
+    scenario: Scenario
+    method: Method
+    const: Constants
+    faults: Faults
+    setting: Setting
 
-    k: int
-    uavs: np.ndarray
-    mean: np.ndarray
-    cov: np.ndarray
-
-
-@dataclass(frozen=True)
-class Cycle:
-    """What one cycle decided and measured, for B trials.
-
-    observed (B, Nu, Nt); bids (B, Nu, Nt); target (B, Nu) assigned target;
-    action (B, Nu) index of the bank angle flown; rounds (B, Nu) D_i;
-    messages (B,) consensus messages; decision_time (B, Nu) seconds of planning and
-    assignment per UAV (see `metrics.METRICS["decision_time_ms"]`).
-    """
-
-    observed: np.ndarray
-    bids: np.ndarray
-    target: np.ndarray
-    action: np.ndarray
-    rounds: np.ndarray
-    messages: np.ndarray
-    decision_time: np.ndarray
+    @classmethod
+    def of(
+        cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
+    ) -> Context:
+        const = Constants.of(scenario)
+        keys = np.stack([trial_key(world.children(s)[2]) for s in seeds])
+        faults = Faults(scenario.faults, keys, scenario.n_uavs)
+        f, robust = scenario.faults, scenario.robust
+        setting = Setting(
+            faulty=faults.active,
+            delay=f.delay,
+            budget=f.round_budget,
+            extra_rounds=robust.extra_rounds,
+            stale=robust.stale,
+            forward=_forward(scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2),
+            plan=lambda uavs, mean: _plan(uavs, mean, scenario),
+        )
+        return cls(scenario, method, const, faults, setting)
 
 
-def step(
-    state: State,
-    targets: np.ndarray,
-    noise: np.ndarray,
-    scenario: Scenario,
-    method: Method,
-    const: Constants,
-) -> tuple[State, Cycle]:
-    """One decision cycle at step k = state.k for every trial.
-
-    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals.
-    Returns the state at k+1 (UAVs moved, beliefs fused at k) and the cycle's record.
-    """
-    uavs = state.uavs
-    graph = network.adjacency(uavs, scenario.comm_range)
-    observed, z, R = sense(uavs, targets, noise, scenario)
-    mean, cov = estimation.filter_step(
-        state.mean,
-        state.cov,
-        observed,
-        z,
-        R,
-        *((const.A, const.Q) if state.k > 0 else (None, None)),
-    )
-    fused = method.fuse(estimation.confidence(cov), graph)
-    if fused.rounds.any():  # otherwise every UAV kept its own estimates
-        mean, cov = fusion.gather(fused.source, mean), fusion.gather(fused.source, cov)
-    start = time.perf_counter()
-    plan = planning.plan(
+def _plan(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> tuple[np.ndarray, ...]:
+    p = planning.plan(
         uavs,
         mean,
         scenario.sensor,
@@ -122,130 +98,277 @@ def step(
         scenario.planner.discount,
         G,
     )
-    plan_seconds = time.perf_counter() - start
-    target, assign_seconds = method.assign(plan.value, graph)
-    action = np.take_along_axis(plan.action, target[..., None], axis=-1)[..., 0]
-    new_uavs = world.fly(uavs, const.actions[action], scenario.dt, G)
-    share = plan_seconds / (uavs.shape[0] if method.central else uavs.shape[0] * uavs.shape[1])
-    cycle = Cycle(
-        observed, plan.value, target, action, fused.rounds, fused.messages, share + assign_seconds
+    return p.value, p.action
+
+
+def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable:
+    """forward(tuples, k): time-stamped tuples predicted to step k (eq. 23 applied
+    k - stamp times), their confidence recomputed (eq. 22)."""
+    A, Q = estimation.transition(dt), estimation.process_noise(dt, sigma_1, sigma_2)
+
+    @cache
+    def power(n: int) -> tuple[np.ndarray, np.ndarray]:  # A^n and its accumulated noise
+        An, Qn = np.eye(4), np.zeros((4, 4))
+        for _ in range(n):
+            An, Qn = A @ An, A @ Qn @ A.T + Q
+        return An, Qn
+
+    def forward(tuples: dict, k: int) -> dict:
+        lag = k - tuples["stamp"]
+        mean, cov = tuples["mean"].copy(), tuples["cov"].copy()
+        for n in np.unique(lag[lag > 0]):
+            at = lag == n
+            An, Qn = power(int(n))
+            mean[at] = mean[at] @ An.T
+            cov[at] = An @ cov[at] @ An.T + Qn
+        out = dict(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k))
+        out["gamma"] = np.where(np.isfinite(tuples["gamma"]), estimation.confidence(cov), -np.inf)
+        return out
+
+    return forward
+
+
+@dataclass(frozen=True)
+class State:
+    """What persists between cycles, for B trials, all at step k.
+
+    uavs: (B, Nu, 5) true UAV states; mean (B, Nu, Nt, 4) and cov (B, Nu, Nt, 4, 4):
+    each UAV's beliefs predicted to k (the prior at k = 0); alive (B, Nu); target (B,
+    Nu) each UAV's last target (-1: none yet); radio: messages in flight and link
+    states; held: the bids each UAV holds of the others (only when messages get lost).
+    """
+
+    k: int
+    uavs: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    alive: np.ndarray
+    target: np.ndarray
+    radio: RadioState = RadioState()
+    held: Held | None = None
+
+
+def _record(shape: str, doc: str, dtype: type = np.float64):
+    return field(metadata={"shape": shape, "doc": doc, "dtype": dtype})
+
+
+@dataclass(frozen=True)
+class Cycle:
+    """What one cycle decided and measured, for B trials: each field is (B, *shape).
+
+    The trace holds the same fields over the steps (T, *shape); this class is the one
+    place a recorded quantity is declared.
+    """
+
+    uavs: np.ndarray = _record(
+        "(Nu, 5)", "true UAV states x, y, h, V, heading [m, m, m, m/s, rad] when deciding"
     )
-    return State(state.k + 1, new_uavs, mean, cov), cycle
+    observed: np.ndarray = _record(
+        "(Nu, Nt)", "target inside the UAV's observation disk (a failed UAV sees nothing)", bool
+    )
+    mean: np.ndarray = _record("(Nu, Nt, 4)", "each UAV's fused estimate of each target")
+    cov: np.ndarray = _record("(Nu, Nt, 4, 4)", "its covariance")
+    bids: np.ndarray = _record("(Nu, Nt)", "the UAV's best planning value per target (its bid)")
+    assignment: np.ndarray = _record(
+        "(Nu,)", "the target each UAV tracks (-1: the UAV has failed)", np.int64
+    )
+    action: np.ndarray = _record("(Nu,)", "the bank angle flown [rad]")
+    rounds: np.ndarray = _record(
+        "(Nu,)", "consensus rounds the UAV ran (D_i, plus robust.extra_rounds)", np.int64
+    )
+    messages: np.ndarray = _record(
+        "()", "radio messages sent, all protocols (see README, Messages)", np.int64
+    )
+    delivered: np.ndarray = _record("()", "radio messages that arrived", np.int64)
+    conflicts: np.ndarray = _record(
+        "()", "targets followed by two or more UAVs while another has none", np.int64
+    )
+    alive: np.ndarray = _record("(Nu,)", "the UAV has not failed", bool)
+    decision_time_ms: np.ndarray = _record(
+        "(Nu,)", "planning and assignment per UAV [ms] (NaN inside a batch)"
+    )
+
+
+def _trace_arrays(self) -> dict[str, np.ndarray]:
+    return {name: getattr(self, name) for name in self.__dataclass_fields__}
+
+
+Trace = make_dataclass(
+    "Trace",
+    [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in fields(Cycle)],
+    frozen=True,
+    namespace={
+        "arrays": _trace_arrays,
+        "__doc__": "Everything a run did, step by step: targets (T, Nt, 4) the true target "
+        "states x, y, vx, vy at each cycle, then every field of `Cycle` over the T steps. "
+        "arrays() gives them as a dict (the .npz of `uavtrack run --trace`).",
+        "__module__": __name__,
+    },
+)
+
+
+def step(
+    state: State,
+    targets: np.ndarray,
+    noise: np.ndarray,
+    ctx: Context,
+    actions: np.ndarray | None = None,
+) -> tuple[State, Cycle]:
+    """One decision cycle at step k = state.k for every trial.
+
+    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals;
+    actions: (B, Nu) indices into the action set to fly instead of the method's choice
+    (an environment's agents). Returns the state at k+1 and the cycle's record.
+    """
+    scenario, method, const, faults = ctx.scenario, ctx.method, ctx.const, ctx.faults
+    k, uavs = state.k, state.uavs
+    alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
+    believed = world.believed(uavs, faults.position_error(k))
+    radio = Radio(k, network.links(graph(uavs, alive, scenario)), alive, faults, state.radio)
+    observed, z, R = sense(uavs, believed, targets, noise, alive, scenario)
+    mean, cov = estimation.filter_step(state.mean, state.cov, observed, z, R, None, None)
+    inputs = Inputs(
+        k,
+        radio,
+        mean,
+        cov,
+        estimation.confidence(cov),
+        believed,
+        alive,
+        state.target,
+        state.held,
+        ctx.setting,
+    )
+    fused = method.fuse(inputs)
+    start = time.perf_counter()
+    bids, best = ctx.setting.plan(believed, fused.mean)
+    plan_seconds = time.perf_counter() - start
+    assigned = method.assign(inputs, fused, bids)
+    target = assigned.target
+    if actions is None:
+        chosen = np.take_along_axis(best, np.maximum(target, 0)[..., None], axis=-1)[..., 0]
+        actions = np.where(alive, chosen, STRAIGHT)
+    new_uavs = world.fly(uavs, const.actions[actions], scenario.dt, G)
+    if not alive.all():
+        new_uavs = np.where(alive[..., None], new_uavs, uavs)  # a failed UAV is down
+    B, Nu = alive.shape
+    share = plan_seconds / (B if method.central else B * Nu)
+    cycle = Cycle(
+        uavs=uavs,
+        observed=observed,
+        mean=fused.mean,
+        cov=fused.cov,
+        bids=bids,
+        assignment=target,
+        action=const.actions[actions],
+        rounds=fused.rounds,
+        messages=fused.sent + assigned.sent,
+        delivered=fused.delivered + assigned.delivered,
+        conflicts=conflicts(target, alive, bids.shape[-1]),
+        alive=alive,
+        decision_time_ms=1e3 * (share + assigned.seconds),
+    )
+    mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
+    new = State(
+        k + 1,
+        new_uavs,
+        mean,
+        cov,
+        alive,
+        np.where(target >= 0, target, state.target),
+        radio.close(),
+        assigned.held,
+    )
+    return new, cycle
+
+
+def graph(uavs: np.ndarray, alive: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """The radio graph at this step: within r_C (3-D), both UAVs alive, (B, Nu, Nu)."""
+    adj = network.adjacency(uavs, scenario.comm_range)
+    if not alive.all():
+        adj &= alive[:, :, None] & alive[:, None, :]
+    return adj
 
 
 def sense(
-    uavs: np.ndarray, targets: np.ndarray, noise: np.ndarray, scenario: Scenario
+    uavs: np.ndarray,
+    believed: np.ndarray,
+    targets: np.ndarray,
+    noise: np.ndarray,
+    alive: np.ndarray,
+    scenario: Scenario,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Which pairs observe, and their converted measurements (eqs. 2-12).
 
-    uavs (B, Nu, 5); targets (B, Nt, 4); noise (B, Nu, Nt, 2) standard normals.
-    Returns observed (B, Nu, Nt) and, for the K observing pairs in the order of
-    ``np.nonzero(observed)``, z^C (K, 2) and R (K, 2, 2).
+    uavs (B, Nu, 5) true states (what the sensor sees from), believed (B, Nu, 5) the
+    UAVs' own idea of them (what the conversion uses); targets (B, Nt, 4); noise
+    (B, Nu, Nt, 2) standard normals; alive (B, Nu). Returns observed (B, Nu, Nt) and,
+    for the K observing pairs in the order of ``np.nonzero(observed)``, z^C (K, 2) and
+    R (K, 2, 2).
     """
     observed = sensing.in_view(uavs[:, :, None, :], targets[:, None, :, :], scenario.sensor)
+    if not alive.all():
+        observed &= alive[:, :, None]
     b, i, j = np.nonzero(observed)
-    seen_by = uavs[b, i]
-    z = sensing.measure(seen_by, targets[b, j], scenario.sensor, noise[b, i, j])
-    zc, R = sensing.convert(seen_by, z, scenario.sensor)
+    z = sensing.measure(uavs[b, i], targets[b, j], scenario.sensor, noise[b, i, j])
+    zc, R = sensing.convert(believed[b, i], z, scenario.sensor)
+    if scenario.robust.position_noise and scenario.faults.position_std > 0:
+        R = R + scenario.faults.position_std**2 * np.eye(2)  # z^C is offset by the UAV's error
     return observed, zc, R
 
 
-# ---------------------------------------------------------------- initial conditions
+def conflicts(target: np.ndarray, alive: np.ndarray, n_targets: int) -> np.ndarray:
+    """Per trial, the targets followed by two or more UAVs while another target has none.
 
-
-def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
-    """(truth, sensor) generators of one trial, independent streams of its seed.
-
-    The children are derived from the seed's spawn key, not with `SeedSequence.spawn`,
-    whose counter would give a reused seed object different streams.
+    target: (B, Nu) (-1 for a failed UAV); alive (B, Nu). Returns (B,) int.
     """
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    truth, sensor = (
-        np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, k), pool_size=seq.pool_size)
-        for k in range(2)
+    B = target.shape[0]
+    counts = np.zeros((B, n_targets), dtype=np.int64)
+    b, i = np.nonzero(alive & (target >= 0))
+    np.add.at(counts, (b, target[b, i]), 1)
+    return np.where((counts == 0).any(axis=-1), (counts >= 2).sum(axis=-1), 0)
+
+
+def initial_state(
+    scenario: Scenario, seeds: Sequence[np.random.SeedSequence]
+) -> tuple[State, np.ndarray, list[np.random.Generator]]:
+    """The state at step 0 of each trial, the target trajectories (B, T, Nt, 4) and the
+    sensor-noise generators, from each trial's truth and sensor streams."""
+    B, Nu, Nt = len(seeds), scenario.n_uavs, scenario.n_targets
+    truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
+    drawn = [initial_conditions(scenario, rng) for rng in truth_rngs]
+    uavs = np.stack([d[0] for d in drawn])
+    trajectory = np.stack([d[1] for d in drawn])
+    mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
+    cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
+    del drawn  # the per-trial copies of the trajectories
+    held = None
+    if scenario.faults.loss > 0:
+        held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
+    state = State(
+        0,
+        uavs,
+        mean,
+        cov,
+        np.ones((B, Nu), dtype=bool),
+        np.full((B, Nu), -1, dtype=np.int64),
+        RadioState(),
+        held,
     )
-    return np.random.default_rng(truth), np.random.default_rng(sensor)
-
-
-def trial_seed(seed: int, trial: int) -> np.random.SeedSequence:
-    """The seed of trial `trial` of an experiment seeded with `seed`.
-
-    Equal to ``SeedSequence(seed).spawn(n)[trial]`` for any n > trial.
-    """
-    return np.random.SeedSequence(seed, spawn_key=(trial,))
-
-
-def initial_conditions(
-    scenario: Scenario, rng: np.random.Generator
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Draw one trial's truth and prior (all assumed; see the parameter table).
-
-    Targets start uniformly in the field with N(0, v0^2) velocity components; UAVs
-    start in a square of side `uav.start_spread` at the field centre with uniform
-    headings; every UAV's prior of target j is N(cue_j, P0) with cue_j the true position
-    plus N(0, sigma_p0^2) noise and zero velocity, and P0 = diag(sigma_p0^2, sigma_p0^2,
-    sigma_v0^2, sigma_v0^2), so the prior is consistent.
-
-    Returns uavs (Nu, 5), target trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4).
-    """
-    nu, nt, L = scenario.n_uavs, scenario.n_targets, scenario.field_size
-    tgt = scenario.target
-    targets = np.concatenate(
-        [rng.uniform(0.0, L, (nt, 2)), rng.normal(0.0, tgt.initial_velocity_std, (nt, 2))], axis=1
-    )
-    uavs = np.empty((nu, 5))
-    half = scenario.uav.start_spread / 2
-    uavs[:, :2] = L / 2 + rng.uniform(-half, half, (nu, 2))
-    uavs[:, 2] = scenario.altitudes()
-    uavs[:, 3] = scenario.uav.speed
-    uavs[:, 4] = rng.uniform(-np.pi, np.pi, nu)
-    est = scenario.estimation
-    prior = np.zeros((nt, 4))
-    prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
-    P0 = np.diag([est.initial_position_std**2] * 2 + [est.initial_velocity_std**2] * 2)
-    accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * [tgt.sigma_1, tgt.sigma_2]
-    trajectory = world.target_trajectories(targets, accel, scenario.dt, L)
-    return uavs, trajectory, prior, P0
+    return state, trajectory, list(sensor_rngs)
 
 
 # ---------------------------------------------------------------- runs
 
 
 @dataclass(frozen=True)
-class Trace:
-    """Everything a run did, step by step (T steps, Nu UAVs, Nt targets).
-
-    targets (T, Nt, 4) truth; uavs (T, Nu, 5) at the time of the cycle; mean
-    (T, Nu, Nt, 4) and cov (T, Nu, Nt, 4, 4) each UAV's fused estimate; observed
-    (T, Nu, Nt); bids (T, Nu, Nt); assignment (T, Nu) target index; action (T, Nu)
-    bank angle flown [rad]; rounds (T, Nu) D_i; messages (T,); decision_time_ms (T, Nu)
-    [ms] (NaN in the traces of a batch, where it is not measured).
-    """
-
-    targets: np.ndarray
-    uavs: np.ndarray
-    mean: np.ndarray
-    cov: np.ndarray
-    observed: np.ndarray
-    bids: np.ndarray
-    assignment: np.ndarray
-    action: np.ndarray
-    rounds: np.ndarray
-    messages: np.ndarray
-    decision_time_ms: np.ndarray
-
-    def arrays(self) -> dict[str, np.ndarray]:
-        return {name: getattr(self, name) for name in self.__dataclass_fields__}
-
-
-@dataclass(frozen=True)
 class BatchResult:
-    """Per-trial metrics of a batch (see `metrics.Tally.summary`) and optional traces."""
+    """Per-trial metrics of a batch (see `metrics.METRICS`) and optional traces."""
 
     method: str
     scenario: Scenario
     metrics: dict[str, np.ndarray]
-    traces: list[Trace] | None = field(default=None, repr=False)
+    traces: list | None = field(default=None, repr=False)
 
 
 def run(
@@ -263,46 +386,57 @@ def run(
     method = get(method)
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
-    seeds = list(seeds)
+    seeds = [
+        s if isinstance(s, np.random.SeedSequence) else np.random.SeedSequence(s) for s in seeds
+    ]
     if not seeds:
         raise ValueError("seeds is empty: give at least one seed (one per trial)")
     check_memory(scenario, len(seeds), trace)
-    const = Constants.of(scenario)
+    ctx = Context.of(scenario, method, seeds)
+    state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
-    truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
-    drawn = [initial_conditions(scenario, rng) for rng in truth_rngs]
-    uavs = np.stack([d[0] for d in drawn])
-    trajectory = np.stack([d[1] for d in drawn])  # (B, T, Nt, 4)
-    mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
-    cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
-    del drawn  # the per-trial copies of the trajectories
-    state = State(0, uavs, mean, cov)
     tally = Tally(B, Nu, Nt, timed=B == 1)
-    rec = _Recorder(B, T, Nu, Nt, timed=B == 1) if trace else None
+    rec = Recorder(T, timed=B == 1) if trace else None
     for k in range(T):
         if k % NOISE_BLOCK == 0:  # the same numbers as one draw per step, fewer calls
             noise = np.stack(
                 [rng.standard_normal((NOISE_BLOCK, Nu, Nt, 2)) for rng in sensor_rngs], axis=1
             )
-        before = state.uavs
-        state, cycle = step(
-            state, trajectory[:, k], noise[k % NOISE_BLOCK], scenario, method, const
-        )
-        tally.add(
-            cycle.observed,
-            trajectory[:, k],
-            state.mean,
-            state.cov,
-            cycle.rounds,
-            cycle.messages,
-            cycle.decision_time,
-        )
+        state, cycle = step(state, trajectory[:, k], noise[k % NOISE_BLOCK], ctx)
+        tally.add(cycle, trajectory[:, k])
         if rec is not None:
-            rec.record(k, before, state, cycle, const)
+            rec.record(k, cycle)
         if progress is not None:
             progress(k + 1)
     traces = rec.traces(trajectory) if rec is not None else None
     return BatchResult(method.name, scenario, tally.summary(), traces)
+
+
+class Recorder:
+    """Per-step arrays of every `Cycle` field, allocated at the first step."""
+
+    def __init__(self, steps: int, timed: bool) -> None:
+        self.steps, self.timed = steps, timed
+        self.arrays: dict[str, np.ndarray] = {}
+
+    def record(self, k: int, cycle: Cycle) -> None:
+        if not self.arrays:
+            for f in fields(Cycle):
+                value = getattr(cycle, f.name)
+                B = value.shape[0]
+                self.arrays[f.name] = np.empty(
+                    (B, self.steps) + value.shape[1:], f.metadata["dtype"]
+                )
+        for name, array in self.arrays.items():
+            array[:, k] = getattr(cycle, name)
+        if not self.timed:
+            self.arrays["decision_time_ms"][:, k] = np.nan
+
+    def traces(self, trajectory: np.ndarray) -> list:
+        return [
+            Trace(trajectory[b], **{name: a[b] for name, a in self.arrays.items()})
+            for b in range(trajectory.shape[0])
+        ]
 
 
 def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, int]:
@@ -315,14 +449,19 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
     """
     T, Nu, Nt = scenario.steps, scenario.n_uavs, scenario.n_targets
     f = 8  # bytes per float
+    history = 1 + scenario.faults.delay
     parts = {
         "steps": batch * T * Nt * 4 * f * 2 + T * Nt * 2 * f * 8,
         "planner.horizon": planning.memory(batch * Nu, Nt, 3, scenario.planner.horizon),
-        "n_uavs": batch * Nu * Nu * f * (8 + (Nt if Nu < fusion.SPARSE_FROM else 3 * Nt)),
-        "n_targets": batch * Nu * Nt * f * (20 * 6 + NOISE_BLOCK * 2 * 2),
+        "n_uavs": batch
+        * Nu
+        * Nu
+        * f
+        * (8 + (Nt if Nu < network.SPARSE_FROM else 3 * Nt) + (Nt if scenario.faults.loss else 0)),
+        "n_targets": batch * Nu * Nt * f * (20 * 6 * history + NOISE_BLOCK * 2 * 2),
     }
     if trace:
-        parts["steps"] += batch * T * (Nu * Nt * (4 + 16 + 1 + 1) + Nu * 9) * f
+        parts["steps"] += batch * T * (Nu * Nt * (4 + 16 + 1 + 1) + Nu * 12) * f
     return parts
 
 
@@ -332,13 +471,13 @@ def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> Non
     need, have = sum(parts.values()), available_memory()
     if need <= 0.9 * have:
         return
-    field = max(parts, key=parts.get)
+    field_ = max(parts, key=parts.get)
     hint = {
         "steps": "steps (or run without a trace)" if trace else "steps",
         "planner.horizon": "planner.horizon (or n_uavs, n_targets)",
         "n_uavs": "n_uavs",
         "n_targets": "n_targets (or n_uavs)",
-    }[field]
+    }[field_]
     trials = f" for {batch} trials at once" if batch > 1 else ""
     raise ScenarioError(
         f"this run needs about {_size(need)} of memory{trials} and {_size(have)} are "
@@ -365,56 +504,6 @@ def available_memory() -> int:
         return 2**62  # unknown: do not refuse
 
 
-class _Recorder:
-    """Preallocated per-step arrays for traces."""
-
-    def __init__(self, B: int, T: int, Nu: int, Nt: int, timed: bool) -> None:
-        self.timed = timed
-        self.uavs = np.empty((B, T, Nu, 5))
-        self.mean = np.empty((B, T, Nu, Nt, 4))
-        self.cov = np.empty((B, T, Nu, Nt, 4, 4))
-        self.observed = np.empty((B, T, Nu, Nt), dtype=bool)
-        self.bids = np.empty((B, T, Nu, Nt))
-        self.assignment = np.empty((B, T, Nu), dtype=np.int64)
-        self.action = np.empty((B, T, Nu))
-        self.rounds = np.empty((B, T, Nu), dtype=np.int64)
-        self.messages = np.empty((B, T), dtype=np.int64)
-        self.decision_time_ms = np.full((B, T, Nu), np.nan)
-
-    def record(
-        self, k: int, uavs: np.ndarray, state: State, cycle: Cycle, const: Constants
-    ) -> None:
-        self.uavs[:, k] = uavs
-        self.mean[:, k] = state.mean
-        self.cov[:, k] = state.cov
-        self.observed[:, k] = cycle.observed
-        self.bids[:, k] = cycle.bids
-        self.assignment[:, k] = cycle.target
-        self.action[:, k] = const.actions[cycle.action]
-        self.rounds[:, k] = cycle.rounds
-        self.messages[:, k] = cycle.messages
-        if self.timed:
-            self.decision_time_ms[:, k] = 1e3 * cycle.decision_time
-
-    def traces(self, trajectory: np.ndarray) -> list[Trace]:
-        return [
-            Trace(
-                trajectory[b],
-                self.uavs[b],
-                self.mean[b],
-                self.cov[b],
-                self.observed[b],
-                self.bids[b],
-                self.assignment[b],
-                self.action[b],
-                self.rounds[b],
-                self.messages[b],
-                self.decision_time_ms[b],
-            )
-            for b in range(trajectory.shape[0])
-        ]
-
-
 @dataclass(frozen=True)
 class Result:
     """One trial: the paper's metric, the estimation quality, costs, and the trace.
@@ -422,7 +511,8 @@ class Result:
     The metrics are those of `metrics.METRICS` (units and meaning there):
     observation_rate (Sec. 7); per_target (Nt,); rmse and nees over every UAV's fused
     estimate; rmse_best and nees_best of the team's best estimate; rounds: mean D_i per
-    UAV and step; messages per step; decision_time_ms per UAV and cycle.
+    UAV and step; messages and delivered per step; conflicts per step; failed: UAVs
+    failed by the end; decision_time_ms per UAV and cycle.
     """
 
     method: str
@@ -436,6 +526,9 @@ class Result:
     nees_best: float
     rounds: float
     messages: float
+    delivered: float
+    conflicts: float
+    failed: float
     decision_time_ms: float
     trace: Trace | None = field(default=None, repr=False)
 

@@ -1,14 +1,20 @@
-"""Truth: UAV kinematics (eq. 1) and target motion (eq. 13-15) in a square field.
+"""Truth: UAV kinematics (eq. 1), target motion (eq. 13-15), and each trial's draws.
 
 UAV state ``(..., 5)`` = x, y, h, V, heading; target state ``(..., 4)`` = x, y, vx, vy.
 Nothing here is visible to the UAVs' estimation or decisions except through sensing.
+
+Randomness: each trial has its own `numpy.random.SeedSequence`, split into a truth
+stream (initial layout, target accelerations), a sensor stream (measurement noise) and
+a fault stream (`faults`). The methods therefore see the same targets, the same noise
+and the same faults in a trial (common random numbers), and a trial gives the same
+result alone, in a batch, or in another process.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from .config import G
+from .config import G, Scenario
 
 X, Y, H, V, HEADING = range(5)
 
@@ -30,6 +36,16 @@ def fly(uavs: np.ndarray, bank: np.ndarray, dt: float, g: float = G) -> np.ndarr
     out[..., X] += step * np.cos(heading)
     out[..., Y] += step * np.sin(heading)
     out[..., HEADING] = wrap_angle(heading + (g * dt) * np.tan(bank) / uavs[..., V])
+    return out
+
+
+def believed(uavs: np.ndarray, error: np.ndarray | None) -> np.ndarray:
+    """The UAV states as the UAVs believe them: the true ground position plus their own
+    position error (..., 2) [m] (GPS), altitude, speed and heading exact. None: no error."""
+    if error is None:
+        return uavs
+    out = uavs.copy()
+    out[..., :2] += error
     return out
 
 
@@ -87,3 +103,66 @@ def target_trajectories(
     pos = np.where(folded > field_size, 2.0 * field_size - folded, folded)
     mirrored = np.mod(np.floor_divide(free, field_size), 2) == 1
     return np.concatenate([pos, np.where(mirrored, -vel, vel)], axis=-1)
+
+
+# ---------------------------------------------------------------- each trial's draws
+
+
+def children(seed: int | np.random.SeedSequence) -> tuple[np.random.SeedSequence, ...]:
+    """The (truth, sensor, faults) streams of one trial, independent children of its seed.
+
+    The children are derived from the seed's spawn key, not with `SeedSequence.spawn`,
+    whose counter would give a reused seed object different streams.
+    """
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return tuple(
+        np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, k), pool_size=seq.pool_size)
+        for k in range(3)
+    )
+
+
+def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
+    """(truth, sensor) generators of one trial (see `children`)."""
+    truth, sensor, _ = children(seed)
+    return np.random.default_rng(truth), np.random.default_rng(sensor)
+
+
+def trial_seed(seed: int, trial: int) -> np.random.SeedSequence:
+    """The seed of trial `trial` of an experiment seeded with `seed`.
+
+    Equal to ``SeedSequence(seed).spawn(n)[trial]`` for any n > trial.
+    """
+    return np.random.SeedSequence(seed, spawn_key=(trial,))
+
+
+def initial_conditions(
+    scenario: Scenario, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Draw one trial's truth and prior (all assumed; see the parameter table).
+
+    Targets start uniformly in the field with N(0, v0^2) velocity components; UAVs
+    start in a square of side `uav.start_spread` at the field centre with uniform
+    headings; every UAV's prior of target j is N(cue_j, P0) with cue_j the true position
+    plus N(0, sigma_p0^2) noise and zero velocity, and P0 = diag(sigma_p0^2, sigma_p0^2,
+    sigma_v0^2, sigma_v0^2), so the prior is consistent.
+
+    Returns uavs (Nu, 5), target trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4).
+    """
+    nu, nt, L = scenario.n_uavs, scenario.n_targets, scenario.field_size
+    tgt = scenario.target
+    targets = np.concatenate(
+        [rng.uniform(0.0, L, (nt, 2)), rng.normal(0.0, tgt.initial_velocity_std, (nt, 2))], axis=1
+    )
+    uavs = np.empty((nu, 5))
+    half = scenario.uav.start_spread / 2
+    uavs[:, :2] = L / 2 + rng.uniform(-half, half, (nu, 2))
+    uavs[:, 2] = scenario.altitudes()
+    uavs[:, 3] = scenario.uav.speed
+    uavs[:, 4] = rng.uniform(-np.pi, np.pi, nu)
+    est = scenario.estimation
+    prior = np.zeros((nt, 4))
+    prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
+    P0 = np.diag([est.initial_position_std**2] * 2 + [est.initial_velocity_std**2] * 2)
+    accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * [tgt.sigma_1, tgt.sigma_2]
+    trajectory = target_trajectories(targets, accel, scenario.dt, L)
+    return uavs, trajectory, prior, P0

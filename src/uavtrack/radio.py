@@ -1,0 +1,112 @@
+"""The radio of a batch of trials: what each UAV sends in a cycle, and what arrives.
+
+Messages are broadcast in numbered rounds of a protocol (the D_i flooding and the
+consensus run rounds 1, 2, ...; beacons, bids, uploads and downloads are one-round
+protocols, round 0). A message of round r of cycle k travels over the links of cycle k
+(the UAVs' 3-D distance at k within r_C, both alive), unless the fault realisation
+loses it, and is received in round r of cycle k + delay. A UAV keeps transmitting its
+last state in rounds beyond the last one it ran, so a receiver that needs more rounds
+than a sender ran gets the sender's final state.
+
+With no faults this is the paper's synchronous exchange: everything sent in round r
+of cycle k arrives in round r of cycle k over the links of k.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import NamedTuple
+
+import numpy as np
+
+from .faults import Faults
+from .network import Links
+
+
+@dataclass
+class Sent:
+    """What the UAVs sent in one cycle: its links, link states, and each protocol's rounds."""
+
+    k: int
+    links: Links
+    bad: np.ndarray | None
+    alive: np.ndarray
+    rounds: dict[str, list[dict[str, np.ndarray]]] = field(default_factory=dict)
+
+
+class Inbox(NamedTuple):
+    """One round's arrivals: the senders' content (arrays (B, N, ...) as sent), the links
+    the messages travelled (`network.Links`, before losses: what was sent) and those
+    that delivered them (after losses). Self-links are always present: a UAV's own
+    current state is always at hand."""
+
+    content: dict[str, np.ndarray]
+    links: Links
+    delivered: Links
+
+
+@dataclass(frozen=True)
+class RadioState:
+    """What the radio carries over between cycles: messages still in flight (the last
+    `delay` cycles) and the Gilbert-Elliott link states of the last step."""
+
+    history: tuple[Sent, ...] = ()
+    bad: np.ndarray | None = None
+
+
+class Radio:
+    """One cycle of the radio for a batch of trials."""
+
+    def __init__(
+        self, k: int, links: Links, alive: np.ndarray, faults: Faults, state: RadioState
+    ) -> None:
+        self.k, self.faults, self.delay = k, faults, faults.model.delay
+        self.now = Sent(k, links, faults.link_states(k, state.bad), alive)
+        self.history = state.history
+
+    def send(self, protocol: str, content: dict[str, np.ndarray]) -> None:
+        """Every UAV transmits `content` (arrays (B, N, ...)) in the next round of `protocol`."""
+        self.now.rounds.setdefault(protocol, []).append(content)
+
+    def _sent(self) -> Sent | None:
+        """The cycle whose messages arrive now."""
+        if self.delay == 0:
+            return self.now
+        for sent in self.history:
+            if sent.k == self.k - self.delay:
+                return sent
+        return None
+
+    def receive(self, protocol: str, round_: int = 0) -> Inbox | None:
+        """What arrives now of `protocol`'s round, or None when nothing was sent (the
+        first `delay` cycles)."""
+        sent = self._sent()
+        if sent is None or protocol not in sent.rounds:
+            return None
+        contents = sent.rounds[protocol]
+        content = contents[min(max(round_, 1), len(contents)) - 1]
+        faults = self.faults
+        if faults.model.loss <= 0:
+            return Inbox(content, sent.links, sent.links)
+        trial, receiver, sender = sent.links.pairs()
+        lost = faults.lost(sent.k, protocol, round_, trial, sender, receiver, sent.bad)
+        return Inbox(content, sent.links, sent.links.keep(~lost))
+
+    def receive_central(self, protocol: str):
+        """(content, delivered (B, N) bool) of an upload (UAV i -> central, delivered[i])
+        or a download (central -> UAV i) arriving now; (None, None) when nothing was sent."""
+        sent = self._sent()
+        if sent is None or protocol not in sent.rounds:
+            return None, None
+        content = sent.rounds[protocol][0]
+        B, n = sent.alive.shape
+        trial, uav = np.ogrid[:B, :n]
+        central = np.full_like(uav, n)
+        sender, receiver = (uav, central) if protocol == "upload" else (central, uav)
+        lost = self.faults.lost(sent.k, protocol, 0, trial, sender, receiver, sent.bad)
+        return content, sent.alive & ~lost
+
+    def close(self) -> RadioState:
+        """The state to carry into the next cycle."""
+        history = (*self.history, self.now)[-self.delay :] if self.delay else ()
+        return RadioState(history, self.now.bad)

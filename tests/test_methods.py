@@ -1,0 +1,100 @@
+"""The methods under faults: what each fault does to each method's decisions."""
+
+import numpy as np
+import pytest
+
+import uavtrack
+from uavtrack import fusion, network
+from uavtrack.equivalence import assert_same_trace, differences
+
+
+@pytest.fixture(scope="module")
+def scenario():
+    return uavtrack.Scenario(steps=80)
+
+
+def test_total_loss_makes_distributed_decide_exactly_as_greedy(scenario):
+    deaf = scenario.with_overrides({"faults.loss": 1.0})
+    d = uavtrack.simulate(deaf, "distributed", seed=3)
+    g = uavtrack.simulate(deaf, "greedy", seed=3)
+    assert_same_trace(d.trace, g.trace, counters=False)
+    assert (d.trace.delivered == 0).all() and (d.trace.messages > 0).any()
+    assert (d.trace.rounds == 0).all()
+
+
+def test_a_failed_uav_never_observes_or_sends_and_the_others_go_on(scenario):
+    s = scenario.with_overrides({"faults.failures": [[2, 30]], "comm_range": 80.0})
+    r = uavtrack.simulate(s, "distributed", seed=1)
+    tr = r.trace
+    assert tr.alive[:30, 2].all() and not tr.alive[30:, 2].any()
+    assert tr.alive[:, [0, 1, 3, 4]].all()
+    assert not tr.observed[30:, 2].any() and (tr.assignment[30:, 2] == -1).all()
+    assert (tr.uavs[31:, 2] == tr.uavs[30, 2]).all()  # down where it failed
+    # nothing travels through it: the others' rounds are the eccentricities without it
+    for k in range(30, s.steps):
+        adj = network.adjacency(tr.uavs[k], s.comm_range)
+        adj[2, :] = adj[:, 2] = False
+        depth, _ = fusion.eccentricity(adj)
+        assert np.array_equal(tr.rounds[k, [0, 1, 3, 4]], depth[[0, 1, 3, 4]]), k
+    assert tr.observed[30:, [0, 1, 3, 4]].any()
+    assert r.failed == 1.0
+    # every other method drops it the same way
+    for method in ("centralized", "greedy"):
+        other = uavtrack.simulate(s, method, seed=1).trace
+        assert not other.observed[30:, 2].any() and (other.assignment[30:, 2] == -1).all()
+
+
+@pytest.mark.parametrize(
+    "faults",
+    [{}, {"faults.round_budget": 2}, {"faults.failure_rate": 0.005}, {"faults.position_std": 3.0}],
+)
+def test_robust_options_change_no_decision_without_delay_and_loss(scenario, faults):
+    plain = scenario.with_overrides(faults)
+    robust = plain.with_overrides({"robust.extra_rounds": 2, "robust.stale": True})
+    for method in ("distributed", "centralized", "greedy"):
+        a = uavtrack.simulate(plain, method, seed=4).trace
+        b = uavtrack.simulate(robust, method, seed=4).trace
+        assert_same_trace(a, b, counters=False)
+
+
+def test_extra_rounds_help_under_loss_and_cost_messages(scenario):
+    lossy = scenario.with_overrides({"faults.loss": 0.4})
+    a = uavtrack.simulate(lossy, "distributed", seed=2, trace=True)
+    b = uavtrack.simulate(lossy.with_overrides({"robust.extra_rounds": 3}), "distributed", seed=2)
+    assert b.trace.rounds.mean() > a.trace.rounds.mean()
+    assert b.messages > a.messages
+    assert differences(a.trace, b.trace, counters=False)  # the estimates differ
+
+
+def test_delay_makes_information_stale_and_stale_option_predicts_it(scenario):
+    late = scenario.with_overrides({"faults.delay": 2})
+    a = uavtrack.simulate(late, "distributed", seed=5)
+    b = uavtrack.simulate(late.with_overrides({"robust.stale": True}), "distributed", seed=5)
+    on_time = uavtrack.simulate(scenario, "distributed", seed=5)
+    assert differences(a.trace, on_time.trace, counters=False)
+    assert differences(a.trace, b.trace, counters=False)
+    # the first two cycles hear nobody: every UAV decides alone, as greedy does
+    g = uavtrack.simulate(late, "greedy", seed=5)
+    assert np.array_equal(a.trace.assignment[:2], g.trace.assignment[:2])
+
+
+def test_centralized_lost_downloads_keep_the_previous_target(scenario):
+    lossy = scenario.with_overrides({"faults.loss": 0.5})
+    tr = uavtrack.simulate(lossy, "centralized", seed=6).trace
+    changed = (tr.assignment[1:] != tr.assignment[:-1]).mean()
+    perfect = uavtrack.simulate(scenario, "centralized", seed=6).trace
+    assert changed < (perfect.assignment[1:] != perfect.assignment[:-1]).mean() + 0.05
+    assert (tr.delivered < tr.messages).any()
+    total = uavtrack.simulate(scenario.with_overrides({"faults.loss": 1.0}), "centralized", seed=6)
+    # no download ever arrives: every UAV keeps the target it chose alone at the start
+    assert (total.trace.assignment == total.trace.assignment[0]).all()
+
+
+def test_conflicts_count_doubled_targets_while_one_is_free():
+    from uavtrack.simulation import conflicts
+
+    target = np.array([[0, 0, 1, 1, 2], [0, 1, 2, 3, 0], [0, 0, 0, 1, -1]])
+    alive = np.array([[True] * 5, [True] * 5, [True] * 4 + [False]])
+    # trial 0: targets 0 and 1 doubled while 3 is free; trial 1: every target covered;
+    # trial 2: target 0 tripled while 2 and 3 are free
+    assert conflicts(target, alive, 4).tolist() == [2, 0, 1]
