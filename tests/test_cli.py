@@ -172,6 +172,12 @@ def test_trace_to_a_folder_or_special_file_is_refused(capsys, tmp_path, target):
         ("field_size=inf", "field_size: Input should be a finite number"),
         ("dt=1e308", "dt: Input should be less than or equal to 10"),
         ("uav.altitudes=[400, 410, nan, 430, 440]", "uav.altitudes.2: Input should be a finite"),
+        ("faults.loss=1.5", "faults.loss: Input should be less than or equal to 1"),
+        ("faults.loss=-0.1", "faults.loss: Input should be greater than or equal to 0"),
+        ("faults.failures=[[7, 10]]", "faults.failures names UAV 7, which does not exist"),
+        ("faults.delay=0.5", "faults.delay: Input should be a valid integer"),
+        ("faults.round_budget=0", "faults.round_budget: Input should be greater than or equal"),
+        ("robust.stale=1", "robust.stale: Input should be a valid boolean"),
     ],
 )
 def test_bad_values_are_refused_before_any_work(capsys, setting, message):

@@ -132,7 +132,7 @@ def test_animate(tmp_path, capsys):
     )
     assert code == 0, err
     with Image.open(out) as im:
-        assert im.n_frames == 4
+        assert im.n_frames == 5  # steps 0, 3, 6, 9 and the last, 11
     assert [p.name for p in tmp_path.iterdir()] == ["run.gif"]
 
 
@@ -177,6 +177,8 @@ def test_tampered_job_files_are_set_aside_and_recomputed(tmp_path, capsys):
         f"{edited.stem}.rejected.json",
         f"{truncated.stem}.rejected.json",
     }
+    kept = json.loads((out / "failed" / f"{edited.stem}.rejected.json").read_text())
+    assert "checksum" in kept["reason"] and json.loads(kept["content"]) == record
     empty.write_text("")
     code, _, err = run_cli(capsys, *tiny_sweep(out))
     assert code == 0 and "set aside" in err and "Traceback" not in err
@@ -419,3 +421,60 @@ def test_sweep_of_negative_values_and_messages_name_the_sweep(tmp_path, capsys):
     assert "--set" not in err
     code, _, err = run_cli(capsys, "sweep", "dt", "--", "0.5", "--trials", "2")
     assert code == 2 and "put options before '--'" in err
+
+
+def test_robustness_writes_a_figure_per_fault_and_a_report(tmp_path, capsys):
+    out = tmp_path / "r"
+    code, stdout, err = run_cli(
+        capsys,
+        "robustness",
+        "--quick",
+        "--trials",
+        "2",
+        "--steps",
+        "12",
+        "--out",
+        str(out),
+        "--no-progress",
+    )
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    names = ("loss", "burst", "delay", "round_budget", "failure_rate", "position_std")
+    assert tuple(summary["faults"]) == names
+    for name in names:
+        fault = summary["faults"][name]
+        assert set(fault["series"]) == {"distributed", "robust", "centralized", "greedy"}
+        assert len(fault["series"]["distributed"]) == len(fault["levels"])
+        # the first level is "no fault": every fault's first row is the same runs
+        first = fault["series"]["greedy"][0]["mean"]
+        assert first == summary["faults"]["loss"]["series"]["greedy"][0]["mean"] or name == "burst"
+        with Image.open(out / f"fault_{name}.png") as im:
+            assert im.size[0] > 500
+    assert set(summary["ablation"]) == set(names)
+    report = (out / "report.md").read_text()
+    assert "## loss: `faults.loss`" in report and "Which mechanism helps" in report
+    assert "fault" in stdout and "robust" in stdout
+
+
+def test_sweep_of_a_fault_field(tmp_path, capsys):
+    code, stdout, err = run_cli(
+        capsys,
+        "sweep",
+        "faults.round_budget",
+        "none",
+        "1",
+        "--trials",
+        "2",
+        "--steps",
+        "15",
+        "--out",
+        str(tmp_path / "s"),
+        "--no-progress",
+        "--workers",
+        "1",
+    )
+    assert code == 0, err
+    summary = json.loads((tmp_path / "s" / "summary.json").read_text())
+    assert summary["values"] == [None, 1] and summary["unit"] == "rounds"
+    assert len(summary["paired"]["distributed - greedy"]) == 2
+    assert "none" in stdout

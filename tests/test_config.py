@@ -171,3 +171,22 @@ def test_parse_value_refuses_line_breaks():
     assert parse_value("[1, 2]") == [1, 2] and parse_value("abc") == "abc"
     with pytest.raises(ScenarioError, match="spans several lines"):
         parse_value("5\nn_uavs = 3")
+
+
+def test_constructor_errors_are_one_line_scenario_errors():
+    for fields, message in (
+        ({"dt": math.nan}, "dt: Input should be a finite number (got nan)"),
+        ({"foo": 1}, "unknown field 'foo'"),
+        ({"sensor": {"half_fov_deg": 95}}, "sensor.half_fov_deg: Input should be less than 90"),
+    ):
+        with pytest.raises(ScenarioError) as info:
+            Scenario(**fields)
+        assert str(info.value).startswith(message) and "\n" not in str(info.value)
+
+
+def test_none_unsets_an_optional_field():
+    assert parse_value("none") is None
+    s = Scenario().with_overrides({"faults.round_budget": 3})
+    assert (
+        s.with_overrides({"faults.round_budget": parse_value("none")}).faults.round_budget is None
+    )

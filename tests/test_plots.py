@@ -82,9 +82,9 @@ def test_animation_frames_legend_and_link_colour(tmp_path, monkeypatch):
     monkeypatch.setattr(plots.plt.Axes, "legend", keep)
     frames = []
     n = plots.animate(trace, scenario, tmp_path / "a.gif", every=2, progress=frames.append)
-    assert n == 3 and len(frames) == 3
+    assert n == 4 and len(frames) == 4  # steps 0, 2, 4 and the last, 5
     with Image.open(tmp_path / "a.gif") as im:
-        assert im.size == (1000, 800) and im.n_frames == 3
+        assert im.size == (1000, 800) and im.n_frames == 4
     labels = [h.get_label() for h in legends[0]]
     assert "radio link" in labels and "observation disk" in labels
     link = next(h for h in legends[0] if h.get_label() == "radio link")

@@ -403,6 +403,13 @@ class Scenario(_Part):
         default_factory=RobustModel, description="robustness mechanisms (off: the paper)"
     )
 
+    def __init__(self, **data: Any) -> None:
+        # one line naming the field, as for files and overrides, not pydantic's report
+        try:
+            super().__init__(**data)
+        except ValidationError as exc:
+            raise ScenarioError(describe_errors(exc)) from None
+
     @model_validator(mode="after")
     def _altitude_count(self) -> Scenario:
         if self.uav.altitudes is not None and len(self.uav.altitudes) != self.n_uavs:
@@ -449,6 +456,8 @@ class Scenario(_Part):
             return cls.model_validate(data)
         except ValidationError as exc:
             raise ScenarioError(f"{origin}: {describe_errors(exc)}") from None
+        except ScenarioError as exc:  # raised by __init__, which validation calls
+            raise ScenarioError(f"{origin}: {exc}") from None
 
     def with_overrides(self, overrides: dict[str, Any], origin: str = "override") -> Scenario:
         """A copy with dotted fields replaced, e.g. ``{"sensor.half_fov_deg": 10}``.
@@ -547,13 +556,16 @@ def describe_errors(exc: ValidationError) -> str:
 
 
 def parse_value(text: str, where: str = "value") -> Any:
-    """Read a command-line value as TOML (numbers, booleans, lists), else as a string.
+    """Read a command-line value as TOML (numbers, booleans, lists), ``none`` as None (an
+    optional field left unset), else as a string.
 
     A value is one line: text after a line break would otherwise be read as more TOML
     or dropped. `where` names the value in the error message.
     """
     if "\n" in text or "\r" in text:
         raise ScenarioError(f"{where}: value {text!r} spans several lines; give it on one line")
+    if text.strip() == "none":  # TOML has no null: `none` unsets an optional field
+        return None
     try:
         return tomllib.loads(f"v = {text}")["v"]
     except tomllib.TOMLDecodeError:

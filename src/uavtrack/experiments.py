@@ -128,6 +128,22 @@ def label_of(overrides: dict[str, Any]) -> str:
     return ",".join(f"{k}={_fmt(v)}" for k, v in sorted(overrides.items()))
 
 
+def difference(base: Scenario, scenario: Scenario) -> dict[str, Any]:
+    """The dotted fields where `scenario` differs from `base`, with its values."""
+    was, now = _flatten(base.to_dict()), _flatten(scenario.to_dict())
+    return {k: now[k] for k in now if now[k] != was.get(k)}
+
+
+def _flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(_flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def _fmt(value: Any) -> str:
     if isinstance(value, float) and value.is_integer():
         return str(int(value))
@@ -145,7 +161,7 @@ def trial_jobs(
 ) -> list[Job]:
     """Jobs covering trials 0 .. trials-1 of base+overrides with one method."""
     scenario = base.with_overrides(overrides, origin=origin)
-    label = "default" if scenario == base else label_of(overrides)
+    label = label_of(difference(base, scenario))  # equal scenarios, equal labels
     return [
         Job("trials", label, method, scenario, first, min(chunk, trials - first), seed)
         for first in range(0, trials, chunk)

@@ -27,8 +27,9 @@ os.umask(_UMASK)
 def check_output(path: str | Path, option: str) -> Path:
     """Refuse early an output file that cannot be written, before any long computation.
 
-    The target must be a regular file or not exist, and its folder must exist and be
-    writable. `option` names the argument in the message (``--trace``).
+    The target must be a regular file or not exist, and its folder must exist and take
+    a file (tried, not read off the permission bits). `option` names the argument in the
+    message (``--trace``).
     """
     path = Path(path).expanduser()
     if path.is_dir():
@@ -38,8 +39,12 @@ def check_output(path: str | Path, option: str) -> Path:
     parent = path.resolve().parent
     if not parent.is_dir():
         raise UsageError(f"{option}: directory {parent} does not exist")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise UsageError(f"{option}: directory {parent} is not writable")
+    try:  # a real write: permission bits say nothing to root, or on /proc
+        with tempfile.NamedTemporaryFile(dir=parent, prefix=".uavtrack-probe-"):
+            pass
+    except OSError as exc:
+        reason = exc.strerror or str(exc)
+        raise UsageError(f"{option}: cannot write in directory {parent} ({reason})") from None
     return path
 
 

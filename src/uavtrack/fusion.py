@@ -49,7 +49,7 @@ def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> n
             offered[delivered.trial, delivered.sender], delivered.starts, axis=0
         )
         return known | heard.reshape(known.shape)
-    grown = np.matmul(delivered.dense.astype(np.float64), offered.astype(np.float64)) > 0
+    grown = np.matmul(delivered.weights, offered.astype(np.float64)) > 0
     return known | grown
 
 
@@ -69,9 +69,10 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
         top = np.maximum.reduceat(values, delivered.starts, axis=0)
         lowest = np.where(values == top[delivered.segment], q[:, None], n)
         return np.minimum.reduceat(lowest, delivered.starts, axis=0).reshape(own.shape)
-    values = np.where(delivered.dense[..., None], offered[:, None, :, :], -np.inf)
-    idx = np.arange(n)
-    values[:, idx, idx] = own  # the receiver's own current tuple
+    values = offered[:, None, :, :] + delivered.penalty
+    if own is not offered:  # what a UAV offered is not its current tuple (delay)
+        idx = np.arange(n)
+        values[:, idx, idx] = own
     return np.argmax(values, axis=-2)  # first maximum = lowest index
 
 
@@ -128,8 +129,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
         if inbox is None:  # nothing in flight yet: nothing to learn
             depth[running] = r - 1
             break
-        sent += (inbox.links.incoming() * running).sum(axis=1)
-        delivered += (inbox.delivered.incoming() * running).sum(axis=1)
+        sent, delivered = count(inbox, running, sent, delivered)
         grown = flood(known, inbox.content["known"], inbox.delivered)
         stopped = running & ~(grown != known).any(axis=-1)
         depth[stopped] = r - 1
@@ -139,6 +139,16 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = budget
             break
     return Depth(depth, sent, delivered)
+
+
+def count(inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray):
+    """Add a round's messages to the totals (B,): one per link into a receiving UAV,
+    sent over `inbox.links`, delivered over `inbox.delivered`."""
+    into = inbox.links.incoming()
+    now = np.einsum("bn,bn->b", into, receiving)
+    if inbox.delivered is inbox.links:  # nothing lost
+        return sent + now, delivered + now
+    return sent + now, delivered + np.einsum("bn,bn->b", inbox.delivered.incoming(), receiving)
 
 
 @dataclass(frozen=True)
@@ -179,8 +189,7 @@ def consensus(
         if inbox is None:
             continue
         offered = inbox.content if receive is None else receive(inbox.content)
-        sent += (inbox.links.incoming() * active).sum(axis=1)
-        delivered += (inbox.delivered.incoming() * active).sum(axis=1)
+        sent, delivered = count(inbox, active, sent, delivered)
         best = adopt(score(tuples), score(offered), inbox.delivered)
         best = np.where(active[..., None], best, np.arange(n)[:, None])
         tuples = pick(tuples, offered, best)
@@ -200,8 +209,21 @@ def perfect_radio(adjacency: np.ndarray, form: str = "auto") -> Radio:
     return Radio(0, network.links(adj, form), alive, faults, RadioState())
 
 
-def _flat(adjacency: np.ndarray) -> np.ndarray:
-    return adjacency.reshape((-1,) + adjacency.shape[-2:])
+def _flat(adjacency: np.ndarray, confidence: np.ndarray | None = None) -> np.ndarray:
+    """The graphs as (B, N, N), after checking them against the confidences (..., N, M)."""
+    adjacency = np.asarray(adjacency)
+    if adjacency.ndim < 2 or adjacency.shape[-1] != adjacency.shape[-2]:
+        raise ValueError(f"adjacency must be (..., N, N), got shape {adjacency.shape}")
+    if confidence is not None:
+        lead, n = confidence.shape[:-2], confidence.shape[-2]
+        if confidence.ndim < 2 or adjacency.shape != lead + (n, n):
+            raise ValueError(
+                f"adjacency {adjacency.shape} does not match confidence {confidence.shape}: "
+                "expected (..., N, N) for confidence (..., N, M)"
+            )
+        if not np.all(np.isfinite(confidence)):
+            raise ValueError("confidence must be finite")
+    return adjacency.astype(bool).reshape((-1,) + adjacency.shape[-2:])
 
 
 def eccentricity(adjacency: np.ndarray, form: str = "auto") -> tuple[np.ndarray, np.ndarray]:
@@ -224,7 +246,7 @@ def consensus_rounds(
     confidence: (..., N, M); adjacency: (..., N, N) bool (diagonal ignored); rounds:
     (..., N) int. Returns source (..., N, M): index of the UAV whose initial tuple i holds.
     """
-    radio = perfect_radio(_flat(adjacency), form)
+    radio = perfect_radio(_flat(adjacency, confidence), form)
     n, m = confidence.shape[-2:]
     gamma = confidence.reshape(-1, n, m)
     out = consensus(radio, {"gamma": gamma, "source": identity(gamma.shape)}, rounds.reshape(-1, n))
@@ -252,7 +274,7 @@ def fuse(confidence: np.ndarray, adjacency: np.ndarray, form: str = "auto") -> C
 
     A user-given adjacency may mark a UAV as its own neighbour; the diagonal is ignored.
     """
-    radio = perfect_radio(_flat(adjacency), form)
+    radio = perfect_radio(_flat(adjacency, confidence), form)
     n, m = confidence.shape[-2:]
     gamma = confidence.reshape(-1, n, m)
     depth = learn_depth(radio, np.ones(gamma.shape[:2], dtype=bool))

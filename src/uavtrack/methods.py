@@ -176,10 +176,10 @@ class Distributed(Method):
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
         sent = np.zeros(B, dtype=np.int64)
         delivered = np.zeros(B, dtype=np.int64)
+        everyone = np.ones((B, n), dtype=bool)
         for arrived in (beacon, inbox):
             if arrived is not None:
-                sent += arrived.links.incoming().sum(axis=1)
-                delivered += arrived.delivered.incoming().sum(axis=1)
+                sent, delivered = fusion.count(arrived, everyone, sent, delivered)
         alive = inputs.alive
         idx = np.arange(n)
         held = inputs.held
@@ -203,7 +203,8 @@ class Distributed(Method):
                 members = got
                 view = np.broadcast_to(offered["bids"][:, None], (B, n, n, m)).copy()
             view[:, idx, idx] = bids  # a UAV's own bids are current
-        members = members & alive[:, :, None] & alive[:, None, :]
+        if not alive.all():
+            members = members & alive[:, :, None] & alive[:, None, :]
         target, seconds = assignment.auction(view, members, type(self).solve)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
 

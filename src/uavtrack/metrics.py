@@ -108,10 +108,10 @@ class Tally:
         gamma = confidence(cov)
         if not everyone:
             gamma = np.where(alive[..., None], gamma, -np.inf)
-        best = np.argmax(gamma, axis=1)[:, None, :]  # (B, 1, Nt)
+        best = np.argmax(gamma, axis=1)  # (B, Nt)
         anyone = alive.any(axis=1)
-        best_mean = np.take_along_axis(mean, best[..., None], axis=1)[:, 0]
-        best_cov = np.take_along_axis(cov, best[..., None, None], axis=1)[:, 0]
+        b, j = np.arange(best.shape[0])[:, None], np.arange(best.shape[1])
+        best_mean, best_cov = mean[b, best, j], cov[b, best, j]
         err = best_mean[..., :2] - truth[..., :2]
         s["squared_error_best"] += np.where(anyone, (err * err).sum(axis=(1, 2)), 0.0)
         s["best"] += anyone * self.n_targets
@@ -178,6 +178,15 @@ class Tally:
             "failed": self.failed,
             "decision_time_ms": decision,
         }
+
+
+def rank_names(n: int) -> list[str]:
+    """Names of the places of n sorted rates: lowest, 2nd lowest, ..., highest."""
+    if n == 1:
+        return ["only"]
+    ordinal = {2: "2nd", 3: "3rd"}
+    middle = [f"{ordinal.get(k, f'{k}th')} lowest" for k in range(2, n)]
+    return ["lowest", *middle, "highest"]
 
 
 def sorted_rates(per_target: np.ndarray) -> np.ndarray:

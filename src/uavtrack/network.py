@@ -91,6 +91,16 @@ class Links:
         """Whether each edge is a self-link (edge form)."""
         return self.receiver == self.sender
 
+    @cached_property
+    def weights(self) -> np.ndarray:
+        """The dense relation as floats, for matrix products (dense form)."""
+        return self.dense.astype(np.float64)
+
+    @cached_property
+    def penalty(self) -> np.ndarray:
+        """0 where a link exists, -inf elsewhere, (B, N, N, 1) (dense form)."""
+        return np.where(self.dense, 0.0, -np.inf)[..., None]
+
     def pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(trial, receiver, sender) index arrays in the layout of this form's masks."""
         if self.edges:
@@ -110,6 +120,10 @@ class Links:
 
     def incoming(self) -> np.ndarray:
         """Links into each receiver from others, (B, N) int."""
+        return self._incoming
+
+    @cached_property
+    def _incoming(self) -> np.ndarray:
         if self.edges:
             out = np.zeros(self.batch * self.n, dtype=np.int64)
             np.add.at(out, self.segment[~self.own], 1)

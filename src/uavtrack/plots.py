@@ -17,12 +17,20 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib import patheffects  # noqa: E402
 from matplotlib.patches import Circle, Ellipse  # noqa: E402
 
 from .files import replacing  # noqa: E402
+from .metrics import rank_names  # noqa: E402
 
 COLORS = {"distributed": "#1f77b4", "centralized": "#2ca02c", "greedy": "#d62728"}
 RANK_COLORS = ["#c6dbef", "#9ecae1", "#6baed6", "#3182bd", "#08519c", "#08306b"]
+
+
+def _rate_bars(mean, std) -> np.ndarray:
+    """(2, n) error bars of ±1 std around rates, cut at the [0, 1] a rate lives in."""
+    mean, std = _num(mean), _num(std)
+    return np.stack([np.minimum(std, mean), np.minimum(std, 1.0 - mean)])
 
 
 def _num(values) -> np.ndarray:
@@ -45,8 +53,10 @@ def _bars(
     groups: Sequence[str],
     series: dict[str, tuple[Sequence[float], Sequence[float]]],
     colors: dict[str, str] | Sequence[str],
+    rates: bool = True,
 ) -> None:
-    """Grouped bars with error bars: series name -> (means per group, stds per group)."""
+    """Grouped bars with error bars: series name -> (means per group, stds per group);
+    the bars of rates are cut at [0, 1]."""
     n = len(series)
     width = 0.8 / n
     x = np.arange(len(groups))
@@ -56,7 +66,7 @@ def _bars(
             x + (k - (n - 1) / 2) * width,
             _num(mean),
             width,
-            yerr=_num(std),
+            yerr=_rate_bars(mean, std) if rates else _num(std),
             capsize=3,
             label=name,
             color=color,
@@ -67,11 +77,6 @@ def _bars(
     ax.set_xticks(x, groups)
     ax.grid(axis="y", alpha=0.3)
     ax.set_axisbelow(True)
-
-
-def _rank_names(n: int) -> list[str]:
-    names = ["lowest"] + [f"#{k + 1}" for k in range(1, n - 1)] + ["highest"]
-    return names[:n] if n > 1 else ["only"]
 
 
 def fig5(summary: dict[str, Any], path: Path) -> None:
@@ -115,7 +120,7 @@ def fig6(summary: dict[str, Any], path: Path) -> None:
     nt = len(next(iter(compare.values()))["sorted_mean"])
     series = {m: (r["sorted_mean"], r["sorted_std"]) for m, r in compare.items()}
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    _bars(ax, _rank_names(nt), series, COLORS)
+    _bars(ax, rank_names(nt), series, COLORS)
     ax.set_ylim(0, 1.15)
     ax.set_ylabel("observation rate")
     ax.set_xlabel("targets of each trial, sorted by their observation rate")
@@ -130,7 +135,7 @@ def fig7(summary: dict[str, Any], path: Path) -> None:
     groups = [f"{n} vs {m}" for n, m in timing["grid"]]
     series = {m: (timing[m]["mean_ms"], timing[m]["std_ms"]) for m in COLORS if m in timing}
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    _bars(ax, groups, series, COLORS)
+    _bars(ax, groups, series, COLORS, rates=False)
     ax.set_yscale("log")
     # labels at 1, 2 and 5 of each decade only: every minor tick labelled would overlap
     ax.yaxis.set_major_locator(matplotlib.ticker.LogLocator(base=10, subs=(1.0, 2.0, 5.0)))
@@ -138,9 +143,13 @@ def fig7(summary: dict[str, Any], path: Path) -> None:
     ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     low, high = ax.get_ylim()
     ax.set_ylim(low, high * 3)  # room above the bars for the legend
-    ax.set_ylabel("decision time per UAV and cycle [ms]")
+    ax.set_ylabel("decision time per cycle [ms]")
     ax.set_xlabel("UAVs vs targets")
-    ax.set_title("Decision-making time (Fig. 7)")
+    ax.set_title(
+        "Decision time per cycle (Fig. 7): a UAV's own (distributed, greedy),\n"
+        "the central node's for the whole team (centralized)",
+        fontsize=10,
+    )
     ax.legend(ncols=3, fontsize=8, loc="upper left")
     save(fig, path)
 
@@ -151,21 +160,23 @@ def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> 
     rows = curve["distributed"]
     nt = len(rows[0]["sorted_mean"])
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    for rank, name in enumerate(_rank_names(nt)):
+    for rank, name in enumerate(rank_names(nt)):
         ax.errorbar(
             values,
             _num([r["sorted_mean"][rank] for r in rows]),
-            yerr=_num([r["sorted_std"][rank] for r in rows]),
+            yerr=_rate_bars(
+                [r["sorted_mean"][rank] for r in rows], [r["sorted_std"][rank] for r in rows]
+            ),
             marker="o",
             ms=4,
             capsize=3,
             color=RANK_COLORS[min(rank + 1, len(RANK_COLORS) - 1)],
-            label=f"{name} target",
+            label=f"{name} target of each trial",
         )
     ax.errorbar(
         values,
         _num([r["mean"] for r in rows]),
-        yerr=_num([r["std"] for r in rows]),
+        yerr=_rate_bars([r["mean"] for r in rows], [r["std"] for r in rows]),
         marker="s",
         ms=5,
         capsize=3,
@@ -231,7 +242,66 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
     save(fig, path)
 
 
+SERIES_STYLE = {
+    "distributed": {"color": COLORS["distributed"], "marker": "o", "label": "distributed (paper)"},
+    "robust": {
+        "color": "#9467bd",
+        "marker": "D",
+        "ls": "--",
+        "label": "distributed, robust options on",
+    },
+    "centralized": {"color": COLORS["centralized"], "marker": "s", "label": "centralized"},
+    "greedy": {"color": COLORS["greedy"], "marker": "^", "label": "greedy"},
+}
+
+
+def fault_figure(name: str, fault: dict[str, Any], path: Path) -> None:
+    """Observation rate against one fault's level, a line per series, 95% intervals."""
+    levels = fault["levels"]
+    numeric = all(isinstance(v, int | float) for v in levels)
+    x = np.asarray(levels, dtype=float) if numeric else np.arange(len(levels))
+    fig, ax = plt.subplots(figsize=(8, 4.5))
+    span = (x.max() - x.min()) if len(x) > 1 else 1.0
+    n = len(fault["series"])
+    for k, (series, rows) in enumerate(fault["series"].items()):
+        style = SERIES_STYLE.get(series, {"label": series})
+        ax.errorbar(
+            x + (k - (n - 1) / 2) * 0.012 * span,  # side by side, so the intervals show
+            _num([r["mean"] for r in rows]),
+            yerr=_num([r["ci95"] for r in rows]),
+            capsize=3,
+            ms=5,
+            **style,
+        )
+    if not numeric:
+        ax.set_xticks(x, ["none" if v is None else str(v) for v in levels])
+    ax.set_xlabel(fault["xlabel"])
+    ax.set_ylabel("observation rate (mean, 95% CI)")
+    ax.set_ylim(0, 1.05)
+    ax.grid(alpha=0.3)
+    ax.legend(fontsize=8, loc="lower left")
+    fixed = ", ".join(f"{k} = {v}" for k, v in fault.get("fixed", {}).items())
+    ax.set_title(f"Fault: {name}" + (f" ({fixed})" if fixed else ""))
+    save(fig, path)
+
+
+def robustness_figures(summary: dict[str, Any], out: Path) -> list[Path]:
+    """fault_<name>.png in `out`, one per fault."""
+    paths = []
+    for name, fault in summary["faults"].items():
+        path = Path(out) / f"fault_{name}.png"
+        fault_figure(name, fault, path)
+        paths.append(path)
+    return paths
+
+
 # ------------------------------------------------------------------ Fig. 4 animation
+
+
+def animation_frames(steps: int, every: int) -> list[int]:
+    """The steps drawn: every `every`-th, and the last one."""
+    frames = list(range(0, steps, max(1, every)))
+    return frames if frames[-1] == steps - 1 else frames + [steps - 1]
 
 
 def animate(
@@ -260,7 +330,8 @@ def animate(
     from .sensing import observation_radius
 
     T, nu, nt = trace.observed.shape
-    frames = list(range(0, T, max(1, every)))
+    frames = animation_frames(T, every)
+    outline = [patheffects.withStroke(linewidth=2.5, foreground="white")]
     radius = observation_radius(np.array(scenario.altitudes()), scenario.sensor)
     margin = radius.max() + 20
     lo = min(0.0, np.min(trace.uavs[..., :2])) - margin
@@ -290,17 +361,28 @@ def animate(
     ]
     targets = ax.scatter(np.zeros(nt), np.zeros(nt), c="black", s=30, zorder=4)
     names = [
-        ax.annotate(f"T{j}", (0, 0), xytext=(4, 4), textcoords="offset points", fontsize=8)
+        ax.annotate(
+            f"T{j}",
+            (0, 0),
+            xytext=(5, 5),
+            textcoords="offset points",
+            fontsize=8,
+            zorder=7,
+            path_effects=outline,
+        )
         for j in range(nt)
     ]
     uav_names = [
         ax.annotate(
             f"U{i}",
             (0, 0),
-            xytext=(-12, -12),
+            xytext=(-14, -14),
             textcoords="offset points",
-            fontsize=7,
+            fontsize=8,
             color=colors[i],
+            fontweight="bold",
+            zorder=7,
+            path_effects=outline,
         )
         for i in range(nu)
     ]
@@ -350,7 +432,7 @@ def animate(
         arrows.set_offsets(uavs[:, :2])
         arrows.set_UVC(15 * np.cos(uavs[:, 4]), 15 * np.sin(uavs[:, 4]))
         seen = trace.observed[: k + 1].any(axis=1).mean()
-        heading.set_text(f"{title}  step {k}  observation rate so far {seen:.2f}")
+        heading.set_text(f"{title}, step {k}, observation rate so far {seen:.2f}")
 
     anim = FuncAnimation(fig, draw, frames=frames)
     callback = (lambda done, total: progress(1)) if progress is not None else None

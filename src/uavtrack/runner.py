@@ -28,6 +28,7 @@ import fcntl
 import hashlib
 import json
 import os
+import signal
 import threading
 import time
 import traceback
@@ -44,11 +45,30 @@ from .progress import bar
 LOCK = ".lock"
 
 
+PRESENTATION = frozenset(
+    {
+        "bench.py",
+        "equivalence.py",
+        "errors.py",
+        "files.py",
+        "plots.py",
+        "progress.py",
+        "report.py",
+        "robustness.py",
+        "runner.py",
+    }
+)
+"""Modules that do not change a job's numbers (reports, figures, storage, the command line)."""
+
+
 def code_hash() -> str:
-    """SHA-256 over the package's source files: results of other code are not mixed in."""
+    """SHA-256 over the source files that compute results: results of other code are not
+    mixed in, while a change to a report, a figure or the command line keeps them."""
     digest = hashlib.sha256()
     package = Path(__file__).parent
     for path in sorted(package.rglob("*.py")):
+        if path.name in PRESENTATION or path.parent.name == "cli":
+            continue
         digest.update(path.relative_to(package).as_posix().encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
@@ -98,7 +118,7 @@ class Store:
         try:
             if path.exists():
                 self._check_manifest(path)
-            for folder in (self.raw, self.failed):
+            for folder in (self.root, self.raw, self.failed):
                 _check_writable(folder)
             if not path.exists():
                 write_json(path, self.manifest)
@@ -182,12 +202,17 @@ class Store:
         return "", record
 
     def _set_aside(self, job: Job, path: Path, problem: str) -> None:
-        target = self.failed / f"{job.key}.rejected.json"
-        os.replace(path, target)
+        """Move a job file that cannot be used to failed/, with the reason beside its
+        content, so the job is computed again."""
+        try:
+            content = path.read_bytes().decode("utf-8", errors="replace")
+        except OSError as exc:
+            content = f"(unreadable: {_reason(exc)})"
         write_json(
-            self.failed / f"{job.key}.json",
-            {"job": describe_job(job), "error": f"{path.name} set aside: {problem}"},
+            self.failed / f"{job.key}.rejected.json",
+            {"job": describe_job(job), "reason": problem, "content": content},
         )
+        path.unlink()
         self.set_aside.append((job.key, problem))
 
     def save(self, job: Job, metrics: dict[str, Any], seconds: float) -> None:
@@ -317,16 +342,21 @@ def exit_with_parent(parent: int) -> None:
             time.sleep(0.5)
         os._exit(1)
 
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
     threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
 
 
 def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
-    """Run jobs in worker processes; yield results as they finish."""
+    """Run jobs in worker processes; yield results as they finish.
+
+    At most two jobs per worker are queued at a time, so an interruption finds little to
+    cancel; it stops the workers at once (they ignore Ctrl-C, which is this process's).
+    """
     if workers == 1:
         for job in jobs:
             yield guarded(job)
         return
-    from concurrent.futures import as_completed
+    from concurrent.futures import FIRST_COMPLETED, wait
 
     from joblib.externals.loky import get_reusable_executor
     from joblib.externals.loky.process_executor import TerminatedWorkerError
@@ -334,19 +364,60 @@ def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
     executor = get_reusable_executor(
         max_workers=workers, timeout=30, initializer=exit_with_parent, initargs=(os.getpid(),)
     )
-    futures = [executor.submit(guarded, job) for job in jobs]
+    waiting, running = list(reversed(jobs)), set()
     try:
-        for future in as_completed(futures):
-            try:
-                yield future.result()
-            except TerminatedWorkerError as exc:
-                lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
-                raise EngineError(f"a worker process died ({lines[-1]})") from None
+        while waiting or running:
+            while waiting and len(running) < 2 * workers:
+                running.add(executor.submit(guarded, waiting.pop()))
+            done, running = wait(running, return_when=FIRST_COMPLETED)
+            for future in done:
+                try:
+                    yield future.result()
+                except TerminatedWorkerError as exc:
+                    lines = [line.strip() for line in str(exc).splitlines() if line.strip()]
+                    raise EngineError(f"a worker process died ({lines[-1]})") from None
     finally:
-        if not all(f.done() for f in futures):  # interrupted or failed: stop the workers now
-            for future in futures:
-                future.cancel()
-            executor.shutdown(wait=True, kill_workers=True)
+        if running:  # interrupted or failed: stop the workers now
+            _stop(executor)
+
+
+def _stop(executor) -> None:
+    """Kill the executor's workers. Its manager thread may report the jobs it loses
+    as it goes down; those reports are expected here and are not shown."""
+    hook = threading.excepthook
+
+    def quiet(args) -> None:
+        if args.thread is None or "ExecutorManager" not in args.thread.name:
+            hook(args)
+
+    threading.excepthook = quiet
+    try:
+        executor.shutdown(wait=True, kill_workers=True)
+    finally:
+        threading.excepthook = hook
+
+
+def check_scheduler(address: str, timeout: float = 5.0) -> None:
+    """Refuse at once a Dask scheduler address that nothing answers (tcp:// or tls://)."""
+    import socket
+    from urllib.parse import urlsplit
+
+    parts = urlsplit(address if "://" in address else f"tcp://{address}")
+    if parts.scheme not in ("tcp", "tls"):
+        return  # other transports are left to Dask
+    try:
+        host, port = parts.hostname, parts.port
+    except ValueError:
+        host, port = None, None
+    if not host or not port:
+        raise UsageError(f"--address {address}: expected tcp://HOST:PORT")
+    try:
+        socket.create_connection((host, port), timeout=timeout).close()
+    except OSError as exc:
+        reason = exc.strerror or str(exc) or type(exc).__name__
+        raise UsageError(
+            f"--address {address}: no Dask scheduler answers there ({reason})"
+        ) from None
 
 
 def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[tuple]:

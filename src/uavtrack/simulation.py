@@ -323,9 +323,9 @@ def conflicts(target: np.ndarray, alive: np.ndarray, n_targets: int) -> np.ndarr
     target: (B, Nu) (-1 for a failed UAV); alive (B, Nu). Returns (B,) int.
     """
     B = target.shape[0]
-    counts = np.zeros((B, n_targets), dtype=np.int64)
-    b, i = np.nonzero(alive & (target >= 0))
-    np.add.at(counts, (b, target[b, i]), 1)
+    valid = alive & (target >= 0)
+    code = (np.arange(B)[:, None] * n_targets + target)[valid]
+    counts = np.bincount(code, minlength=B * n_targets).reshape(B, n_targets)
     return np.where((counts == 0).any(axis=-1), (counts >= 2).sum(axis=-1), 0)
 
 

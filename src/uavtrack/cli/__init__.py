@@ -1,4 +1,5 @@
-"""Command line: ``uavtrack run | compare | reproduce | sweep | animate | bench | params``.
+"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | animate | bench |
+params``.
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
 ``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130
@@ -7,7 +8,6 @@ interrupted (Ctrl-C; finished work is kept, no partial file is left).
 
 from __future__ import annotations
 
-import math
 import os
 import sys
 from enum import StrEnum
@@ -107,13 +107,19 @@ def load_scenario(config: Path | None, overrides: list[str] | None) -> Scenario:
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """``["a.b=1", "c=[1, 2]"]`` -> ``{"a.b": 1, "c": [1, 2]}`` (values read as TOML)."""
+    """``["a.b=1", "c=[1, 2]"]`` -> ``{"a.b": 1, "c": [1, 2]}`` (values read as TOML).
+
+    A field set twice is refused: which of the two was meant cannot be told.
+    """
     out: dict[str, Any] = {}
     for item in items:
         name, sep, text = item.partition("=")
-        if not sep or not name.strip():
+        name = name.strip()
+        if not sep or not name:
             raise ScenarioError(f"--set expects FIELD=VALUE, got {item!r}")
-        out[name.strip()] = parse_value(text.strip(), where=f"--set {name.strip()}")
+        if name in out:
+            raise ScenarioError(f"--set {name} is given twice; give each field once")
+        out[name] = parse_value(text.strip(), where=f"--set {name}")
     return out
 
 
@@ -190,13 +196,13 @@ def run(
         typer.echo(f"trace written to {trace}")
 
 
-COMPARE_COLUMNS = (
-    ("rmse_best", "RMSE best [m]", "{:.1f}"),
-    ("rmse", "RMSE all [m]", "{:.1f}"),
-    ("nees_best", "NEES best", "{:.1f}"),
-    ("rounds", "rounds", "{:.2f}"),
-    ("messages", "messages", "{:.1f}"),
-    ("decision_time_ms", "decision [ms]", "{:.3f}"),
+COMPARE_ROWS = (
+    ("rmse_best", "RMSE, best estimate [m]", "{:.2f}"),
+    ("rmse", "RMSE, every UAV's [m]", "{:.2f}"),
+    ("nees_best", "NEES, best estimate", "{:.2f}"),
+    ("rounds", "rounds per UAV and step", "{:.2f}"),
+    ("messages", "messages per step", "{:.1f}"),
+    ("decision_time_ms", "decision time [ms]", "{:.3f}"),
 )
 
 
@@ -245,26 +251,30 @@ def compare(
     from rich.markup import escape
     from rich.table import Table
 
+    from ..report import pm
+
     table = Table(
-        title=f"{trials} trials of {scenario.steps} steps, seed {seed} (mean over trials)",
-        caption="best: the team's best estimate of each target; all: every UAV's estimate. "
-        "Decision time: trial 0, run alone.",
+        title=f"{trials} trials of {scenario.steps} steps, seed {seed}: mean over trials",
+        caption="Best estimate: per target, the most confident UAV's. Decision time: trial 0, "
+        "run alone.",
         caption_justify="left",
     )
-    table.add_column("method")
-    table.add_column("observation rate ± std", justify="right")
-    table.add_column("per target 0, 1, ...")
-    for _, label, _ in COMPARE_COLUMNS:
-        table.add_column(escape(label), justify="right")
-    for name, r in results.items():
-        rate = r["observation_rate"]
-        spread = "" if math.isnan(rate["std"]) else f" ± {rate['std']:.4f}"
+    table.add_column("metric", no_wrap=True)
+    for name in results:
+        table.add_column(name, justify="right", no_wrap=True)
+    table.add_row(
+        "observation rate ± std",
+        *(
+            pm(r["observation_rate"]["mean"], r["observation_rate"]["std"], 3)
+            for r in results.values()
+        ),
+    )
+    for j in range(scenario.n_targets):
         table.add_row(
-            name,
-            f"{rate['mean']:.4f}{spread}",
-            " ".join(f"{x:.3f}" for x in r["per_target"]["mean"]),
-            *(fmt.format(r[key]["mean"]) for key, _, fmt in COMPARE_COLUMNS),
+            f"  target {j}", *(f"{r['per_target']['mean'][j]:.3f}" for r in results.values())
         )
+    for key, label, fmt in COMPARE_ROWS:
+        table.add_row(escape(label), *(fmt.format(r[key]["mean"]) for r in results.values()))
     console().print(table)
 
 
@@ -372,4 +382,4 @@ def interrupted(kept: str) -> int:
 
 
 # the other commands register themselves on `app`
-from . import benchmark, experiments  # noqa: E402, F401
+from . import benchmark, experiments, robustness  # noqa: E402, F401

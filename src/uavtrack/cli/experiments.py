@@ -51,7 +51,10 @@ AddressOpt = Annotated[
 SeedOpt = Annotated[
     int, typer.Option(min=0, metavar="N", help="experiment seed (trial t uses its t-th child)")
 ]
-ProgressOpt = Annotated[bool, typer.Option("--progress/--no-progress", help="show a progress bar")]
+ProgressOpt = Annotated[
+    bool | None,
+    typer.Option("--progress/--no-progress", help="show a progress bar [when on a terminal]"),
+]
 StepsOpt = Annotated[int | None, typer.Option(min=1, metavar="N", help="steps per trial [500]")]
 
 
@@ -70,12 +73,15 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
 
     from ..errors import RunError
     from ..experiments import unique
-    from ..runner import Store, execute, resolve_workers
+    from ..progress import on_terminal
+    from ..runner import Store, check_scheduler, execute, resolve_workers
     from ..simulation import available_memory, check_memory, memory_estimate
 
     jobs = unique(j for group in plan.values() for j in group)
     if address and engine != EngineName.dask:
         raise UsageError("--address needs --engine dask")
+    if address:
+        check_scheduler(address)  # before anything is written
     workers, capped = resolve_workers(workers)
     if capped:
         note(capped)
@@ -86,6 +92,8 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
     if workers > fits:
         note(f"{workers} workers would not fit in memory; using {fits}")
         workers = fits
+    if progress is None:
+        progress = on_terminal()
     start = time.perf_counter()
     with Store(out, manifest) as store:
         try:
@@ -166,7 +174,7 @@ def reproduce(
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
-    progress: ProgressOpt = True,
+    progress: ProgressOpt = None,
 ) -> None:
     """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder."""
     from dataclasses import replace
@@ -249,7 +257,7 @@ def sweep(
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
-    progress: ProgressOpt = True,
+    progress: ProgressOpt = None,
 ) -> None:
     """Vary one scenario field; every method on the same trials at every value."""
     from .. import plots, report
@@ -290,7 +298,7 @@ def sweep(
     from rich.markup import escape
     from rich.table import Table
 
-    from ..report import pm
+    from ..report import level_text, pm
 
     unit = f" [{summary['unit']}]" if summary["unit"] else ""
     table = Table(title=f"observation rate against {field} (mean ± std, {trials} trials)")
@@ -299,7 +307,7 @@ def sweep(
         table.add_column(m)
     for k, v in enumerate(parsed):
         table.add_row(
-            str(v),
+            level_text(v),
             *(pm(summary["methods"][m][k]["mean"], summary["methods"][m][k]["std"]) for m in names),
         )
     console().print(table)
@@ -329,7 +337,7 @@ def animate(
     scenario = load_scenario(config, set_)
     with steps_bar(scenario) as advance:
         result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))
-    frames = len(range(0, scenario.steps, every))
+    frames = len(plots.animation_frames(scenario.steps, every))
     with bar(frames, "frames", "frames", enabled=on_terminal()) as advance:
         plots.animate(
             result.trace,

@@ -1,0 +1,245 @@
+"""The paper's open questions (Sec. 8), measured: every method under every fault.
+
+`uavtrack robustness` runs, for each fault of `config.FaultModel`, a range of levels
+with four series on the same trials (common random numbers, so differences between
+series are paired):
+
+* ``distributed``: the paper's method as printed;
+* ``robust``: the same with every robustness mechanism of `config.RobustModel` on
+  (`ROBUST`): extra consensus rounds, time-stamped tuples predicted forward with silent
+  neighbours dropped from the auction, and the UAV's own position error added to R;
+* ``centralized`` and ``greedy``, the paper's baselines.
+
+An ablation then runs each mechanism alone at one level of each fault, to tell which
+one helps where. The experiment is a job list on the same resumable store as
+`uavtrack reproduce`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+from scipy import stats
+
+from .config import Scenario
+from .experiments import (
+    Job,
+    collect,
+    describe,
+    difference,
+    label_of,
+    paired,
+    trial_jobs,
+    unique,
+)
+
+ROBUST = {"robust.extra_rounds": 2, "robust.stale": True, "robust.position_noise": True}
+"""The robust series: every mechanism on; 2 extra rounds (assumed: a margin of two rounds
+covers the D_i a UAV underestimates when one or two flooding messages are lost)."""
+
+MECHANISMS = {
+    "extra rounds": {"robust.extra_rounds": 2},
+    "stale": {"robust.stale": True},
+    "position noise": {"robust.position_noise": True},
+}
+"""The mechanisms of the ablation, each alone."""
+
+SERIES = ("distributed", "robust", "centralized", "greedy")
+
+
+@dataclass(frozen=True)
+class Fault:
+    """One fault of the standard set: a field swept over levels, with fixed settings.
+
+    name: short name; field: the scenario field swept; levels: its values (the first is
+    "no fault"); fixed: other fields set at every level; ablation: the level at which
+    each mechanism is tried alone; xlabel: the axis label of its figure.
+    """
+
+    name: str
+    field: str
+    levels: tuple
+    fixed: dict
+    ablation: Any
+    xlabel: str
+
+
+FAULTS = (
+    Fault(
+        "loss",
+        "faults.loss",
+        (0.0, 0.1, 0.2, 0.3, 0.5, 0.7),
+        {},
+        0.5,
+        "message loss probability (independent)",
+    ),
+    Fault(
+        "burst",
+        "faults.burst_length",
+        (1.0, 2.0, 5.0, 10.0, 20.0),
+        {"faults.loss": 0.3},
+        10.0,
+        "mean burst length [cycles] at 30% loss",
+    ),
+    Fault(
+        "delay",
+        "faults.delay",
+        (0, 1, 2, 4, 8),
+        {},
+        2,
+        "message delay [cycles]",
+    ),
+    Fault(
+        "round_budget",
+        "faults.round_budget",
+        (None, 3, 2, 1),
+        {},
+        1,
+        "consensus rounds per cycle (none: unlimited)",
+    ),
+    Fault(
+        "failure_rate",
+        "faults.failure_rate",
+        (0.0, 0.0001, 0.0004, 0.001, 0.002),
+        {},
+        0.001,
+        "UAV failure probability per UAV and cycle",
+    ),
+    Fault(
+        "position_std",
+        "faults.position_std",
+        (0.0, 1.0, 2.0, 5.0, 10.0),
+        {},
+        5.0,
+        "UAV position error, std per axis [m]",
+    ),
+)
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The size of a robustness run."""
+
+    trials: int = 50
+    steps: int = 500
+    chunk: int = 25
+    faults: tuple[Fault, ...] = FAULTS
+
+    @classmethod
+    def quick(cls) -> Profile:
+        """A smoke-test profile: a few short trials, three levels per fault."""
+        short = tuple(
+            Fault(f.name, f.field, f.levels[:1] + f.levels[2:4], f.fixed, f.ablation, f.xlabel)
+            for f in FAULTS
+        )
+        return cls(trials=4, steps=60, chunk=4, faults=short)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {
+            "trials": self.trials,
+            "steps": self.steps,
+            "chunk": self.chunk,
+            "faults": {f.name: {"field": f.field, "levels": list(f.levels)} for f in self.faults},
+        }
+
+
+def series_method(series: str) -> tuple[str, dict]:
+    """The method and the robustness overrides of a series."""
+    if series == "robust":
+        return "distributed", ROBUST
+    if series in MECHANISMS:
+        return "distributed", MECHANISMS[series]
+    return series, {}
+
+
+def plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
+    """Every job of the experiment, grouped by fault (and "ablation")."""
+    base = base.with_overrides({"steps": profile.steps})
+    out: dict[str, list[Job]] = {}
+
+    def jobs(overrides: dict, series: str) -> list[Job]:
+        method, extra = series_method(series)
+        return trial_jobs(base, {**overrides, **extra}, method, profile.trials, profile.chunk, seed)
+
+    for fault in profile.faults:
+        out[fault.name] = [
+            job
+            for level in fault.levels
+            for series in SERIES
+            for job in jobs({**fault.fixed, fault.field: level}, series)
+        ]
+    out["ablation"] = [
+        job
+        for fault in profile.faults
+        for series in ("distributed", *MECHANISMS, "robust")
+        for job in jobs({**fault.fixed, fault.field: fault.ablation}, series)
+    ]
+    return out
+
+
+def _label(base: Scenario, overrides: dict, series: str) -> tuple[str, str]:
+    method, extra = series_method(series)
+    scenario = base.with_overrides({**overrides, **extra})
+    return label_of(difference(base, scenario)), method
+
+
+def summarize(
+    jobs: dict[str, list[Job]], results: dict[str, dict], profile: Profile, base: Scenario
+) -> dict[str, Any]:
+    """summary.json: per fault, per series and level, the observation rate and costs,
+    with paired differences; the ablation; and the settings of the series."""
+    base = base.with_overrides({"steps": profile.steps})
+    data = collect(unique(j for group in jobs.values() for j in group), results)
+    out: dict[str, Any] = {"series": {s: dict(series_method(s)[1]) for s in SERIES}}
+    faults: dict[str, Any] = {}
+    for fault in profile.faults:
+        rows: dict[str, list] = {s: [] for s in SERIES}
+        pairs: dict[str, list] = {
+            "distributed - centralized": [],
+            "distributed - greedy": [],
+            "robust - distributed": [],
+        }
+        for level in fault.levels:
+            over = {**fault.fixed, fault.field: level}
+            rate = {}
+            for s in SERIES:
+                metrics = data[_label(base, over, s)]
+                rows[s].append(describe(metrics) | {"ci95": ci95(metrics["observation_rate"])})
+                rate[s] = metrics["observation_rate"]
+            for name in pairs:
+                a, b = name.split(" - ")
+                pairs[name].append(paired(rate[a], rate[b]))
+        faults[fault.name] = {
+            "field": fault.field,
+            "fixed": fault.fixed,
+            "levels": list(fault.levels),
+            "xlabel": fault.xlabel,
+            "series": rows,
+            "paired": pairs,
+        }
+    out["faults"] = faults
+    ablation = {}
+    for fault in profile.faults:
+        over = {**fault.fixed, fault.field: fault.ablation}
+        paper = data[_label(base, over, "distributed")]["observation_rate"]
+        entry = {"field": fault.field, "level": fault.ablation, "series": {}}
+        for s in ("distributed", *MECHANISMS, "robust"):
+            rate = data[_label(base, over, s)]["observation_rate"]
+            entry["series"][s] = {
+                "mean": float(np.mean(rate)),
+                "vs_paper": paired(rate, paper),
+            }
+        ablation[fault.name] = entry
+    out["ablation"] = ablation
+    return out
+
+
+def ci95(values: np.ndarray) -> float:
+    """Half-width of the 95% t confidence interval of the mean (NaN for one value)."""
+    values = np.asarray(values, dtype=float)
+    n = len(values)
+    if n < 2:
+        return float("nan")
+    return float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / np.sqrt(n))
