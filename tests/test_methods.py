@@ -98,3 +98,28 @@ def test_conflicts_count_doubled_targets_while_one_is_free():
     # trial 0: targets 0 and 1 doubled while 3 is free; trial 1: every target covered;
     # trial 2: target 0 tripled while 2 and 3 are free
     assert conflicts(target, alive, 4).tolist() == [2, 0, 1]
+
+
+def test_the_registry_serves_plugins_and_registered_methods(monkeypatch):
+    from uavtrack import methods, registry
+
+    class Sticky(methods.Distributed):
+        name = "sticky-test"
+
+        @staticmethod
+        def solve(bids):
+            return np.zeros(bids.shape[0], dtype=np.int64)  # everyone on target 0
+
+    assert registry.names()[:3] == ["distributed", "centralized", "greedy"]
+    with pytest.raises(ValueError, match="unknown method 'sticky-test'; choose one of"):
+        methods.get("sticky-test")
+    monkeypatch.setattr(registry, "_REGISTERED", dict(registry._REGISTERED))
+    methods.register(Sticky())
+    assert "sticky-test" in registry.names()
+    r = uavtrack.simulate(uavtrack.Scenario(steps=20, comm_range=1e5), "sticky-test", seed=0)
+    assert (r.trace.assignment[1:] == 0).all()
+    # a plugin names its class by entry point; it loads on first use
+    monkeypatch.setattr(registry, "_plugins", lambda: {"greedy-again": "uavtrack.methods:Greedy"})
+    assert isinstance(methods.get("greedy-again"), methods.Greedy)
+    with pytest.raises(TypeError, match="must be a uavtrack.methods.Method"):
+        methods.register(object())

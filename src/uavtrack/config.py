@@ -524,6 +524,17 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ScenarioError(f"config file {path} is not valid TOML: {exc}") from None
 
 
+def flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A nested dict as ``{"a.b": value}`` (the dotted field names of a scenario)."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
 def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     """Set ``data["a"]["b"] = value`` for ``dotted = "a.b"``, refusing unknown names."""
     keys = dotted.split(".")

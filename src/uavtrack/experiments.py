@@ -23,11 +23,13 @@ from typing import Any
 import numpy as np
 from scipy import stats
 
-from .config import Scenario, ScenarioError
+from . import registry
+from .config import Scenario, ScenarioError, flatten
 from .metrics import METRICS, mean_std, sorted_rates
 from .simulation import run, trial_seed
 
-METHOD_NAMES = ("distributed", "centralized", "greedy")
+METHOD_NAMES = tuple(registry.BUILT_IN)
+"""The paper's method and its baselines, which the reproduction compares."""
 
 PAPER_FIG5 = {
     "distributed": (0.8031, 0.1262),
@@ -130,18 +132,8 @@ def label_of(overrides: dict[str, Any]) -> str:
 
 def difference(base: Scenario, scenario: Scenario) -> dict[str, Any]:
     """The dotted fields where `scenario` differs from `base`, with its values."""
-    was, now = _flatten(base.to_dict()), _flatten(scenario.to_dict())
+    was, now = flatten(base.to_dict()), flatten(scenario.to_dict())
     return {k: now[k] for k in now if now[k] != was.get(k)}
-
-
-def _flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out: dict[str, Any] = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out.update(_flatten(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 def _fmt(value: Any) -> str:

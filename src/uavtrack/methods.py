@@ -22,8 +22,8 @@ leaves the UAV with its own estimates and its previous target. A failed UAV take
 in nothing.
 
 A new auction rule plugs in by subclassing `Distributed` and replacing `solve` (see
-examples/custom_method.py); `METHODS` is the registry the command line and the
-experiments read, and `register` adds to it.
+examples/custom_method.py); `register` adds a method to the `registry` the command line
+and the experiments read, and other packages can add theirs by entry point.
 """
 
 from __future__ import annotations
@@ -35,7 +35,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import assignment, fusion
+from . import assignment, fusion, registry
 from .radio import Radio
 
 
@@ -316,24 +316,24 @@ class Greedy(Method):
         return Assigned(np.where(inputs.alive, out, -1), seconds, none, none)
 
 
-METHODS: dict[str, Method] = {m.name: m for m in (Distributed(), Centralized(), Greedy())}
-"""The registry of methods by name; the command line and the experiments read it."""
+METHODS: dict[str, Method] = {
+    m.name: registry.register(m) for m in (Distributed(), Centralized(), Greedy())
+}
+"""The built-in methods by name; `registry` holds every method (plugins and `register`)."""
 
 
 def register(method: Method) -> Method:
-    """Add a method to `METHODS` under its name (in this process) and return it."""
-    if not getattr(method, "name", None):
-        raise ValueError("a method needs a name")
-    METHODS[method.name] = method
-    return method
+    """Make `method` available by its name (in this process) and return it."""
+    if not isinstance(method, Method):
+        raise TypeError(f"a method must be a uavtrack.methods.Method, not {type(method).__name__}")
+    return registry.register(method)
 
 
 def get(method: str | Method) -> Method:
-    """A method by name (``distributed``, ``centralized``, ``greedy``) or instance."""
+    """A method by name (``distributed``, ``centralized``, ``greedy``, or any registered)
+    or an instance."""
     if isinstance(method, Method):
         return method
-    try:
-        return METHODS[method]
-    except (KeyError, TypeError):
-        names = ", ".join(METHODS)
-        raise ValueError(f"unknown method {method!r}; choose one of: {names}") from None
+    if not isinstance(method, str):
+        raise ValueError(f"unknown method {method!r}; choose one of: {', '.join(registry.names())}")
+    return registry.load(method)

@@ -37,6 +37,7 @@ from pathlib import Path
 from typing import Any
 
 from ._version import __version__
+from .config import flatten
 from .errors import RunError, UsageError
 from .experiments import Job, run_job
 from .files import dumps, write_json
@@ -292,7 +293,7 @@ def mismatch(old: dict[str, Any], new: dict[str, Any]) -> str:
         if old.get(section) != new.get(section):
             return f"a different {section} ({old.get(section)!r}, now {new.get(section)!r})"
     for section in ("plan", "scenario"):
-        was, now = _flat(old.get(section) or {}), _flat(new.get(section) or {})
+        was, now = flatten(old.get(section) or {}), flatten(new.get(section) or {})
         diffs = [
             f"{k} {was.get(k)!r}, now {now.get(k)!r}"
             for k in sorted(was.keys() | now.keys())
@@ -302,16 +303,6 @@ def mismatch(old: dict[str, Any], new: dict[str, Any]) -> str:
             more = f" and {len(diffs) - 3} more" if len(diffs) > 3 else ""
             return f"a different {section} ({'; '.join(diffs[:3])}{more})"
     return ""
-
-
-def _flat(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
-    out = {}
-    for key, value in data.items():
-        if isinstance(value, dict):
-            out.update(_flat(value, f"{prefix}{key}."))
-        else:
-            out[f"{prefix}{key}"] = value
-    return out
 
 
 # ------------------------------------------------------------------ execution

@@ -18,6 +18,7 @@ import typer
 from typer import core as typer_core
 from typer.exceptions import TyperException
 
+from .. import registry
 from .._version import __version__
 from ..config import Scenario, ScenarioError, parse_value
 from ..errors import Interrupted, RunError, UsageError
@@ -70,10 +71,8 @@ def _root(
     """Distributed multi-UAV cooperative multi-target tracking (see README.md)."""
 
 
-class MethodName(StrEnum):
-    distributed = "distributed"
-    centralized = "centralized"
-    greedy = "greedy"
+MethodName = StrEnum("MethodName", {name: name for name in registry.names()})
+"""The choices of --method: every method of the registry (built-in and plugins)."""
 
 
 ConfigOpt = Annotated[
@@ -95,7 +94,7 @@ SetOpt = Annotated[
 ]
 MethodOpt = Annotated[
     MethodName,
-    typer.Option(metavar="METHOD", help="distributed, centralized or greedy"),
+    typer.Option(metavar="METHOD", help=", ".join(registry.names())),
 ]
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
 

@@ -133,6 +133,20 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
         yield {job.key: store.load(job) for job in jobs}, info
 
 
+def sized(profile, trials: int | None, steps: int | None):
+    """A profile with the --trials and --steps asked for (its job chunks no larger)."""
+    from dataclasses import replace
+
+    asked = {k: v for k, v in (("trials", trials), ("steps", steps)) if v is not None}
+    profile = replace(profile, **asked)
+    return replace(profile, chunk=min(profile.chunk, profile.trials))
+
+
+def manifest_of(kind: str, seed: int, profile, scenario) -> dict:
+    """What an experiment folder records it was made with."""
+    return {"kind": kind, "seed": seed, "plan": profile.to_dict(), "scenario": scenario.to_dict()}
+
+
 def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | None) -> int | None:
     """Steps asked for by ``--steps``, ``--set steps=`` or the config file, in that order;
     two of them that disagree are refused."""
@@ -177,27 +191,16 @@ def reproduce(
     progress: ProgressOpt = None,
 ) -> None:
     """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder."""
-    from dataclasses import replace
-
     from .. import plots, report
     from ..experiments import Profile, reproduce_plan, summarize_reproduction
 
     scenario = load_scenario(config, set_)
     steps = explicit_steps(config, set_, steps)
-    profile = Profile.quick() if quick else Profile()
-    profile = replace(
-        profile, **{k: v for k, v in (("trials", trials), ("steps", steps)) if v is not None}
-    )
-    profile = replace(profile, chunk=min(profile.chunk, profile.trials))
+    profile = sized(Profile.quick() if quick else Profile(), trials, steps)
     out = out or Path("results") / ("reproduce-quick" if quick else "reproduce")
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     plan = reproduce_plan(scenario, profile, seed)
-    manifest = {
-        "kind": "reproduce",
-        "seed": seed,
-        "plan": profile.to_dict(),
-        "scenario": scenario.to_dict(),
-    }
+    manifest = manifest_of("reproduce", seed, profile, scenario)
     with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
         info["seed"] = seed
         summary = summarize_reproduction(plan, results, profile, scenario)

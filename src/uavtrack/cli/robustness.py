@@ -18,7 +18,9 @@ from .experiments import (
     StepsOpt,
     WorkersOpt,
     explicit_steps,
+    manifest_of,
     run_jobs,
+    sized,
 )
 
 
@@ -49,27 +51,16 @@ def robustness(
 ) -> None:
     """Every method under message loss, bursts, delay, a round budget, UAV failures and
     position error, with and without the robustness options, into a folder."""
-    from dataclasses import replace
-
     from .. import plots, report
     from .. import robustness as experiment
 
     scenario = load_scenario(config, set_)
     steps = explicit_steps(config, set_, steps)
-    profile = experiment.Profile.quick() if quick else experiment.Profile()
-    profile = replace(
-        profile, **{k: v for k, v in (("trials", trials), ("steps", steps)) if v is not None}
-    )
-    profile = replace(profile, chunk=min(profile.chunk, profile.trials))
+    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
     out = out or Path("results") / ("robustness-quick" if quick else "robustness")
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     jobs = experiment.plan(scenario, profile, seed)
-    manifest = {
-        "kind": "robustness",
-        "seed": seed,
-        "plan": profile.to_dict(),
-        "scenario": scenario.to_dict(),
-    }
+    manifest = manifest_of("robustness", seed, profile, scenario)
     with run_jobs(jobs, out, manifest, engine, workers, address, progress) as (results, info):
         info["seed"] = seed
         summary = experiment.summarize(jobs, results, profile, scenario)
