@@ -109,8 +109,10 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
     After round r UAV i knows K_i(r), the UAVs within r hops: K_i(r) = K_i(r-1) united
     with the K_l(r-1) its neighbours l sent. The first round that teaches i nothing new
     shows its ball has covered its component, so i stops with D_i = r - 1: it needs no
-    knowledge of the team size. A lost message can make that happen early. With a
-    round `budget`, a UAV still learning after `budget` rounds takes D_i = budget.
+    knowledge of the team size. A lost message can make that happen early. A UAV that
+    stopped keeps answering its neighbours with the set it stopped with (without losses
+    that set is its whole component, so nothing is lost by freezing it). With a round
+    `budget`, a UAV still learning after `budget` rounds takes D_i = budget.
 
     running: (B, N) bool, the UAVs taking part (the living).
     """
@@ -133,8 +135,9 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
         grown = flood(known, inbox.content["known"], inbox.delivered)
         stopped = running & ~(grown != known).any(axis=-1)
         depth[stopped] = r - 1
+        # a UAV that stopped keeps answering with what it knew when it stopped
+        known = np.where(running[..., None], grown, known)
         running &= ~stopped
-        known = grown
         if budget is not None and r >= budget:
             depth[running] = budget
             break

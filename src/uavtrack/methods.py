@@ -191,22 +191,48 @@ class Distributed(Method):
             view = bids
         else:
             got = inbox.delivered.adjacency()  # bids that arrived this cycle
-            offered = inbox.content
-            if held is not None:  # remember the last bid heard of each neighbour
-                value = np.where(got[..., None], offered["bids"][:, None], held.value)
-                stamp = np.where(got, offered["stamp"][:, None], held.stamp)
-                held = Held(value, stamp)
-                heard = beacon.delivered.adjacency() if beacon is not None else got
-                members = got if s.stale else heard & (stamp >= 0)
-                view = value.copy()
-            else:
-                members = got
-                view = np.broadcast_to(offered["bids"][:, None], (B, n, n, m)).copy()
+            heard = beacon.delivered.adjacency() if beacon is not None else got
+            members, view, stamp = bid_view(
+                got,
+                inbox.content["bids"][:, None],
+                inbox.content["stamp"][:, None],
+                heard,
+                held,
+                s.stale,
+            )
+            held = held if held is None else Held(view, stamp)
+            view = np.array(np.broadcast_to(view, (B, n, n, m)))
             view[:, idx, idx] = bids  # a UAV's own bids are current
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
         target, seconds = assignment.auction(view, members, type(self).solve)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
+
+
+def bid_view(
+    got: np.ndarray,
+    bids: np.ndarray,
+    stamp: np.ndarray,
+    heard: np.ndarray,
+    held: Held | None,
+    stale: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A receiver's auction after this cycle's arrivals: who takes part, and the bids it
+    holds of each sender. Broadcasts over leading receiver axes.
+
+    got (..., N) bool: the senders whose bid arrived this cycle; bids (..., N, M) and
+    stamp (..., N): those bids and the step they were sent; heard (..., N): the senders
+    whose beacon arrived; held: the bids held before (None when messages are never
+    lost: nothing to remember). Without `stale`, a sender heard by its beacon takes part
+    with the last bid held of it, however old; with `stale`, only senders whose bid
+    arrived take part. Returns (members (..., N), bids held (..., N, M), their stamps).
+    """
+    if held is None:
+        return got, bids, stamp
+    value = np.where(got[..., None], bids, held.value)
+    stamp = np.where(got, stamp, held.stamp)
+    members = got if stale else heard & (stamp >= 0)
+    return members, value, stamp
 
 
 class Centralized(Method):
@@ -232,7 +258,7 @@ class Centralized(Method):
 
     @staticmethod
     def _over_links(inputs: Inputs) -> Fused:
-        """Uploads, central fusion, planning and assignment, downloads, with faults."""
+        """Uploads, the central node's work, downloads, with faults."""
         s, radio, k = inputs.setting, inputs.radio, inputs.k
         B, n, m = inputs.gamma.shape
         stamp = np.full((B, n, m), k)
@@ -241,37 +267,18 @@ class Centralized(Method):
         upload, up_ok = radio.receive_central("upload")
         sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
         seconds = np.zeros((B, n))
-        down_tuples = {
-            "gamma": np.full((B, n, m), -np.inf),
-            "mean": inputs.mean,
-            "cov": inputs.cov,
-            "stamp": stamp,
-        }
-        down_target = np.full((B, n), -1, dtype=np.int64)
-        if upload is not None:
+        if upload is None:
+            down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
+        else:
             up_ok = up_ok & upload["alive"]
             sent += upload["alive"].sum(axis=1)
             delivered += up_ok.sum(axis=1)
-            got = {key: upload[key] for key in tuples}
-            if s.stale:
-                got = s.forward(got, k)
-            score = np.where(up_ok[..., None], got["gamma"], -np.inf)  # (B, N, M)
-            best = np.argmax(score, axis=1)  # per target, the most confident uploader
-            heard = up_ok.any(axis=1)  # trials where the node heard anyone
-            b, j = np.arange(B)[:, None], np.arange(m)
-            central = {key: value[b, best, j] for key, value in got.items()}  # (B, M, ...)
-            start = time.perf_counter()  # the node plans for the UAVs it heard from, as they were
-            value, _ = s.plan(upload["uavs"], np.repeat(central["mean"][:, None], n, axis=1))
-            targets, _ = assignment.centralized(value, up_ok)
+            start = time.perf_counter()
+            down, down_target = central_node(
+                {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
+            )
             seconds += (time.perf_counter() - start) / B
-            for key, value in central.items():
-                down_tuples[key] = np.where(
-                    heard.reshape((B,) + (1,) * value.ndim),
-                    np.repeat(value[:, None], n, axis=1),
-                    down_tuples[key],
-                )
-            down_target = np.where(heard[:, None], targets, -1)
-        radio.send("download", {**down_tuples, "target": down_target, "alive": inputs.alive})
+        radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
         download, down_ok = radio.receive_central("download")
         mean, cov = inputs.mean, inputs.cov
         target = None
@@ -279,12 +286,7 @@ class Centralized(Method):
             down_ok = down_ok & inputs.alive
             sent += download["alive"].sum(axis=1)
             delivered += down_ok.sum(axis=1)
-            got = {key: download[key] for key in tuples}
-            if s.stale:
-                got = s.forward(got, k)
-            use = down_ok[..., None] & np.isfinite(got["gamma"])  # (B, N, M)
-            mean = np.where(use[..., None], got["mean"], mean)
-            cov = np.where(use[..., None, None], got["cov"], cov)
+            mean, cov = take_download(mean, cov, download, down_ok, s, k)
             target = np.where(down_ok, download["target"], -1)
         rounds = np.where(inputs.alive, 1, 0)
         return Fused(mean, cov, rounds, sent, delivered, seconds, target)
@@ -301,6 +303,65 @@ class Centralized(Method):
         target = np.where(target >= 0, target, assignment.greedy(bids))
         target = np.where(inputs.alive, target, -1)
         return Assigned(target, fused.seconds, none, none)
+
+
+def nothing_heard(B: int, n: int, m: int) -> dict[str, np.ndarray]:
+    """A download that carries no estimate (confidence -inf): the node heard nobody."""
+    return {
+        "gamma": np.full((B, n, m), -np.inf),
+        "mean": np.zeros((B, n, m, 4)),
+        "cov": np.zeros((B, n, m, 4, 4)),
+        "stamp": np.zeros((B, n, m), dtype=np.int64),
+    }
+
+
+def central_node(
+    got: dict, heard: np.ndarray, uavs: np.ndarray, setting: Setting, k: int
+) -> tuple[dict, np.ndarray]:
+    """The central node's work on the uploads it received.
+
+    got: the uploaded tuples (B, N, M, ...) ("gamma", "mean", "cov", "stamp"); heard
+    (B, N): whose upload arrived; uavs (B, N, 5): the states they reported. Per target
+    the most confident uploaded estimate (ties to the lowest UAV), predicted forward with
+    ``robust.stale``; bids of every UAV heard from, planned from its reported state; one
+    global assignment over them. Returns the download of every UAV (the fused tuples,
+    (B, N, M, ...), confidence -inf where the node heard nobody) and its target (B, N),
+    -1 for a UAV not heard from.
+    """
+    B, n, m = got["gamma"].shape
+    if setting.stale:
+        got = setting.forward(got, k)
+    score = np.where(heard[..., None], got["gamma"], -np.inf)
+    best = np.argmax(score, axis=1)  # per target, the most confident uploader
+    b, j = np.arange(B)[:, None], np.arange(m)
+    central = {key: value[b, best, j] for key, value in got.items()}  # (B, M, ...)
+    value, _ = setting.plan(uavs, np.repeat(central["mean"][:, None], n, axis=1))
+    targets, _ = assignment.centralized(value, heard)
+    anyone = heard.any(axis=1)
+    down = nothing_heard(B, n, m)
+    for key, value in central.items():
+        down[key] = np.where(
+            anyone.reshape((B,) + (1,) * value.ndim),
+            np.repeat(value[:, None], n, axis=1),
+            down[key],
+        )
+    return down, np.where(anyone[:, None], targets, -1)
+
+
+def take_download(
+    mean: np.ndarray, cov: np.ndarray, got: dict, arrived: np.ndarray, setting: Setting, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """A UAV's estimates after the central node's download: the downloaded tuple of each
+    target where it arrived and carries one (predicted forward with ``robust.stale``),
+    its own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); arrived (B, N)."""
+    got = {key: got[key] for key in ("gamma", "mean", "cov", "stamp")}
+    if setting.stale:
+        got = setting.forward(got, k)
+    use = arrived[..., None] & np.isfinite(got["gamma"])  # (B, N, M)
+    return (
+        np.where(use[..., None], got["mean"], mean),
+        np.where(use[..., None, None], got["cov"], cov),
+    )
 
 
 class Greedy(Method):

@@ -311,10 +311,18 @@ def sense(
         observed &= alive[:, :, None]
     b, i, j = np.nonzero(observed)
     z = sensing.measure(uavs[b, i], targets[b, j], scenario.sensor, noise[b, i, j])
-    zc, R = sensing.convert(believed[b, i], z, scenario.sensor)
+    zc, R = convert(believed[b, i], z, scenario)
+    return observed, zc, R
+
+
+def convert(believed: np.ndarray, z: np.ndarray, scenario: Scenario):
+    """A UAV's side of sensing: its range-bearing measurements z (K, 2) converted from
+    where it believes it is, believed (K, 5) (eqs. 5-12); with ``robust.position_noise``
+    its own position-error variance is added to R. Returns z^C (K, 2), R (K, 2, 2)."""
+    zc, R = sensing.convert(believed, z, scenario.sensor)
     if scenario.robust.position_noise and scenario.faults.position_std > 0:
         R = R + scenario.faults.position_std**2 * np.eye(2)  # z^C is offset by the UAV's error
-    return observed, zc, R
+    return zc, R
 
 
 def conflicts(target: np.ndarray, alive: np.ndarray, n_targets: int) -> np.ndarray:
