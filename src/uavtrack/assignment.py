@@ -155,9 +155,9 @@ def centralized(
     bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
     out; seconds (B,) of each trial's solve).
     """
-    _check(bids)
     B, n, _ = bids.shape
     members = np.ones((B, n), dtype=bool) if members is None else members
+    _check(bids[members])
     out = np.full((B, n), -1, dtype=np.int64)
     seconds = np.zeros(B)
     for b in range(B):

@@ -31,7 +31,7 @@ def differences(a, b, atol: float = 1e-9, counters: bool = True) -> list[str]:
             continue
         if np.shape(x) != np.shape(y):
             out.append(f"{name}: shapes {np.shape(x)} and {np.shape(y)}")
-        elif not np.array_equal(x, y):
+        elif not np.array_equal(x, y, equal_nan=np.asarray(x).dtype.kind == "f"):
             where = np.argwhere(np.asarray(x) != np.asarray(y))
             out.append(f"{name}: first difference at step {where[0][0]} ({len(where)} in all)")
     for name in CLOSE:
@@ -41,7 +41,8 @@ def differences(a, b, atol: float = 1e-9, counters: bool = True) -> list[str]:
         if np.shape(x) != np.shape(y):
             out.append(f"{name}: shapes {np.shape(x)} and {np.shape(y)}")
             continue
-        gap = np.abs(np.asarray(x) - np.asarray(y))
+        x, y = np.asarray(x, dtype=float), np.asarray(y, dtype=float)
+        gap = np.where(np.isnan(x) & np.isnan(y), 0.0, np.abs(x - y))  # NaN: a failed UAV
         if not (gap <= atol).all():
             step = np.argwhere(~(gap <= atol))[0][0]
             out.append(f"{name}: differs by up to {np.nanmax(gap):.3g} (from step {step})")

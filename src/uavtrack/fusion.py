@@ -40,16 +40,17 @@ from .radio import Radio, RadioState
 
 def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.ndarray:
     """One round of the D_i protocol for every receiver: K_i <- K_i united with the
-    sets K_q offered by the senders whose message was delivered.
+    sets K_q offered by the other senders whose message was delivered (a receiver's own
+    set is its current one, not what it offered, which with delay is an old one).
 
     known, offered: (B, N, N) bool [trial, UAV, identifier]. Returns (B, N, N) bool.
     """
     if delivered.edges:  # the segments are the B x N receivers in order
-        heard = np.logical_or.reduceat(
-            offered[delivered.trial, delivered.sender], delivered.starts, axis=0
-        )
+        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        rows = np.where(delivered.own[:, None], known[t, i], offered[t, q])
+        heard = np.logical_or.reduceat(rows, delivered.starts, axis=0)
         return known | heard.reshape(known.shape)
-    grown = np.matmul(delivered.weights, offered.astype(np.float64)) > 0
+    grown = np.matmul(delivered.others, offered.astype(np.float64)) > 0
     return known | grown
 
 
@@ -141,6 +142,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
         if budget is not None and r >= budget:
             depth[running] = budget
             break
+    radio.send("flood", {"known": known})  # the final sets, for later rounds (with delay)
     return Depth(depth, sent, delivered)
 
 
@@ -196,6 +198,7 @@ def consensus(
         best = adopt(score(tuples), score(offered), inbox.delivered)
         best = np.where(active[..., None], best, np.arange(n)[:, None])
         tuples = pick(tuples, offered, best)
+    radio.send("consensus", tuples)  # the final tuples, for later rounds (with delay)
     return Outcome(tuples, sent, delivered)
 
 

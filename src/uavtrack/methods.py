@@ -335,7 +335,10 @@ def central_node(
     best = np.argmax(score, axis=1)  # per target, the most confident uploader
     b, j = np.arange(B)[:, None], np.arange(m)
     central = {key: value[b, best, j] for key, value in got.items()}  # (B, M, ...)
-    value, _ = setting.plan(uavs, np.repeat(central["mean"][:, None], n, axis=1))
+    value = np.zeros((B, n, m))  # bids of the UAVs heard from, planned from their reports
+    t, i = np.nonzero(heard)
+    if t.size:
+        value[t, i] = setting.plan(uavs[t, i][None], central["mean"][t][None])[0][0]
     targets, _ = assignment.centralized(value, heard)
     anyone = heard.any(axis=1)
     down = nothing_heard(B, n, m)

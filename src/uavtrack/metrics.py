@@ -101,7 +101,7 @@ class Tally:
         err = mean[..., :2] - truth[:, None, :, :2]
         squared = err * err
         if not everyone:
-            squared = squared * alive[:, :, None, None]
+            squared = np.where(alive[:, :, None, None], squared, 0.0)
         s["squared_error"] += squared.sum(axis=(1, 2, 3))
         s["pairs"] += alive.sum(axis=1) * self.n_targets
         # the team's best estimate of each target: its most confident UAV (lowest on ties)
@@ -142,7 +142,7 @@ class Tally:
                 alive = np.stack(
                     [np.ones(q.shape[1:3], dtype=bool) if m is None else m for m in masks]
                 )
-                q = q * alive[..., None]
+                q = np.where(alive[..., None], q, 0.0)
                 anyone = alive.any(axis=2)  # (S, B)
                 best = np.where(anyone[..., None], nees(best_mean, best_cov, truth), 0.0)
             else:

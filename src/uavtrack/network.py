@@ -92,9 +92,12 @@ class Links:
         return self.receiver == self.sender
 
     @cached_property
-    def weights(self) -> np.ndarray:
-        """The dense relation as floats, for matrix products (dense form)."""
-        return self.dense.astype(np.float64)
+    def others(self) -> np.ndarray:
+        """The dense relation as floats without self-links (dense form)."""
+        out = self.dense.astype(np.float64)
+        idx = np.arange(self.n)
+        out[:, idx, idx] = 0.0
+        return out
 
     @cached_property
     def penalty(self) -> np.ndarray:

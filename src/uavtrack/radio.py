@@ -5,8 +5,9 @@ consensus run rounds 1, 2, ...; beacons, bids, uploads and downloads are one-rou
 protocols, round 0). A message of round r of cycle k travels over the links of cycle k
 (the UAVs' 3-D distance at k within r_C, both alive), unless the fault realisation
 loses it, and is received in round r of cycle k + delay. A UAV keeps transmitting its
-last state in rounds beyond the last one it ran, so a receiver that needs more rounds
-than a sender ran gets the sender's final state.
+final state in rounds beyond the last one it ran (the drivers send it once more when
+a protocol ends), so a receiver that needs more rounds than a sender ran gets the
+sender's final state.
 
 With no faults this is the paper's synchronous exchange: everything sent in round r
 of cycle k arrives in round r of cycle k over the links of k.

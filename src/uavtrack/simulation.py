@@ -166,9 +166,13 @@ class Cycle:
     observed: np.ndarray = _record(
         "(Nu, Nt)", "target inside the UAV's observation disk (a failed UAV sees nothing)", bool
     )
-    mean: np.ndarray = _record("(Nu, Nt, 4)", "each UAV's fused estimate of each target")
+    mean: np.ndarray = _record(
+        "(Nu, Nt, 4)", "each UAV's fused estimate of each target (NaN: the UAV has failed)"
+    )
     cov: np.ndarray = _record("(Nu, Nt, 4, 4)", "its covariance")
-    bids: np.ndarray = _record("(Nu, Nt)", "the UAV's best planning value per target (its bid)")
+    bids: np.ndarray = _record(
+        "(Nu, Nt)", "the UAV's best planning value per target, its bid (NaN: failed)"
+    )
     assignment: np.ndarray = _record(
         "(Nu,)", "the target each UAV tracks (-1: the UAV has failed)", np.int64
     )
@@ -253,12 +257,17 @@ def step(
         new_uavs = np.where(alive[..., None], new_uavs, uavs)  # a failed UAV is down
     B, Nu = alive.shape
     share = plan_seconds / (B if method.central else B * Nu)
+    recorded = (fused.mean, fused.cov, bids)
+    if not alive.all():  # a failed UAV holds no estimate and makes no bid: NaN
+        recorded = tuple(
+            np.where(alive.reshape(alive.shape + (1,) * (x.ndim - 2)), x, np.nan) for x in recorded
+        )
     cycle = Cycle(
         uavs=uavs,
         observed=observed,
-        mean=fused.mean,
-        cov=fused.cov,
-        bids=bids,
+        mean=recorded[0],
+        cov=recorded[1],
+        bids=recorded[2],
         assignment=target,
         action=const.actions[actions],
         rounds=fused.rounds,
@@ -306,13 +315,23 @@ def sense(
     for the K observing pairs in the order of ``np.nonzero(observed)``, z^C (K, 2) and
     R (K, 2, 2).
     """
+    observed, z = observe(uavs, targets, noise, alive, scenario)
+    b, i, _ = np.nonzero(observed)
+    zc, R = convert(believed[b, i], z, scenario)
+    return observed, zc, R
+
+
+def observe(
+    uavs: np.ndarray, targets: np.ndarray, noise: np.ndarray, alive: np.ndarray, scenario: Scenario
+) -> tuple[np.ndarray, np.ndarray]:
+    """The world's side of sensing: which pairs observe (B, Nu, Nt), and the noisy
+    range-bearing measurements (K, 2) of the K observing pairs in the order of
+    ``np.nonzero(observed)`` (eqs. 2-4)."""
     observed = sensing.in_view(uavs[:, :, None, :], targets[:, None, :, :], scenario.sensor)
     if not alive.all():
         observed &= alive[:, :, None]
     b, i, j = np.nonzero(observed)
-    z = sensing.measure(uavs[b, i], targets[b, j], scenario.sensor, noise[b, i, j])
-    zc, R = convert(believed[b, i], z, scenario)
-    return observed, zc, R
+    return observed, sensing.measure(uavs[b, i], targets[b, j], scenario.sensor, noise[b, i, j])
 
 
 def convert(believed: np.ndarray, z: np.ndarray, scenario: Scenario):
@@ -569,12 +588,17 @@ def simulate(
     elif not isinstance(seed, np.random.SeedSequence):
         raise TypeError(f"seed must be an integer or a SeedSequence, not {type(seed).__name__}")
     batch = run(scenario, method, [seed], trace=trace, progress=progress)
+    return result_of(batch, seed if isinstance(seed, int) else None)
+
+
+def result_of(batch: BatchResult, seed: int | None) -> Result:
+    """The `Result` of the one trial of a batch."""
     m = {name: values[0] for name, values in batch.metrics.items()}
     return Result(
         method=batch.method,
-        seed=seed if isinstance(seed, int) else None,
-        scenario=scenario,
+        seed=seed,
+        scenario=batch.scenario,
         per_target=m["per_target"],
-        trace=batch.traces[0] if trace else None,
+        trace=batch.traces[0] if batch.traces else None,
         **{name: float(m[name]) for name in METRICS if name != "per_target"},
     )
