@@ -286,7 +286,7 @@ def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, ca
 
     def broken(*args, **kwargs):
         result = real(*args, **kwargs)
-        result.metrics["rmse"][:] = float("nan")
+        result.metrics["observation_rate"][:] = float("nan")
         return result
 
     monkeypatch.setattr(experiments, "run", broken)
@@ -295,7 +295,7 @@ def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, ca
     assert code == 1 and "jobs failed" in err
     assert not list((out / "raw").glob("*.json"))
     record = json.loads(next((out / "failed").glob("*.json")).read_text())
-    assert "metric rmse is not finite" in record["error"]
+    assert "metric observation_rate is not finite" in record["error"]
 
 
 def test_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
@@ -478,3 +478,10 @@ def test_sweep_of_a_fault_field(tmp_path, capsys):
     assert summary["values"] == [None, 1] and summary["unit"] == "rounds"
     assert len(summary["paired"]["distributed - greedy"]) == 2
     assert "none" in stdout
+
+
+def test_robustness_refuses_faults_in_the_base_scenario(tmp_path, capsys):
+    code, _, err = run_cli(
+        capsys, "robustness", "--quick", "--set", "robust.stale=true", "--out", str(tmp_path / "r")
+    )
+    assert code == 2 and "robust.stale=True" in err and not (tmp_path / "r").exists()

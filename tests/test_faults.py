@@ -125,8 +125,25 @@ def test_faults_are_active_only_when_set():
         ),
         ({"faults.position_std": -1}, "faults.position_std: Input should be greater"),
         ({"robust.stale": "yes"}, "robust.stale: Input should be a valid boolean"),
+        ({"faults.failures": [[0, 500]]}, "names step 500, after the run's last step 499"),
+        ({"faults.failures": [[0, 10], [0, 5]]}, "lists UAV 0 twice"),
+        ({"faults.loss": 1.0, "faults.burst_length": 5}, "needs 0 < loss < 1"),
+        ({"faults.burst_length": 5}, "needs 0 < loss < 1"),
     ],
 )
 def test_bad_fault_values_name_the_field(overrides, message):
     with pytest.raises(uavtrack.ScenarioError, match=message):
         uavtrack.Scenario().with_overrides(overrides)
+
+
+def test_listed_failures_have_one_order():
+    a = uavtrack.Scenario().with_overrides({"faults.failures": [[3, 10], [1, 5]]})
+    b = uavtrack.Scenario().with_overrides({"faults.failures": [[1, 5], [3, 10]]})
+    assert a == b and a.faults.failures == ((1, 5), (3, 10))
+
+
+def test_with_every_uav_failed_nothing_is_averaged():
+    r = uavtrack.simulate(uavtrack.Scenario(steps=10, faults={"failure_rate": 1.0}), trace=False)
+    assert r.failed == 5 and r.observation_rate == 0.0
+    for name in ("rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms"):
+        assert np.isnan(getattr(r, name)), name

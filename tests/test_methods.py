@@ -123,3 +123,19 @@ def test_the_registry_serves_plugins_and_registered_methods(monkeypatch):
     assert isinstance(methods.get("greedy-again"), methods.Greedy)
     with pytest.raises(TypeError, match="must be a uavtrack.methods.Method"):
         methods.register(object())
+
+
+def test_a_rule_may_be_an_ordinary_method_with_state():
+    from uavtrack import methods
+
+    class FirstTarget(methods.Distributed):
+        name = "first-target-test"
+
+        def __init__(self, target):
+            self.target = target
+
+        def solve(self, bids):  # an instance method, using the instance's state
+            return np.full(bids.shape[0], self.target)
+
+    r = uavtrack.simulate(uavtrack.Scenario(steps=10, comm_range=1e5), FirstTarget(1), seed=0)
+    assert (r.trace.assignment == 1).all()

@@ -25,6 +25,7 @@ from pydantic import (
     Field,
     Strict,
     ValidationError,
+    field_validator,
     model_validator,
 )
 
@@ -303,7 +304,12 @@ class FaultModel(_Part):
 
     @model_validator(mode="after")
     def _bursts(self) -> FaultModel:
-        if self.burst_length > 1 and 0 < self.loss < 1:
+        if self.burst_length > 1 and not 0 < self.loss < 1:
+            raise ValueError(
+                f"burst_length {self.burst_length:g} needs 0 < loss < 1 (at loss {self.loss:g} "
+                "every message is lost or none is); use burst_length 1"
+            )
+        if self.burst_length > 1:
             least = 1.0 / (1.0 - self.loss)
             if self.burst_length < least:
                 raise ValueError(
@@ -311,6 +317,23 @@ class FaultModel(_Part):
                     f"burst of independent losses at loss {self.loss:g}; use burst_length 1 "
                     f"(independent) or at least {least:.3g}"
                 )
+        return self
+
+    @field_validator("failures", mode="after")
+    @classmethod
+    def _sorted(cls, value: tuple) -> tuple:
+        return tuple(sorted(value))  # one order: the same failures are the same scenario
+
+    @model_validator(mode="after")
+    def _one_failure_per_uav(self) -> FaultModel:
+        seen: dict[int, int] = {}
+        for uav, step in self.failures:
+            if uav in seen:
+                raise ValueError(
+                    f"failures lists UAV {uav} twice (steps {seen[uav]} and {step}); a UAV "
+                    "fails once"
+                )
+            seen[uav] = step
         return self
 
 
@@ -416,11 +439,16 @@ class Scenario(_Part):
             raise ValueError(
                 f"uav.altitudes has {len(self.uav.altitudes)} entries but n_uavs is {self.n_uavs}"
             )
-        for uav, _ in self.faults.failures:
+        for uav, step in self.faults.failures:
             if uav >= self.n_uavs:
                 raise ValueError(
                     f"faults.failures names UAV {uav}, which does not exist "
                     f"(n_uavs is {self.n_uavs}: UAVs 0 to {self.n_uavs - 1})"
+                )
+            if step >= self.steps:
+                raise ValueError(
+                    f"faults.failures names step {step}, after the run's last step "
+                    f"{self.steps - 1}; it would never happen"
                 )
         heights = self.altitudes()
         if min(heights) <= 0 or max(heights) > MAX_ALTITUDE:

@@ -112,13 +112,17 @@ def run_job(job: Job) -> dict[str, Any]:
     return {name: np.asarray(values).tolist() for name, values in metrics.items()}
 
 
+UNDEFINED_ALLOWED = ("rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms")
+"""Metrics that may be NaN: nothing to average (every UAV failed), or not measured."""
+
+
 def check_finite(metrics: dict[str, np.ndarray], what: str) -> None:
-    """Raise if a metric other than an unmeasured decision time is NaN or infinite."""
+    """Raise if a metric is infinite, or NaN where it cannot be undefined."""
     for name, values in metrics.items():
         values = np.asarray(values, dtype=float)
         bad = ~np.isfinite(values)
-        if name == "decision_time_ms":
-            bad &= ~np.isnan(values)  # NaN: not measured inside a batch
+        if name in UNDEFINED_ALLOWED:
+            bad &= ~np.isnan(values)
         if bad.any():
             raise FloatingPointError(f"{what}: metric {name} is not finite ({values[bad][0]})")
 

@@ -205,7 +205,7 @@ class Distributed(Method):
             view[:, idx, idx] = bids  # a UAV's own bids are current
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
-        target, seconds = assignment.auction(view, members, type(self).solve)
+        target, seconds = assignment.auction(view, members, self.solve)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
 
 

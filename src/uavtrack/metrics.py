@@ -83,7 +83,7 @@ class Tally:
         self.observed = np.zeros((self.batch, self.n_targets))
         names = (
             "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
-            "delivered", "conflicts", "decision", "pairs", "best", "alive",
+            "delivered", "conflicts", "decision", "decided", "pairs", "best", "alive",
         )  # fmt: skip
         self.sums = {name: np.zeros(self.batch) for name in names}
         self.failed = np.zeros(self.batch)
@@ -128,7 +128,17 @@ class Tally:
         s["messages"] += cycle.messages
         s["delivered"] += cycle.delivered
         s["conflicts"] += cycle.conflicts
-        s["decision"] += cycle.decision_time_ms.mean(axis=1)
+        decision = cycle.decision_time_ms
+        if not everyone:  # only the living decide
+            counted = np.isfinite(decision)
+            decision = np.where(counted, decision, 0.0).sum(axis=1) / np.maximum(
+                counted.sum(axis=1), 1
+            )
+            s["decided"] += counted.any(axis=1)
+        else:
+            decision = decision.mean(axis=1)
+            s["decided"] += 1
+        s["decision"] += decision
         self.failed = (~alive).sum(axis=1).astype(float)
 
     def _flush(self) -> None:
@@ -160,10 +170,11 @@ class Tally:
         self._flush()
         per_target = self.per_target()
         s = self.sums
-        pairs, targets = np.maximum(s["pairs"], 1), np.maximum(s["best"], 1)
-        decision = (
-            1e3 * 0 + s["decision"] / self.steps if self.timed else np.full(self.batch, np.nan)
-        )
+        # nothing to average (every UAV failed from the start): NaN, not a perfect score
+        pairs = np.where(s["pairs"] > 0, s["pairs"], np.nan)
+        targets = np.where(s["best"] > 0, s["best"], np.nan)
+        decided = np.where(s["decided"] > 0, s["decided"], np.nan)
+        decision = s["decision"] / decided if self.timed else np.full(self.batch, np.nan)
         return {
             "observation_rate": per_target.mean(axis=1),
             "per_target": per_target,
@@ -171,7 +182,7 @@ class Tally:
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,
             "nees_best": s["nees_best"] / targets,
-            "rounds": s["rounds"] / np.maximum(s["alive"], 1),
+            "rounds": s["rounds"] / np.where(s["alive"] > 0, s["alive"], np.nan),
             "messages": s["messages"] / self.steps,
             "delivered": s["delivered"] / self.steps,
             "conflicts": s["conflicts"] / self.steps,

@@ -22,6 +22,7 @@ from matplotlib.patches import Circle, Ellipse  # noqa: E402
 
 from .files import replacing  # noqa: E402
 from .metrics import rank_names  # noqa: E402
+from .report import level_text  # noqa: E402
 
 COLORS = {"distributed": "#1f77b4", "centralized": "#2ca02c", "greedy": "#d62728"}
 RANK_COLORS = ["#c6dbef", "#9ecae1", "#6baed6", "#3182bd", "#08519c", "#08306b"]
@@ -217,12 +218,14 @@ def reproduction_figures(summary: dict[str, Any], out: Path) -> list[Path]:
 def sweep_figure(summary: dict[str, Any], path: Path) -> None:
     """Observation rate (mean ± std) of each method against the swept field."""
     values = summary["values"]
-    numeric = all(isinstance(v, int | float) for v in values)
-    x = values if numeric else list(range(len(values)))
+    numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
+    x = np.asarray(values, dtype=float) if numeric else np.arange(len(values))
+    span = (x.max() - x.min()) if len(x) > 1 and x.max() > x.min() else 1.0
+    n = len(summary["methods"])
     fig, ax = plt.subplots(figsize=(8, 4.5))
-    for m, rows in summary["methods"].items():
+    for k, (m, rows) in enumerate(summary["methods"].items()):
         ax.errorbar(
-            x,
+            x + (k - (n - 1) / 2) * 0.01 * span,  # side by side, so the bars show
             _num([r["mean"] for r in rows]),
             yerr=_num([r["std"] for r in rows]),
             marker="o",
@@ -231,10 +234,10 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
             color=COLORS.get(m),
         )
     if not numeric:
-        ax.set_xticks(x, [str(v) for v in values])
+        ax.set_xticks(x, [level_text(v) for v in values])
     unit = summary.get("unit")
     ax.set_xlabel(f"{summary['field']} [{unit}]" if unit else summary["field"])
-    ax.set_ylabel("observation rate")
+    ax.set_ylabel("observation rate (mean ± std over trials)")
     ax.set_ylim(0, 1.05)
     ax.grid(alpha=0.3)
     ax.legend()
@@ -258,28 +261,25 @@ SERIES_STYLE = {
 def fault_figure(name: str, fault: dict[str, Any], path: Path) -> None:
     """Observation rate against one fault's level, a line per series, 95% intervals."""
     levels = fault["levels"]
-    numeric = all(isinstance(v, int | float) for v in levels)
-    x = np.asarray(levels, dtype=float) if numeric else np.arange(len(levels))
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    span = (x.max() - x.min()) if len(x) > 1 else 1.0
+    x = np.arange(len(levels))  # the levels evenly spaced, named on the axis
+    fig, ax = plt.subplots(figsize=(8, 5))
     n = len(fault["series"])
     for k, (series, rows) in enumerate(fault["series"].items()):
         style = SERIES_STYLE.get(series, {"label": series})
         ax.errorbar(
-            x + (k - (n - 1) / 2) * 0.012 * span,  # side by side, so the intervals show
+            x + (k - (n - 1) / 2) * 0.06,  # side by side, so the intervals show
             _num([r["mean"] for r in rows]),
             yerr=_num([r["ci95"] for r in rows]),
             capsize=3,
             ms=5,
             **style,
         )
-    if not numeric:
-        ax.set_xticks(x, ["none" if v is None else str(v) for v in levels])
+    ax.set_xticks(x, [level_text(v) for v in levels])
     ax.set_xlabel(fault["xlabel"])
     ax.set_ylabel("observation rate (mean, 95% CI)")
     ax.set_ylim(0, 1.05)
     ax.grid(alpha=0.3)
-    ax.legend(fontsize=8, loc="lower left")
+    ax.legend(fontsize=8, loc="upper center", bbox_to_anchor=(0.5, -0.14), ncols=4)
     fixed = ", ".join(f"{k} = {v}" for k, v in fault.get("fixed", {}).items())
     ax.set_title(f"Fault: {name}" + (f" ({fixed})" if fixed else ""))
     save(fig, path)

@@ -37,8 +37,14 @@ def ci(p: dict[str, float], negate: bool = False) -> str:
     if negate:
         mean, low, high = -mean, -high, -low
     if _missing(low) or _missing(high):
-        return f"{mean:+.4f} [n/a]"
-    return f"{mean:+.4f} [{low:+.4f}, {high:+.4f}]"
+        return f"{signed(mean)} [n/a]"
+    return f"{signed(mean)} [{signed(low)}, {signed(high)}]"
+
+
+def signed(x: float, digits: int = 4) -> str:
+    """x with its sign, and +0 rather than -0 for what rounds to zero."""
+    text = f"{x:+.{digits}f}"
+    return "+" + text[1:] if float(text) == 0 else text
 
 
 def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[str]:
@@ -54,7 +60,7 @@ def _by_value(field: str, values: list, columns: list[str], cell) -> list[str]:
     """A table with one row per value of `field` and `cell(row, column)` in each column."""
     lines = [f"| {field} | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
     for k, v in enumerate(values):
-        lines.append(f"| {v} | " + " | ".join(cell(k, c) for c in columns) + " |")
+        lines.append(f"| {level_text(v)} | " + " | ".join(cell(k, c) for c in columns) + " |")
     return lines
 
 
@@ -76,7 +82,8 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         f"Command: `{info['command']}`  ",
         f"Trials: {trials} per configuration, {scenario.steps} steps each, seed {info['seed']}; "
         f"engine {info['engine']}, {info['workers']} workers; {info['seconds']:.0f} s "
-        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done; "
+        f"{info['compute_seconds']:.0f} s of compute for all jobs).",
         "",
         *([NA_NOTE, ""] if trials < 2 else []),
         "## Fig. 5: observation rate, 5 UAVs and 4 targets, r_C = 50 m, FOV 10°",
@@ -192,7 +199,7 @@ def sweep(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> 
         "",
         f"Command: `{info['command']}`  ",
         f"{trials} trials per point, {scenario.steps} steps, seed {info['seed']}; "
-        f"{info['seconds']:.0f} s.",
+        f"{info['seconds']:.0f} s ({info['compute_seconds']:.0f} s of compute for all jobs).",
         "",
         *([NA_NOTE, ""] if trials < 2 else []),
         "Observation rate, mean ± std over trials:",
@@ -240,8 +247,15 @@ ABLATION = {
 """Ablation columns: heading -> series."""
 
 
-def level_text(value) -> str:
-    return "none" if value is None else f"{value:g}" if isinstance(value, float) else str(value)
+def level_text(value: Any) -> str:
+    """A level or swept value as text: none for an unset field, numbers without noise."""
+    if value is None:
+        return "none"
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, float):
+        return f"{value:g}"
+    return str(value)
 
 
 def robustness(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> str:
@@ -255,7 +269,8 @@ def robustness(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]
         f"Command: `{info['command']}`  ",
         f"{trials} trials per point, {scenario.steps} steps, seed {info['seed']}; engine "
         f"{info['engine']}, {info['workers']} workers; {info['seconds']:.0f} s "
-        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done; "
+        f"{info['compute_seconds']:.0f} s of compute for all jobs).",
         "",
         *([NA_NOTE, ""] if trials < 2 else []),
         FAULT_MODEL,

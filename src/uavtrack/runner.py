@@ -97,6 +97,7 @@ class Store:
         )
         self.set_aside: list[tuple[str, str]] = []  # (job key, reason) of rejected files
         self._valid: dict[str, dict[str, Any]] = {}
+        self._seconds: dict[str, float] = {}
         self._lock = None
         self._open()
 
@@ -177,6 +178,7 @@ class Store:
             self._set_aside(job, path, problem)
             return False
         self._valid[job.key] = record["metrics"]
+        self._seconds[job.key] = float(record["seconds"])
         return True
 
     def _read(self, job: Job, path: Path) -> tuple[str, dict[str, Any]]:
@@ -221,6 +223,7 @@ class Store:
         body = json.loads(dumps(record))  # the plain JSON types the file will hold
         write_json(self.path(job), {**body, "sha256": checksum(body)})
         self._valid[job.key] = body["metrics"]
+        self._seconds[job.key] = float(body["seconds"])
         (self.failed / f"{job.key}.json").unlink(missing_ok=True)
 
     def fail(self, job: Job, error: str) -> None:
@@ -230,6 +233,11 @@ class Store:
         if not self.done(job):
             raise RunError(f"the result of job {job.key} is missing from {self.raw}")
         return self._valid[job.key]
+
+    def seconds(self, job: Job) -> float:
+        """The compute time a stored job took, whenever it ran."""
+        self.load(job)
+        return self._seconds[job.key]
 
 
 def _take_lock(root: Path):

@@ -275,7 +275,7 @@ def step(
         delivered=fused.delivered + assigned.delivered,
         conflicts=conflicts(target, alive, bids.shape[-1]),
         alive=alive,
-        decision_time_ms=1e3 * (share + assigned.seconds),
+        decision_time_ms=np.where(alive, 1e3 * (share + assigned.seconds), np.nan),
     )
     mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
     new = State(

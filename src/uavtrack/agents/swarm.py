@@ -26,7 +26,7 @@ from ..errors import RunError, UsageError
 from ..methods import get
 from ..simulation import Result, result_of
 from .program import serve
-from .transport import Bus, MemoryTransport, ZenohTransport
+from .transport import Bus, MemoryTransport, ZenohTransport, zenoh_reason
 from .world import Traffic, WorldProgram
 
 TRANSPORTS = ("memory", "zenoh")
@@ -49,6 +49,21 @@ def free_port() -> int:
         return probe.getsockname()[1]
 
 
+@dataclass(frozen=True)
+class Options:
+    """How a swarm runs (see `run_swarm`)."""
+
+    deadline: float = 2.0
+    listen: str | None = None
+    connect: tuple[str, ...] = ()
+    spawn: bool = True
+    realtime: bool = False
+    trace: bool = True
+    progress: Callable[[int], None] | None = None
+    startup: float = 60.0
+    announce: Callable[[str, str], None] | None = None
+
+
 def run_swarm(
     scenario: Scenario,
     method: str = "distributed",
@@ -62,13 +77,16 @@ def run_swarm(
     trace: bool = True,
     progress: Callable[[int], None] | None = None,
     startup: float | None = None,
+    announce: Callable[[str, str], None] | None = None,
 ) -> SwarmResult:
     """Run one trial as a swarm of programs; its result equals `simulate`'s for the same
     scenario, method and seed (the same faults included).
 
-    listen: the world's endpoint (zenoh; default a free loopback port); connect: more
-    endpoints for the world to join (programs on other machines); spawn: start the
-    programs here (else wait for them to join, started with `uavtrack agent`).
+    deadline: seconds a round waits for messages; listen: the world's endpoint (zenoh;
+    default a free loopback port); connect: more endpoints for the world to join
+    (programs on other machines); spawn: start the programs here (else wait for them,
+    started with `uavtrack agent`; `announce` is told the run id and the endpoint);
+    realtime: pace cycles at dt; startup: seconds to wait for the programs.
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
@@ -76,39 +94,32 @@ def run_swarm(
     run = secrets.token_hex(6)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
-    startup = startup if startup is not None else 30.0 + 2.0 * len(programs)
-    if transport == "memory":
-        return _in_memory(
-            scenario, method, seed, run, programs, deadline, realtime, trace, progress, startup
-        )
-    return _over_zenoh(
-        scenario,
-        method,
-        seed,
-        run,
-        programs,
+    options = Options(
         deadline,
         listen,
-        connect,
+        tuple(connect),
         spawn,
         realtime,
         trace,
         progress,
-        startup,
+        startup if startup is not None else 30.0 + 2.0 * len(programs),
+        announce,
     )
+    go = _in_memory if transport == "memory" else _over_zenoh
+    return go(scenario, method, seed, run, programs, options)
 
 
-def _in_memory(scenario, method, seed, run, programs, deadline, realtime, trace, progress, startup):
+def _in_memory(scenario, method, seed, run, programs, o: Options) -> SwarmResult:
     bus = Bus()
     world_link = MemoryTransport(bus)
     world_link.announce(f"uavtrack/{run}/alive/world")
-    world = WorldProgram(scenario, method, seed, world_link, run, deadline, startup)
+    world = WorldProgram(scenario, method, seed, world_link, run, o.deadline, o.startup)
     errors: list[BaseException] = []
 
     def program(me: int) -> None:
         link = MemoryTransport(bus)
         try:
-            serve(link, run, me, wait=startup)
+            serve(link, run, me, wait=o.startup)
         except BaseException as exc:  # reported by the world's thread
             errors.append(exc)
         finally:
@@ -118,48 +129,36 @@ def _in_memory(scenario, method, seed, run, programs, deadline, realtime, trace,
     for thread in threads:
         thread.start()
     try:
-        batch = world.run_trial(trace=trace, realtime=realtime, progress=progress)
+        batch = world.run_trial(trace=o.trace, realtime=o.realtime, progress=o.progress)
     finally:
         world_link.close()  # the programs see the world gone and stop
         for thread in threads:
-            thread.join(timeout=deadline + 5.0)
+            thread.join(timeout=o.deadline + 5.0)
     if errors:
         raise RunError(f"a program failed: {type(errors[0]).__name__}: {errors[0]}") from errors[0]
     return SwarmResult(result_of(batch, seed), world.traffic, run, "memory")
 
 
-def _over_zenoh(
-    scenario,
-    method,
-    seed,
-    run,
-    programs,
-    deadline,
-    listen,
-    connect,
-    spawn,
-    realtime,
-    trace,
-    progress,
-    startup,
-):
+def _over_zenoh(scenario, method, seed, run, programs, o: Options) -> SwarmResult:
     try:
         import zenoh  # noqa: F401
     except ImportError:
         raise UsageError(
             '--transport zenoh needs eclipse-zenoh: pip install "uavtrack[agents]"'
         ) from None
-    endpoint = listen or f"tcp/127.0.0.1:{free_port()}"
+    endpoint = o.listen or f"tcp/127.0.0.1:{free_port()}"
     try:
-        link = ZenohTransport([endpoint], list(connect))
-    except Exception as exc:  # zenoh reports a busy port or a bad endpoint this way
-        reason = " ".join(str(exc).split())[:200] or type(exc).__name__
-        raise UsageError(f"cannot open the swarm's endpoint {endpoint}: {reason}") from None
+        link = ZenohTransport([endpoint], list(o.connect))
+    except Exception as exc:  # zenoh reports a busy port, a bad endpoint, no answer so
+        where = " and ".join([f"listen on {endpoint}", *(f"connect to {c}" for c in o.connect)])
+        raise UsageError(f"cannot {where}: {zenoh_reason(exc)}") from None
     children: list[subprocess.Popen] = []
     try:
         link.announce(f"uavtrack/{run}/alive/world")
-        world = WorldProgram(scenario, method, seed, link, run, deadline, startup)
-        if spawn:
+        world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup)
+        if o.announce is not None:
+            o.announce(run, endpoint)
+        if o.spawn:
             for me in programs:
                 children.append(
                     subprocess.Popen(
@@ -178,14 +177,14 @@ def _over_zenoh(
                     f"started (exit codes {codes}); see their messages above"
                 )
 
-        world.check = check if spawn else None
+        world.check = check if o.spawn else None
         try:
-            batch = world.run_trial(trace=trace, realtime=realtime, progress=progress)
+            batch = world.run_trial(trace=o.trace, realtime=o.realtime, progress=o.progress)
         except TimeoutError as exc:
             raise RunError(str(exc)) from None
     finally:
         link.close()
-        stop(children, grace=deadline + 3.0)
+        stop(children, grace=o.deadline + 3.0)
     return SwarmResult(result_of(batch, seed), world.traffic, run, "zenoh")
 
 

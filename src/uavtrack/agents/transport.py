@@ -81,8 +81,12 @@ class MemoryTransport(Transport):
     def __init__(self, bus: Bus) -> None:
         self.bus = bus
         self.announced: list[str] = []
+        self.published = 0
+        self.bytes = 0
 
     def publish(self, key: str, payload: bytes) -> None:
+        self.published += 1
+        self.bytes += len(payload)
         with self.bus.lock:
             self.bus.published += 1
             self.bus.bytes += len(payload)
@@ -109,7 +113,7 @@ class MemoryTransport(Transport):
         self.announced = []
 
 
-def zenoh_config(listen: list[str], connect: list[str]) -> Any:
+def zenoh_config(listen: list[str], connect: list[str], connect_timeout: float = 5.0) -> Any:
     """A peer-mode Zenoh configuration: explicit endpoints, no multicast scouting."""
     import zenoh
 
@@ -118,9 +122,17 @@ def zenoh_config(listen: list[str], connect: list[str]) -> Any:
     conf.insert_json5("scouting/multicast/enabled", "false")
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
-    if connect:
+    if connect:  # fail, rather than retry for ever, when nothing answers
         conf.insert_json5("connect/endpoints", json.dumps(connect))
+        conf.insert_json5("connect/exit_on_failure", "true")
+        conf.insert_json5("connect/timeout_ms", json.dumps(int(1000 * connect_timeout)))
     return conf
+
+
+def zenoh_reason(exc: BaseException) -> str:
+    """Zenoh's error message without its source location."""
+    text = " ".join(str(exc).split())
+    return text.split(" at /")[0][:200] or type(exc).__name__
 
 
 class ZenohTransport(Transport):

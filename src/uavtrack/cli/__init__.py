@@ -1,5 +1,5 @@
-"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | animate | bench |
-params``.
+"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | swarm | agent |
+animate | bench | params``.
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
 ``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130
@@ -136,6 +136,18 @@ RUN_ROWS = (
     ("messages", "messages per step", "{:.2f}"),
     ("decision_time_ms", "decision time per UAV and cycle [ms]", "{:.3f}"),
 )
+FAULT_ROWS = (
+    ("delivered", "messages delivered per step", "{:.2f}"),
+    ("conflicts", "conflicts per step (doubled targets while one is free)", "{:.3f}"),
+    ("failed", "UAVs failed by the end", "{:.0f}"),
+)
+
+
+def number(fmt: str, value) -> str:
+    """A metric for a table: n/a when it could not be computed (None or NaN)."""
+    return "n/a" if value is None or value != value else fmt.format(value)
+
+
 CAPTION = (
     "Team's best estimate: per target, the estimate of the UAV most confident in it. "
     "Every UAV's estimate includes the stale ones of UAVs cut off from the team. NEES above "
@@ -169,18 +181,34 @@ def run(
             trace=trace is not None,
             progress=lambda _: advance(1),
         )
+    show(result, scenario, seed, as_json, trace)
+
+
+def show(
+    result,
+    scenario: Scenario,
+    seed: int,
+    as_json: bool,
+    trace: Path | None,
+    extra: dict[str, Any] | None = None,
+    title: str = "uavtrack run",
+    rows: list[tuple[str, str]] | None = None,
+) -> None:
+    """Write the trace if asked, then print a run's metrics as a table (with more `rows`)
+    or one JSON object (with `extra`, such as a swarm's traffic)."""
     if trace is not None:
         write_npz(trace, result.trace.arrays())
     summary = result.summary()
     if as_json:
         summary["scenario"] = scenario.to_dict()
+        summary.update(extra or {})
         typer.echo(dumps(summary))
         return
     from rich.markup import escape
     from rich.table import Table
 
     table = Table(
-        title=f"uavtrack run: {summary['method']}, seed {seed}, {scenario.steps} steps",
+        title=f"{title}: {summary['method']}, seed {seed}, {scenario.steps} steps",
         caption=CAPTION,
         caption_justify="left",
         show_header=False,
@@ -189,7 +217,12 @@ def run(
     for j, rate in enumerate(summary["per_target"]):
         table.add_row(f"  target {j}", f"{rate:.4f}")
     for key, label, fmt in RUN_ROWS:
-        table.add_row(escape(label), fmt.format(summary[key]))
+        table.add_row(escape(label), number(fmt, summary[key]))
+    if scenario.faults != type(scenario.faults)():
+        for key, label, fmt in FAULT_ROWS:
+            table.add_row(escape(label), number(fmt, summary[key]))
+    for label, value in rows or []:
+        table.add_row(escape(label), escape(value))
     console().print(table)
     if trace is not None:
         typer.echo(f"trace written to {trace}")
@@ -273,7 +306,7 @@ def compare(
             f"  target {j}", *(f"{r['per_target']['mean'][j]:.3f}" for r in results.values())
         )
     for key, label, fmt in COMPARE_ROWS:
-        table.add_row(escape(label), *(fmt.format(r[key]["mean"]) for r in results.values()))
+        table.add_row(escape(label), *(number(fmt, r[key]["mean"]) for r in results.values()))
     console().print(table)
 
 
@@ -381,4 +414,4 @@ def interrupted(kept: str) -> int:
 
 
 # the other commands register themselves on `app`
-from . import benchmark, experiments, robustness  # noqa: E402, F401
+from . import benchmark, experiments, robustness, swarm  # noqa: E402, F401

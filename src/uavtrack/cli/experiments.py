@@ -124,6 +124,7 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
             )
         info = {
             "seconds": time.perf_counter() - start,
+            "compute_seconds": sum(store.seconds(job) for job in jobs),
             "jobs_run": len(jobs) - skipped,
             "jobs_skipped": skipped,
             "engine": engine.value,
