@@ -181,7 +181,7 @@ class UavAgent:
     def cycle(self, sense: Sense) -> Report:
         """One decision cycle from the world's message; returns the report to send."""
         k, s = sense.k, self.scenario
-        believed = sense.believed.array()
+        believed = self.believed = sense.believed.array()
         alive = sense.alive.array().astype(bool)
         self.radio.begin(k, sense.links.array().astype(bool), alive)
         observed = sense.observed.array().astype(bool)
@@ -240,11 +240,12 @@ class UavAgent:
         rounds = depth + s.extra_rounds
         if s.budget is not None:
             rounds = min(rounds, s.budget)
-        state = {
+        state = {  # per target: confidence, estimate, its time stamp and whose it is
             "gamma": estimation.confidence(cov),
             "mean": mean,
             "cov": cov,
             "stamp": np.full(self.m, k, dtype=np.int64),
+            "origin": np.full(self.m, self.me, dtype=np.int64),
         }
         for r in range(1, rounds + 1):
             self.radio.send(k, "consensus", r, state)
@@ -256,6 +257,8 @@ class UavAgent:
             offered = inbox.contents
             if s.stale:
                 offered = {q: s.forward(t, k) for q, t in offered.items()}
+            if any(set(t) != set(state) for t in offered.values()):
+                offered = {q: t for q, t in offered.items() if set(t) == set(state)}
             state = self._adopt(state, offered)
         self.radio.send(k, "consensus", rounds + 1, state, final=True)
         return state["mean"], state["cov"], rounds, sent, delivered
@@ -315,7 +318,7 @@ class UavAgent:
     def auction(self, k: int, bids: np.ndarray, alive: np.ndarray):
         """Beacons and bids to the neighbours, then this UAV's auction (`assignment.local`)."""
         s, me, n = self.setting, self.me, self.n
-        self.radio.send(k, "beacon", 0, {})
+        self.radio.send(k, "beacon", 0, {"position": self.believed[:3]})  # who, where, when
         self.radio.send(k, "bids", 0, {"bids": bids, "stamp": np.array(k)})
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
         sent = sum(a.sent for a in (beacon, inbox) if a is not None)

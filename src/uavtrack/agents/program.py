@@ -16,23 +16,27 @@ import numpy as np
 
 from ..config import Scenario
 from ..faults import Faults
+from ..methods import get
 from .agent import CentralAgent, UavAgent, keys
-from .messages import VERSION, Report, encode, packed
+from .messages import VERSION, Radio, Report, encode, packed
 from .transport import Mailbox, Transport
 
 STARTUP = 120.0
 """Seconds a program waits for the world's first message."""
+LINGER = 10.0
+"""Seconds a program that ran its last cycle waits for the world to finish."""
 
 
 def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int:
     """Run program `me` of swarm `run` to its end; returns the cycles it ran."""
     k_ = keys(run)
     mailbox = Mailbox(run)
-    transport.subscribe(k_["hello"], mailbox.handler)
+    # the world's hello last: once it arrives, the declarations before it have too
     transport.subscribe(f"{k_['sense']}{me}", mailbox.handler)
     transport.subscribe(k_["radio"], mailbox.handler)
     transport.subscribe(k_["tick"], mailbox.handler)
     transport.watch(f"{k_['alive']}world", mailbox.lost)
+    transport.subscribe(k_["hello"], mailbox.handler)
     if not mailbox.wait(
         lambda: ("hello",) in mailbox.inbox or mailbox.gone, time.monotonic() + wait
     ):
@@ -52,9 +56,16 @@ def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int
             me, scenario, hello.method, faults, transport, mailbox, run, hello.deadline, prior
         )
     transport.announce(f"{k_['alive']}{me}")
+    if not meet(transport, mailbox, run, me, n + int(get(hello.method).central), wait):
+        return 0
     empty = packed({"x": np.zeros(0)})["x"]
     ready = Report(VERSION, run, -1, me, -1, -1, empty, empty, empty, 0, 0, 0, 0.0)
     transport.publish(f"{k_['report']}{me}", encode(ready))
+    first = ("tick", 0) if me == n else ("sense", 0, me)
+    limit = time.monotonic() + wait
+    while first not in mailbox.inbox and not mailbox.gone and time.monotonic() < limit:
+        _presence(transport, run, me)  # until the run starts: others may still need it
+        mailbox.wait(lambda: first in mailbox.inbox or bool(mailbox.gone), time.monotonic() + 0.1)
     published = (getattr(transport, "published", 0), getattr(transport, "bytes", 0))
     ran = 0
     for k in range(scenario.steps):
@@ -72,7 +83,28 @@ def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int
         published = now
         transport.publish(f"{k_['report']}{me}", encode(report))
         ran += 1
+    # stay until the world is done: closing at once could lose the last report in flight
+    mailbox.wait(lambda: bool(mailbox.gone), time.monotonic() + LINGER)
     return ran
+
+
+def _presence(transport: Transport, run: str, me: int) -> None:
+    message = Radio(VERSION, run, -1, "presence", 0, me, True, {})
+    transport.publish(f"{keys(run)['radio']}{me}", encode(message))
+
+
+def meet(transport: Transport, mailbox: Mailbox, run: str, me: int, programs: int, wait: float):
+    """Announce this program to the others until it has heard every one of them (UAVs
+    0 .. N-1 and the central node N if any): then the routes between all programs
+    exist, and no message of the first cycle is lost to a subscription still in transit."""
+    others = [p for p in range(programs) if p != me]
+    limit = time.monotonic() + wait
+    while time.monotonic() < limit and not mailbox.gone:
+        _presence(transport, run, me)
+        heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
+        if mailbox.wait(heard, time.monotonic() + 0.1):
+            return True
+    return False
 
 
 def _with_traffic(report: Report, published: int, size: int) -> Report:

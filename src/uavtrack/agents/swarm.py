@@ -183,7 +183,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options) -> SwarmResul
         except TimeoutError as exc:
             raise RunError(str(exc)) from None
     finally:
-        link.close()
+        link.close()  # the programs see the world gone and end
         stop(children, grace=o.deadline + 3.0)
     return SwarmResult(result_of(batch, seed), world.traffic, run, "zenoh")
 

@@ -120,6 +120,7 @@ def zenoh_config(listen: list[str], connect: list[str], connect_timeout: float =
     conf = zenoh.Config()
     conf.insert_json5("mode", json.dumps("peer"))
     conf.insert_json5("scouting/multicast/enabled", "false")
+    conf.insert_json5("transport/shared_memory/enabled", "false")  # no SHM watchdog threads
     if listen:
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     if connect:  # fail, rather than retry for ever, when nothing answers
@@ -150,8 +151,14 @@ class ZenohTransport(Transport):
 
     def publish(self, key: str, payload: bytes) -> None:
         publisher = self.publishers.get(key)
-        if publisher is None:
-            publisher = self.publishers[key] = self.session.declare_publisher(key)
+        if publisher is None:  # block rather than drop when queues fill: a lost message
+            import zenoh  # would cost its receivers a deadline; losses are the fault model's
+
+            publisher = self.publishers[key] = self.session.declare_publisher(
+                key,
+                congestion_control=zenoh.CongestionControl.BLOCK,
+                reliability=zenoh.Reliability.RELIABLE,
+            )
         publisher.put(payload)
         self.published += 1
         self.bytes += len(payload)

@@ -353,6 +353,7 @@ def console(width: int = 120):
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit code (see the module docstring)."""
     argv = sys.argv[1:] if argv is None else list(argv)
+    _terminate_as_interrupt()
     try:
         # without standalone mode typer returns exit codes (typer.Exit, Ctrl-C -> 130)
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
@@ -377,6 +378,19 @@ def main(argv: list[str] | None = None) -> int:
         return fail("out of memory; make the scenario smaller (see uavtrack params)", code=1)
     except OSError as exc:
         return fail(os_error(exc), code=1)
+
+
+def _terminate_as_interrupt() -> None:
+    """SIGTERM ends a command as Ctrl-C does: its cleanup runs (workers and programs it
+    started are stopped, no partial file is left)."""
+    import signal
+    import threading
+
+    def interrupt(signum, frame):
+        raise KeyboardInterrupt
+
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGTERM, interrupt)
 
 
 def os_error(exc: OSError) -> str:
