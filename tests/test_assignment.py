@@ -57,9 +57,15 @@ def test_ties_go_to_lower_indices():
     assert assignment.greedy(np.ones((2, 3))).tolist() == [0, 0]
 
 
-def test_non_finite_bids_rejected():
+def test_infinite_bids_and_missing_needed_bids_rejected():
     with pytest.raises(ValueError, match="finite"):
-        assignment.hungarian(np.array([[1.0, np.nan]]))
+        assignment.hungarian(np.array([[1.0, np.inf]]))
+    with pytest.raises(ValueError, match="2 best bids scored"):  # row 1 lacks its 2nd best
+        assignment.hungarian(np.array([[1.0, 0.5, 0.2], [np.nan, 0.3, np.nan]]))
+    with pytest.raises(ValueError, match="every bid must be scored"):  # n >= m reads all
+        assignment.hungarian(np.array([[1.0, np.nan], [0.5, 0.2]]))
+    # a bid below the row's n best is never read: NaN there changes nothing
+    assert assignment.hungarian(np.array([[1.0, np.nan, 0.5]])).tolist() == [0]
 
 
 @settings(max_examples=60, deadline=None)

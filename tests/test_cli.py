@@ -267,7 +267,7 @@ def test_memory_refusal_names_the_field(capsys, monkeypatch):
         "--set",
         "uav.altitude_spacing=0.2",
     )
-    assert code == 2 and "of memory" in err and "reduce n_targets" in err
+    assert code == 2 and "of memory" in err and "reduce n_uavs" in err
 
 
 def test_ctrl_c_on_run_says_so_and_exits_130(tmp_path):

@@ -23,11 +23,27 @@ from scipy.optimize import linear_sum_assignment
 def hungarian(bids: np.ndarray) -> np.ndarray:
     """Assignment of rows (UAVs) to columns (targets) maximising the total bid, Remark 2.
 
-    bids: (n, m) finite. Rows are assigned in rounds: each round solves the rectangular
-    problem over the rows still unassigned and all columns, so with n <= m every row
-    gets a distinct column, and with n > m every column is used once per round.
-    Returns (n,) column per row.
+    bids: (n, m), finite, or NaN for a bid that was not scored because it is below the
+    row's n best (`planning.plan` with ``top``): such a bid is never read. Rows are
+    assigned in rounds: each round solves the rectangular problem over the rows still
+    unassigned and all columns, so with n <= m every row gets a distinct column, and
+    with n > m every column is used once per round. Returns (n,) column per row.
+
+    With n < m only each row's n best columns matter. Exchange argument: take an
+    optimal assignment in which row i holds a column c outside its n best B_i. The other
+    n - 1 rows hold at most n - 1 of the n columns of B_i, so some c' in B_i is free,
+    and bid_i(c') >= bid_i(c); moving i to c' keeps the total at least as high and puts
+    one more row inside its own list. Repeating ends with an optimal assignment where
+    every row holds a column of its own B_i. So the problem restricted to those pairs
+    (others forbidden) over the union of the B_i (at most n^2 columns, whatever m is)
+    has the same optimal total, and the same assignment when the optimum is unique.
+    B_i is the n largest bids of row i, ties to the lower column, so the restricted
+    problem, and the choice among tied optima, depends only on the bids at or above
+    each row's n-th best.
     """
+    bids = np.asarray(bids, dtype=float)
+    if bids.ndim != 2:
+        raise ValueError(f"bids must be (n, m), got shape {bids.shape}")
     _check(bids)
     return _solve(bids)
 
@@ -39,14 +55,59 @@ def local(bids: np.ndarray, me: int, solve: Callable | None = None) -> int:
 
 
 def _check(bids: np.ndarray) -> None:
-    if not np.isfinite(bids).all():
-        raise ValueError("bids must be finite")
+    if np.isinf(bids).any():
+        raise ValueError("bids must be finite (NaN only for a bid not scored)")
+
+
+def ranked(bids: np.ndarray, count: int) -> np.ndarray:
+    """Each row's `count` largest bids, best first, ties to the lower column; a bid not
+    scored (NaN) is never chosen.
+
+    bids: (R, m). Returns (R, count) columns, -1 past a row's scored bids. The first k
+    of a row's list are its k best by the same rule, whatever `count` >= k is.
+    """
+    R, m = bids.shape
+    count = min(count, m)
+    scored = ~np.isnan(bids)
+    if m > 2 * count:  # only bids at or above the count-th largest can be chosen
+        filled = np.where(scored, bids, -np.inf)
+        kth = np.partition(filled, m - count, axis=1)[:, m - count]
+        scored &= filled >= kth[:, None]
+    row, col = np.nonzero(scored)
+    order = np.lexsort((col, -bids[row, col], row))
+    row, col = row[order], col[order]
+    rank = np.arange(row.size) - np.searchsorted(row, row)  # place within its row
+    keep = rank < count
+    out = np.full((R, count), -1, dtype=np.int64)
+    out[row[keep], rank[keep]] = col[keep]
+    return out
+
+
+def _restricted(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """The problem over rows (n, m) restricted to each row's n best columns `best`
+    (n, n), solved (`hungarian`'s exchange argument). Returns (n,) columns.
+
+    When the rows' first choices differ and each is strictly better than the row's
+    second, giving every row its first is the unique optimum: no solve needed."""
+    n = best.shape[0]
+    if (best < 0).any():
+        raise ValueError(f"every row needs its {n} best bids scored (not NaN)")
+    values = np.take_along_axis(bids, best, axis=1)
+    first = best[:, 0]
+    if n == 1 or (np.unique(first).size == n and (values[:, 0] > values[:, 1]).all()):
+        return first
+    columns, position = np.unique(best, return_inverse=True)
+    problem = np.full((n, columns.size), -np.inf)
+    problem[np.arange(n)[:, None], position.reshape(best.shape)] = values
+    return columns[linear_sum_assignment(problem, maximize=True)[1]]
 
 
 def _solve(bids: np.ndarray) -> np.ndarray:
     n, m = bids.shape
-    if n <= m:  # one round
-        return linear_sum_assignment(bids, maximize=True)[1]
+    if n < m:  # one round, over each row's n best columns (the exchange argument)
+        return _restricted(bids, ranked(bids, n))
+    if np.isnan(bids).any():
+        raise ValueError(f"{n} rows and {m} columns: every bid must be scored (not NaN)")
     choice = np.empty(n, dtype=np.int64)
     left = np.arange(n)
     while left.size:
@@ -86,12 +147,14 @@ def auction(
     A UAV alone takes its best bid (the lowest target on ties, as the solver does).
     """
     solve = solve or _solve
+    if solve is hungarian:
+        solve = _solve  # the same, without checking every problem again
     _check(bids)
     B, n = members.shape[:2]
     views = bids.ndim == 4
     own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
     start = time.perf_counter()
-    out = np.argmax(own, axis=-1)
+    out = greedy(own)
     seconds = np.full(out.shape, (time.perf_counter() - start) / max(out.size, 1))
     idx = np.arange(n)
     members = members.copy()
@@ -107,11 +170,28 @@ def auction(
     row = np.cumsum(rows, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
     choice = np.empty((first.size, n), dtype=np.int64)
     cost = np.empty(first.size)
+    size = rows[first].sum(axis=1)
+    m = bids.shape[-1]
+    lists, share = None, 0.0
+    if solve is _solve and not views and (size < m).any():
+        # the built-in solver reads each member's k best bids only: rank every bidder's
+        # once, as many as the largest problem needs (`ranked` keeps the order of each
+        # shorter prefix), and charge the ranking to the problems by their members
+        start = time.perf_counter()
+        problem, member = np.nonzero(rows[first])
+        bidders = np.unique(b[first][problem] * n + member)
+        lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
+        lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
+        share = (time.perf_counter() - start) / bidders.size
     for u, k in enumerate(first):  # one solve per distinct problem
         problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
         start = time.perf_counter()
-        solved = solve(problem)
-        cost[u] = time.perf_counter() - start
+        if lists is not None and size[u] < m:
+            who = np.flatnonzero(rows[k]) + n * b[k]
+            solved = _restricted(problem, lists[who, : size[u]])
+        else:
+            solved = solve(problem)
+        cost[u] = time.perf_counter() - start + share * size[u]
         choice[u, : solved.size] = solved
     out[b, i] = choice[which, row]
     seconds[b, i] = cost[which]
@@ -170,5 +250,6 @@ def centralized(
 
 
 def greedy(bids: np.ndarray) -> np.ndarray:
-    """Each UAV takes its own best bid, no interaction (the greedy baseline)."""
-    return np.argmax(bids, axis=-1)
+    """Each UAV takes its own best bid, no interaction (the greedy baseline); a bid not
+    scored (NaN) is never the best; ties to the lowest target."""
+    return np.argmax(np.where(np.isnan(bids), -np.inf, bids), axis=-1)

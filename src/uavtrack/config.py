@@ -201,6 +201,10 @@ class EstimationModel(_Part):
     )
 
 
+Bool = Annotated[bool, Strict()]
+"""A boolean field: true or false only (not 1 or "yes")."""
+
+
 class PlannerModel(_Part):
     """Receding-horizon action search (Algorithm 1, lines 1-4)."""
 
@@ -223,10 +227,18 @@ class PlannerModel(_Part):
             "undiscounted (1.0)"
         ),
     )
+    prune: Bool = Field(
+        True,
+        description=(
+            "true or false; beyond the paper (Algorithm 1 scores every target; the "
+            "decisions are the same): score only the bids an assignment can read (a UAV in "
+            "neighbourhoods of at most k members needs its k best; greedy its best), "
+            "skipping targets whose upper bound of det G cannot reach them; false: score "
+            "every bid, so that the "
+            "trace holds them all (as it always does when messages can be lost or late)"
+        ),
+    )
 
-
-Bool = Annotated[bool, Strict()]
-"""A boolean field: true or false only (not 1 or "yes")."""
 
 
 class FaultModel(_Part):
@@ -453,13 +465,51 @@ class Scenario(_Part):
         heights = self.altitudes()
         if min(heights) <= 0 or max(heights) > MAX_ALTITUDE:
             lowest, highest = min(heights), max(heights)
+            fits = 2 * min(self.uav.altitude, MAX_ALTITUDE - self.uav.altitude) / self.n_uavs
             raise ValueError(
                 f"uav.altitude {self.uav.altitude:g} m and uav.altitude_spacing "
                 f"{self.uav.altitude_spacing:g} m put the {self.n_uavs} UAVs between "
                 f"{lowest:g} and {highest:g} m, outside (0, {MAX_ALTITUDE:g}] m; "
-                "make uav.altitude_spacing smaller or uav.altitude higher"
+                f"set uav.altitude_spacing to {fits:.3g} m or less, or grow the whole scenario "
+                f"to this team with --team {self.n_uavs}x{self.n_targets} (Scenario.scaled), "
+                "which keeps the altitude band"
             )
         return self
+
+    def scaled(self, n_uavs: int, n_targets: int) -> Scenario:
+        """This scenario grown (or shrunk) to a team of n_uavs UAVs and n_targets targets
+        at the same density.
+
+        * the field's area grows with the number of vehicles (UAVs plus targets), so each
+          UAV meets as many radio neighbours and targets per square metre;
+        * the UAVs keep this scenario's altitude band (lowest to highest), their spacing
+          shrunk to fit the team;
+        * the UAVs start spread over the whole field (``uav.start_spread`` = the field):
+          a team taking off from one small square, as the 5 UAVs of the paper do, would
+          start with every UAV in radio range of a hundred others at 1000 UAVs.
+
+        Everything else is unchanged. Assumed (the paper runs one team size); the
+        README's Performance section measures with it.
+        """
+        for name, value in (("n_uavs", n_uavs), ("n_targets", n_targets)):
+            if not isinstance(value, Integral) or isinstance(value, bool) or value < 1:
+                raise ScenarioError(f"{name} must be a positive integer, got {value!r}")
+        heights = self.altitudes()
+        band = max(heights) - min(heights)
+        area = (n_uavs + n_targets) / (self.n_uavs + self.n_targets)
+        field_size = self.field_size * math.sqrt(area)
+        return self.with_overrides(
+            {
+                "n_uavs": int(n_uavs),
+                "n_targets": int(n_targets),
+                "field_size": field_size,
+                "uav.altitudes": None,
+                "uav.altitude": (max(heights) + min(heights)) / 2,
+                "uav.altitude_spacing": band / (n_uavs - 1) if n_uavs > 1 else 0.0,
+                "uav.start_spread": field_size,
+            },
+            origin=f"team {n_uavs}x{n_targets}",
+        )
 
     def altitudes(self) -> list[float]:
         """Altitude h_i of each UAV [m], centred on `uav.altitude`."""

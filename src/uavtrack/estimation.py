@@ -41,13 +41,23 @@ def predict(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction, eq. (23): s(k|k-1) = A s(k-1), P(k|k-1) = A P(k-1) A^T + Q.
 
-    All filters at once: vec(A P A^T) = (A kron A) vec(P), one matrix product for the
-    whole stack.
+    All filters at once: vec(A P A^T) = (A kron A) vec(P), one matrix product per
+    block of `BLOCK` filters (the block and its result stay in cache; every filter's
+    numbers are the same whatever the block).
     """
     shape = cov.shape
     mean = (mean.reshape(-1, 4) @ A.T).reshape(mean.shape)
-    cov = (cov.reshape(-1, 16) @ _kron(A.tobytes()).T).reshape(shape) + Q
-    return mean, cov
+    flat, kron, q = cov.reshape(-1, 16), _kron(A.tobytes()).T, Q.reshape(16)
+    out = np.empty(flat.shape)
+    for start in range(0, flat.shape[0], BLOCK):
+        block = out[start : start + BLOCK]
+        np.matmul(flat[start : start + BLOCK], kron, out=block)
+        block += q
+    return mean, out.reshape(shape)
+
+
+BLOCK = 8192
+"""Filters processed at once by `predict` and `nees` on large stacks."""
 
 
 @lru_cache(maxsize=8)
@@ -114,8 +124,12 @@ def filter_step(
 
 
 def confidence(cov: np.ndarray) -> np.ndarray:
-    """Perception confidence gamma = 1 / trace(P), eq. (22). cov: (..., 4, 4) -> (...)."""
-    return 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    """Perception confidence gamma = 1 / trace(P), eq. (22). cov: (..., 4, 4) -> (...).
+
+    The diagonal is summed in order, as `numpy.trace` does, without its overhead."""
+    if cov.shape[-2:] != (4, 4):
+        return 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    return 1.0 / (((cov[..., 0, 0] + cov[..., 1, 1]) + cov[..., 2, 2]) + cov[..., 3, 3])
 
 
 def nees(mean: np.ndarray, cov: np.ndarray, truth: np.ndarray) -> np.ndarray:
@@ -130,9 +144,19 @@ def nees(mean: np.ndarray, cov: np.ndarray, truth: np.ndarray) -> np.ndarray:
         e = np.broadcast_to(e, np.broadcast_shapes(e.shape, cov.shape[:-1]))
         return np.einsum("...i,...i->...", e, np.linalg.solve(cov, e[..., None])[..., 0])
     shape = np.broadcast_shapes(e.shape[:-1], cov.shape[:-2])
+    P = np.broadcast_to(cov, shape + (4, 4)).reshape(-1, 16)
+    e = np.broadcast_to(e, shape + (4,)).reshape(-1, 4)
+    out = np.empty(P.shape[0])
+    for start in range(0, P.shape[0], BLOCK):  # each block stays in cache
+        out[start : start + BLOCK] = _nees(P[start : start + BLOCK], e[start : start + BLOCK])
+    return out.reshape(shape)
+
+
+def _nees(P: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """`nees` of filters P (n, 16) with errors e (n, 4)."""
     # component-major copies: each P_ij and e_i a contiguous row
-    P = np.ascontiguousarray(np.broadcast_to(cov, shape + (4, 4)).reshape(-1, 16).T)
-    e0, e1, e2, e3 = np.ascontiguousarray(np.broadcast_to(e, shape + (4,)).reshape(-1, 4).T)
+    P = np.ascontiguousarray(P.T)
+    e0, e1, e2, e3 = np.ascontiguousarray(e.T)
     a11, a12, a22 = P[0], P[1], P[5]
     p02, p12, p03, p13 = P[2], P[6], P[3], P[7]
     inv_det = 1.0 / (a11 * a22 - a12 * a12)
@@ -149,4 +173,4 @@ def nees(mean: np.ndarray, cov: np.ndarray, truth: np.ndarray) -> np.ndarray:
     s12 = P[11] - (p02 * c0 + p12 * c1)
     s22 = P[15] - (p03 * c0 + p13 * c1)
     second = (s22 * f0 * f0 - 2.0 * s12 * f0 * f1 + s11 * f1 * f1) / (s11 * s22 - s12 * s12)
-    return (e0 * u0 + e1 * u1 + second).reshape(shape)
+    return e0 * u0 + e1 * u1 + second

@@ -44,12 +44,16 @@ def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> n
     set is its current one, not what it offered, which with delay is an old one).
 
     known, offered: (B, N, N) bool [trial, UAV, identifier]. Returns (B, N, N) bool.
+    In the edge form only the receivers with links (`network.Links.into`) can grow.
     """
-    if delivered.edges:  # the segments are the B x N receivers in order
+    if delivered.edges:  # one segment per receiver, its self-link included
         t, i, q = delivered.trial, delivered.receiver, delivered.sender
-        rows = np.where(delivered.own[:, None], known[t, i], offered[t, q])
-        heard = np.logical_or.reduceat(rows, delivered.starts, axis=0)
-        return known | heard.reshape(known.shape)
+        out = known.copy()
+        if t.size:
+            rows = np.where(delivered.own[:, None], known[t, i], offered[t, q])
+            heard = np.logical_or.reduceat(rows, delivered.starts, axis=0)
+            out[delivered.heads] = heard
+        return out
     grown = np.matmul(delivered.others, offered.astype(np.float64)) > 0
     return known | grown
 
@@ -61,15 +65,19 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
     sender index.
 
     own, offered: (B, N, M) confidences. Returns (B, N, M) the chosen sender (the
-    receiver's own index: keep its tuple).
+    receiver's own index: keep its tuple). In the edge form a receiver without links
+    (`network.Links.into`) keeps its own.
     """
     n = own.shape[1]
-    if delivered.edges:  # the segments are the B x N receivers in order
+    if delivered.edges:  # one segment per receiver, its self-link included
         t, i, q = delivered.trial, delivered.receiver, delivered.sender
-        values = np.where(delivered.own[:, None], own[t, i], offered[t, q])  # (E, M)
-        top = np.maximum.reduceat(values, delivered.starts, axis=0)
-        lowest = np.where(values == top[delivered.segment], q[:, None], n)
-        return np.minimum.reduceat(lowest, delivered.starts, axis=0).reshape(own.shape)
+        best = identity(own.shape)
+        if t.size:
+            values = np.where(delivered.own[:, None], own[t, i], offered[t, q])  # (E, M)
+            top = np.maximum.reduceat(values, delivered.starts, axis=0)
+            lowest = np.where(values == top[delivered.ordinal], q[:, None], n)
+            best[delivered.heads] = np.minimum.reduceat(lowest, delivered.starts, axis=0)
+        return best
     values = offered[:, None, :, :] + delivered.penalty
     if own is not offered:  # what a UAV offered is not its current tuple (delay)
         idx = np.arange(n)
@@ -77,17 +85,28 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
     return np.argmax(values, axis=-2)  # first maximum = lowest index
 
 
-def pick(own: dict, offered: dict, best: np.ndarray) -> dict:
+def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) -> dict:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
-    offered[best]. Fields are arrays (B, N, M, ...)."""
+    offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
+    arrays of the only receivers whose choice may differ from their own (None: all)."""
     B, n, m = best.shape
-    b, j = np.arange(B)[:, None, None], np.arange(m)
-    keep = best == np.arange(n)[:, None]
+    j = np.arange(m)
+    if rows is None:
+        b = np.arange(B)[:, None, None]
+        keep = best == np.arange(n)[:, None]
+    else:
+        b, i = rows
+        best, keep = best[b, i], best[b, i] == i[:, None]  # (R, M)
+        b = b[:, None]
     out = {}
     for name, value in own.items():
         chosen = offered[name][b, best, j]
-        mask = keep.reshape(keep.shape + (1,) * (value.ndim - 3))
-        out[name] = np.where(mask, value, chosen)
+        mask = keep.reshape(keep.shape + (1,) * (chosen.ndim - keep.ndim))
+        if rows is None:
+            out[name] = np.where(mask, value, chosen)
+        else:
+            out[name] = value.copy()
+            out[name][rows] = np.where(mask, value[rows], chosen)
     return out
 
 
@@ -97,11 +116,14 @@ def pick(own: dict, offered: dict, best: np.ndarray) -> dict:
 @dataclass(frozen=True)
 class Depth:
     """Outcome of the D_i protocol: depth (B, N) rounds learned; sent and delivered (B,)
-    messages (one per link into a receiver still running, per round)."""
+    messages (one per link into a receiver still running, per round); largest (B, N):
+    the most members of any closed neighbourhood the UAV belongs to (its own and its
+    neighbours'), learned in round 2 from the sets K_q(1) = N_q its neighbours send."""
 
     depth: np.ndarray
     sent: np.ndarray
     delivered: np.ndarray
+    largest: np.ndarray
 
 
 def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) -> Depth:
@@ -122,6 +144,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
     idx = np.arange(n)
     known[:, idx, idx] = running  # K(0): each UAV knows itself
     depth = np.zeros((B, n), dtype=np.int64)
+    largest = np.ones((B, n), dtype=np.int64)  # a UAV alone (it stops in round 1)
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
     running = running.copy()
     r = 0
@@ -133,7 +156,13 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = r - 1
             break
         sent, delivered = count(inbox, running, sent, delivered)
-        grown = flood(known, inbox.content["known"], inbox.delivered)
+        links = inbox.delivered.into(running)
+        if r == 2:  # the sets sent now are the senders' closed neighbourhoods
+            mine, theirs = known.sum(axis=-1), inbox.content["known"].sum(axis=-1)
+            best = adopt(mine[..., None], theirs[..., None], links)[..., 0]
+            b = np.arange(B)[:, None]
+            largest = np.where(best == idx, mine, theirs[b, best])
+        grown = flood(known, inbox.content["known"], links)
         stopped = running & ~(grown != known).any(axis=-1)
         depth[stopped] = r - 1
         # a UAV that stopped keeps answering with what it knew when it stopped
@@ -143,7 +172,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = budget
             break
     radio.send("flood", {"known": known})  # the final sets, for later rounds (with delay)
-    return Depth(depth, sent, delivered)
+    return Depth(depth, sent, delivered, largest)
 
 
 def count(inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray):
@@ -195,9 +224,13 @@ def consensus(
             continue
         offered = inbox.content if receive is None else receive(inbox.content)
         sent, delivered = count(inbox, active, sent, delivered)
-        best = adopt(score(tuples), score(offered), inbox.delivered)
-        best = np.where(active[..., None], best, np.arange(n)[:, None])
-        tuples = pick(tuples, offered, best)
+        links = inbox.delivered.into(active)
+        best = adopt(score(tuples), score(offered), links)
+        if links.edges:  # only the active receivers have links: only their rows change
+            tuples = pick(tuples, offered, best, links.heads)
+        else:
+            best = np.where(active[..., None], best, np.arange(n)[:, None])
+            tuples = pick(tuples, offered, best)
     radio.send("consensus", tuples)  # the final tuples, for later rounds (with delay)
     return Outcome(tuples, sent, delivered)
 

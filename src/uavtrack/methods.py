@@ -45,8 +45,11 @@ class Setting:
 
     forward(tuples, k): tuples (dict of (B, N, M, ...) arrays with "mean", "cov",
     "stamp") predicted forward to step k, with their confidence "gamma" recomputed.
-    plan(uavs, mean): bids (B, N, M) and first actions of UAVs at `uavs` (B, N, 5) with
-    fused estimates `mean` (B, N, M, 4), as `planning.plan` under the scenario.
+    plan(uavs, mean, top=None): bids (B, N, M) and first actions of UAVs at `uavs`
+    (B, N, 5) with fused estimates `mean` (B, N, M, 4), as `planning.plan` under the
+    scenario (top: how many best bids each UAV needs, None: all). prune: whether a
+    method may ask for fewer than all bids (``planner.prune``, and a radio that neither
+    loses nor delays, so that every UAV knows the neighbourhoods its bids serve).
     """
 
     faulty: bool
@@ -56,6 +59,7 @@ class Setting:
     stale: bool
     forward: Callable
     plan: Callable
+    prune: bool = False
 
 
 @dataclass(frozen=True)
@@ -89,8 +93,9 @@ class Inputs:
 @dataclass(frozen=True)
 class Fused:
     """Each UAV's fused estimates (mean, cov), the rounds it ran (B, N), messages sent
-    and delivered (B,), seconds of central work (B, N) and, for the centralized method
-    under faults, the targets the central node sent (B, N)."""
+    and delivered (B,), seconds of central work (B, N), for the centralized method
+    under faults the targets the central node sent (B, N), and from the D_i protocol
+    the largest closed neighbourhood each UAV belongs to (B, N) (`fusion.Depth`)."""
 
     mean: np.ndarray
     cov: np.ndarray
@@ -99,6 +104,7 @@ class Fused:
     delivered: np.ndarray
     seconds: np.ndarray | None = None
     target: np.ndarray | None = None
+    largest: np.ndarray | None = None
 
 
 @dataclass(frozen=True)
@@ -128,6 +134,12 @@ class Method:
         """Targets from bids (B, N, M)."""
         raise NotImplementedError
 
+    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+        """How many of its best bids each UAV's assignment can read (B, N), or None: all
+        (the default: a method that does not say needs every bid). The planner scores
+        only what can be among them (`planning.plan_top`); the others are NaN."""
+        return None
+
     def __repr__(self) -> str:
         return f"{type(self).__name__}()"
 
@@ -155,7 +167,8 @@ def consensus(inputs: Inputs) -> Fused:
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
-    return Fused(mean, cov, rounds, depth.sent + out.sent, depth.delivered + out.delivered)
+    sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
+    return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest)
 
 
 class Distributed(Method):
@@ -167,6 +180,15 @@ class Distributed(Method):
     def solve(bids: np.ndarray) -> np.ndarray:
         """The neighbourhood problem: targets (n,) of the n members, Remark 2."""
         return assignment.hungarian(bids)
+
+    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+        """A UAV's bids serve the auction of every neighbourhood it belongs to, and in
+        an auction of k members only each member's k best bids matter
+        (`assignment.hungarian`): it needs as many as the largest of them has members.
+        A replaced `solve` may read any bid: then all."""
+        if not setting.prune or type(self).solve is not Distributed.solve:
+            return None
+        return fused.largest
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         s, radio, k = inputs.setting, inputs.radio, inputs.k
@@ -205,7 +227,8 @@ class Distributed(Method):
             view[:, idx, idx] = bids  # a UAV's own bids are current
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
-        target, seconds = assignment.auction(view, members, self.solve)
+        built_in = type(self).solve is Distributed.solve
+        target, seconds = assignment.auction(view, members, None if built_in else self.solve)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
 
 
@@ -371,6 +394,10 @@ class Greedy(Method):
     """Same fusion as distributed; each UAV takes its own best bid."""
 
     name = "greedy"
+
+    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+        """Its own best bid only."""
+        return np.ones(fused.rounds.shape, dtype=np.int64) if setting.prune else None
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         start = time.perf_counter()

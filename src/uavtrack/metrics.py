@@ -144,8 +144,9 @@ class Tally:
     def _flush(self) -> None:
         if self._pending:
             masks = [p[5] for p in self._pending]
-            mean, cov, best_mean, best_cov, truth = (
-                np.stack(parts) for parts in list(zip(*self._pending, strict=True))[:5]
+            mean, cov, best_mean, best_cov, truth = (  # one step: no copy
+                parts[0][None] if len(parts) == 1 else np.stack(parts)
+                for parts in list(zip(*self._pending, strict=True))[:5]
             )
             q = nees(mean, cov, truth[:, :, None])  # (S, B, Nu, Nt)
             if any(m is not None for m in masks):

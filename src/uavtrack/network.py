@@ -18,12 +18,55 @@ def adjacency(uavs: np.ndarray, comm_range: float) -> np.ndarray:
     uavs: (..., N, 5) states (x, y, h used). Returns (..., N, N) bool, without self-loops.
     """
     pos = uavs[..., :3]
-    diff = pos[..., :, None, :] - pos[..., None, :, :]
-    dist2 = np.einsum("...ijk,...ijk->...ij", diff, diff)
-    adj = dist2 <= comm_range**2
+    adj = in_range(pos[..., :, None, :] - pos[..., None, :, :], comm_range)
     n = adj.shape[-1]
     adj[..., np.arange(n), np.arange(n)] = False
     return adj
+
+
+def in_range(diff: np.ndarray, comm_range: float) -> np.ndarray:
+    """Whether offsets (..., 3) between two UAVs are within r_C: the one predicate of
+    the radio graph, whichever way the candidate pairs were found."""
+    x, y, z = diff[..., 0], diff[..., 1], diff[..., 2]
+    return x * x + y * y + z * z <= comm_range * comm_range
+
+
+def radio_links(
+    uavs: np.ndarray, alive: np.ndarray, comm_range: float, form: str = "auto"
+) -> Links:
+    """The radio graph of a step as `Links`: UAVs within r_C in 3-D, both alive.
+
+    uavs: (B, N, 5); alive: (B, N). Small teams get the dense form from the N x N
+    distances; large ones (`SPARSE_FROM` UAVs and more) the edge form, their candidate
+    pairs from a k-d tree (`scipy.spatial.cKDTree`), so the work grows with the pairs
+    in range, not with N^2. Both keep exactly the pairs `in_range` accepts.
+    """
+    B, n = alive.shape
+    if form not in ("auto", "dense", "edges"):
+        raise ValueError(f"form must be 'auto', 'dense' or 'edges', not {form!r}")
+    if form == "dense" or (form == "auto" and n < SPARSE_FROM):
+        adj = adjacency(uavs, comm_range)
+        if not alive.all():
+            adj &= alive[:, :, None] & alive[:, None, :]
+        return links(adj, "dense")
+    from scipy.spatial import cKDTree
+
+    parts = []
+    for b in range(B):
+        living = np.flatnonzero(alive[b])
+        pos = uavs[b, living, :3]
+        # a margin on the radius: the tree's distance rounds differently from in_range
+        pairs = cKDTree(pos).query_pairs(comm_range * (1 + 1e-9) + 1e-9, output_type="ndarray")
+        i, q = living[pairs[:, 0]], living[pairs[:, 1]]
+        keep = in_range(uavs[b, i, :3] - uavs[b, q, :3], comm_range)
+        i, q = i[keep], q[keep]
+        everyone = np.arange(n)
+        receiver = np.concatenate([i, q, everyone])
+        sender = np.concatenate([q, i, everyone])
+        parts.append((np.full(receiver.size, b), receiver, sender))
+    trial, receiver, sender = (np.concatenate(x) for x in zip(*parts, strict=True))
+    order = np.lexsort((sender, receiver, trial))
+    return Links(B, n, None, trial[order], receiver[order], sender[order])
 
 
 def complete(n: int, batch: tuple[int, ...] = ()) -> np.ndarray:
@@ -62,6 +105,9 @@ class Links:
     ``receiver``, ``sender``, each (E,), sorted by trial and receiver, every node's
     self-link included, so the segments starting at ``starts`` are the B x N receivers
     in order) for large ones. The per-round rules of `fusion` accept either.
+
+    `into` keeps the links into some receivers only (those still running a protocol);
+    in the edge form the segments are then those receivers', in the same order.
     """
 
     batch: int
@@ -79,12 +125,36 @@ class Links:
     def starts(self) -> np.ndarray:
         """First edge of each (trial, receiver) segment (edge form)."""
         row = self.segment
+        if not row.size:
+            return np.zeros(0, dtype=np.int64)
         return np.flatnonzero(np.r_[True, row[1:] != row[:-1]])
 
     @cached_property
     def segment(self) -> np.ndarray:
         """The (trial, receiver) segment of each edge, trial * N + receiver (edge form)."""
         return self.trial * self.n + self.receiver
+
+    @cached_property
+    def ordinal(self) -> np.ndarray:
+        """The number of each edge's segment, 0, 1, ... in order (edge form)."""
+        row = np.zeros(self.trial.size, dtype=np.int64)
+        row[self.starts[1:]] = 1
+        return np.cumsum(row)
+
+    @property
+    def heads(self) -> tuple[np.ndarray, np.ndarray]:
+        """(trial, receiver) of each segment (edge form)."""
+        return self.trial[self.starts], self.receiver[self.starts]
+
+    def into(self, receivers: np.ndarray) -> Links:
+        """The links into the receivers where `receivers` (B, N) holds; the dense form,
+        whose rules run on every receiver at once, is returned as it is."""
+        if not self.edges or receivers.all():
+            return self
+        keep = receivers[self.trial, self.receiver]
+        return Links(
+            self.batch, self.n, None, self.trial[keep], self.receiver[keep], self.sender[keep]
+        )
 
     @cached_property
     def own(self) -> np.ndarray:

@@ -33,7 +33,7 @@ from functools import cache
 import numpy as np
 
 from .config import G, SensorModel
-from .sensing import edge_range, fisher_det
+from .sensing import edge_range, fisher_det, fisher_det_bound
 from .world import HEADING, V, X, Y, fly
 
 
@@ -160,13 +160,20 @@ def plan(
     dt: float,
     discount: float = 1.0,
     g: float = G,
+    top: np.ndarray | None = None,
 ) -> Plan:
     """Algorithm 1 lines 1-4 for every UAV and target, on the shared-prefix tree.
 
     uavs: (..., Nu, 5); mean: (..., Nu, Nt, 4) each UAV's fused estimates. Every
     (UAV, target) pair is scored on its own, so planning a block of UAVs at a time (to
     bound the memory, `CHUNK_BYTES`) gives the same result bit for bit.
+
+    top: (..., Nu) int, how many of its best bids each UAV needs (None: all). Then only
+    the targets that can be among them are scored (`plan_top`); the others get value
+    NaN and action and sequence -1. Every value returned equals the full search's.
     """
+    if top is not None:
+        return plan_top(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, top)
     lead, nt = uavs.shape[:-1], mean.shape[-2]
     per_row = nt * floats_per_pair(3, horizon) * 8
     rows = int(np.prod(lead))
@@ -192,6 +199,82 @@ def plan(
             np.concatenate([getattr(p, name) for p in parts]).reshape(lead + (nt,))
             for name in ("value", "action", "sequence")
         )
+    )
+
+
+PRUNE_SLACK = 8
+"""Targets scored beyond a UAV's `top` in the first pass of `plan_top`."""
+
+
+def plan_top(
+    uavs: np.ndarray,
+    mean: np.ndarray,
+    sensor: SensorModel,
+    bank_angle: float,
+    horizon: int,
+    dt: float,
+    discount: float,
+    g: float,
+    top: np.ndarray,
+) -> Plan:
+    """`plan` scoring only the targets that can be among each UAV's `top` best bids.
+
+    Within the horizon a UAV moves at most h V dT and target j's predicted position at
+    most h dT |v_j| (eq. 14), so every slant range the search evaluates is at least
+    d_lb = sqrt(max(0, r - h dT (V + |v_j|))^2 + h_i^2), r the ground distance now, and
+    since `sensing.fisher_det_bound` is non-increasing, V_ij <= bound(d_lb) sum_t
+    lambda^t. Per UAV the targets are taken in increasing order of that lower bound:
+    the first w (w = top + `PRUNE_SLACK`, doubled until it suffices) are scored exactly;
+    when the bound of the next one is below the top-th best score found, no target left
+    out can reach the UAV's `top` best, ties included. A UAV whose bound never falls
+    low enough is scored in full.
+
+    uavs (..., Nu, 5), mean (..., Nu, Nt, 4), top (..., Nu). Returns a `Plan` with NaN
+    values (action and sequence -1) where a target was not scored.
+    """
+    lead, nt = uavs.shape[:-1], mean.shape[-2]
+    rows = int(np.prod(lead))
+    flat_uavs, flat_mean = uavs.reshape(rows, 5), mean.reshape(rows, nt, 4)
+    need = np.clip(np.asarray(top).reshape(rows), 1, nt)
+    value = np.full((rows, nt), np.nan)
+    action = np.full((rows, nt), -1, dtype=np.int64)
+    sequence = np.full((rows, nt), -1, dtype=np.int64)
+    altitude = flat_uavs[:, 2, None]
+    reach = horizon * dt * (flat_uavs[:, V, None] + np.hypot(flat_mean[..., 2], flat_mean[..., 3]))
+    ground = np.hypot(
+        flat_mean[..., 0] - flat_uavs[:, X, None], flat_mean[..., 1] - flat_uavs[:, Y, None]
+    )
+    gap = ground - reach - 1e-6 * (1.0 + ground)  # the slack covers round-off
+    weight = sum(discount**t for t in range(horizon))
+    args = (sensor, bank_angle, horizon, dt, discount, g)
+    pending = np.arange(rows)
+    width = int(need.max(initial=1)) + PRUNE_SLACK
+    while pending.size:
+        if width >= nt:  # score the rest in full
+            full = plan(flat_uavs[pending], flat_mean[pending], *args)
+            value[pending], action[pending], sequence[pending] = (
+                full.value,
+                full.action,
+                full.sequence,
+            )
+            break
+        order = np.argpartition(gap[pending], width, axis=1)
+        chosen, after = order[:, :width], order[:, width]  # the width nearest, the next
+        part = plan(flat_uavs[pending], flat_mean[pending[:, None], chosen], *args)
+        kth = -np.sort(-part.value, axis=1)[np.arange(pending.size), need[pending] - 1]
+        nearest = np.maximum(gap[pending, after], 0.0)
+        d_edge = edge_range(altitude[pending, 0], sensor)
+        d_lb = np.sqrt(nearest * nearest + altitude[pending, 0] ** 2)
+        done = fisher_det_bound(d_lb, d_edge, sensor) * weight < kth
+        r, c = pending[done, None], chosen[done]
+        value[r, c], action[r, c], sequence[r, c] = (
+            part.value[done],
+            part.action[done],
+            part.sequence[done],
+        )
+        pending, width = pending[~done], 2 * width
+    return Plan(
+        value.reshape(lead + (nt,)), action.reshape(lead + (nt,)), sequence.reshape(lead + (nt,))
     )
 
 

@@ -152,6 +152,23 @@ def fisher_det(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.nda
     return a if a.shape else a[()]
 
 
+def fisher_det_bound(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> np.ndarray:
+    """An upper bound of det G at every slant range d' >= d: non-increasing in d.
+
+    det G = a b / d^2 with a = (1 - grow)^2 / k_d^2 + 2 (k_r/d_O)^2 grow^2 + 2/d^2,
+    b = (d_O / (k_theta d))^2, grow = expit(k_r (d/d_O - 1)) (`_range_coefficient`).
+    grow rises with d from 0 to 1, so (1 - grow)^2 falls, and grow^2 <= 1: replacing
+    grow^2 by 1 leaves a sum of non-increasing terms, times the falling b / d^2. The
+    bound is tight far from the UAV, where grow is 1, which is where the planner uses
+    it (`planning.plan` with ``top``). A relative margin of 1e-9 covers round-off.
+    """
+    d = np.asarray(d, dtype=float)
+    e = np.exp(np.minimum(sensor.k_r - d * (sensor.k_r / d_edge), 700.0))
+    falling = (e / (1.0 + e)) / sensor.k_d  # (1 - grow) / k_d
+    a = falling * falling + 2.0 * (sensor.k_r / d_edge) ** 2 + 2.0 / (d * d)
+    return a * (d_edge / sensor.k_theta) ** 2 / (d * d) ** 2 * (1.0 + 1e-9)
+
+
 def _range_coefficient(d, d_edge, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
     """a = 1/sigma_d^2 + 2 (sigma_d'/sigma_d)^2 + 2/d^2 of `fisher_information`, and d^2.
 

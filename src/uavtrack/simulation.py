@@ -15,7 +15,7 @@ from __future__ import annotations
 
 import os
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import cache
 from numbers import Integral
@@ -31,7 +31,26 @@ from .radio import Radio, RadioState
 from .world import initial_conditions, streams, trial_seed  # noqa: F401 (public here too)
 
 NOISE_BLOCK = 64
-"""Steps of sensor noise drawn at once per trial (a draw of n normals equals n draws of 1)."""
+"""Most steps of sensor noise drawn at once per trial (a draw of n normals equals n
+draws of 1, so the block changes no number)."""
+
+NOISE_BYTES = 64 * 2**20
+"""Most memory a block of sensor noise takes; large teams draw fewer steps at once."""
+
+
+def sensor_noise(
+    rngs: Sequence[np.random.Generator], n_uavs: int, n_targets: int, steps: int
+) -> Iterator[np.ndarray]:
+    """The standard normals of each step's measurements, (B, Nu, Nt, 2) per step, from
+    each trial's sensor stream, drawn a block of steps at a time."""
+    per_step = len(rngs) * n_uavs * n_targets * 2 * 8
+    block = int(np.clip(NOISE_BYTES // per_step, 1, NOISE_BLOCK))
+    for start in range(0, steps, block):
+        count = min(block, steps - start)
+        draws = [rng.standard_normal((count, n_uavs, n_targets, 2)) for rng in rngs]
+        noise = draws[0][:, None] if len(draws) == 1 else np.stack(draws, axis=1)
+        del draws  # the block alone stays
+        yield from noise
 
 STRAIGHT = 1
 """Index of the zero bank angle in the action set (-phi, 0, +phi): a failed UAV's."""
@@ -82,12 +101,18 @@ class Context:
             extra_rounds=robust.extra_rounds,
             stale=robust.stale,
             forward=_forward(scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2),
-            plan=lambda uavs, mean: _plan(uavs, mean, scenario),
+            plan=lambda uavs, mean, top=None: _plan(uavs, mean, scenario, top),
+            prune=scenario.planner.prune
+            and f.loss == 0
+            and f.delay == 0
+            and (f.round_budget is None or f.round_budget >= 2),
         )
         return cls(scenario, method, const, faults, setting)
 
 
-def _plan(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> tuple[np.ndarray, ...]:
+def _plan(
+    uavs: np.ndarray, mean: np.ndarray, scenario: Scenario, top: np.ndarray | None
+) -> tuple[np.ndarray, ...]:
     p = planning.plan(
         uavs,
         mean,
@@ -97,6 +122,7 @@ def _plan(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> tuple[np.nd
         scenario.dt,
         scenario.planner.discount,
         G,
+        top,
     )
     return p.value, p.action
 
@@ -171,7 +197,9 @@ class Cycle:
     )
     cov: np.ndarray = _record("(Nu, Nt, 4, 4)", "its covariance")
     bids: np.ndarray = _record(
-        "(Nu, Nt)", "the UAV's best planning value per target, its bid (NaN: failed)"
+        "(Nu, Nt)",
+        "the UAV's best planning value per target, its bid (NaN: the UAV failed, or a bid "
+        "not scored because no assignment can read it, see planner.prune)",
     )
     assignment: np.ndarray = _record(
         "(Nu,)", "the target each UAV tracks (-1: the UAV has failed)", np.int64
@@ -228,7 +256,8 @@ def step(
     k, uavs = state.k, state.uavs
     alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
     believed = world.believed(uavs, faults.position_error(k))
-    radio = Radio(k, network.links(graph(uavs, alive, scenario)), alive, faults, state.radio)
+    links = network.radio_links(uavs, alive, scenario.comm_range)
+    radio = Radio(k, links, alive, faults, state.radio)
     observed, z, R = sense(uavs, believed, targets, noise, alive, scenario)
     mean, cov = estimation.filter_step(state.mean, state.cov, observed, z, R, None, None)
     inputs = Inputs(
@@ -245,7 +274,7 @@ def step(
     )
     fused = method.fuse(inputs)
     start = time.perf_counter()
-    bids, best = ctx.setting.plan(believed, fused.mean)
+    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused))
     plan_seconds = time.perf_counter() - start
     assigned = method.assign(inputs, fused, bids)
     target = assigned.target
@@ -292,11 +321,9 @@ def step(
 
 
 def graph(uavs: np.ndarray, alive: np.ndarray, scenario: Scenario) -> np.ndarray:
-    """The radio graph at this step: within r_C (3-D), both UAVs alive, (B, Nu, Nu)."""
-    adj = network.adjacency(uavs, scenario.comm_range)
-    if not alive.all():
-        adj &= alive[:, :, None] & alive[:, None, :]
-    return adj
+    """The radio graph at this step as an adjacency (B, Nu, Nu): within r_C (3-D), both
+    UAVs alive (`network.radio_links`, which the cycle uses)."""
+    return network.radio_links(uavs, alive, scenario.comm_range, "dense").adjacency()
 
 
 def sense(
@@ -424,12 +451,9 @@ def run(
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     tally = Tally(B, Nu, Nt, timed=B == 1)
     rec = Recorder(T, timed=B == 1) if trace else None
-    for k in range(T):
-        if k % NOISE_BLOCK == 0:  # the same numbers as one draw per step, fewer calls
-            noise = np.stack(
-                [rng.standard_normal((NOISE_BLOCK, Nu, Nt, 2)) for rng in sensor_rngs], axis=1
-            )
-        state, cycle = step(state, trajectory[:, k], noise[k % NOISE_BLOCK], ctx)
+    noises = sensor_noise(sensor_rngs, Nu, Nt, T)
+    for k, noise in enumerate(noises):
+        state, cycle = step(state, trajectory[:, k], noise, ctx)
         tally.add(cycle, trajectory[:, k])
         if rec is not None:
             rec.record(k, cycle)
@@ -469,27 +493,45 @@ class Recorder:
 def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, int]:
     """Bytes a batch of `batch` trials needs at its peak, by the field that drives each part.
 
-    The parts are the target trajectories (steps x n_targets), the per-step work of the
-    cycle (n_uavs x n_targets, with the planner's tree of 3^h sequences and the N x N
-    radio graph), and the trace (steps x n_uavs x n_targets). The estimate is checked
-    against measured peaks in the tests.
+    The parts are the target trajectories (steps x n_targets), the planner's tree of
+    3^h sequences, the radio (n_uavs^2 bits of the flooding and the auction, and the
+    consensus tuples on each radio link, whose number is estimated from the UAVs'
+    density at the start and over the field; with lost or late messages each UAV's
+    copy of every neighbour's bids), the per-pair state of the cycle (n_uavs x
+    n_targets estimates and a block of sensor noise), and the trace (steps x n_uavs x
+    n_targets). The estimate is checked against measured peaks in the tests.
     """
     T, Nu, Nt = scenario.steps, scenario.n_uavs, scenario.n_targets
     f = 8  # bytes per float
     history = 1 + scenario.faults.delay
+    pairs = batch * Nu * Nt
+    noise = min(pairs * 2 * f * NOISE_BLOCK, max(NOISE_BYTES, pairs * 2 * f))
+    radio = batch * Nu * Nu * 16
+    if Nu < network.SPARSE_FROM:  # the dense form: an N x N x Nt array per round
+        radio += batch * Nu * Nu * Nt * f * 4
+    else:  # the edge form: a row of Nt confidences per link, a few arrays of them
+        radio += batch * Nu * (1 + _neighbours(scenario)) * Nt * f * 6
+    if scenario.faults.loss > 0 or scenario.faults.delay > 0:  # each UAV's view of the bids
+        radio += batch * Nu * Nu * Nt * f * 3
     parts = {
         "steps": batch * T * Nt * 4 * f * 2 + T * Nt * 2 * f * 8,
         "planner.horizon": planning.memory(batch * Nu, Nt, 3, scenario.planner.horizon),
-        "n_uavs": batch
-        * Nu
-        * Nu
-        * f
-        * (8 + (Nt if Nu < network.SPARSE_FROM else 3 * Nt) + (Nt if scenario.faults.loss else 0)),
-        "n_targets": batch * Nu * Nt * f * (20 * 6 * history + NOISE_BLOCK * 2 * 2),
+        "n_uavs": radio,
+        "n_targets": pairs * f * 20 * 6 * history + 2 * noise,
     }
     if trace:
         parts["steps"] += batch * T * (Nu * Nt * (4 + 16 + 1 + 1) + Nu * 12) * f
     return parts
+
+
+def _neighbours(scenario: Scenario) -> float:
+    """Expected radio neighbours of a UAV: the team at its start (a square of side
+    `uav.start_spread`) or spread over the field, whichever is denser; at most all."""
+    n, r = scenario.n_uavs, scenario.comm_range
+    disk = np.pi * r * r
+    start = max(scenario.uav.start_spread, r) ** 2
+    spread = max(scenario.field_size, r) ** 2
+    return min(n - 1, (n - 1) * disk / min(start, spread))
 
 
 def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> None:

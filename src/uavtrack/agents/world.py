@@ -122,13 +122,9 @@ class WorldProgram:
         recorder = simulation.Recorder(T, timed=True) if trace else None
         previous = np.full((1, Nu), -1, dtype=np.int64)
         started = time.monotonic()
-        for k in range(T):
+        noises = simulation.sensor_noise(sensor_rngs, Nu, Nt, T)
+        for k, noise in enumerate(noises):
             begin = time.monotonic()
-            if k % simulation.NOISE_BLOCK == 0:
-                noise = np.stack(
-                    [r.standard_normal((simulation.NOISE_BLOCK, Nu, Nt, 2)) for r in sensor_rngs],
-                    axis=1,
-                )
             was = alive
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             alive[0, sorted(i for i in self.gone if i < Nu)] = False
@@ -137,9 +133,7 @@ class WorldProgram:
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory[:, k]
-            observed, z = simulation.observe(
-                uavs, targets, noise[k % simulation.NOISE_BLOCK], alive, s
-            )
+            observed, z = simulation.observe(uavs, targets, noise, alive, s)
             self.send(k, believed[0], observed[0], z, graph[0], alive[0], was[0])
             cycle, previous = self.collect(k, uavs, observed, alive, previous)
             if recorder is not None:
