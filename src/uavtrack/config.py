@@ -240,7 +240,6 @@ class PlannerModel(_Part):
     )
 
 
-
 class FaultModel(_Part):
     """Faults the paper leaves open (Sec. 8); every default means "no fault".
 

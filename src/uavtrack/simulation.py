@@ -52,6 +52,7 @@ def sensor_noise(
         del draws  # the block alone stays
         yield from noise
 
+
 STRAIGHT = 1
 """Index of the zero bank angle in the action set (-phi, 0, +phi): a failed UAV's."""
 
