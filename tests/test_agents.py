@@ -38,6 +38,17 @@ def test_memory_swarm_equals_the_simulator(method, faults):
     assert swarm.traffic.published > 0 and swarm.traffic.dropped == 0
 
 
+@pytest.mark.parametrize("method", ["distributed", "greedy"])
+def test_memory_swarm_prunes_bids_as_the_simulator_does(method):
+    # 20 targets, UAVs spread out: small neighbourhoods, so the planner scores only a
+    # few bids per UAV (NaN elsewhere), learned by each program from its flooding
+    scenario = uavtrack.Scenario().scaled(6, 20).with_overrides({"steps": 12})
+    swarm = run_swarm(scenario, method, seed=5, transport="memory")
+    reference = uavtrack.simulate(scenario, method, seed=5)
+    assert np.isnan(reference.trace.bids).mean() > 0.3
+    assert_same_trace(swarm.result.trace, reference.trace)
+
+
 def zenoh_or_skip():
     pytest.importorskip("zenoh")
 
@@ -50,6 +61,23 @@ def test_zenoh_swarm_of_processes_equals_run(method):
     reference = uavtrack.simulate(scenario, method, seed=4)
     assert_same_trace(swarm.result.trace, reference.trace)
     assert swarm.transport == "zenoh" and swarm.traffic.bytes > 0
+
+
+def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():
+    zenoh_or_skip()
+    scenario = uavtrack.Scenario(steps=5)
+    told = {}
+    swarm = run_swarm(
+        scenario,
+        "greedy",
+        seed=1,
+        transport="zenoh",
+        listen="tcp/127.0.0.1:0",
+        announce=lambda run, endpoint: told.update(endpoint=endpoint),
+        spawn=True,
+    )
+    assert told["endpoint"].startswith("tcp/127.0.0.1:") and not told["endpoint"].endswith(":0")
+    assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "greedy", seed=1).trace)
 
 
 def test_two_swarms_at_once_do_not_hear_each_other():
@@ -136,7 +164,8 @@ def test_a_killed_uav_program_fails_and_the_others_go_on():
                 p.kill()
             p.wait()
     tr = done["swarm"].result.trace
-    failed_at = done["swarm"].traffic.failed[2]
+    assert not done["swarm"].traffic.failed  # no failure of the fault model: a lost program
+    failed_at = done["swarm"].traffic.lost[2]
     assert 0 < failed_at < scenario.steps and not tr.alive[failed_at:, 2].any()
     assert not tr.observed[failed_at:, 2].any() and (tr.assignment[failed_at:, 2] == -1).all()
     assert tr.alive[:, [0, 1, 3, 4]].all()
@@ -189,7 +218,70 @@ def test_garbage_on_the_bus_does_not_change_the_run():
     del noise
     reference = uavtrack.simulate(scenario, "distributed", seed=1)
     assert_same_trace(swarm.result.trace, reference.trace)
-    assert swarm.traffic.dropped > 0
+    # one garbage message per subscription: the world's one (reports), and four per UAV
+    # program (its sense, radio, tick and hello keys), each counted where it was dropped
+    assert swarm.traffic.dropped == 1 + 4 * scenario.n_uavs
+    assert swarm.traffic.program_dropped == {i: 4 for i in range(scenario.n_uavs)}
+
+
+def test_failures_of_the_fault_model_are_not_lost_programs():
+    scenario = uavtrack.Scenario(steps=12).with_overrides({"faults.failures": [[1, 4], [3, 7]]})
+    swarm = run_swarm(scenario, "distributed", seed=2, transport="memory")
+    assert swarm.traffic.failed == {1: 4, 3: 7} and swarm.traffic.lost == {}
+
+
+def test_realtime_overruns_are_the_cycles_longer_than_dt():
+    scenario = uavtrack.Scenario(steps=6, dt=0.02)
+    swarm = run_swarm(scenario, "distributed", seed=2, transport="memory", realtime=True)
+    took = swarm.traffic.cycle_seconds
+    assert swarm.traffic.overruns == [k for k, t in enumerate(took) if t > scenario.dt]
+
+
+def hello_on(bus, scenario, method="distributed", run="r1"):
+    """A world that only says hello, every 50 ms, until `stop` is set."""
+    from uavtrack.agents.world import WorldProgram
+
+    world = WorldProgram(scenario, method, 0, MemoryTransport(bus), run)
+    stop = threading.Event()
+
+    def say():
+        while not stop.is_set():
+            world.hello(np.zeros((scenario.n_targets, 4)), np.eye(4))
+            time.sleep(0.05)
+
+    threading.Thread(target=say, daemon=True).start()
+    return stop
+
+
+def test_a_program_tells_why_it_did_not_run():
+    from uavtrack.agents.program import serve
+
+    bus = Bus()
+    assert serve(MemoryTransport(bus), "r1", 0, first=0.3).end == "no world"
+    stop = hello_on(bus, uavtrack.Scenario(steps=3))
+    try:
+        out = serve(MemoryTransport(bus), "r1", 5, first=5)
+        assert (out.end, out.programs, out.central) == ("not in run", 5, False)
+        MemoryTransport(bus).announce("uavtrack/r1/alive/2")  # program 2 runs already
+        assert serve(MemoryTransport(bus), "r1", 2, first=5).end == "taken"
+    finally:
+        stop.set()
+
+
+def test_uavtrack_agent_exit_codes(capsys, monkeypatch):
+    from uavtrack.agents import transport
+
+    bus = Bus()
+    monkeypatch.setattr(transport, "ZenohTransport", lambda listen, connect: MemoryTransport(bus))
+    monkeypatch.setattr("uavtrack.cli.swarm.AGENT_WAIT", 0.3)
+    code, _, err = run_cli(capsys, "agent", "--run", "nope", "--uav", "0", "--connect", "x")
+    assert code == 1 and "no world of run nope answered" in err
+    stop = hello_on(bus, uavtrack.Scenario(steps=3), "centralized")
+    try:
+        code, _, err = run_cli(capsys, "agent", "--run", "r1", "--uav", "6", "--connect", "x")
+        assert code == 2 and "run r1 has programs 0 to 5 only" in err
+    finally:
+        stop.set()
 
 
 def run_cli(capsys, *args):
@@ -207,6 +299,8 @@ def run_cli(capsys, *args):
         (["--listen", "tcp/127.0.0.1:7447"], "need --transport zenoh"),
         (["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"], "cannot listen on"),
         (["--transport", "zenoh", "--listen", "tcp/no-such-host:x"], "cannot listen on"),
+        (["--transport", "zenoh", "--listen", ""], "--listen is empty"),
+        (["--listen", ""], "need --transport zenoh"),
     ],
 )
 def test_swarm_bad_input_is_one_line(capsys, args, message):

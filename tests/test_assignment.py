@@ -90,3 +90,62 @@ def test_neighbourhood_keeps_own_row_of_local_problem():
     assert out[1] == assignment.hungarian(bids)[1]
     assert out[2] == assignment.hungarian(bids[[1, 2]])[1]
     assert out.tolist() == [0, 0, 1]
+
+
+def full_problem(bids):
+    """Remark 2 over every column (the solver before restriction): the oracle."""
+    from scipy.optimize import linear_sum_assignment
+
+    n = bids.shape[0]
+    choice, left = np.empty(n, dtype=np.int64), np.arange(n)
+    while left.size:
+        rows, cols = linear_sum_assignment(bids[left], maximize=True)
+        choice[left[rows]] = cols
+        left = np.delete(left, rows)
+    return choice
+
+
+@settings(max_examples=150, deadline=None)
+@given(st.integers(1, 8), st.integers(1, 30), st.integers(0, 2**32 - 1))
+def test_restriction_to_each_rows_best_bids_loses_nothing(n, m, seed):
+    rng = np.random.default_rng(seed)
+    bids = rng.random((n, m))  # continuous: the optimum is unique almost surely
+    assert np.array_equal(assignment.hungarian(bids), full_problem(bids))
+    # integer bids: many tied optima; the same total, and the same choice every time
+    ties = rng.integers(0, 3, (n, m)).astype(float)
+    choice = assignment.hungarian(ties)
+    oracle = full_problem(ties)
+    total = ties[np.arange(n), choice].sum()
+    assert total == ties[np.arange(n), oracle].sum()
+    assert np.array_equal(choice, assignment.hungarian(ties.copy()))
+    if n <= m:
+        assert np.unique(choice).size == n
+    # a bid below its row's n best may be unscored (NaN) without changing the choice
+    if n < m:
+        lists = assignment.ranked(ties, n)
+        hidden = np.full_like(ties, np.nan)
+        np.put_along_axis(hidden, lists, np.take_along_axis(ties, lists, axis=1), axis=1)
+        assert np.array_equal(assignment.hungarian(hidden), choice)
+
+
+def test_ranked_lists_best_first_ties_to_lower_column():
+    bids = np.array([[0.5, 2.0, 2.0, np.nan, 1.0], [np.nan, np.nan, 3.0, np.nan, np.nan]])
+    assert assignment.ranked(bids, 3).tolist() == [[1, 2, 4], [2, -1, -1]]
+    # a shorter list is the prefix of a longer one
+    assert assignment.ranked(bids, 2).tolist() == [[1, 2], [2, -1]]
+
+
+@settings(max_examples=40, deadline=None)
+@given(st.integers(2, 30), st.integers(1, 40), st.integers(0, 2**32 - 1))
+def test_auction_with_ranked_bidders_equals_one_full_solve_per_uav(n, m, seed):
+    rng = np.random.default_rng(seed)
+    bids = rng.random((2, n, m))
+    points = rng.uniform(0, 100, (2, n, 2))
+    links = np.linalg.norm(points[:, :, None] - points[:, None], axis=-1) < 40
+    fast, _ = assignment.auction(bids, links)
+    slow, _ = assignment.auction(bids, links, solve=full_problem)
+    assert np.array_equal(fast, slow)
+    for b, i in [(0, 0), (1, n - 1)]:  # and each is its own neighbourhood's problem
+        rows = np.flatnonzero(links[b, i] | (np.arange(n) == i))
+        me = int(np.flatnonzero(rows == i)[0])
+        assert fast[b, i] == full_problem(bids[b, rows])[me]

@@ -77,3 +77,37 @@ def test_bench_json_is_written_atomically(tmp_path, monkeypatch):
     data = json.loads(out.read_text())
     assert data["cases"][0]["speedup"] == pytest.approx(2.0)
     assert data["cases"][0]["median_s"] == pytest.approx(2e-3)
+
+
+def test_mid_run_state_is_the_runs_state():
+    # k steps of `mid_run` are the first k steps of a run with the same seed
+    import numpy as np
+
+    scenario = bench.Scenario(steps=6).scaled(12, 12)
+    state, targets, _ = bench.mid_run(scenario, k=5)
+    trace = bench.simulate(scenario, "distributed", seed=bench.trial_seed(0, 0)).trace
+    assert state.k == 5
+    assert np.array_equal(state.uavs[0], trace.uavs[5])
+    assert np.array_equal(targets[0], trace.targets[5])
+    assert np.array_equal(state.target[0], trace.assignment[4])
+
+
+def test_run_case_reports_its_memory_peak_beside_the_estimate():
+    row = bench.run_case(12, 12, steps=5)
+    assert row["unit"] == "step" and row["steps"] == 5
+    # the process's peak holds Python and the libraries: above the run's own estimate
+    assert row["peak_bytes"] > row["estimate_bytes"] > 0
+
+
+def test_scaling_figure_needs_scaled_cases(tmp_path):
+    from uavtrack import plots
+
+    rows = bench.cycle_cases([(4, 4), (8, 8)], ("distributed",), repeats=1, scaled=True)
+    assert [r["scaled"] for r in rows] == [True, True]
+    plots.scaling_figure(rows, tmp_path / "s.png")
+    assert (tmp_path / "s.png").stat().st_size > 0
+    with pytest.raises(ValueError, match="no scaled decision-cycle cases"):
+        plots.scaling_figure(
+            bench.cycle_cases([(3, 2)], ("greedy",), repeats=1), tmp_path / "t.png"
+        )
+    assert not (tmp_path / "t.png").exists()

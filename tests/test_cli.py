@@ -70,6 +70,17 @@ def test_trace_file(capsys, tmp_path):
     assert [p.name for p in tmp_path.iterdir()] == ["t.npz"]
 
 
+def test_team_scales_the_scenario_before_the_overrides(capsys):
+    code, out, err = run_cli(
+        capsys, "run", "--team", "30x40", "--set", "steps=6", "--set", "field_size=900", "--json"
+    )
+    assert code == 0, err
+    data = json.loads(out)["scenario"]
+    expected = uavtrack.Scenario().scaled(30, 40)
+    assert (data["n_uavs"], data["n_targets"], data["field_size"]) == (30, 40, 900.0)
+    assert data["uav"]["altitude_spacing"] == expected.uav.altitude_spacing
+
+
 BAD = [
     (["run", "--set", "foo=1"], "unknown scenario field 'foo'"),
     (["run", "--set", "sensor.fov=1"], "unknown scenario field 'sensor.fov'"),
@@ -86,6 +97,10 @@ BAD = [
     (["run", "--config", "/nonexistent/s.toml"], "cannot read config file"),
     (["run", "--bogus"], "No such option: --bogus"),
     (["nocommand"], "No such command"),
+    (["run", "--team", "300"], "--team expects NxM"),
+    (["sweep", "dt", "1", "--team", "0x4"], "--team expects NxM"),
+    (["params", "--team", "9x9", "--set", "n_targets=3"], "do not --set n_targets too"),
+    (["run", "--set", "n_uavs=300", "--set", "n_targets=300"], "--team 300x300"),
 ]
 
 
@@ -270,7 +285,10 @@ def test_memory_refusal_names_the_field(capsys, monkeypatch):
     assert code == 2 and "of memory" in err and "reduce n_uavs" in err
 
 
-def test_ctrl_c_on_run_says_so_and_exits_130(tmp_path):
+@pytest.mark.parametrize(
+    "sent,code,word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")]
+)
+def test_ctrl_c_or_sigterm_on_run_says_so(tmp_path, sent, code, word):
     proc = subprocess.Popen(
         cli_command("run", "--set", "steps=200000", "--trace", str(tmp_path / "t.npz")),
         stdout=subprocess.PIPE,
@@ -278,10 +296,10 @@ def test_ctrl_c_on_run_says_so_and_exits_130(tmp_path):
         text=True,
     )
     time.sleep(4)
-    proc.send_signal(signal.SIGINT)
+    proc.send_signal(sent)
     out, err = proc.communicate(timeout=30)
-    assert proc.returncode == 130
-    assert err.strip().startswith("uavtrack: interrupted") and err.count("\n") == 1
+    assert proc.returncode == code
+    assert err.strip().startswith(f"uavtrack: {word}") and err.count("\n") == 1
     assert not any(tmp_path.iterdir())
 
 

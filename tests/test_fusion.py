@@ -191,3 +191,61 @@ def test_self_loops_in_a_given_adjacency_are_ignored():
     assert rounds.tolist() == [1, 1, 0]
     assert source[:, 0].tolist() == [1, 1, 2]
     assert fusion.fuse(confidence, adj).messages == 2
+
+
+@st.composite
+def teams(draw):
+    """B trials of n UAVs at random 3-D positions, some failed, and a radio range."""
+    b, n = draw(st.integers(1, 3)), draw(st.integers(1, 70))
+    seed = draw(st.integers(0, 2**32 - 1))
+    rng = np.random.default_rng(seed)
+    uavs = np.zeros((b, n, 5))
+    side = draw(st.floats(10, 600))
+    uavs[..., :2] = rng.uniform(0, side, (b, n, 2))
+    uavs[..., 2] = 400 + rng.uniform(0, draw(st.floats(0, 60)), (b, n))
+    alive = rng.random((b, n)) > draw(st.floats(0, 0.5))
+    return uavs, alive, draw(st.floats(0, 120))
+
+
+@settings(max_examples=80, deadline=None)
+@given(case=teams())
+def test_radio_links_from_the_kd_tree_equal_the_dense_relation(case):
+    uavs, alive, radius = case
+    dense = network.adjacency(uavs, radius) & alive[:, :, None] & alive[:, None, :]
+    for form in ("dense", "edges"):
+        links = network.radio_links(uavs, alive, radius, form)
+        assert links.edges == (form == "edges")
+        assert np.array_equal(links.adjacency(), dense)
+    edges = network.radio_links(uavs, alive, radius, "edges")
+    # sorted by (trial, receiver, sender), every node's self-link present
+    key = (edges.trial * uavs.shape[1] + edges.receiver) * uavs.shape[1] + edges.sender
+    assert (np.diff(key) > 0).all() and edges.own.sum() == alive.size
+
+
+@pytest.mark.parametrize("form", ["dense", "edges"])
+@settings(max_examples=60, deadline=None)
+@given(case=geometric_graphs())
+def test_the_flooding_learns_the_largest_neighbourhood_of_each_uav(form, case):
+    adj, _ = case
+    n = len(adj)
+    radio = fusion.perfect_radio(adj[None], form)
+    depth = fusion.learn_depth(radio, np.ones((1, n), dtype=bool))
+    closed = adj | np.eye(n, dtype=bool)
+    size = closed.sum(axis=1)
+    expected = [size[closed[i]].max() for i in range(n)]  # over i and its neighbours
+    assert depth.largest[0].tolist() == expected
+
+
+def test_rounds_run_only_on_the_receivers_still_running():
+    # a path 0-1-2-3 and a pair 4-5: the pair stops after one round, the path runs three
+    adj = graph(6, [(0, 1), (1, 2), (2, 3), (4, 5)])
+    links = network.links(adj[None], "edges")
+    running = np.array([[True, True, True, True, False, False]])
+    into = links.into(running)
+    assert set(into.receiver.tolist()) == {0, 1, 2, 3}
+    heads = into.heads
+    assert heads[1].tolist() == [0, 1, 2, 3] and into.ordinal[-1] == 3
+    # a receiver with no links keeps its own tuple
+    gamma = np.arange(6.0)[None, :, None]
+    best = fusion.adopt(gamma, gamma, into)
+    assert best[0, :, 0].tolist() == [1, 2, 3, 3, 4, 5]

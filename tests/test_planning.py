@@ -102,3 +102,48 @@ def test_planning_in_blocks_of_uavs_equals_one_pass(monkeypatch):
     blocks = planning.plan(uavs, mean, *args)
     for name in ("value", "action", "sequence"):
         assert np.array_equal(getattr(whole, name), getattr(blocks, name)), name
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    nu=st.integers(1, 6),
+    nt=st.integers(1, 40),
+    field=st.sampled_from([200.0, 1000.0, 4000.0]),
+    discount=st.sampled_from([1.0, 0.8]),
+)
+def test_pruned_planner_scores_every_bid_an_assignment_can_read(seed, nu, nt, field, discount):
+    rng = np.random.default_rng(seed)
+    uavs, mean = random_case(rng, batch=(2,), nu=nu, nt=nt)
+    uavs[..., :2] *= field / 200
+    mean[..., :2] *= field / 200
+    top = rng.integers(1, nu + 3, size=(2, nu))
+    args = (SensorModel(), np.radians(45), 3, 1.0, discount)
+    full = planning.plan(uavs, mean, *args)
+    part = planning.plan(uavs, mean, *args, top=top)
+    scored = ~np.isnan(part.value)
+    # what is scored is scored exactly, bit for bit
+    assert np.array_equal(part.value[scored], full.value[scored])
+    assert np.array_equal(part.action[scored], full.action[scored])
+    assert np.array_equal(part.sequence[scored], full.sequence[scored])
+    assert (part.action[~scored] == -1).all() and (part.sequence[~scored] == -1).all()
+    # every target at or above a UAV's top-th best full value is scored (ties included)
+    k = np.minimum(top, nt)
+    kth = np.take_along_axis(-np.sort(-full.value, axis=-1), k[..., None] - 1, axis=-1)
+    assert scored[full.value >= kth].all()
+    # a UAV's scored set depends on its own data only: planned alone, the same
+    alone = planning.plan(uavs[:1, :1], mean[:1, :1], *args, top=top[:1, :1])
+    assert np.array_equal(alone.value[0, 0], part.value[0, 0], equal_nan=True)
+
+
+def test_pruned_planner_skips_targets_out_of_reach():
+    rng = np.random.default_rng(5)
+    uavs, mean = random_case(rng, nu=2, nt=60)
+    mean[..., :2] *= 20  # targets over 4 km, the UAVs near the corner
+    mean[:, :3, :2] = uavs[:, None, :2] + 30.0  # three targets close to the UAVs
+    args = (SensorModel(), np.radians(45), 3, 1.0)
+    part = planning.plan(uavs, mean, *args, top=np.array([1, 2]))
+    scored = (~np.isnan(part.value)).sum(axis=-1)
+    assert (scored < 60).all() and (scored >= 3).all()
+    full = planning.plan(uavs, mean, *args)
+    assert np.array_equal(np.nanargmax(part.value, axis=-1), full.value.argmax(axis=-1))

@@ -1,5 +1,7 @@
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 from uavtrack import SensorModel, sensing
 
@@ -171,3 +173,22 @@ def test_converted_measurement_is_consistent_at_every_ground_range(rng, ground_r
     q = np.einsum("ni,ni->n", e, np.linalg.solve(R, e[..., None])[..., 0])
     assert 1.5 < q.mean() < 2.5
     assert (np.linalg.eigvalsh(R) > 0).all()
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.floats(50, 2000),  # altitude
+    st.floats(0, 20),  # k_r
+    st.floats(0.01, 10),  # k_d
+    st.floats(0.5, 30),  # half field of view
+    st.floats(1.0, 20.0),  # d / h
+    st.floats(0.0, 5.0),  # how much farther d' is
+)
+def test_the_det_g_bound_holds_at_every_farther_range(h, k_r, k_d, fov, ratio, farther):
+    sensor = SensorModel(k_r=k_r, k_d=k_d, half_fov_deg=fov)
+    d_edge = sensing.edge_range(h, sensor)
+    d = h * ratio
+    d_far = d * (1 + farther)
+    bound = sensing.fisher_det_bound(np.array(d), d_edge, sensor)
+    assert bound >= sensing.fisher_det(np.array(d_far), d_edge, sensor)
+    assert bound >= sensing.fisher_det_bound(np.array(d_far), d_edge, sensor)  # non-increasing

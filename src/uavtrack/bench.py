@@ -10,6 +10,7 @@ pinned to 1 (`uavtrack bench` sets the environment before numpy loads).
 from __future__ import annotations
 
 import itertools
+import json
 import os
 import platform
 import statistics
@@ -25,7 +26,16 @@ from . import estimation, planning, sensing, world
 from .config import Scenario
 from .experiments import resized
 from .methods import get
-from .simulation import Constants, Context, State, run, simulate, step, trial_seed
+from .simulation import (
+    Context,
+    initial_state,
+    memory_estimate,
+    run,
+    sensor_noise,
+    simulate,
+    step,
+    trial_seed,
+)
 
 
 def timed(*functions: Callable[[], Any], repeats: int, block: float = 0.05) -> list[float]:
@@ -190,37 +200,92 @@ def planner_case(
     ]
 
 
-def cycle_cases(sizes, methods, repeats: int) -> list[dict[str, Any]]:
-    """One decision cycle (step) of each method, from a state in the middle of a run."""
+def mid_run(scenario: Scenario, k: int = 20):
+    """The state of one distributed trial after k steps, with the targets and sensor
+    noise of step k: where a cycle is timed (the estimates have converged, the team has
+    spread out)."""
+    seeds = [trial_seed(0, 0)]
+    ctx = Context.of(scenario, get("distributed"), seeds)
+    state, trajectory, rngs = initial_state(scenario, seeds)
+    noises = sensor_noise(rngs, scenario.n_uavs, scenario.n_targets, k + 1)
+    for j, noise in zip(range(k), noises, strict=False):
+        state, _ = step(state, trajectory[:, j], noise, ctx)
+    return state, trajectory[:, k], next(noises)
+
+
+def cycle_cases(sizes, methods, repeats: int, scaled: bool = False) -> list[dict[str, Any]]:
+    """One decision cycle (step) of each method, from a state in the middle of a run.
+
+    scaled: each team in `Scenario.scaled` (the field grows with the team, the density
+    stays); else in the default field (`team`), denser as the team grows."""
     out = []
     for n_uavs, n_targets in sizes:
-        scenario = team(n_uavs, n_targets, steps=24)
-        trace = simulate(scenario, "distributed", seed=2).trace
-        k = 20
-        const = Constants.of(scenario)
-        mean, cov = estimation.predict(trace.mean[k - 1], trace.cov[k - 1], const.A, const.Q)
-        alive = np.ones((1, n_uavs), dtype=bool)
-        state = State(
-            k, trace.uavs[k][None], mean[None], cov[None], alive, trace.assignment[k - 1][None]
-        )
-        noise = np.random.default_rng(3).standard_normal((1, n_uavs, n_targets, 2))
-        targets = trace.targets[k][None]
+        if scaled:
+            scenario = Scenario(steps=24).scaled(n_uavs, n_targets)
+        else:
+            scenario = team(n_uavs, n_targets, steps=24)
+        state, targets, noise = mid_run(scenario)
         for name in methods:
             ctx = Context.of(scenario, get(name), [trial_seed(0, 0)])
             cycle = partial(step, state, targets, noise, ctx)
             (t,) = timed(cycle, repeats=repeats)
+            where = "at the default density" if scaled else "in the default field"
             out.append(
                 case(
-                    f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets",
+                    f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets {where}",
                     t,
                     unit="cycle",
                     method=name,
                     n_uavs=n_uavs,
                     n_targets=n_targets,
+                    scaled=scaled,
                     real_time_factor=scenario.dt / t,
                 )
             )
     return out
+
+
+PEAK = """
+import json, resource, sys, time
+import uavtrack
+scenario = uavtrack.Scenario(steps={steps}).scaled({n_uavs}, {n_targets})
+start = time.perf_counter()
+uavtrack.run(scenario, {method!r}, [0])
+seconds = time.perf_counter() - start
+peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
+print(json.dumps({{"seconds": seconds, "peak_bytes": peak}}))
+"""
+
+
+def run_case(n_uavs: int, n_targets: int, steps: int, method: str = "distributed"):
+    """A whole run without a trace (metrics only) of a scaled team, in a process of its
+    own: its time per step and its memory peak (the process's maximum resident set,
+    Python and the libraries included). Without a trace nothing grows with the steps
+    (`simulation.memory_estimate`), so a short run has a long one's peak."""
+    import subprocess
+    import sys
+
+    code = PEAK.format(steps=steps, n_uavs=n_uavs, n_targets=n_targets, method=method)
+    done = subprocess.run(
+        [sys.executable, "-c", code], capture_output=True, text=True, timeout=3600, check=False
+    )
+    if done.returncode != 0:
+        raise RuntimeError(f"the {n_uavs}x{n_targets} run failed: {done.stderr.strip()[-500:]}")
+    measured = json.loads(done.stdout)
+    scenario = Scenario(steps=steps).scaled(n_uavs, n_targets)
+    estimate = sum(memory_estimate(scenario).values())
+    return case(
+        f"run without trace, {method}, {n_uavs} UAVs x {n_targets} targets, {steps} steps",
+        measured["seconds"],
+        per=steps,
+        unit="step",
+        method=method,
+        n_uavs=n_uavs,
+        n_targets=n_targets,
+        steps=steps,
+        peak_bytes=measured["peak_bytes"],
+        estimate_bytes=estimate,
+    )
 
 
 def trial_case(repeats: int) -> dict[str, Any]:
@@ -264,6 +329,9 @@ def batch_case(trials: int, steps: int, repeats: int) -> dict[str, Any]:
 
 
 # ------------------------------------------------------------------ the whole bench
+
+SCALING = (10, 30, 100, 300, 1000)
+"""Team sizes (N UAVs x N targets, `Scenario.scaled`) of the scaling figure."""
 
 
 def machine() -> dict[str, Any]:
@@ -325,7 +393,14 @@ def bench(quick: bool = False, progress: Callable[[str], None] | None = None) ->
         if quick
         else ((5, 4), (10, 10), (20, 20), (50, 50), (100, 100))
     )
-    cases.extend(cycle_cases(sizes, ("distributed", "centralized", "greedy"), repeats))
+    methods = ("distributed", "centralized", "greedy")
+    cases.extend(cycle_cases(sizes, methods, repeats))
+    say("large teams at the default density")
+    teams = SCALING if not quick else tuple(n for n in SCALING if n <= 300)
+    cases.extend(cycle_cases([(n, n) for n in teams], methods, 5 if quick else 7, scaled=True))
+    for n in (300,) if quick else (300, 1000):
+        say(f"a {n} x {n} run and its memory peak")
+        cases.append(run_case(n, n, steps=40))
     say("a default trial")
     cases.append(trial_case(3 if quick else 5))
     say("batched trials")

@@ -134,10 +134,13 @@ class Method:
         """Targets from bids (B, N, M)."""
         raise NotImplementedError
 
-    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+    def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """How many of its best bids each UAV's assignment can read (B, N), or None: all
         (the default: a method that does not say needs every bid). The planner scores
-        only what can be among them (`planning.plan_top`); the others are NaN."""
+        only what can be among them (`planning.plan_top`); the others are NaN.
+
+        largest (B, N): the most members of a closed neighbourhood each UAV belongs to
+        (`fusion.Depth`; None when the fusion did not learn it)."""
         return None
 
     def __repr__(self) -> str:
@@ -181,14 +184,14 @@ class Distributed(Method):
         """The neighbourhood problem: targets (n,) of the n members, Remark 2."""
         return assignment.hungarian(bids)
 
-    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+    def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """A UAV's bids serve the auction of every neighbourhood it belongs to, and in
         an auction of k members only each member's k best bids matter
         (`assignment.hungarian`): it needs as many as the largest of them has members.
         A replaced `solve` may read any bid: then all."""
         if not setting.prune or type(self).solve is not Distributed.solve:
             return None
-        return fused.largest
+        return largest
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         s, radio, k = inputs.setting, inputs.radio, inputs.k
@@ -395,9 +398,11 @@ class Greedy(Method):
 
     name = "greedy"
 
-    def top(self, setting: Setting, fused: Fused) -> np.ndarray | None:
+    def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """Its own best bid only."""
-        return np.ones(fused.rounds.shape, dtype=np.int64) if setting.prune else None
+        if not setting.prune or largest is None:
+            return None
+        return np.ones(largest.shape, dtype=np.int64)
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         start = time.perf_counter()

@@ -225,6 +225,8 @@ def plan_top(
     since `sensing.fisher_det_bound` is non-increasing, V_ij <= bound(d_lb) sum_t
     lambda^t. Per UAV the targets are taken in increasing order of that lower bound:
     the first w (w = top + `PRUNE_SLACK`, doubled until it suffices) are scored exactly;
+    which ones depends only on the UAV's own state, estimates and top (not on the other
+    UAVs or trials planned with it);
     when the bound of the next one is below the top-th best score found, no target left
     out can reach the UAV's `top` best, ties included. A UAV whose bound never falls
     low enough is scored in full.
@@ -247,32 +249,37 @@ def plan_top(
     gap = ground - reach - 1e-6 * (1.0 + ground)  # the slack covers round-off
     weight = sum(discount**t for t in range(horizon))
     args = (sensor, bank_angle, horizon, dt, discount, g)
+    width = need + PRUNE_SLACK  # per UAV: what is scored depends on its own data only
     pending = np.arange(rows)
-    width = int(need.max(initial=1)) + PRUNE_SLACK
     while pending.size:
-        if width >= nt:  # score the rest in full
-            full = plan(flat_uavs[pending], flat_mean[pending], *args)
-            value[pending], action[pending], sequence[pending] = (
-                full.value,
-                full.action,
-                full.sequence,
+        left = []
+        for w in np.unique(width[pending]):
+            these = pending[width[pending] == w]
+            if w >= nt:  # score these in full
+                full = plan(flat_uavs[these], flat_mean[these], *args)
+                value[these], action[these], sequence[these] = (
+                    full.value,
+                    full.action,
+                    full.sequence,
+                )
+                continue
+            order = np.argpartition(gap[these], w, axis=1)
+            chosen, after = order[:, :w], order[:, w]  # the w nearest, and the next one
+            part = plan(flat_uavs[these], flat_mean[these[:, None], chosen], *args)
+            kth = -np.sort(-part.value, axis=1)[np.arange(these.size), need[these] - 1]
+            nearest = np.maximum(gap[these, after], 0.0)
+            d_edge = edge_range(altitude[these, 0], sensor)
+            d_lb = np.sqrt(nearest * nearest + altitude[these, 0] ** 2)
+            done = fisher_det_bound(d_lb, d_edge, sensor) * weight < kth
+            r, c = these[done, None], chosen[done]
+            value[r, c], action[r, c], sequence[r, c] = (
+                part.value[done],
+                part.action[done],
+                part.sequence[done],
             )
-            break
-        order = np.argpartition(gap[pending], width, axis=1)
-        chosen, after = order[:, :width], order[:, width]  # the width nearest, the next
-        part = plan(flat_uavs[pending], flat_mean[pending[:, None], chosen], *args)
-        kth = -np.sort(-part.value, axis=1)[np.arange(pending.size), need[pending] - 1]
-        nearest = np.maximum(gap[pending, after], 0.0)
-        d_edge = edge_range(altitude[pending, 0], sensor)
-        d_lb = np.sqrt(nearest * nearest + altitude[pending, 0] ** 2)
-        done = fisher_det_bound(d_lb, d_edge, sensor) * weight < kth
-        r, c = pending[done, None], chosen[done]
-        value[r, c], action[r, c], sequence[r, c] = (
-            part.value[done],
-            part.action[done],
-            part.sequence[done],
-        )
-        pending, width = pending[~done], 2 * width
+            left.append(these[~done])
+        pending = np.concatenate(left) if left else np.zeros(0, dtype=np.int64)
+        width[pending] *= 2
     return Plan(
         value.reshape(lead + (nt,)), action.reshape(lead + (nt,)), sequence.reshape(lead + (nt,))
     )

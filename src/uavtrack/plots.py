@@ -194,6 +194,38 @@ def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> 
     save(fig, path)
 
 
+def scaling_figure(cases: list[dict[str, Any]], path: Path) -> None:
+    """Time per decision cycle against team size at constant density (`uavtrack bench`'s
+    scaled cycle cases), log-log, with a line of slope 1 (linear growth) for reference."""
+    fig, ax = plt.subplots(figsize=(6.5, 4.5))
+    shown = []
+    for method, color, marker in (
+        ("distributed", "C0", "o"),
+        ("centralized", "C1", "s"),
+        ("greedy", "C2", "^"),
+    ):
+        rows = sorted(
+            (c["n_uavs"], c["median_s"])
+            for c in cases
+            if c.get("scaled") and c.get("method") == method
+        )
+        if rows:
+            n, t = np.array(rows, dtype=float).T
+            ax.loglog(n, 1e3 * t, marker=marker, color=color, label=method)
+            shown.append((n, t))
+    if not shown:
+        plt.close(fig)
+        raise ValueError("no scaled decision-cycle cases to plot (run the bench without --quick)")
+    n, t = shown[0]
+    ax.loglog(n, 1e3 * t[0] * n / n[0], ls="--", color="gray", lw=1, label="linear (slope 1)")
+    ax.set_xlabel("team size N (N UAVs x N targets, constant density)")
+    ax.set_ylabel("time per decision cycle [ms]")
+    ax.set_title("Cost of a cycle against team size, 1 process")
+    ax.grid(alpha=0.3, which="both")
+    ax.legend(fontsize=8)
+    save(fig, path)
+
+
 def reproduction_figures(summary: dict[str, Any], out: Path) -> list[Path]:
     """fig5.png ... fig9.png in `out`."""
     out = Path(out)

@@ -275,7 +275,7 @@ def step(
     )
     fused = method.fuse(inputs)
     start = time.perf_counter()
-    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused))
+    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
     plan_seconds = time.perf_counter() - start
     assigned = method.assign(inputs, fused, bids)
     target = assigned.target

@@ -15,12 +15,12 @@ def main(argv: list[str]) -> int:
     watch_parent(os.getppid())
     transport = ZenohTransport([listen], [endpoint])
     try:
-        serve(transport, run, me)
+        served = serve(transport, run, me)
     except KeyboardInterrupt:
         return 130
     finally:
         transport.close()
-    return 0
+    return 0 if served.end in ("done", "failed") else 1
 
 
 if __name__ == "__main__":

@@ -197,8 +197,9 @@ class UavAgent:
             )
         else:
             fused_mean, fused_cov, rounds, sent, delivered = self.consensus(k, mean, cov, alive)
+        top = None if self.central else self.method.top(self.setting, np.array([[self.largest]]))
         plan_start = time.perf_counter()
-        bids, best = self.setting.plan(believed[None, None], fused_mean[None, None])
+        bids, best = self.setting.plan(believed[None, None], fused_mean[None, None], top)
         bids, best = bids[0, 0], best[0, 0]
         plan_seconds = time.perf_counter() - plan_start
         if self.central:
@@ -281,10 +282,12 @@ class UavAgent:
         return {name: value[0, where] for name, value in picked.items()}
 
     def learn_depth(self, k: int) -> tuple[int, int, int]:
-        """The D_i protocol (`fusion.learn_depth`) from this UAV's side."""
+        """The D_i protocol (`fusion.learn_depth`) from this UAV's side; sets
+        `self.largest`, the most members of a closed neighbourhood it belongs to."""
         known = np.zeros(self.n, dtype=bool)
         known[self.me] = True
         depth, sent, delivered, r = 0, 0, 0, 0
+        self.largest = 1
         budget = self.setting.budget
         while True:
             r += 1
@@ -295,6 +298,9 @@ class UavAgent:
                 break
             sent += inbox.sent
             delivered += inbox.delivered
+            if r == 2:  # the sets sent now are the senders' closed neighbourhoods
+                sizes = [int(c["known"].sum()) for c in inbox.contents.values()]
+                self.largest = max([int(known.sum()), *sizes])
             ids = sorted({self.me, *inbox.contents})
             offered = np.stack(
                 [known if q == self.me else inbox.contents[q]["known"] for q in ids]
@@ -345,7 +351,7 @@ class UavAgent:
         rows = np.flatnonzero(members)
         start = time.perf_counter()
         if rows.size == 1:
-            target = int(np.argmax(bids))
+            target = int(assignment.greedy(bids))
         else:
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
         return target, time.perf_counter() - start, (sent, delivered)

@@ -18,7 +18,7 @@ from typing import Any
 import msgspec
 import numpy as np
 
-VERSION = 1
+VERSION = 2
 """Schema version; a message of another version is dropped."""
 
 
@@ -98,6 +98,7 @@ class Report(msgspec.Struct, tag="report", frozen=True):
     decision_ms: float
     published: int = 0
     bytes: int = 0
+    dropped: int = 0  # malformed, foreign or old messages this program dropped so far
 
 
 class Radio(msgspec.Struct, tag="radio", frozen=True):

@@ -11,8 +11,10 @@ from __future__ import annotations
 
 import json
 import time
+from dataclasses import dataclass
 
 import numpy as np
+from msgspec import structs
 
 from ..config import Scenario
 from ..faults import Faults
@@ -27,8 +29,34 @@ LINGER = 10.0
 """Seconds a program that ran its last cycle waits for the world to finish."""
 
 
-def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int:
-    """Run program `me` of swarm `run` to its end; returns the cycles it ran."""
+@dataclass(frozen=True)
+class Served:
+    """How a program ended: the cycles it ran of the run's `steps`, and why it stopped:
+    "done" (every step), "failed" (the world said this UAV failed, at step `at`),
+    "world gone" (the world ended or went silent at step `at`), "no world" (no world of
+    the run answered), "not in run" (this program's number is not one of the run's),
+    "taken" (another program with this number is running)."""
+
+    ran: int
+    steps: int
+    end: str
+    at: int = -1
+    programs: int = 0
+    central: bool = False
+
+    def name(self, me: int) -> str:
+        """How to call program `me` of this run."""
+        return (
+            "central node program" if self.central and me == self.programs - 1 else ("UAV program")
+        )
+
+
+def serve(
+    transport: Transport, run: str, me: int, wait: float = STARTUP, first: float | None = None
+) -> Served:
+    """Run program `me` of swarm `run` to its end. wait: seconds to wait for the other
+    programs and for each message of the run; first: for the world's first message
+    (default `wait`)."""
     k_ = keys(run)
     mailbox = Mailbox(run)
     # the world's hello last: once it arrives, the declarations before it have too
@@ -37,15 +65,19 @@ def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int
     transport.subscribe(k_["tick"], mailbox.handler)
     transport.watch(f"{k_['alive']}world", mailbox.lost)
     transport.subscribe(k_["hello"], mailbox.handler)
-    if not mailbox.wait(
-        lambda: ("hello",) in mailbox.inbox or mailbox.gone, time.monotonic() + wait
-    ):
-        return 0
+    limit = time.monotonic() + (wait if first is None else first)
+    mailbox.wait(lambda: ("hello",) in mailbox.inbox or mailbox.gone, limit)
     hello = mailbox.inbox.get(("hello",))
     if hello is None:
-        return 0
+        return Served(0, 0, "no world")
     scenario = Scenario.from_dict(json.loads(hello.scenario), origin="the world's scenario")
     n = scenario.n_uavs
+    central = get(hello.method).central
+    programs = n + int(central)
+    if me >= programs:
+        return Served(0, scenario.steps, "not in run", programs=programs, central=central)
+    if transport.alive(f"{k_['alive']}{me}"):  # another program with this number runs
+        return Served(0, scenario.steps, "taken", programs=programs, central=central)
     faults = Faults(scenario.faults, hello.key.array()[None].astype(np.uint32), n)
     if me == n:
         program = CentralAgent(scenario, faults, transport, mailbox, run, hello.deadline)
@@ -56,8 +88,8 @@ def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int
             me, scenario, hello.method, faults, transport, mailbox, run, hello.deadline, prior
         )
     transport.announce(f"{k_['alive']}{me}")
-    if not meet(transport, mailbox, run, me, n + int(get(hello.method).central), wait):
-        return 0
+    if not meet(transport, mailbox, run, me, programs, wait):
+        return Served(0, scenario.steps, "world gone", 0, programs, central)
     empty = packed({"x": np.zeros(0)})["x"]
     ready = Report(VERSION, run, -1, me, -1, -1, empty, empty, empty, 0, 0, 0, 0.0)
     transport.publish(f"{k_['report']}{me}", encode(ready))
@@ -67,25 +99,32 @@ def serve(transport: Transport, run: str, me: int, wait: float = STARTUP) -> int
         _presence(transport, run, me)  # until the run starts: others may still need it
         mailbox.wait(lambda: first in mailbox.inbox or bool(mailbox.gone), time.monotonic() + 0.1)
     published = (getattr(transport, "published", 0), getattr(transport, "bytes", 0))
-    ran = 0
+    ran, end, at = 0, "done", -1
     for k in range(scenario.steps):
         want = ("tick", k) if me == n else ("sense", k, me)
         patience = time.monotonic() + wait
         mailbox.wait(lambda want=want: want in mailbox.inbox or bool(mailbox.gone), patience)
         message = mailbox.take(want)
         if message is None:  # the world is gone or silent: stop
+            end, at = "world gone", k
             break
         if me < n and not bool(message.alive.array()[me]):
-            break  # the world says this UAV has failed
+            end, at = "failed", k  # the world says this UAV has failed
+            break
         report = program.cycle(message)
         now = (getattr(transport, "published", 0), getattr(transport, "bytes", 0))
-        report = _with_traffic(report, now[0] - published[0], now[1] - published[1])
+        report = structs.replace(
+            report,
+            published=now[0] - published[0],
+            bytes=now[1] - published[1],
+            dropped=mailbox.dropped,
+        )
         published = now
         transport.publish(f"{k_['report']}{me}", encode(report))
         ran += 1
     # stay until the world is done: closing at once could lose the last report in flight
     mailbox.wait(lambda: bool(mailbox.gone), time.monotonic() + LINGER)
-    return ran
+    return Served(ran, scenario.steps, end, at, programs, central)
 
 
 def _presence(transport: Transport, run: str, me: int) -> None:
@@ -105,9 +144,3 @@ def meet(transport: Transport, mailbox: Mailbox, run: str, me: int, programs: in
         if mailbox.wait(heard, time.monotonic() + 0.1):
             return True
     return False
-
-
-def _with_traffic(report: Report, published: int, size: int) -> Report:
-    from msgspec import structs
-
-    return structs.replace(report, published=published, bytes=size)

@@ -11,6 +11,7 @@
 from __future__ import annotations
 
 import os
+import re
 import secrets
 import signal
 import socket
@@ -42,11 +43,29 @@ class SwarmResult:
     transport: str
 
 
-def free_port() -> int:
-    """A TCP port free on the loopback interface now."""
+def free_port(host: str = "127.0.0.1") -> int:
+    """A TCP port free on `host` now."""
     with socket.socket() as probe:
-        probe.bind(("127.0.0.1", 0))
+        probe.bind((host, 0))
         return probe.getsockname()[1]
+
+
+def world_endpoint(listen: str | None) -> str:
+    """The endpoint the world listens on, as the programs will reach it: a free loopback
+    port when none is given, and a free port of the host for ``tcp/HOST:0`` (the
+    programs must be told a real port)."""
+    if listen is None:
+        return f"tcp/127.0.0.1:{free_port()}"
+    if not listen.strip():
+        raise UsageError("--listen is empty; give an endpoint such as tcp/127.0.0.1:7447")
+    found = re.fullmatch(r"tcp/(\[[^\]]+\]|[^:/]+):0", listen.strip())
+    if found is None:
+        return listen
+    host = found.group(1)
+    try:
+        return f"tcp/{host}:{free_port(host.strip('[]'))}"
+    except OSError as exc:
+        raise UsageError(f"cannot listen on {listen}: {exc.strerror or exc}") from None
 
 
 @dataclass(frozen=True)
@@ -146,7 +165,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options) -> SwarmResul
         raise UsageError(
             '--transport zenoh needs eclipse-zenoh: pip install "uavtrack[agents]"'
         ) from None
-    endpoint = o.listen or f"tcp/127.0.0.1:{free_port()}"
+    endpoint = world_endpoint(o.listen)
     try:
         link = ZenohTransport([endpoint], list(o.connect))
     except Exception as exc:  # zenoh reports a busy port, a bad endpoint, no answer so

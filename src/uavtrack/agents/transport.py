@@ -15,6 +15,7 @@ with a deadline.
 from __future__ import annotations
 
 import json
+import re
 import threading
 import time
 from collections.abc import Callable
@@ -40,6 +41,10 @@ class Transport:
     def watch(self, key: str, on_gone: Callable[[str], None]) -> None:
         """Call on_gone(key) when the program announced as `key` (or under it, when it
         ends with a slash) is gone."""
+
+    def alive(self, key: str) -> set[str]:
+        """The keys announced now as `key` (or under it, when it ends with a slash)."""
+        return set()
 
     def close(self) -> None:
         pass
@@ -107,6 +112,10 @@ class MemoryTransport(Transport):
         with self.bus.lock:
             self.bus.watchers.append((prefix, on_gone))
 
+    def alive(self, key: str) -> set[str]:
+        with self.bus.lock:
+            return {k for k in self.bus.alive if matches(key, k)}
+
     def close(self) -> None:
         for key in self.announced:
             self.bus.drop(key)
@@ -131,9 +140,16 @@ def zenoh_config(listen: list[str], connect: list[str], connect_timeout: float =
 
 
 def zenoh_reason(exc: BaseException) -> str:
-    """Zenoh's error message without its source location."""
+    """Zenoh's error message in words: without source locations, its debug wrappers
+    and brackets."""
     text = " ".join(str(exc).split())
-    return text.split(" at /")[0][:200] or type(exc).__name__
+    quoted = re.search(r'msg: "([^"]*)"', text)  # a configuration error's message
+    if quoted:
+        text = quoted.group(1)
+    text = re.sub(r" at /\S+", "", text)  # source locations
+    text = re.sub(r"\bSingle\(([^)]*)\)", r"\1", text)
+    text = text.replace("[", "").replace("]", "").rstrip(".")
+    return text[:200] or type(exc).__name__
 
 
 class ZenohTransport(Transport):
@@ -186,7 +202,6 @@ class ZenohTransport(Transport):
         )
 
     def alive(self, prefix: str) -> set[str]:
-        """Keys announced under `prefix` now."""
         replies = self.session.liveliness().get(expression(prefix), timeout=1.0)
         return {str(reply.ok.key_expr) for reply in replies if reply.ok is not None}
 

@@ -32,15 +32,23 @@ from .transport import Mailbox, Transport
 
 @dataclass
 class Traffic:
-    """What a swarm run cost: wall time of each cycle [s], radio messages published and
-    their bytes (every program's), cycles that overran the time step with --realtime."""
+    """What a swarm run cost and what happened to its programs.
+
+    cycle_seconds: wall time of each cycle [s]; published, bytes: radio messages
+    published and their bytes (every program's); overruns: the steps whose cycle took
+    longer than dt (with --realtime); dropped: malformed, foreign or old messages
+    dropped (the world's and every program's); failed: UAVs failed by the fault model
+    (uav -> step); lost: programs gone or silent past their deadline (uav -> step).
+    """
 
     cycle_seconds: list[float] = field(default_factory=list)
     published: int = 0
     bytes: int = 0
     overruns: list[int] = field(default_factory=list)
     dropped: int = 0
-    failed: dict[int, int] = field(default_factory=dict)  # uav -> step it was found gone
+    failed: dict[int, int] = field(default_factory=dict)
+    lost: dict[int, int] = field(default_factory=dict)
+    program_dropped: dict[int, int] = field(default_factory=dict)
 
 
 class WorldProgram:
@@ -106,8 +114,21 @@ class WorldProgram:
             self.mailbox.wait(lambda: False, min(deadline, time.monotonic() + 0.2))
             waiting = {p for p in waiting if self.mailbox.take(("report", -1, p)) is None}
             if waiting and time.monotonic() > deadline:
-                names = ", ".join(str(p) for p in sorted(waiting))
-                raise TimeoutError(f"programs {names} did not start within {self.startup:g} s")
+                raise TimeoutError(self._not_started(waiting))
+
+    def _not_started(self, waiting: set[int]) -> str:
+        """Which programs kept the run from starting, and which were there."""
+        present = {
+            int(k.rsplit("/", 1)[-1])
+            for k in self.transport.alive(self.keys["alive"])
+            if k.rsplit("/", 1)[-1].isdigit()
+        }
+        missing = sorted(waiting - present) or sorted(waiting)
+        started = sorted(set(self.programs) - set(missing))
+        names = ", ".join(map(str, missing))
+        there = f"; {', '.join(map(str, started))} started and waited for them" if started else ""
+        which = "programs" if len(missing) > 1 else "program"
+        return f"{which} {names} did not start within {self.startup:g} s{there}"
 
     def run_trial(
         self, trace: bool = True, realtime: bool = False, progress: Callable | None = None
@@ -127,9 +148,12 @@ class WorldProgram:
             begin = time.monotonic()
             was = alive
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
-            alive[0, sorted(i for i in self.gone if i < Nu)] = False
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
+            alive[0, sorted(i for i in self.gone if i < Nu)] = False
+            for i in np.flatnonzero(was[0] & ~alive[0]):
+                if int(i) not in self.traffic.failed:
+                    self.traffic.lost.setdefault(int(i), k)
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory[:, k]
@@ -141,16 +165,17 @@ class WorldProgram:
             tally.add(cycle, targets)
             new = world.fly(uavs, ctx.const.actions[self.actions], s.dt, G)
             uavs = np.where(alive[..., None], new, uavs)
-            self.traffic.cycle_seconds.append(time.monotonic() - begin)
+            took = time.monotonic() - begin
+            self.traffic.cycle_seconds.append(took)
             if realtime:
-                due = started + (k + 1) * s.dt
-                if time.monotonic() > due:
+                if took > s.dt:
                     self.traffic.overruns.append(k)
-                else:
+                due = started + (k + 1) * s.dt  # the schedule: a late cycle is not made up
+                if time.monotonic() < due:
                     time.sleep(due - time.monotonic())
             if progress is not None:
                 progress(k + 1)
-        self.traffic.dropped = self.mailbox.dropped
+        self.traffic.dropped = self.mailbox.dropped + sum(self.traffic.program_dropped.values())
         traces = recorder.traces(trajectory) if recorder is not None else None
         return simulation.BatchResult(self.method.name, s, tally.summary(), traces)
 
@@ -208,6 +233,7 @@ class WorldProgram:
             delivered += report.delivered
             self.traffic.published += report.published
             self.traffic.bytes += report.bytes
+            self.traffic.program_dropped[i] = report.dropped
             if i == Nu:
                 continue
             try:

@@ -3,12 +3,14 @@ animate | bench | params``.
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
 ``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130
-interrupted (Ctrl-C; finished work is kept, no partial file is left).
+interrupted (Ctrl-C; finished work is kept, no partial file is left); 143 the same
+after SIGTERM.
 """
 
 from __future__ import annotations
 
 import os
+import re
 import sys
 from enum import StrEnum
 from pathlib import Path
@@ -92,6 +94,15 @@ SetOpt = Annotated[
         "repeatable; values are read as TOML",
     ),
 ]
+TeamOpt = Annotated[
+    str | None,
+    typer.Option(
+        "--team",
+        metavar="NxM",
+        help="grow the scenario to N UAVs and M targets at the same density "
+        "(Scenario.scaled: field, altitude spacing and start area follow the team)",
+    ),
+]
 MethodOpt = Annotated[
     MethodName,
     typer.Option(metavar="METHOD", help=", ".join(registry.names())),
@@ -99,10 +110,30 @@ MethodOpt = Annotated[
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
 
 
-def load_scenario(config: Path | None, overrides: list[str] | None) -> Scenario:
-    """The scenario from an optional TOML file and FIELD=VALUE overrides."""
+def load_scenario(
+    config: Path | None, overrides: list[str] | None, team: str | None = None
+) -> Scenario:
+    """The scenario from an optional TOML file, scaled to --team NxM, then the
+    FIELD=VALUE overrides."""
+    changes = parse_overrides(overrides or [])
     scenario = Scenario.from_toml(config) if config is not None else Scenario()
-    return scenario.with_overrides(parse_overrides(overrides or []), origin="--set")
+    if team is not None:
+        n_uavs, n_targets = parse_team(team)
+        both = sorted({"n_uavs", "n_targets"} & changes.keys())
+        if both:
+            raise ScenarioError(f"--team sets n_uavs and n_targets; do not --set {both[0]} too")
+        scenario = scenario.scaled(n_uavs, n_targets)
+    return scenario.with_overrides(changes, origin="--set")
+
+
+def parse_team(text: str) -> tuple[int, int]:
+    """``"300x300"`` -> (300, 300): UAVs and targets, each a positive integer."""
+    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    if not match or min(int(match[1]), int(match[2])) < 1:
+        raise ScenarioError(
+            f"--team expects NxM, N UAVs and M targets, positive integers (300x300), got {text!r}"
+        )
+    return int(match[1]), int(match[2])
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
@@ -161,6 +192,7 @@ def run(
     method: MethodOpt = MethodName.distributed,
     seed: SeedOpt = 0,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
     trace: Annotated[
         Path | None,
@@ -170,7 +202,7 @@ def run(
     """Simulate one trial and print its metrics."""
     from ..simulation import simulate
 
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     if trace is not None:
         check_output(trace, "--trace")
     with steps_bar(scenario) as advance:
@@ -257,13 +289,14 @@ def compare(
         int, typer.Option(min=0, metavar="N", help="experiment seed (trial t uses its t-th child)")
     ] = 0,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
 ) -> None:
     """Run the methods on the same trials, in this process; mean and std of each metric."""
     from ..experiments import compare as run_compare
     from ..experiments import summarize
 
-    scenario = with_steps(load_scenario(config, set_), steps, set_)
+    scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
     with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
         raw = run_compare(scenario, names, trials, seed, progress=advance)
@@ -324,10 +357,11 @@ def with_steps(scenario: Scenario, steps: int | None, set_: list[str] | None) ->
 def params(
     config: ConfigOpt = None,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     toml: Annotated[bool, typer.Option("--toml", help="print the scenario as TOML")] = False,
 ) -> None:
     """Show every scenario parameter with its value, unit, range and source."""
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     if toml:
         typer.echo(scenario.to_toml(), nl=False)
         return
@@ -359,7 +393,7 @@ def main(argv: list[str] | None = None) -> int:
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
         code = code if isinstance(code, int) else 0
         if code == 130:
-            return interrupted("no partial file was left")
+            return interrupted(NO_PARTIAL)
         sys.stdout.flush()  # a full or closed stdout shows here, not at interpreter exit
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
@@ -369,7 +403,7 @@ def main(argv: list[str] | None = None) -> int:
     except Interrupted as exc:
         return interrupted(str(exc))
     except KeyboardInterrupt:
-        return interrupted("no partial file was left")
+        return interrupted(NO_PARTIAL)
     except RunError as exc:
         return fail(str(exc), code=1)
     except typer.Exit as exc:
@@ -380,13 +414,19 @@ def main(argv: list[str] | None = None) -> int:
         return fail(os_error(exc), code=1)
 
 
+NO_PARTIAL = "no partial file was left"
+
+_signal = {"terminated": False}
+
+
 def _terminate_as_interrupt() -> None:
     """SIGTERM ends a command as Ctrl-C does: its cleanup runs (workers and programs it
-    started are stopped, no partial file is left)."""
+    started are stopped, no partial file is left); the exit code is 143, not 130."""
     import signal
     import threading
 
     def interrupt(signum, frame):
+        _signal["terminated"] = True
         raise KeyboardInterrupt
 
     if threading.current_thread() is threading.main_thread():
@@ -423,6 +463,9 @@ def fail(message: str, code: int = 2) -> int:
 
 
 def interrupted(kept: str) -> int:
+    if _signal["terminated"]:  # SIGTERM: 128 + 15
+        print(f"uavtrack: terminated; {kept}", file=sys.stderr)
+        return 143
     print(f"uavtrack: interrupted; {kept}", file=sys.stderr)
     return 130
 

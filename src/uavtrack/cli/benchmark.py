@@ -19,10 +19,18 @@ def bench(
     json_out: Annotated[
         Path | None, typer.Option("--json", metavar="FILE", help="write the results as JSON")
     ] = None,
+    figure: Annotated[
+        Path | None,
+        typer.Option(
+            "--figure", metavar="FILE", help="draw time per cycle against team size (.png)"
+        ),
+    ] = None,
 ) -> None:
     """Speed of the building blocks and whole runs, each beside its reference."""
     if json_out is not None:
         check_output(json_out, "--json")
+    if figure is not None:
+        check_output(figure, "--figure")
     pinning = pin_threads()  # before numpy loads
     from ..bench import bench as run_bench
 
@@ -37,11 +45,11 @@ def bench(
         title=f"uavtrack bench{' --quick' if quick else ''} "
         f"({results['machine']['cores']} cores, BLAS threads: {pinning})"
     )
-    for col in ("case", "ours", "reference", "speedup"):
+    for col in ("case", "ours", "reference", "speedup", "memory peak"):
         table.add_column(col, justify="left" if col == "case" else "right")
     for c in results["cases"]:
         if "skipped" in c:
-            table.add_row(escape(c["name"]), "skipped", escape(c["skipped"]), "")
+            table.add_row(escape(c["name"]), "skipped", escape(c["skipped"]), "", "")
             continue
         ref = c.get("reference_median_s")
         table.add_row(
@@ -49,10 +57,16 @@ def bench(
             f"{_si(c['median_s'])} / {c['unit']}",
             "" if ref is None else f"{_si(ref)} / {c['unit']}",
             "" if ref is None else f"{c['speedup']:.1f}x",
+            f"{c['peak_bytes'] / 2**20:.0f} MiB" if "peak_bytes" in c else "",
         )
     console(140).print(table)
     if json_out is not None:
         typer.echo(f"wrote {json_out}")
+    if figure is not None:
+        from ..plots import scaling_figure
+
+        scaling_figure(results["cases"], figure)
+        typer.echo(f"wrote {figure}")
 
 
 THREAD_VARIABLES = (

@@ -18,6 +18,7 @@ from . import (
     MethodName,
     MethodOpt,
     SetOpt,
+    TeamOpt,
     app,
     console,
     load_scenario,
@@ -189,13 +190,14 @@ def reproduce(
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     progress: ProgressOpt = None,
 ) -> None:
     """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder."""
     from .. import plots, report
     from ..experiments import Profile, reproduce_plan, summarize_reproduction
 
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
     profile = sized(Profile.quick() if quick else Profile(), trials, steps)
     out = out or Path("results") / ("reproduce-quick" if quick else "reproduce")
@@ -261,13 +263,14 @@ def sweep(
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     progress: ProgressOpt = None,
 ) -> None:
     """Vary one scenario field; every method on the same trials at every value."""
     from .. import plots, report
     from ..experiments import summarize_sweep, sweep_plan, sweep_values
 
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
     if steps is not None:
         scenario = scenario.with_overrides({"steps": steps}, origin="--steps")
@@ -325,6 +328,7 @@ def animate(
     method: MethodOpt = MethodName.distributed,
     seed: Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")] = 0,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     every: Annotated[int, typer.Option(min=1, metavar="K", help="draw every K-th step")] = 2,
     fps: Annotated[
         int, typer.Option(min=1, max=60, metavar="F", help="frames per second, 1 to 60")
@@ -338,7 +342,7 @@ def animate(
     if out.suffix.lower() != ".gif":
         raise UsageError(f"--out must name a .gif file, got {out}")
     check_output(out, "--out")
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     with steps_bar(scenario) as advance:
         result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))
     frames = len(plots.animation_frames(scenario.steps, every))

@@ -10,7 +10,7 @@ import typer
 from ..config import Scenario
 from ..errors import UsageError
 from ..files import write_json, write_text
-from . import ConfigOpt, SetOpt, app, console, load_scenario
+from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
@@ -49,6 +49,7 @@ def robustness(
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
+    team: TeamOpt = None,
     progress: ProgressOpt = None,
 ) -> None:
     """Every method under message loss, bursts, delay, a round budget, UAV failures and
@@ -57,7 +58,7 @@ def robustness(
     from .. import robustness as experiment
     from ..experiments import difference
 
-    scenario = load_scenario(config, set_)
+    scenario = load_scenario(config, set_, team)
     set_here = {
         k: v
         for k, v in difference(Scenario(), scenario).items()
