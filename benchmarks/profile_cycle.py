@@ -1,10 +1,11 @@
 """Where one trial's time goes: microseconds per step in each stage of the cycle.
 
-    python benchmarks/profile_cycle.py [method] [trials-in-the-batch] [FIELD=VALUE ...]
+    python benchmarks/profile_cycle.py [method] [trials-in-the-batch] [NxM] [FIELD=VALUE ...]
 
-Runs the default scenario's 500 steps through `simulation.run` under cProfile and
-charges each stage function's cumulative time to its stage (profiling adds its own
-overhead, about a third, spread over the stages).
+Runs the default scenario's 500 steps (or the scenario grown to N UAVs x M targets,
+`Scenario.scaled`, and FIELD=VALUE overrides such as steps=10) through `simulation.run`
+under cProfile and charges each stage function's cumulative time to its stage
+(profiling adds its own overhead, about a third, spread over the stages).
 """
 
 import cProfile
@@ -15,21 +16,27 @@ import time
 import uavtrack
 from uavtrack.config import parse_value
 
-STAGES = {  # stage: functions of the cycle whose cumulative time is the stage's
-    "graph": ("graph", "links"),
-    "sensing": ("sense",),
-    "filter": ("filter_step", "predict"),
-    "fusion": ("fuse",),
-    "planning": ("_plan",),
-    "auction": ("assign",),
-    "control": ("fly",),
-    "metrics": ("add",),
-    "noise": ("standard_normal",),
+STAGES = {  # stage: (module, function) of the cycle whose cumulative time is the stage's
+    "graph": (("network", "radio_links"),),
+    "sensing": (("simulation", "sense"),),
+    "filter": (("estimation", "filter_step"),),
+    "confidence": (("estimation", "confidence"),),
+    "fusion": (("methods", "fuse"),),
+    "planning": (("simulation", "_plan"),),
+    "auction": (("methods", "assign"),),
+    "control": (("world", "fly"),),
+    "metrics": (("metrics", "add"),),
+    "noise": (("simulation", "sensor_noise"),),
 }
 
 
-def profile(method: str = "distributed", batch: int = 1, overrides=None) -> dict[str, float]:
-    scenario = uavtrack.Scenario().with_overrides(overrides or {})
+def profile(
+    method: str = "distributed", batch: int = 1, overrides=None, team=None
+) -> dict[str, float]:
+    scenario = uavtrack.Scenario()
+    if team is not None:
+        scenario = scenario.scaled(*team)
+    scenario = scenario.with_overrides(overrides or {})
     seeds = [uavtrack.trial_seed(0, t) for t in range(batch)]
     profiler = cProfile.Profile()
     start = time.perf_counter()
@@ -41,7 +48,8 @@ def profile(method: str = "distributed", batch: int = 1, overrides=None) -> dict
         out[stage] = sum(
             cumulative
             for (path, _, name), (_, _, _, cumulative, _) in stats.items()
-            if name in names and ("uavtrack" in path or name == "standard_normal")
+            for module, function in names
+            if name == function and path.endswith(f"uavtrack/{module}.py")
         )
     out["other"] = max(total - sum(out.values()), 0.0)  # the rest of step and run
     return {stage: 1e6 * s / scenario.steps for stage, s in out.items()}
@@ -50,13 +58,17 @@ def profile(method: str = "distributed", batch: int = 1, overrides=None) -> dict
 if __name__ == "__main__":
     method = sys.argv[1] if len(sys.argv) > 1 else "distributed"
     batch = int(sys.argv[2]) if len(sys.argv) > 2 else 1
+    rest = sys.argv[3:]
+    team = None
+    if rest and "=" not in rest[0]:
+        team = tuple(int(n) for n in rest.pop(0).lower().split("x"))
     overrides = dict(
-        (name, parse_value(value)) for name, _, value in (a.partition("=") for a in sys.argv[3:])
+        (name, parse_value(value)) for name, _, value in (a.partition("=") for a in rest)
     )
-    profile(method, batch, overrides)  # warm-up
-    stages = profile(method, batch, overrides)
+    profile(method, batch, overrides, team)  # warm-up
+    stages = profile(method, batch, overrides, team)
     total = sum(stages.values())
     print(f"{method}, {batch} trial(s) per batch: microseconds per step (under cProfile)")
     for stage, us in sorted(stages.items(), key=lambda kv: -kv[1]):
         print(f"  {stage:10s} {us:8.1f}  {100 * us / total:4.0f}%")
-    print(f"  {'total':10s} {total:8.1f}  -> {total * 500 / 1e6:.3f} s for 500 steps")
+    print(f"  {'total':10s} {total:8.1f}  per step")

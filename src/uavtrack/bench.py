@@ -229,10 +229,10 @@ def cycle_cases(sizes, methods, repeats: int, scaled: bool = False) -> list[dict
             ctx = Context.of(scenario, get(name), [trial_seed(0, 0)])
             cycle = partial(step, state, targets, noise, ctx)
             (t,) = timed(cycle, repeats=repeats)
-            where = "at the default density" if scaled else "in the default field"
+            where = ", default density" if scaled else ""
             out.append(
                 case(
-                    f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets {where}",
+                    f"decision cycle, {name}, {n_uavs} UAVs x {n_targets} targets{where}",
                     t,
                     unit="cycle",
                     method=name,
@@ -246,22 +246,24 @@ def cycle_cases(sizes, methods, repeats: int, scaled: bool = False) -> list[dict
 
 
 PEAK = """
-import json, resource, sys, time
+import json, time
 import uavtrack
 scenario = uavtrack.Scenario(steps={steps}).scaled({n_uavs}, {n_targets})
 start = time.perf_counter()
 uavtrack.run(scenario, {method!r}, [0])
 seconds = time.perf_counter() - start
-peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
-print(json.dumps({{"seconds": seconds, "peak_bytes": peak}}))
+status = open("/proc/self/status").read().split("VmHWM:")[1].split()
+print(json.dumps({{"seconds": seconds, "peak_bytes": int(status[0]) * 1024}}))
 """
 
 
 def run_case(n_uavs: int, n_targets: int, steps: int, method: str = "distributed"):
     """A whole run without a trace (metrics only) of a scaled team, in a process of its
     own: its time per step and its memory peak (the process's maximum resident set,
-    Python and the libraries included). Without a trace nothing grows with the steps
-    (`simulation.memory_estimate`), so a short run has a long one's peak."""
+    VmHWM of Linux's /proc/self/status, Python and the libraries included; not
+    getrusage's, which a child inherits from the process that started it). Without a
+    trace nothing grows with the steps (`simulation.memory_estimate`), so a short run
+    has a long one's peak."""
     import subprocess
     import sys
 
@@ -275,7 +277,7 @@ def run_case(n_uavs: int, n_targets: int, steps: int, method: str = "distributed
     scenario = Scenario(steps=steps).scaled(n_uavs, n_targets)
     estimate = sum(memory_estimate(scenario).values())
     return case(
-        f"run without trace, {method}, {n_uavs} UAVs x {n_targets} targets, {steps} steps",
+        f"{steps}-step run, no trace, {method}, {n_uavs} UAVs x {n_targets} targets",
         measured["seconds"],
         per=steps,
         unit="step",

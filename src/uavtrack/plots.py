@@ -196,7 +196,7 @@ def curve_figure(curve: dict[str, Any], path: Path, xlabel: str, title: str) -> 
 
 def scaling_figure(cases: list[dict[str, Any]], path: Path) -> None:
     """Time per decision cycle against team size at constant density (`uavtrack bench`'s
-    scaled cycle cases), log-log, with a line of slope 1 (linear growth) for reference."""
+    scaled cycle cases), log-log, with lines of slope 1 and 2 for reference."""
     fig, ax = plt.subplots(figsize=(6.5, 4.5))
     shown = []
     for method, color, marker in (
@@ -216,8 +216,16 @@ def scaling_figure(cases: list[dict[str, Any]], path: Path) -> None:
     if not shown:
         plt.close(fig)
         raise ValueError("no scaled decision-cycle cases to plot (run the bench without --quick)")
-    n, t = shown[0]
-    ax.loglog(n, 1e3 * t[0] * n / n[0], ls="--", color="gray", lw=1, label="linear (slope 1)")
+    n, t = shown[0]  # reference lines through the distributed method's largest team
+    for power, style in ((1, "--"), (2, ":")):
+        ax.loglog(
+            n,
+            1e3 * t[-1] * (n / n[-1]) ** power,
+            ls=style,
+            color="gray",
+            lw=1,
+            label=f"slope {power} (time ~ N^{power})",
+        )
     ax.set_xlabel("team size N (N UAVs x N targets, constant density)")
     ax.set_ylabel("time per decision cycle [ms]")
     ax.set_title("Cost of a cycle against team size, 1 process")

@@ -121,7 +121,7 @@ def run_swarm(
         realtime,
         trace,
         progress,
-        startup if startup is not None else 30.0 + 2.0 * len(programs),
+        startup if startup is not None else 30.0 + 4.0 * len(programs),
         announce,
     )
     go = _in_memory if transport == "memory" else _over_zenoh

@@ -59,7 +59,7 @@ def bench(
             "" if ref is None else f"{c['speedup']:.1f}x",
             f"{c['peak_bytes'] / 2**20:.0f} MiB" if "peak_bytes" in c else "",
         )
-    console(140).print(table)
+    console(160).print(table)
     if json_out is not None:
         typer.echo(f"wrote {json_out}")
     if figure is not None:

@@ -94,7 +94,7 @@ def swarm(
         typer.echo(
             f"waiting for {programs}: start each with uavtrack agent (the run id and "
             f"endpoint follow); the run starts when all have joined, within "
-            f"{30 + 2 * (n + central)} s",
+            f"{30 + 4 * (n + central)} s",
             err=True,
         )
     with steps_bar(scenario, label="cycles") as advance:
