@@ -121,8 +121,9 @@ def fisher_information(uav: np.ndarray, target: np.ndarray, sensor: SensorModel)
     where ' is d/dd: sigma_d' = k_d k_r / d_O exp(k_r (d/d_O - 1)) and
     sigma_theta'/sigma_theta = 1/d. The first term of each coefficient is the mean's
     sensitivity, the others come from the noise's dependence on the distance. (The
-    printed eqs. 52-54 differ from this: r^2 for r^4 in the bearing term, a sign and a
-    repeated factor in eq. 53.) The bearing is undefined straight under the UAV
+    printed eqs. 52-54 differ from this: r^2 for r^4 in the bearing terms of all three;
+    in eq. 53's bearing term (y-y)(y-y) for (x-x)(y-y), its minus sign being right; and
+    eq. 54 labelled [G]_11 for [G]_22.) The bearing is undefined straight under the UAV
     (r = 0), where this returns the range term only.
 
     uav: (..., >=3); target: (..., >=2). Returns (..., 2, 2).
