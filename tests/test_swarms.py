@@ -5,21 +5,11 @@ import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.optimize import linear_sum_assignment
 
 import uavtrack
 from uavtrack import assignment, network
 
-
-def dense_solve(bids):
-    """The neighbourhood problem over every column (Remark 2), no restriction."""
-    n = bids.shape[0]
-    choice, left = np.empty(n, dtype=np.int64), np.arange(n)
-    while left.size:
-        rows, cols = linear_sum_assignment(bids[left], maximize=True)
-        choice[left[rows]] = cols
-        left = np.delete(left, rows)
-    return choice
+from .test_assignment import full_problem as dense_solve  # every column, no restriction
 
 
 def dense(monkeypatch):
