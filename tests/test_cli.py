@@ -100,6 +100,7 @@ BAD = [
     (["run", "--team", "300"], "--team expects NxM"),
     (["sweep", "dt", "1", "--team", "0x4"], "--team expects NxM"),
     (["params", "--team", "9x9", "--set", "n_targets=3"], "do not --set n_targets too"),
+    (["sweep", "n_uavs", "10", "30", "--team", "20x20"], "do not sweep n_uavs too"),
     (["run", "--set", "n_uavs=300", "--set", "n_targets=300"], "--team 300x300"),
 ]
 

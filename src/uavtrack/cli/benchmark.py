@@ -22,7 +22,9 @@ def bench(
     figure: Annotated[
         Path | None,
         typer.Option(
-            "--figure", metavar="FILE", help="draw time per cycle against team size (.png)"
+            "--figure",
+            metavar="FILE",
+            help="draw time per cycle against team size (.png, .pdf or .svg, by its suffix)",
         ),
     ] = None,
 ) -> None:

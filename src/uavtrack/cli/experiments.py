@@ -270,6 +270,8 @@ def sweep(
     from .. import plots, report
     from ..experiments import summarize_sweep, sweep_plan, sweep_values
 
+    if team is not None and field in ("n_uavs", "n_targets"):
+        raise UsageError(f"--team sets n_uavs and n_targets; do not sweep {field} too")
     scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
     if steps is not None:
