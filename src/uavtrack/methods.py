@@ -184,12 +184,18 @@ class Distributed(Method):
         """The neighbourhood problem: targets (n,) of the n members, Remark 2."""
         return assignment.hungarian(bids)
 
+    @property
+    def built_in_solve(self) -> bool:
+        """Whether `solve` is this class's own, which reads only each member's k best
+        bids in a problem of k members (a subclass's may read any bid)."""
+        return type(self).solve is Distributed.solve
+
     def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """A UAV's bids serve the auction of every neighbourhood it belongs to, and in
         an auction of k members only each member's k best bids matter
         (`assignment.hungarian`): it needs as many as the largest of them has members.
         A replaced `solve` may read any bid: then all."""
-        if not setting.prune or type(self).solve is not Distributed.solve:
+        if not setting.prune or not self.built_in_solve:
             return None
         return largest
 
@@ -230,8 +236,8 @@ class Distributed(Method):
             view[:, idx, idx] = bids  # a UAV's own bids are current
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
-        built_in = type(self).solve is Distributed.solve
-        target, seconds = assignment.auction(view, members, None if built_in else self.solve)
+        solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
+        target, seconds = assignment.auction(view, members, solve)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
 
 
