@@ -46,9 +46,7 @@ class Served:
 
     def name(self, me: int) -> str:
         """How to call program `me` of this run."""
-        return (
-            "central node program" if self.central and me == self.programs - 1 else ("UAV program")
-        )
+        return "central node program" if self.central and me == self.programs - 1 else "UAV program"
 
 
 def serve(
@@ -137,10 +135,10 @@ def meet(transport: Transport, mailbox: Mailbox, run: str, me: int, programs: in
     0 .. N-1 and the central node N if any): then the routes between all programs
     exist, and no message of the first cycle is lost to a subscription still in transit."""
     others = [p for p in range(programs) if p != me]
+    heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
     limit = time.monotonic() + wait
     while time.monotonic() < limit and not mailbox.gone:
         _presence(transport, run, me)
-        heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
         if mailbox.wait(heard, time.monotonic() + 0.1):
             return True
     return False
