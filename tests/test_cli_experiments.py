@@ -45,18 +45,53 @@ def test_reproduce_quick_writes_everything(quick):
     )
     assert "95% confidence interval" in report and "`dt` | 0.5 |" in report
     assert json.loads((quick / "manifest.json").read_text())["kind"] == "reproduce"
-    assert len(list((quick / "raw").glob("*.json"))) == 18
+    assert len(list((quick / "raw").glob("*.json"))) == 24
+    # the first guess before calibration, beside the defaults, on the same trials
+    first = summary["first_guess"]
+    assert first["overrides"] == {"dt": 1.0, "uav.altitude": 500.0}
+    assert set(first["rates"]) == {"distributed", "centralized", "greedy"}
+    assert "conditional on two calibrated values" in report and "first guess" in report
+    assert "σ over (trial, step)" in report
 
 
 def test_reproduce_again_reuses_every_job(quick, capsys):
     before = (quick / "summary.json").read_text()
     code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
-    assert code == 0 and "0 jobs run, 18 reused" in out
+    assert code == 0 and "0 jobs run, 24 reused" in out
     after = json.loads((quick / "summary.json").read_text())
     assert (
         after["compare"]["distributed"]["mean"]
         == json.loads(before)["compare"]["distributed"]["mean"]
     )
+
+
+def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
+    from uavtrack.experiments import SENSITIVITY
+
+    code, out, _ = run_cli(
+        capsys, "reproduce", "--quick", "--sensitivity", "--out", str(quick), "--no-progress"
+    )
+    n_values = sum(len(v) for v in SENSITIVITY.values())
+    assert code == 0 and f"{n_values * 3 * 2} jobs run, 24 reused" in out
+    sens = json.loads((quick / "summary.json").read_text())["sensitivity"]
+    assert [r["field"] for r in sens["rows"]] == list(SENSITIVITY)
+    base = sens["base"]["rates"]
+    compare = json.loads((quick / "summary.json").read_text())["compare"]
+    assert base["greedy"] == pytest.approx(compare["greedy"]["mean"])
+    for row in sens["rows"]:
+        for entry in row["values"]:
+            p = entry["distributed - greedy"]
+            r = entry["rates"]
+            assert p["mean"] == pytest.approx(r["distributed"] - r["greedy"])
+            assert entry["near_centralized"] in ("yes", "no", "unclear")
+    report = (quick / "report.md").read_text()
+    assert "## Sensitivity of the conclusions" in report and "| `dt` (0.5) | 0.25 |" in report
+    with Image.open(quick / "sensitivity.png") as im:
+        assert im.size[0] > 800
+    # without the flag the report leaves the section out, and nothing is recomputed
+    code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
+    assert code == 0 and "0 jobs run, 24 reused" in out
+    assert "## Sensitivity" not in (quick / "report.md").read_text()
 
 
 def test_reproduce_refuses_a_different_scenario(quick, capsys):

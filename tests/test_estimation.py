@@ -25,6 +25,40 @@ def test_transition_and_process_noise_match_eqs_14_15_at_unit_step():
     assert np.allclose(Q, printed[np.ix_(order, order)])
 
 
+@pytest.mark.parametrize("dt", [0.25, 0.5, 2.0])
+def test_printed_noise_form_is_the_printed_matrix_at_any_step(dt):
+    from uavtrack import Scenario
+
+    s1, s2 = 0.16, 0.3
+    scenario = Scenario(dt=dt, target={"sigma_1": s1, "sigma_2": s2, "noise_form": "printed"})
+    Q = estimation.process_noise(dt, *scenario.acceleration_std())
+    for pos, vel, s in ((0, 2, s1), (1, 3, s2)):  # sigma^2 [[dT^2/4, dT/2], [dT/2, 1]]
+        block = Q[np.ix_([pos, vel], [pos, vel])]
+        assert np.allclose(block, s**2 * np.array([[dt**2 / 4, dt / 2], [dt / 2, 1.0]]))
+    # the acceleration reading: a quarter of the variance at dT = 0.5 s, dT^2 in general
+    plain = Scenario(dt=dt, target={"sigma_1": s1, "sigma_2": s2})
+    assert np.allclose(estimation.process_noise(dt, *plain.acceleration_std()), Q * dt**2)
+
+
+def test_noise_forms_agree_at_unit_step_and_move_the_truth_otherwise():
+    from uavtrack import Scenario, simulate
+
+    one = [
+        simulate(Scenario(dt=1.0, steps=40, target={"noise_form": form}), seed=3)
+        for form in ("acceleration", "printed")
+    ]
+    assert np.array_equal(one[0].trace.targets, one[1].trace.targets)
+    assert one[0].observation_rate == one[1].observation_rate
+    half = [
+        simulate(Scenario(dt=0.5, steps=40, target={"noise_form": form}), seed=3).trace.targets
+        for form in ("acceleration", "printed")
+    ]
+    # the same draws scaled by 1/dT: the velocity changes double (before any wall)
+    dv = [np.diff(t[:5, :, 2:], axis=0) for t in half]
+    assert np.all(np.abs(dv[0]) > 0)
+    assert np.allclose(np.abs(dv[1]), 2 * np.abs(dv[0]))
+
+
 def test_update_hand_computed():
     # prior P = diag(4, 4, 1, 1) predicted with dT = 1 and Q = 0:
     # per axis P(k|k-1) = [[5, 1], [1, 1]]; R = I -> S = 6, K = [5/6, 1/6]

@@ -17,10 +17,43 @@ def test_reproduce_plan_shares_the_default_runs():
     jobs = experiments.unique(j for group in plan.values() for j in group)
     assert len(jobs) == len({j.key for j in jobs})
     trial_jobs = [j for j in jobs if j.kind == "trials"]
-    # 3 methods + 7 other ranges + 5 other FOVs, 2 chunks of 25 trials each
-    assert len(trial_jobs) == (3 + 7 + 5) * 2
+    # 3 methods at the defaults and at the first guess + 7 other ranges + 5 other FOVs,
+    # 2 chunks of 25 trials each
+    assert len(trial_jobs) == (3 + 3 + 7 + 5) * 2
     assert {j.count for j in trial_jobs} == {25}
     assert all(j.scenario.steps == 500 for j in trial_jobs)
+
+
+def test_sensitivity_moves_one_assumed_parameter_at_a_time():
+    base = uavtrack.Scenario()
+    plain = experiments.reproduce_plan(base, Profile())
+    plan = experiments.reproduce_plan(base, Profile(), sensitivity=True)
+    assert {k: [j.key for j in v] for k, v in plain.items()} == {
+        k: [j.key for j in v] for k, v in plan.items() if k != "sensitivity"
+    }
+    moved = set()
+    for job in plan["sensitivity"]:
+        diff = experiments.difference(base.with_overrides({"steps": 500}), job.scenario)
+        assert len(diff) == 1, diff
+        ((field, value),) = diff.items()
+        assert value in experiments.SENSITIVITY[field] and value != base.value(field)
+        moved.add(field)
+        assert "assumed" in dict((n, d) for n, _, d in base.describe())[field]
+    assert moved == set(experiments.SENSITIVITY)
+
+
+def test_conclusion_verdicts_follow_the_confidence_interval():
+    rng = np.random.default_rng(0)
+    noise = rng.normal(0, 0.01, 50)
+    greedy = {"observation_rate": np.full(50, 0.5)}
+    cases = {-0.01: "yes", -0.06: "no", -0.03: "unclear"}
+    for gap, verdict in cases.items():
+        dist = {"observation_rate": 0.8 + noise}
+        cent = {"observation_rate": 0.8 - gap + noise[::-1]}
+        out = experiments.conclusions([dist, cent, greedy])
+        assert out["distributed - centralized"]["mean"] == pytest.approx(gap)
+        assert out["near_centralized"] == verdict
+        assert out["above_greedy"] == "yes"
 
 
 def test_chunks_cover_trials_exactly_once():

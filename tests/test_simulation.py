@@ -256,3 +256,11 @@ def test_faults_do_not_change_targets_or_sensor_noise(short):
     a = uavtrack.simulate(short, "greedy", seed=9).trace
     b = uavtrack.simulate(lossy, "greedy", seed=9).trace
     assert np.array_equal(a.targets, b.targets) and np.array_equal(a.uavs[0], b.uavs[0])
+
+
+def test_in_view_std_is_the_spread_over_steps_of_the_fraction_in_view():
+    result = uavtrack.simulate(uavtrack.Scenario(steps=120), "greedy", seed=2)
+    fraction = result.trace.observed.any(axis=1).mean(axis=1)  # (T,)
+    assert result.observation_rate == pytest.approx(fraction.mean())
+    assert result.in_view_std == pytest.approx(fraction.std())
+    assert 0 < result.in_view_std <= 0.5

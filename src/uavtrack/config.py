@@ -16,7 +16,7 @@ import re
 import tomllib
 from numbers import Integral, Real
 from pathlib import Path
-from typing import Annotated, Any
+from typing import Annotated, Any, Literal
 
 from pydantic import (
     BaseModel,
@@ -174,6 +174,16 @@ class TargetModel(_Part):
         description=(
             "std of each initial velocity component [m/s], [0, 50]; assumed: slow ground "
             "vehicles or pedestrians; the paper says only that targets move randomly"
+        ),
+    )
+    noise_form: Literal["acceleration", "printed"] = Field(
+        "acceleration",
+        description=(
+            "reading of eq. (15) [-]: 'acceleration' takes sigma as a white acceleration "
+            "[m/s^2] (Q = sigma^2 [[dT^4/4, dT^3/2], [dT^3/2, dT^2]] per axis), 'printed' "
+            "as the printed matrix sigma^2 [[dT^2/4, dT/2], [dT/2, 1]], a velocity "
+            "increment of std sigma per step; the two agree at dT = 1 s; assumed "
+            "'acceleration' (sigma keeps its unit at any time step); filter and truth alike"
         ),
     )
 
@@ -474,6 +484,13 @@ class Scenario(_Part):
                 "which keeps the altitude band"
             )
         return self
+
+    def acceleration_std(self) -> tuple[float, float]:
+        """Std of the targets' white acceleration per axis [m/s^2], as eq. (15) is read
+        (`target.noise_form`): sigma itself, or sigma / dT for the printed matrix, whose
+        Gamma = [dT/2, 1] is a velocity increment of std sigma per step."""
+        scale = 1.0 if self.target.noise_form == "acceleration" else 1.0 / self.dt
+        return self.target.sigma_1 * scale, self.target.sigma_2 * scale
 
     def scaled(self, n_uavs: int, n_targets: int) -> Scenario:
         """This scenario grown (or shrunk) to a team of n_uavs UAVs and n_targets targets

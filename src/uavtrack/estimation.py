@@ -25,7 +25,8 @@ def process_noise(dt: float, sigma_1: float, sigma_2: float) -> np.ndarray:
     Per axis Q = sigma^2 [[dT^4/4, dT^3/2], [dT^3/2, dT^2]] (Gamma Gamma^T sigma^2 with
     Gamma = [dT^2/2, dT]^T). The printed eq. (15) writes dT^2/4, dT/2, 1 and orders the
     blocks (x, vx), (y, vy); at dT = 1 s both are the same matrix, and this form keeps
-    sigma in m/s^2 for other time steps.
+    sigma in m/s^2 for other time steps. The printed matrix is this one with sigma / dT
+    (`Scenario.acceleration_std` under ``target.noise_form = "printed"``).
     """
     Q = np.zeros((4, 4))
     for pos, vel, sigma in ((0, 2, sigma_1), (1, 3, sigma_2)):

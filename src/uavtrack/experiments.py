@@ -39,6 +39,32 @@ PAPER_FIG5 = {
 """The paper's overall observation rates, mean and std over 50 trials (Sec. 7.1)."""
 
 
+FIRST_GUESS = {"dt": 1.0, "uav.altitude": 500.0}
+"""The two calibrated parameters at their first guess, before the calibration against
+Fig. 5 (README, "Calibration"); the reproduction runs it beside the defaults."""
+
+SENSITIVITY: dict[str, tuple[Any, ...]] = {
+    "dt": (0.25, 1.0),
+    "uav.bank_angle_deg": (30.0, 60.0),
+    "uav.altitude": (350.0, 500.0),
+    "uav.altitude_spacing": (0.0, 10.0),
+    "planner.horizon": (2, 4),
+    "field_size": (150.0, 300.0),
+    "uav.start_spread": (0.0, 100.0),
+    "target.initial_velocity_std": (0.5, 2.0),
+    "estimation.initial_position_std": (2.0, 20.0),
+    "target.noise_form": ("printed",),
+}
+"""Every assumed parameter with a low and a high value around the default, for
+`reproduce --sensitivity` (the reading of eq. 15 has one alternative). Each moves one
+parameter at a time; steps stay at the profile's, so ΔT changes the mission's length."""
+
+NEAR_CENTRALIZED = -0.03
+""""Distributed within 0.03 of centralized": distributed − centralized ≥ −0.03."""
+ABOVE_GREEDY = 0.05
+""""Distributed well above greedy": distributed − greedy ≥ 0.05 (the paper's gap is 0.137)."""
+
+
 @dataclass(frozen=True)
 class Profile:
     """The size of a reproduction of Section 7."""
@@ -191,12 +217,16 @@ def sweep_values(base: Scenario, field: str, values: Sequence[Any]) -> list[Any]
     return out
 
 
-def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
-    """Every experiment of the paper's Section 7 as jobs, grouped by experiment."""
+def reproduce_plan(
+    base: Scenario, profile: Profile, seed: int = 0, sensitivity: bool = False
+) -> dict[str, list[Job]]:
+    """Every experiment of the paper's Section 7 as jobs, grouped by experiment, with the
+    uncalibrated first guess and, if asked, the one-at-a-time sensitivity study."""
     base = base.with_overrides({"steps": profile.steps})
     tj = lambda over, method: trial_jobs(base, over, method, profile.trials, profile.chunk, seed)  # noqa: E731
     plan = {
         "compare": [j for m in METHOD_NAMES for j in tj({}, m)],
+        "first_guess": [j for m in METHOD_NAMES for j in tj(FIRST_GUESS, m)],
         "comm_range": [
             j for r in profile.comm_ranges for j in tj({"comm_range": r}, "distributed")
         ],
@@ -219,6 +249,14 @@ def reproduce_plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str,
                     seed,
                 )
             )
+    if sensitivity:
+        plan["sensitivity"] = [
+            j
+            for field, values in SENSITIVITY.items()
+            for value in values
+            for m in METHOD_NAMES
+            for j in tj({field: value}, m)
+        ]
     return plan
 
 
@@ -288,20 +326,24 @@ def collect(jobs: Sequence[Job], results: dict[str, dict[str, Any]]) -> dict[tup
 
 def describe(metrics: dict[str, np.ndarray]) -> dict[str, Any]:
     """Mean and std over trials of the rate, per target, sorted per target, and costs."""
-    rate_mean, rate_std = mean_std(metrics["observation_rate"])
+    rate = np.asarray(metrics["observation_rate"], dtype=float)
+    rate_mean, rate_std = mean_std(rate)
     tgt_mean, tgt_std = mean_std(metrics["per_target"])
     srt_mean, srt_std = mean_std(sorted_rates(metrics["per_target"]))
     out = {
         "trials": int(len(metrics["observation_rate"])),
         "mean": float(rate_mean),
         "std": float(rate_std),
+        # the same spread over (trial, target) pairs and over (trial, step) pairs
+        "std_trial_target": float(mean_std(np.ravel(metrics["per_target"]))[1]),
+        "std_trial_step": float(np.sqrt(np.mean(np.square(metrics["in_view_std"])) + np.var(rate))),
         "per_target_mean": tgt_mean.tolist(),
         "per_target_std": tgt_std.tolist(),
         "sorted_mean": srt_mean.tolist(),
         "sorted_std": srt_std.tolist(),
     }
     for name in METRICS:
-        if name in ("observation_rate", "per_target"):
+        if name in ("observation_rate", "per_target", "in_view_std"):
             continue
         m, s = mean_std(metrics[name])
         out[name] = {
@@ -364,13 +406,66 @@ def summarize_reproduction(
             "mean_ms": [float(mean) for mean, _ in rows],
             "std_ms": [float(std) for _, std in rows],
         }
-    return {
+    out = {
         "compare": compare,
         "paired": pairs,
         "comm_range": curve("comm_range", "comm_range", profile.comm_ranges),
         "fov": curve("fov", "sensor.half_fov_deg", profile.half_fovs),
         "timing": timing,
         "paper": {m: {"mean": v[0], "std": v[1]} for m, v in PAPER_FIG5.items()},
+    }
+    out["first_guess"] = {
+        "overrides": FIRST_GUESS,
+        **conclusions(data["first_guess"][(label_of(FIRST_GUESS), m)] for m in METHOD_NAMES),
+    }
+    if "sensitivity" in plan:
+        rows = []
+        for field, values in SENSITIVITY.items():
+            rows.append(
+                {
+                    "field": field,
+                    "default": _plain(base.value(field)),
+                    "values": [
+                        {
+                            "value": v,
+                            **conclusions(
+                                data["sensitivity"][(label_of({field: v}), m)] for m in METHOD_NAMES
+                            ),
+                        }
+                        for v in values
+                    ],
+                }
+            )
+        out["sensitivity"] = {
+            "base": conclusions(data["compare"][("default", m)] for m in METHOD_NAMES),
+            "near_centralized": NEAR_CENTRALIZED,
+            "above_greedy": ABOVE_GREEDY,
+            "rows": rows,
+        }
+    return out
+
+
+def conclusions(per_method: Iterable[dict[str, np.ndarray]]) -> dict[str, Any]:
+    """Mean rates of the three methods (in METHOD_NAMES order) on the same trials, the
+    two paired differences that carry the paper's conclusions, and whether each holds:
+    "yes" when its 95% interval lies on the right side of the threshold, "no" when on
+    the wrong side, "unclear" when it straddles it."""
+    rate = dict(zip(METHOD_NAMES, (m["observation_rate"] for m in per_method), strict=True))
+
+    def verdict(p: dict[str, float], threshold: float) -> str:
+        if p["ci_low"] >= threshold:
+            return "yes"
+        return "no" if p["ci_high"] < threshold else "unclear"
+
+    near = paired(rate["distributed"], rate["centralized"])
+    above = paired(rate["distributed"], rate["greedy"])
+    return {
+        "rates": {m: float(np.mean(r)) for m, r in rate.items()},
+        "stds": {m: float(mean_std(r)[1]) for m, r in rate.items()},
+        "distributed - centralized": near,
+        "distributed - greedy": above,
+        "near_centralized": verdict(near, NEAR_CENTRALIZED),
+        "above_greedy": verdict(above, ABOVE_GREEDY),
     }
 
 

@@ -19,6 +19,11 @@ METRICS: dict[str, tuple[str, str]] = {
         "lies inside at least one UAV's observation disk (Sec. 7)",
     ),
     "per_target": ("", "observation rate of each target, numbered from 0"),
+    "in_view_std": (
+        "",
+        "standard deviation over the steps of the fraction of targets in view, whose mean "
+        "over the steps is the observation rate (one reading of the paper's σ, see README)",
+    ),
     "rmse": (
         "m",
         "position RMSE of every UAV's fused estimate of every target, including the stale "
@@ -84,6 +89,7 @@ class Tally:
         names = (
             "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
             "delivered", "conflicts", "decision", "decided", "pairs", "best", "alive",
+            "in_view_sq",
         )  # fmt: skip
         self.sums = {name: np.zeros(self.batch) for name in names}
         self.failed = np.zeros(self.batch)
@@ -97,7 +103,9 @@ class Tally:
         alive = cycle.alive
         everyone = bool(alive.all())
         mean, cov = cycle.mean, cycle.cov
-        self.observed += cycle.observed.any(axis=1)
+        in_view = cycle.observed.any(axis=1)
+        self.observed += in_view
+        s["in_view_sq"] += np.square(in_view.mean(axis=1))
         err = mean[..., :2] - truth[:, None, :, :2]
         squared = err * err
         if not everyone:
@@ -179,6 +187,9 @@ class Tally:
         return {
             "observation_rate": per_target.mean(axis=1),
             "per_target": per_target,
+            "in_view_std": np.sqrt(
+                np.maximum(s["in_view_sq"] / self.steps - per_target.mean(axis=1) ** 2, 0.0)
+            ),
             "rmse": np.sqrt(s["squared_error"] / pairs),
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,

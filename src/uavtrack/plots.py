@@ -252,7 +252,74 @@ def reproduction_figures(summary: dict[str, Any], out: Path) -> list[Path]:
         "half field of view alpha [deg]",
         "Distributed method against the field of view (Fig. 9)",
     )
-    return [out / f"fig{k}.png" for k in range(5, 10)]
+    written = [out / f"fig{k}.png" for k in range(5, 10)]
+    if "sensitivity" in summary:
+        sensitivity_figure(summary["sensitivity"], out / "sensitivity.png")
+        written.append(out / "sensitivity.png")
+    return written
+
+
+def sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
+    """Tornado chart: the distributed − centralized and distributed − greedy differences
+    (paired, 95% CI) with each assumed parameter at its low and high value, bars drawn
+    from the default's difference; rows sorted by how far they move the first."""
+    pairs = (
+        ("distributed - centralized", sens["near_centralized"], "within 0.03 of centralized"),
+        ("distributed - greedy", sens["above_greedy"], "well above greedy (≥ 0.05)"),
+    )
+    rows = sorted(
+        sens["rows"],
+        key=lambda r: max(
+            abs(v[pairs[0][0]]["mean"] - sens["base"][pairs[0][0]]["mean"]) for v in r["values"]
+        ),
+    )
+    fig, axes = plt.subplots(1, 2, figsize=(12, 0.55 * len(rows) + 1.8), sharey=True)
+    y = np.arange(len(rows))
+    colors = ("#6baed6", "#fd8d3c")
+    for ax, (key, threshold, claim) in zip(axes, pairs, strict=True):
+        base = sens["base"][key]["mean"]
+        for k, row in enumerate(rows):
+            two = len(row["values"]) == 2
+            for j, entry in enumerate(row["values"]):
+                p = entry[key]
+                color = colors[j] if two else "#9467bd"
+                at = k + (0.17 - 0.34 * j if two else 0.0)  # low above, high below
+                ax.barh(at, p["mean"] - base, left=base, height=0.3, color=color, alpha=0.55)
+                ax.errorbar(
+                    p["mean"],
+                    at,
+                    xerr=[[p["mean"] - p["ci_low"]], [p["ci_high"] - p["mean"]]],
+                    fmt="o",
+                    color=color,
+                    ecolor="black",
+                    elinewidth=1,
+                    capsize=3,
+                    ms=4,
+                )
+                ax.annotate(
+                    level_text(entry["value"]),
+                    (p["ci_high"] if p["mean"] >= base else p["ci_low"], at),
+                    xytext=(4 if p["mean"] >= base else -4, 0),
+                    textcoords="offset points",
+                    ha="left" if p["mean"] >= base else "right",
+                    va="center",
+                    fontsize=7,
+                )
+        ax.axvline(base, color="black", lw=1, label=f"defaults ({base:+.3f})")
+        ax.axvline(threshold, color="#d62728", lw=1, ls="--", label=f"{claim}: {threshold:+g}")
+        ax.set_xlabel(f"{key.replace(' - ', ' − ')} (paired, 95% CI)")
+        ax.grid(axis="x", alpha=0.3)
+        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.09), ncol=2, fontsize=8)
+        low, high = ax.get_xlim()
+        ax.set_xlim(low - 0.1 * (high - low), high + 0.1 * (high - low))  # room for labels
+    axes[0].set_yticks(y, [f"{r['field']} ({level_text(r['default'])})" for r in rows])
+    axes[0].set_ylim(-0.6, len(rows) - 0.4)
+    fig.suptitle(
+        "Sensitivity of the conclusions: each assumed parameter at a low (blue) and a high "
+        "(orange) value or another reading (purple); default in brackets",
+        fontsize=10,
+    )
+    save(fig, path)
 
 
 def sweep_figure(summary: dict[str, Any], path: Path) -> None:

@@ -69,9 +69,7 @@ class Constants:
     def of(cls, scenario: Scenario) -> Constants:
         return cls(
             A=estimation.transition(scenario.dt),
-            Q=estimation.process_noise(
-                scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2
-            ),
+            Q=estimation.process_noise(scenario.dt, *scenario.acceleration_std()),
             actions=planning.action_set(np.radians(scenario.uav.bank_angle_deg)),
         )
 
@@ -101,7 +99,7 @@ class Context:
             budget=f.round_budget,
             extra_rounds=robust.extra_rounds,
             stale=robust.stale,
-            forward=_forward(scenario.dt, scenario.target.sigma_1, scenario.target.sigma_2),
+            forward=_forward(scenario.dt, *scenario.acceleration_std()),
             plan=lambda uavs, mean, top=None: _plan(uavs, mean, scenario, top),
             prune=scenario.planner.prune
             and f.loss == 0
@@ -590,6 +588,7 @@ class Result:
     scenario: Scenario
     observation_rate: float
     per_target: np.ndarray
+    in_view_std: float
     rmse: float
     rmse_best: float
     nees: float

@@ -163,6 +163,6 @@ def initial_conditions(
     prior = np.zeros((nt, 4))
     prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
     P0 = np.diag([est.initial_position_std**2] * 2 + [est.initial_velocity_std**2] * 2)
-    accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * [tgt.sigma_1, tgt.sigma_2]
+    accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * scenario.acceleration_std()
     trajectory = target_trajectories(targets, accel, scenario.dt, L)
     return uavs, trajectory, prior, P0

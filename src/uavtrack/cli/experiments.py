@@ -187,13 +187,25 @@ def reproduce(
     quick: Annotated[
         bool, typer.Option("--quick", help="small profile for smoke tests: 4 trials x 60 steps")
     ] = False,
+    sensitivity: Annotated[
+        bool,
+        typer.Option(
+            "--sensitivity",
+            help=(
+                "also move each assumed parameter to a low and a high value (all methods, "
+                "same trials) and report whether the paper's conclusions hold; in the same "
+                "folder, reusing what is done"
+            ),
+        ),
+    ] = False,
     seed: SeedOpt = 0,
     config: ConfigOpt = None,
     set_: SetOpt = None,
     team: TeamOpt = None,
     progress: ProgressOpt = None,
 ) -> None:
-    """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder."""
+    """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder,
+    with the uncalibrated first guess beside the defaults."""
     from .. import plots, report
     from ..experiments import Profile, reproduce_plan, summarize_reproduction
 
@@ -202,7 +214,7 @@ def reproduce(
     profile = sized(Profile.quick() if quick else Profile(), trials, steps)
     out = out or Path("results") / ("reproduce-quick" if quick else "reproduce")
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
-    plan = reproduce_plan(scenario, profile, seed)
+    plan = reproduce_plan(scenario, profile, seed, sensitivity)
     manifest = manifest_of("reproduce", seed, profile, scenario)
     with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
         info["seed"] = seed
