@@ -46,7 +46,7 @@ def test_conclusion_verdicts_follow_the_confidence_interval():
     rng = np.random.default_rng(0)
     noise = rng.normal(0, 0.01, 50)
     greedy = {"observation_rate": np.full(50, 0.5)}
-    cases = {-0.01: "yes", -0.06: "no", -0.03: "unclear"}
+    cases = {-0.01: "yes", -0.06: "no", -0.029: "yes, CI crosses", -0.031: "no, CI crosses"}
     for gap, verdict in cases.items():
         dist = {"observation_rate": 0.8 + noise}
         cent = {"observation_rate": 0.8 - gap + noise[::-1]}

@@ -273,7 +273,9 @@ def sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
             abs(v[pairs[0][0]]["mean"] - sens["base"][pairs[0][0]]["mean"]) for v in r["values"]
         ),
     )
-    fig, axes = plt.subplots(1, 2, figsize=(12, 0.55 * len(rows) + 1.8), sharey=True)
+    fig, axes = plt.subplots(
+        1, 2, figsize=(12, 0.55 * len(rows) + 1.8), sharey=True, layout="constrained"
+    )
     y = np.arange(len(rows))
     colors = ("#6baed6", "#fd8d3c")
     for ax, (key, threshold, claim) in zip(axes, pairs, strict=True):
