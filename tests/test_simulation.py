@@ -264,3 +264,23 @@ def test_in_view_std_is_the_spread_over_steps_of_the_fraction_in_view():
     assert result.observation_rate == pytest.approx(fraction.mean())
     assert result.in_view_std == pytest.approx(fraction.std())
     assert 0 < result.in_view_std <= 0.5
+
+
+def test_ospa_and_gospa_metrics_are_those_of_the_trace():
+    from uavtrack.metrics import gospa, ospa
+
+    scenario = uavtrack.Scenario(steps=80, evaluation={"ospa_cutoff": 6.0, "ospa_order": 2.0})
+    result = uavtrack.simulate(scenario, "greedy", seed=5)
+    t = result.trace
+    truth = t.targets[..., :2]  # (T, Nt, 2)
+    per_uav = [ospa(truth[k], t.mean[k, i, :, :2], 6.0, 2) for k in range(80) for i in range(5)]
+    best = np.argmax(1.0 / np.trace(t.cov, axis1=-2, axis2=-1), axis=1)  # (T, Nt)
+    best_mean = np.take_along_axis(t.mean[..., :2], best[:, None, :, None], axis=1)[:, 0]
+    g = [gospa(truth[k], best_mean[k], 6.0, 2) for k in range(80)]
+    assert result.ospa == pytest.approx(np.mean(per_uav), rel=1e-12)
+    assert result.ospa_best == pytest.approx(
+        np.mean([ospa(truth[k], best_mean[k], 6.0, 2) for k in range(80)]), rel=1e-12
+    )
+    assert result.gospa_best == pytest.approx(np.mean([x.distance for x in g]), rel=1e-12)
+    assert result.gospa_missed_best == pytest.approx(np.mean([x.missed / 18 for x in g]))
+    assert result.gospa_missed_best > 0  # greedy loses targets: some estimates drift off

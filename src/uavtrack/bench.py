@@ -132,6 +132,45 @@ def kalman_case(n_filters: int, repeats: int) -> dict[str, Any]:
     )
 
 
+def set_distance_cases(repeats: int) -> list[dict[str, Any]]:
+    """OSPA and GOSPA: one 1000 x 1000 pair of point sets, and a step's per-UAV scoring
+    of 25 trials of the default team (all n! matchings at once against one assignment
+    solve per set)."""
+    from . import metrics
+
+    rng = np.random.default_rng(0)
+    X, Y = rng.uniform(0, 200, (2, 1000, 2))
+    (t_big,) = timed(lambda: metrics.ospa_and_gospa(X, Y, 20.0, 1.0), repeats=repeats)
+    truth = rng.uniform(0, 200, (25, 1, 4, 2))
+    estimates = truth + rng.normal(0, 15, (25, 5, 4, 2))
+    small = metrics.SMALL_SETS
+
+    def by_solver():
+        metrics.SMALL_SETS = 0
+        try:
+            return metrics.ospa_and_gospa(truth, estimates, 20.0, 1.0)
+        finally:
+            metrics.SMALL_SETS = small
+
+    fast, slow = metrics.ospa_and_gospa(truth, estimates, 20.0, 1.0), by_solver()
+    if not np.allclose(fast[0], slow[0], rtol=1e-12, atol=1e-12):
+        raise AssertionError("the two ways of matching small sets disagree")
+    t_ours, t_ref = timed(
+        lambda: metrics.ospa_and_gospa(truth, estimates, 20.0, 1.0), by_solver, repeats=repeats
+    )
+    return [
+        case("OSPA and GOSPA, one 1000 x 1000 pair of sets", t_big, unit="pair"),
+        case(
+            "OSPA and GOSPA per UAV, 25 trials x 5 UAVs x 4 targets (a step)",
+            t_ours,
+            t_ref,
+            unit="step",
+            reference="scipy linear_sum_assignment per set",
+            equal_outputs=True,
+        ),
+    ]
+
+
 def plan_by_sequence(uavs, mean, sensor, bank_angle, horizon, dt, g=9.81):
     """Reference: a plain loop over the |A|^h sequences, each flown step by step with eq. (1)
     (vectorised over UAVs and targets)."""
@@ -386,6 +425,8 @@ def bench(quick: bool = False, progress: Callable[[str], None] | None = None) ->
                 "skipped": 'filterpy is not installed (pip install "uavtrack[bench]")',
             }
         )
+    say("OSPA and GOSPA")
+    cases.extend(set_distance_cases(repeats))
     say("planner")
     for size in ((5, 4), (20, 20)) if quick else ((5, 4), (20, 20), (100, 100)):
         cases.extend(planner_case(*size, repeats=repeats))

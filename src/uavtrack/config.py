@@ -188,6 +188,27 @@ class TargetModel(_Part):
     )
 
 
+class EvaluationModel(_Part):
+    """How the estimates are scored against the truth as point sets (not in the paper)."""
+
+    ospa_cutoff: Float = Field(
+        20.0,
+        gt=0,
+        le=100_000,
+        description=(
+            "cut-off c of OSPA and GOSPA [m], (0, 100000]; assumed: about half the "
+            "observation radius (37 m): an estimate farther off would not bring its UAV "
+            "over the target"
+        ),
+    )
+    ospa_order: Float = Field(
+        1.0,
+        ge=1,
+        le=10,
+        description="order p of OSPA and GOSPA [-], [1, 10]; assumed: 1, the mean error",
+    )
+
+
 class EstimationModel(_Part):
     """Initial belief shared by all UAVs (the paper does not say how filters start)."""
 
@@ -439,6 +460,9 @@ class Scenario(_Part):
     )
     planner: PlannerModel = Field(
         default_factory=PlannerModel, description="planning (Algorithm 1)"
+    )
+    evaluation: EvaluationModel = Field(
+        default_factory=EvaluationModel, description="scoring of the estimates (OSPA, GOSPA)"
     )
     faults: FaultModel = Field(
         default_factory=FaultModel, description="communication faults, failures, GPS error"

@@ -138,7 +138,10 @@ def run_job(job: Job) -> dict[str, Any]:
     return {name: np.asarray(values).tolist() for name, values in metrics.items()}
 
 
-UNDEFINED_ALLOWED = ("rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms")
+UNDEFINED_ALLOWED = (
+    "rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms",
+    "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
+)  # fmt: skip
 """Metrics that may be NaN: nothing to average (every UAV failed), or not measured."""
 
 

@@ -122,16 +122,26 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         "estimate, including the stale ones of UAVs cut off from the team. NEES is 4 for a "
         "consistent filter; targets turning at the walls raise it.",
         "",
-        "| method | RMSE best [m] | RMSE all [m] | NEES best | NEES all | rounds per UAV | "
-        "messages per step |",
-        "|---|---|---|---|---|---|---|",
+        "| method | RMSE best [m] | RMSE all [m] | NEES best | NEES all | OSPA best [m] | "
+        "OSPA all [m] | GOSPA best [m] | rounds per UAV | messages per step |",
+        "|---|---|---|---|---|---|---|---|---|---|",
     ]
     for m, r in c.items():
         out.append(
             f"| {m} | {r['rmse_best']['mean']:.2f} | {r['rmse']['mean']:.2f} | "
             f"{r['nees_best']['mean']:.2f} | {r['nees']['mean']:.2f} | "
+            f"{_num(r['ospa_best']['mean'])} | {_num(r['ospa']['mean'])} | "
+            f"{_num(r['gospa_best']['mean'])} | "
             f"{r['rounds']['mean']:.2f} | {r['messages']['mean']:.2f} |"
         )
+    cut, order = scenario.evaluation.ospa_cutoff, scenario.evaluation.ospa_order
+    out += [
+        "",
+        f"OSPA and GOSPA (alpha = 2) compare the set of true targets with a set of estimates "
+        f"(the team's best, or each UAV's fused ones), cut-off {cut:g} m, order {order:g}; "
+        "every UAV holds one estimate per target, so they measure how far the estimates "
+        "are from the truth, capped at the cut-off, under the best matching.",
+    ]
     out += [
         "",
         "![Fig. 5](fig5.png)",
@@ -194,6 +204,10 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
     ]
     out += parameter_table(scenario)
     return "\n".join(out) + "\n"
+
+
+def _num(value: float | None, digits: int = 2) -> str:
+    return "n/a" if _missing(value) else f"{value:.{digits}f}"
 
 
 def _spreads(c: dict[str, Any], paper: dict[str, Any]) -> list[str]:

@@ -448,7 +448,14 @@ def run(
     ctx = Context.of(scenario, method, seeds)
     state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
-    tally = Tally(B, Nu, Nt, timed=B == 1)
+    tally = Tally(
+        B,
+        Nu,
+        Nt,
+        timed=B == 1,
+        cutoff=scenario.evaluation.ospa_cutoff,
+        order=scenario.evaluation.ospa_order,
+    )
     rec = Recorder(T, timed=B == 1) if trace else None
     noises = sensor_noise(sensor_rngs, Nu, Nt, T)
     for k, noise in enumerate(noises):
@@ -593,6 +600,11 @@ class Result:
     rmse_best: float
     nees: float
     nees_best: float
+    ospa: float
+    ospa_best: float
+    gospa: float
+    gospa_best: float
+    gospa_missed_best: float
     rounds: float
     messages: float
     delivered: float

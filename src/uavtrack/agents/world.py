@@ -139,7 +139,9 @@ class WorldProgram:
         uavs, alive = state.uavs, state.alive
         self.wait_ready(state.mean[0, 0], state.cov[0, 0, 0])
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
-        tally = Tally(1, Nu, Nt, timed=True)
+        tally = Tally(
+            1, Nu, Nt, timed=True, cutoff=s.evaluation.ospa_cutoff, order=s.evaluation.ospa_order
+        )
         recorder = simulation.Recorder(T, timed=True) if trace else None
         previous = np.full((1, Nu), -1, dtype=np.int64)
         started = time.monotonic()

@@ -163,6 +163,10 @@ RUN_ROWS = (
     ("rmse", "position RMSE, every UAV's estimate [m]", "{:.2f}"),
     ("nees_best", "NEES, team's best estimate (4 if consistent)", "{:.2f}"),
     ("nees", "NEES, every UAV's estimate (4 if consistent)", "{:.2f}"),
+    ("ospa_best", "OSPA, team's best estimates [m]", "{:.2f}"),
+    ("ospa", "OSPA, every UAV's estimates [m]", "{:.2f}"),
+    ("gospa_best", "GOSPA, team's best estimates [m]", "{:.2f}"),
+    ("gospa_missed_best", "GOSPA missed targets per step, best estimates", "{:.3f}"),
     ("rounds", "consensus rounds per UAV and step", "{:.2f}"),
     ("messages", "messages per step", "{:.2f}"),
     ("decision_time_ms", "decision time per UAV and cycle [ms]", "{:.3f}"),
@@ -182,7 +186,10 @@ def number(fmt: str, value) -> str:
 CAPTION = (
     "Team's best estimate: per target, the estimate of the UAV most confident in it. "
     "Every UAV's estimate includes the stale ones of UAVs cut off from the team. NEES above "
-    "4 comes mostly from targets turning at the walls, which the filter cannot predict."
+    "4 comes mostly from targets turning at the walls, which the filter cannot predict. "
+    "OSPA and GOSPA compare the true targets with a set of estimates as point sets "
+    "(cut-off evaluation.ospa_cutoff, order evaluation.ospa_order; per UAV up to "
+    "{per_uav} targets)."
 )
 
 
@@ -239,9 +246,11 @@ def show(
     from rich.markup import escape
     from rich.table import Table
 
+    from ..metrics import PER_UAV_SETS
+
     table = Table(
         title=f"{title}: {summary['method']}, seed {seed}, {scenario.steps} steps",
-        caption=CAPTION,
+        caption=CAPTION.format(per_uav=PER_UAV_SETS),
         caption_justify="left",
         show_header=False,
     )
@@ -264,6 +273,8 @@ COMPARE_ROWS = (
     ("rmse_best", "RMSE, best estimate [m]", "{:.2f}"),
     ("rmse", "RMSE, every UAV's [m]", "{:.2f}"),
     ("nees_best", "NEES, best estimate", "{:.2f}"),
+    ("ospa_best", "OSPA, best estimates [m]", "{:.2f}"),
+    ("gospa_best", "GOSPA, best estimates [m]", "{:.2f}"),
     ("rounds", "rounds per UAV and step", "{:.2f}"),
     ("messages", "messages per step", "{:.1f}"),
     ("decision_time_ms", "decision time [ms]", "{:.3f}"),
