@@ -413,25 +413,8 @@ def animation_frames(steps: int, every: int) -> list[int]:
     return frames if frames[-1] == steps - 1 else frames + [steps - 1]
 
 
-def animate(
-    trace,
-    scenario,
-    path: Path,
-    every: int = 2,
-    fps: int = 10,
-    title: str = "",
-    progress: Callable[[int], None] | None = None,
-) -> int:
-    """Animate a trace like the paper's Fig. 4; returns the number of frames.
-
-    UAVs (numbered from 0) are arrows along their heading, each in its own colour with
-    its observation disk; radio links are dashed grey lines; targets (numbered from 0)
-    are black dots; for each target the team's most confident estimate is drawn with its
-    2-sigma ellipse; a line in the UAV's colour joins it to its estimate of its assigned
-    target. Frames are 1000 x 800 pixels, the legend on the right. `progress`, if given,
-    is called once per frame.
-    """
-    from matplotlib.animation import FuncAnimation, PillowWriter
+def _scene(trace, scenario, title: str):
+    """The figure of Fig. 4 for a trace and a function that draws step k into it."""
     from matplotlib.collections import LineCollection
     from matplotlib.lines import Line2D
 
@@ -439,7 +422,6 @@ def animate(
     from .sensing import observation_radius
 
     T, nu, nt = trace.observed.shape
-    frames = animation_frames(T, every)
     outline = [patheffects.withStroke(linewidth=2.5, foreground="white")]
     radius = observation_radius(np.array(scenario.altitudes()), scenario.sensor)
     margin = radius.max() + 20
@@ -543,6 +525,43 @@ def animate(
         seen = trace.observed[: k + 1].any(axis=1).mean()
         heading.set_text(f"{title}, step {k}, observation rate so far {seen:.2f}")
 
+    return fig, draw
+
+
+def frame(trace, scenario, k: int, title: str = "") -> np.ndarray:
+    """Step k of a trace drawn as `animate` draws it: an RGB array (800, 1000, 3)."""
+    fig, draw = _scene(trace, scenario, title)
+    try:
+        draw(k)
+        fig.set_dpi(100)
+        fig.canvas.draw()
+        return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    finally:
+        plt.close(fig)
+
+
+def animate(
+    trace,
+    scenario,
+    path: Path,
+    every: int = 2,
+    fps: int = 10,
+    title: str = "",
+    progress: Callable[[int], None] | None = None,
+) -> int:
+    """Animate a trace like the paper's Fig. 4; returns the number of frames.
+
+    UAVs (numbered from 0) are arrows along their heading, each in its own colour with
+    its observation disk; radio links are dashed grey lines; targets (numbered from 0)
+    are black dots; for each target the team's most confident estimate is drawn with its
+    2-sigma ellipse; a line in the UAV's colour joins it to its estimate of its assigned
+    target. Frames are 1000 x 800 pixels, the legend on the right. `progress`, if given,
+    is called once per frame.
+    """
+    from matplotlib.animation import FuncAnimation, PillowWriter
+
+    fig, draw = _scene(trace, scenario, title)
+    frames = animation_frames(trace.observed.shape[0], every)
     anim = FuncAnimation(fig, draw, frames=frames)
     callback = (lambda done, total: progress(1)) if progress is not None else None
     try:

@@ -19,6 +19,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import cache
 from numbers import Integral
+from typing import Any
 
 import numpy as np
 
@@ -238,20 +239,32 @@ Trace = make_dataclass(
 )
 
 
-def step(
-    state: State,
-    targets: np.ndarray,
-    noise: np.ndarray,
-    ctx: Context,
-    actions: np.ndarray | None = None,
-) -> tuple[State, Cycle]:
-    """One decision cycle at step k = state.k for every trial.
+@dataclass(frozen=True)
+class Pending:
+    """A cycle up to its decision: what every UAV knows after sensing, filtering and
+    fusion, its bids, the method's assignment and the action it would fly. `finish`
+    flies the method's actions or others (an environment's agents)."""
 
-    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals;
-    actions: (B, Nu) indices into the action set to fly instead of the method's choice
-    (an environment's agents). Returns the state at k+1 and the cycle's record.
+    k: int
+    uavs: np.ndarray
+    believed: np.ndarray
+    alive: np.ndarray
+    observed: np.ndarray
+    radio: Radio
+    fused: Any
+    bids: np.ndarray
+    assigned: Any
+    own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
+    plan_seconds: float
+
+
+def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -> Pending:
+    """The first part of the cycle at step k = state.k for every trial: faults, sensing,
+    local filters, fusion, planning and assignment.
+
+    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals.
     """
-    scenario, method, const, faults = ctx.scenario, ctx.method, ctx.const, ctx.faults
+    scenario, method, faults = ctx.scenario, ctx.method, ctx.faults
     k, uavs = state.k, state.uavs
     alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
     believed = world.believed(uavs, faults.position_error(k))
@@ -276,15 +289,34 @@ def step(
     bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
     plan_seconds = time.perf_counter() - start
     assigned = method.assign(inputs, fused, bids)
+    chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
+    own = np.where(alive, chosen, STRAIGHT)
+    return Pending(
+        k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds
+    )
+
+
+def finish(
+    state: State, pending: Pending, ctx: Context, actions: np.ndarray | None = None
+) -> tuple[State, Cycle]:
+    """The rest of the cycle: fly the method's actions, or `actions` (B, Nu) indices into
+    the action set instead (a failed UAV does not move), record the cycle and predict
+    the estimates to k + 1. Returns the state at k + 1 and the cycle's record."""
+    scenario, method, const = ctx.scenario, ctx.method, ctx.const
+    uavs, alive, fused, assigned, bids = (
+        pending.uavs,
+        pending.alive,
+        pending.fused,
+        pending.assigned,
+        pending.bids,
+    )
     target = assigned.target
-    if actions is None:
-        chosen = np.take_along_axis(best, np.maximum(target, 0)[..., None], axis=-1)[..., 0]
-        actions = np.where(alive, chosen, STRAIGHT)
+    actions = pending.own if actions is None else np.where(alive, actions, STRAIGHT)
     new_uavs = world.fly(uavs, const.actions[actions], scenario.dt, G)
     if not alive.all():
         new_uavs = np.where(alive[..., None], new_uavs, uavs)  # a failed UAV is down
     B, Nu = alive.shape
-    share = plan_seconds / (B if method.central else B * Nu)
+    share = pending.plan_seconds / (B if method.central else B * Nu)
     recorded = (fused.mean, fused.cov, bids)
     if not alive.all():  # a failed UAV holds no estimate and makes no bid: NaN
         recorded = tuple(
@@ -292,7 +324,7 @@ def step(
         )
     cycle = Cycle(
         uavs=uavs,
-        observed=observed,
+        observed=pending.observed,
         mean=recorded[0],
         cov=recorded[1],
         bids=recorded[2],
@@ -307,16 +339,28 @@ def step(
     )
     mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
     new = State(
-        k + 1,
+        pending.k + 1,
         new_uavs,
         mean,
         cov,
         alive,
         np.where(target >= 0, target, state.target),
-        radio.close(),
+        pending.radio.close(),
         assigned.held,
     )
     return new, cycle
+
+
+def step(
+    state: State,
+    targets: np.ndarray,
+    noise: np.ndarray,
+    ctx: Context,
+    actions: np.ndarray | None = None,
+) -> tuple[State, Cycle]:
+    """One decision cycle at step k = state.k for every trial: `decide`, then `finish`
+    with the method's actions or `actions` (B, Nu) indices into the action set."""
+    return finish(state, decide(state, targets, noise, ctx), ctx, actions)
 
 
 def graph(uavs: np.ndarray, alive: np.ndarray, scenario: Scenario) -> np.ndarray:
@@ -490,8 +534,11 @@ class Recorder:
             self.arrays["decision_time_ms"][:, k] = np.nan
 
     def traces(self, trajectory: np.ndarray) -> list:
+        """One Trace per trial, over the steps of `trajectory` (B, T', Nt, 4), T' at
+        most the steps recorded (an episode cut short)."""
+        n = trajectory.shape[1]
         return [
-            Trace(trajectory[b], **{name: a[b] for name, a in self.arrays.items()})
+            Trace(trajectory[b], **{name: a[b, :n] for name, a in self.arrays.items()})
             for b in range(trajectory.shape[0])
         ]
 
