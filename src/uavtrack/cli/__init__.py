@@ -205,6 +205,19 @@ def run(
         Path | None,
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
+    rerun: Annotated[
+        str | None,
+        typer.Option(
+            "--rerun",
+            is_flag=False,
+            flag_value="",
+            metavar="[FILE.rrd]",
+            help=(
+                "log the run to Rerun: save it to FILE.rrd, or with no FILE open it in the "
+                'viewer and wait until it is closed (pip install "uavtrack[viz]")'
+            ),
+        ),
+    ] = None,
 ) -> None:
     """Simulate one trial and print its metrics."""
     from ..simulation import simulate
@@ -212,15 +225,31 @@ def run(
     scenario = load_scenario(config, set_, team)
     if trace is not None:
         check_output(trace, "--trace")
+    viewer = None
+    if rerun is not None:
+        if rerun and Path(rerun).suffix != ".rrd":
+            raise UsageError(f"--rerun: {rerun} should end in .rrd")
+        if rerun:
+            check_output(rerun, "--rerun")
+        try:
+            from .. import viewer
+        except ImportError as exc:
+            raise UsageError(f"--rerun: {exc}") from None
     with steps_bar(scenario) as advance:
         result = simulate(
             scenario,
             method.value,
             seed=seed,
-            trace=trace is not None,
+            trace=trace is not None or viewer is not None,
             progress=lambda _: advance(1),
         )
+    if viewer is not None and rerun:
+        viewer.save(result.trace, scenario, Path(rerun).expanduser(), f"{method.value}-{seed}")
     show(result, scenario, seed, as_json, trace)
+    if viewer is not None and rerun:
+        typer.echo(f"Rerun recording written to {rerun}", err=as_json)
+    elif viewer is not None:
+        viewer.show(result.trace, scenario, f"{method.value}-{seed}")
 
 
 def show(
@@ -397,7 +426,7 @@ def console(width: int = 120):
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit code (see the module docstring)."""
-    argv = sys.argv[1:] if argv is None else list(argv)
+    argv = _optional_values(sys.argv[1:] if argv is None else list(argv))
     _terminate_as_interrupt()
     try:
         # without standalone mode typer returns exit codes (typer.Exit, Ctrl-C -> 130)
@@ -423,6 +452,22 @@ def main(argv: list[str] | None = None) -> int:
         return fail("out of memory; make the scenario smaller (see uavtrack params)", code=1)
     except OSError as exc:
         return fail(os_error(exc), code=1)
+
+
+OPTIONAL_VALUES = ("--rerun",)
+"""Options whose value may be left out (``--rerun`` alone opens the viewer)."""
+
+
+def _optional_values(argv: list[str]) -> list[str]:
+    """``--rerun`` followed by another option or nothing becomes ``--rerun=``: the parser
+    would otherwise take the next option for its value."""
+    out = list(argv)
+    for k, token in enumerate(out):
+        if token == "--":
+            break
+        if token in OPTIONAL_VALUES and (k + 1 == len(out) or out[k + 1].startswith("-")):
+            out[k] = f"{token}="
+    return out
 
 
 NO_PARTIAL = "no partial file was left"

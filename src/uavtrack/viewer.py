@@ -1,0 +1,265 @@
+"""A run in Rerun's interactive viewer (``uavtrack run --rerun [FILE.rrd]``).
+
+The recording holds, on the ``step`` timeline: the field, the UAVs in 3-D at their
+altitudes with their headings and observation disks, the targets and their true paths,
+each UAV's estimate of the target it tracks with its 2-sigma covariance ellipse, the
+radio links, the assignments (a line from a UAV to its estimate of its target), and time
+series (observation rate so far, consensus rounds D_i, messages per step).
+
+Everything is logged in columns, one `send_columns` call per kind of thing over all the
+steps, and one entity per kind rather than one per UAV: the viewer stays usable with
+thousands of UAVs. Install with ``pip install "uavtrack[viz]"``.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+try:
+    import rerun as rr
+except ImportError as exc:  # an optional extra
+    raise ImportError(
+        f'uavtrack.viewer needs rerun-sdk: pip install "uavtrack[viz]" ({exc})'
+    ) from None
+
+from .errors import RunError
+from .files import replacing
+from .network import in_range
+from .sensing import observation_radius
+
+ENTITIES = (
+    "world/field",
+    "world/targets/paths",
+    "world/targets",
+    "world/uavs",
+    "world/uavs/headings",
+    "world/uavs/disks",
+    "world/estimates",
+    "world/estimates/ellipses",
+    "world/links",
+    "world/assignments",
+    "metrics/observation_rate",
+    "metrics/rounds",
+    "metrics/messages",
+)
+"""Every entity a recording holds: one per kind, whatever the team's size."""
+
+THIN = 0.05  # [m] the vertical half-size of flat ellipsoids (disks, ellipses)
+
+
+def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
+    """Write the recording of a run's trace to `path` (.rrd), atomically."""
+    with replacing(Path(path)) as tmp:
+        rec = rr.RecordingStream("uavtrack", recording_id=name)
+        rec.save(tmp)
+        log(rec, trace, scenario)
+        rec.flush()
+        rec.disconnect()
+
+
+def show(trace, scenario, name: str = "uavtrack") -> int:
+    """Open the recording in the Rerun viewer, a child process, and wait until it is
+    closed; the viewer is stopped on Ctrl-C or any error. Returns its exit code."""
+    with tempfile.TemporaryDirectory(prefix="uavtrack-rerun-") as folder:
+        path = Path(folder) / f"{name}.rrd"
+        save(trace, scenario, path, name)
+        log_file = Path(folder) / "viewer.log"
+        command = [sys.executable, "-m", "rerun", "--bind", "127.0.0.1", "--port", "auto"]
+        with open(log_file, "w") as out:
+            try:
+                viewer = subprocess.Popen([*command, str(path)], stdout=out, stderr=out)
+            except OSError as exc:
+                raise RunError(f"cannot start the Rerun viewer: {exc}") from None
+            try:
+                code = viewer.wait()
+            finally:  # Ctrl-C or an error here: the viewer goes too
+                if viewer.poll() is None:
+                    viewer.terminate()
+                    try:
+                        viewer.wait(timeout=5)
+                    except subprocess.TimeoutExpired:
+                        viewer.kill()
+                        viewer.wait()
+        if code != 0:
+            lines = [x for x in log_file.read_text(errors="replace").splitlines() if x.strip()]
+            why = lines[-1].strip() if lines else f"exit code {code}"
+            hint = (
+                ""
+                if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
+                else (" (no display)")
+            )
+            raise RunError(
+                f"the Rerun viewer stopped with exit code {code}{hint}: {why}; give --rerun "
+                "FILE.rrd to save the recording and open it with `rerun FILE.rrd`"
+            )
+        return code
+
+
+def log(rec: rr.RecordingStream, trace, scenario) -> None:
+    """Log every entity of `ENTITIES` for a trace into the recording stream `rec`."""
+    T, nu, nt = trace.observed.shape
+    steps = rr.TimeColumn("step", sequence=np.arange(T))
+    alive = trace.alive
+    uavs = trace.uavs  # (T, Nu, 5)
+    colors = _colors(nu)
+    L = scenario.field_size
+    rec.log(
+        "world/field",
+        rr.LineStrips3D([[[0, 0, 0], [L, 0, 0], [L, L, 0], [0, L, 0], [0, 0, 0]]], colors=128),
+        static=True,
+    )
+    ground = np.concatenate([trace.targets[..., :2], np.zeros((T, nt, 1))], axis=-1)
+    rec.log(
+        "world/targets/paths",
+        rr.LineStrips3D(np.swapaxes(ground, 0, 1), colors=[90, 90, 90], radii=0.2),
+        static=True,
+    )
+    everyone = np.ones((T, nt), dtype=bool)
+    _send(
+        rec,
+        "world/targets",
+        steps,
+        everyone,
+        rr.Points3D,
+        positions=ground,
+        labels=np.broadcast_to(np.array([f"T{j}" for j in range(nt)]), (T, nt)),
+        colors=np.broadcast_to(np.array([20, 20, 20]), (T, nt, 3)),
+        radii=np.full((T, nt), 1.5),
+    )
+    where = uavs[..., :3]
+    color = np.broadcast_to(colors, (T, nu, 3))
+    _send(
+        rec,
+        "world/uavs",
+        steps,
+        alive,
+        rr.Points3D,
+        positions=where,
+        labels=np.broadcast_to(np.array([f"U{i}" for i in range(nu)]), (T, nu)),
+        colors=color,
+        radii=np.full((T, nu), 2.0),
+    )
+    heading = uavs[..., 4]
+    arrows = 15 * np.stack([np.cos(heading), np.sin(heading), np.zeros_like(heading)], axis=-1)
+    _send(
+        rec,
+        "world/uavs/headings",
+        steps,
+        alive,
+        rr.Arrows3D,
+        origins=where,
+        vectors=arrows,
+        colors=color,
+    )
+    radius = observation_radius(np.asarray(scenario.altitudes()), scenario.sensor)
+    disks = np.broadcast_to(np.stack([radius, radius, np.full(nu, THIN)], axis=-1), (T, nu, 3))
+    _send(
+        rec,
+        "world/uavs/disks",
+        steps,
+        alive,
+        rr.Ellipsoids3D,
+        centers=np.concatenate([uavs[..., :2], np.zeros((T, nu, 1))], axis=-1),
+        half_sizes=disks,
+        colors=color,
+    )
+    # each UAV's estimate of the target it tracks, with its 2-sigma ellipse
+    tracking = alive & (trace.assignment >= 0)
+    j = np.maximum(trace.assignment, 0)
+    t_idx, u_idx = np.meshgrid(np.arange(T), np.arange(nu), indexing="ij")
+    mean = np.nan_to_num(trace.mean[t_idx, u_idx, j, :2])  # (T, Nu, 2)
+    cov = np.nan_to_num(trace.cov[t_idx, u_idx, j, :2, :2])
+    at = np.concatenate([mean, np.zeros((T, nu, 1))], axis=-1)
+    _send(rec, "world/estimates", steps, tracking, rr.Points3D, positions=at, colors=color)
+    half, quaternion = _ellipses(cov)
+    _send(
+        rec,
+        "world/estimates/ellipses",
+        steps,
+        tracking,
+        rr.Ellipsoids3D,
+        centers=at,
+        half_sizes=half,
+        quaternions=quaternion,
+        colors=color,
+    )
+    _send(
+        rec,
+        "world/assignments",
+        steps,
+        tracking,
+        rr.LineStrips3D,
+        strips=np.stack([where, at], axis=-2),
+        colors=color,
+    )
+    ends, counts = _links(uavs, alive, scenario.comm_range)
+    rec.send_columns(
+        "world/links",
+        indexes=[steps],
+        columns=rr.LineStrips3D.columns(strips=ends, colors=np.full((len(ends), 3), 110)).partition(
+            counts
+        ),
+    )
+    in_view = trace.observed.any(axis=1).mean(axis=1)
+    series = {
+        "metrics/observation_rate": np.cumsum(in_view) / np.arange(1, T + 1),
+        "metrics/rounds": np.nanmean(np.where(alive, trace.rounds, np.nan), axis=1),
+        "metrics/messages": trace.messages.astype(float),
+    }
+    for entity, values in series.items():
+        rec.send_columns(
+            entity, indexes=[steps], columns=rr.Scalars.columns(scalars=np.nan_to_num(values))
+        )
+
+
+def _send(rec, entity: str, steps, mask: np.ndarray, archetype, **fields) -> None:
+    """Per-step batches of the instances where `mask` (T, n) holds, as one column call."""
+    counts = mask.sum(axis=1)
+    picked = {name: np.asarray(value)[mask] for name, value in fields.items()}
+    rec.send_columns(
+        entity,
+        indexes=[steps],
+        columns=archetype.columns(**picked).partition(counts),
+    )
+
+
+def _colors(n: int) -> np.ndarray:
+    """A colour per UAV (matplotlib's tab10, repeated), as RGB bytes."""
+    from matplotlib import colormaps
+
+    return (255 * np.asarray(colormaps["tab10"](np.arange(n) % 10))[:, :3]).astype(np.uint8)
+
+
+def _ellipses(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Half sizes (2 sigma along each principal axis, flat) and rotations about z (as
+    x, y, z, w quaternions) of the ellipses of 2 x 2 position covariances (..., 2, 2)."""
+    values, vectors = np.linalg.eigh(cov)
+    half = 2 * np.sqrt(np.maximum(values, 0.0))
+    angle = np.arctan2(vectors[..., 1, 0], vectors[..., 0, 0])  # the first axis
+    sizes = np.stack([half[..., 0], half[..., 1], np.full(half.shape[:-1], THIN)], axis=-1)
+    zero = np.zeros_like(angle)
+    quaternion = np.stack([zero, zero, np.sin(angle / 2), np.cos(angle / 2)], axis=-1)
+    return sizes, quaternion
+
+
+def _links(uavs: np.ndarray, alive: np.ndarray, comm_range: float):
+    """Every step's radio links as two-point strips (all steps together) and their
+    number per step; pairs from a k-d tree, kept by the radio model's own test."""
+    from scipy.spatial import cKDTree
+
+    ends, counts = [], []
+    for k in range(uavs.shape[0]):
+        living = np.flatnonzero(alive[k])
+        pos = uavs[k, living, :3]
+        pairs = cKDTree(pos).query_pairs(comm_range * (1 + 1e-9) + 1e-9, output_type="ndarray")
+        keep = in_range(pos[pairs[:, 0]] - pos[pairs[:, 1]], comm_range)
+        pairs = pairs[keep]
+        ends.append(np.stack([pos[pairs[:, 0]], pos[pairs[:, 1]]], axis=1))
+        counts.append(len(pairs))
+    return np.concatenate(ends) if ends else np.zeros((0, 2, 3)), np.asarray(counts)

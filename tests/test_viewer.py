@@ -1,0 +1,97 @@
+"""Rerun recordings: what a saved run holds, read back from the file."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import uavtrack
+
+pytest.importorskip("rerun")
+from rerun.chunk import RrdReader  # noqa: E402
+
+from uavtrack import viewer  # noqa: E402
+
+
+def contents(path):
+    """entity path -> {step: instances} of the positions-like column, and the statics."""
+    out, static = {}, set()
+    for chunk in RrdReader(path).store().stream():
+        entity = chunk.entity_path.lstrip("/")
+        if chunk.is_static:
+            static.add(entity)
+            continue
+        batch = chunk.to_record_batch()
+        data = [n for n in batch.schema.names if n not in ("rerun.controls.RowId", "step")]
+        main = next(
+            (n for n in data if n.split(":")[-1] in ("positions", "centers", "origins", "strips")),
+            data[0],
+        )
+        rows = batch.column(main).to_pylist()
+        steps = out.setdefault(entity, {})
+        for step, row in zip(batch.column("step").to_pylist(), rows, strict=True):
+            steps[step] = steps.get(step, 0) + (len(row) if isinstance(row, list) else 1)
+    return out, static
+
+
+def test_a_saved_recording_holds_every_entity_for_every_step(tmp_path):
+    scenario = uavtrack.Scenario(steps=25, faults={"failures": [[3, 10]]})
+    result = uavtrack.simulate(scenario, seed=2)
+    path = tmp_path / "run.rrd"
+    viewer.save(result.trace, scenario, path)
+    dynamic, static = contents(path)
+    assert set(dynamic) | (static - {"__properties"}) == set(viewer.ENTITIES)
+    assert static - {"__properties"} == {"world/field", "world/targets/paths"}
+    for entity, steps in dynamic.items():
+        assert sorted(steps) == list(range(25)), entity
+    assert [dynamic["world/targets"][k] for k in range(25)] == [4] * 25
+    # UAV 3 fails at step 10: it leaves the picture
+    assert [dynamic["world/uavs"][k] for k in range(25)] == [5] * 10 + [4] * 15
+    tracking = (result.trace.assignment >= 0) & result.trace.alive
+    assert [dynamic["world/estimates/ellipses"][k] for k in range(25)] == list(tracking.sum(1))
+    links = np.triu(uavtrack.network.adjacency(result.trace.uavs, scenario.comm_range))
+    links &= result.trace.alive[:, :, None] & result.trace.alive[:, None, :]
+    assert [dynamic["world/links"].get(k, 0) for k in range(25)] == list(links.sum(axis=(1, 2)))
+
+
+def test_one_entity_per_kind_whatever_the_team(tmp_path):
+    kinds = []
+    for team in ((3, 2), (40, 30)):
+        scenario = uavtrack.Scenario(steps=4).scaled(*team)
+        result = uavtrack.simulate(scenario, seed=0)
+        viewer.save(result.trace, scenario, tmp_path / "r.rrd")
+        dynamic, static = contents(tmp_path / "r.rrd")
+        kinds.append(set(dynamic) | static)
+        assert dynamic["world/uavs"][3] == team[0]
+    assert kinds[0] == kinds[1]
+
+
+def cli(*args, display=False):
+    env = {**os.environ, "DISPLAY": "", "WAYLAND_DISPLAY": ""} if not display else None
+    return subprocess.run(
+        [sys.executable, "-m", "uavtrack.cli", *args],
+        capture_output=True,
+        text=True,
+        env=env,
+        timeout=120,
+    )
+
+
+def test_run_writes_a_recording_and_refuses_bad_names(tmp_path):
+    out = cli("run", "--set", "steps=15", "--rerun", str(tmp_path / "a.rrd"), "--json")
+    assert out.returncode == 0 and "Rerun recording written" in out.stderr
+    assert sorted(contents(tmp_path / "a.rrd")[0]["world/uavs"]) == list(range(15))
+    bad = cli("run", "--rerun", str(tmp_path / "a.txt"))
+    assert bad.returncode == 2 and bad.stderr.strip().endswith("should end in .rrd")
+    missing = cli("run", "--rerun", str(tmp_path / "no" / "a.rrd"))
+    assert missing.returncode == 2 and "does not exist" in missing.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.rrd"]
+
+
+def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
+    out = cli("run", "--set", "steps=5", "--rerun", "--json")  # --json is not the file
+    assert out.returncode == 1
+    assert out.stdout.startswith("{") and out.stderr.count("\n") == 1
+    assert "Rerun viewer stopped" in out.stderr and "--rerun FILE.rrd" in out.stderr
