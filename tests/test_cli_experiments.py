@@ -92,6 +92,23 @@ def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
     code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
     assert code == 0 and "0 jobs run, 24 reused" in out
     assert "## Sensitivity" not in (quick / "report.md").read_text()
+    assert not (quick / "sensitivity.png").exists()  # no chart left that the report lacks
+
+
+def test_a_base_value_equal_to_a_planned_one_is_reported(tmp_path, capsys):
+    # dt = 1.0 is the first guess's, field_size = 300 a sensitivity value: their runs are
+    # the default's, and the report says so rather than failing
+    out = tmp_path / "same"
+    code, _, err = run_cli(
+        capsys, "reproduce", "--quick", "--trials", "2", "--steps", "20", "--sensitivity",
+        "--set", "dt=1.0", "--set", "field_size=300", "--out", str(out), "--no-progress",
+    )  # fmt: skip
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    rows = {r["field"]: r for r in summary["sensitivity"]["rows"]}
+    assert summary["first_guess"]["rates"]["greedy"] != summary["compare"]["greedy"]["mean"]
+    high = rows["field_size"]["values"][1]
+    assert high["value"] == 300 and high["rates"] == summary["sensitivity"]["base"]["rates"]
 
 
 def test_reproduce_refuses_a_different_scenario(quick, capsys):

@@ -159,13 +159,19 @@ class TargetModel(_Part):
         0.16,
         ge=0,
         le=10,
-        description="acceleration-noise std along x [m/s^2], [0, 10]; paper eq. (15), Sec. 7",
+        description=(
+            "acceleration-noise std along x [m/s^2], [0, 10] (a velocity increment per "
+            "step [m/s] with target.noise_form = 'printed'); paper eq. (15), Sec. 7"
+        ),
     )
     sigma_2: Float = Field(
         0.16,
         ge=0,
         le=10,
-        description="acceleration-noise std along y [m/s^2], [0, 10]; paper eq. (15), Sec. 7",
+        description=(
+            "acceleration-noise std along y [m/s^2], [0, 10] (a velocity increment per "
+            "step [m/s] with target.noise_form = 'printed'); paper eq. (15), Sec. 7"
+        ),
     )
     initial_velocity_std: Float = Field(
         1.0,

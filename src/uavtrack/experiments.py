@@ -186,11 +186,17 @@ def trial_jobs(
 ) -> list[Job]:
     """Jobs covering trials 0 .. trials-1 of base+overrides with one method."""
     scenario = base.with_overrides(overrides, origin=origin)
-    label = label_of(difference(base, scenario))  # equal scenarios, equal labels
+    label = label_of(difference(base, scenario))  # equal scenarios, equal labels (label_for)
     return [
         Job("trials", label, method, scenario, first, min(chunk, trials - first), seed)
         for first in range(0, trials, chunk)
     ]
+
+
+def label_for(base: Scenario, overrides: dict[str, Any]) -> str:
+    """The label of base+overrides as `trial_jobs` gives it: only the fields that differ
+    from `base` (an override equal to the base's value leaves no trace, "default")."""
+    return label_of(difference(base, base.with_overrides(overrides)))
 
 
 def sweep_values(base: Scenario, field: str, values: Sequence[Any]) -> list[Any]:
@@ -417,9 +423,12 @@ def summarize_reproduction(
         "timing": timing,
         "paper": {m: {"mean": v[0], "std": v[1]} for m, v in PAPER_FIG5.items()},
     }
+    stepped = base.with_overrides({"steps": profile.steps})  # the plan's base
     out["first_guess"] = {
         "overrides": FIRST_GUESS,
-        **conclusions(data["first_guess"][(label_of(FIRST_GUESS), m)] for m in METHOD_NAMES),
+        **conclusions(
+            data["first_guess"][(label_for(stepped, FIRST_GUESS), m)] for m in METHOD_NAMES
+        ),
     }
     if "sensitivity" in plan:
         rows = []
@@ -432,7 +441,8 @@ def summarize_reproduction(
                         {
                             "value": v,
                             **conclusions(
-                                data["sensitivity"][(label_of({field: v}), m)] for m in METHOD_NAMES
+                                data["sensitivity"][(label_for(stepped, {field: v}), m)]
+                                for m in METHOD_NAMES
                             ),
                         }
                         for v in values

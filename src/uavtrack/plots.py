@@ -318,7 +318,8 @@ def sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
     axes[0].set_ylim(-0.6, len(rows) - 0.4)
     fig.suptitle(
         "Sensitivity of the conclusions: each assumed parameter at a low (blue) and a high "
-        "(orange) value or another reading (purple); default in brackets",
+        "(orange) value or another reading (purple); default in brackets; rows by how far "
+        "they move distributed − centralized",
         fontsize=10,
     )
     save(fig, path)

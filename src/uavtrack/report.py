@@ -284,6 +284,15 @@ def _sensitivity(sens: dict[str, Any]) -> list[str]:
         f"here: distributed is within 0.03 of centralized (distributed − centralized ≥ "
         f"{sens['near_centralized']:+g}), and well above greedy (distributed − greedy ≥ "
         f"{sens['above_greedy']:+g}; the paper's gap is +0.137, its Fig. 5). {VERDICT_NOTE}",
+        *(
+            [
+                "",
+                f"**With {trials} trials per setting these verdicts are mostly noise**; the "
+                "full run has 50.",
+            ]
+            if (trials := base["distributed - centralized"]["trials"]) < 20
+            else []
+        ),
         "",
         "| parameter | value | distributed | centralized | greedy | "
         "distributed − centralized [95% CI] | within 0.03? | distributed − greedy [95% CI] | "

@@ -209,8 +209,6 @@ def run(
         str | None,
         typer.Option(
             "--rerun",
-            is_flag=False,
-            flag_value="",
             metavar="[FILE.rrd]",
             help=(
                 "log the run to Rerun: save it to FILE.rrd, or with no FILE open it in the "
