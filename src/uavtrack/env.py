@@ -197,37 +197,34 @@ class UAVTrackingEnv(ParallelEnv):
 
     def _observations(self, agents: list[str] | None = None) -> dict[str, dict]:
         p = self._pending
-        mean, cov = p.fused.mean[0], p.fused.cov[0]
-        links = graph(p.uavs, p.alive, self.scenario)[0].astype(np.int8)
-        out = {}
-        for agent in agents if agents is not None else self.agents:
-            i = self._index(agent)
-            out[agent] = {
-                "uav": np.asarray(p.believed[0, i], dtype=np.float64),
-                "estimates": np.asarray(mean[i], dtype=np.float64),
-                "covariance": np.stack(
-                    [cov[i, :, 0, 0], cov[i, :, 1, 1], cov[i, :, 0, 1]], axis=-1
-                ).astype(np.float64),
-                "neighbours": links[i],
-            }
-        return out
+        return self._observed(
+            agents if agents is not None else self.agents,
+            p.believed[0],
+            p.fused.mean[0],
+            p.fused.cov[0],
+            graph(p.uavs, p.alive, self.scenario)[0],
+        )
 
     def _last(self, agents: list[str]) -> dict[str, dict]:
         """Observations after the last step: the state flown to, the last estimates."""
-        uavs, mean, cov = self._state.uavs[0], self._state.mean[0], self._state.cov[0]
-        links = graph(self._state.uavs, self._state.alive, self.scenario)[0].astype(np.int8)
-        return {
-            a: {
-                "uav": uavs[i].astype(np.float64),
-                "estimates": mean[i].astype(np.float64),
-                "covariance": np.stack(
-                    [cov[i, :, 0, 0], cov[i, :, 1, 1], cov[i, :, 0, 1]], axis=-1
-                ),
-                "neighbours": links[i],
+        state = self._state
+        links = graph(state.uavs, state.alive, self.scenario)[0]
+        return self._observed(agents, state.uavs[0], state.mean[0], state.cov[0], links)
+
+    def _observed(self, agents, uavs, mean, cov, links) -> dict[str, dict]:
+        """Each agent's observation from the team's UAV states (Nu, 5), estimates
+        (Nu, Nt, 4), covariances (Nu, Nt, 4, 4) and radio adjacency (Nu, Nu)."""
+        out = {}
+        for agent in agents:
+            i = self._index(agent)
+            P = cov[i]
+            out[agent] = {
+                "uav": np.asarray(uavs[i], dtype=np.float64),
+                "estimates": np.asarray(mean[i], dtype=np.float64),
+                "covariance": np.stack([P[:, 0, 0], P[:, 1, 1], P[:, 0, 1]], axis=-1),
+                "neighbours": links[i].astype(np.int8),
             }
-            for a in agents
-            for i in (self._index(a),)
-        }
+        return out
 
     def _infos(self, agents: list[str] | None = None) -> dict[str, dict]:
         p = self._pending
