@@ -92,7 +92,10 @@ def test_a_failed_uav_terminates_as_an_agent():
 def test_pettingzoo_api_and_render():
     parallel_api_test(parallel_env(steps=20), num_cycles=30)
     env = parallel_env(steps=5, render_mode="rgb_array")
+    with pytest.raises(RuntimeError, match="reset"):
+        env.render()
     env.reset(seed=0)
+    assert env.render().shape == (800, 1000, 3)  # the first cycle, before any step
     env.step({})
     frame = env.render()
     assert frame.shape == (800, 1000, 3) and frame.dtype == np.uint8

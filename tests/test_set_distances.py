@@ -111,6 +111,7 @@ def test_ospa_and_gospa_are_metrics(X, Y, Z, c, p):
         (lambda: ospa(np.zeros((2, 2)), np.zeros((2, 3)), 1.0), "same d"),
         (lambda: ospa(np.zeros(2), np.zeros((2, 2)), 1.0), "point sets"),
         (lambda: ospa(np.zeros((2, 2)), np.zeros((2, 2)), 0.0), "cut-off c"),
+        (lambda: ospa(np.full((8, 2), np.nan), np.zeros((8, 2)), 1.0), "finite"),
         (lambda: gospa(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, p=0.5), "order p"),
         (lambda: gospa(np.zeros((2, 2)), np.zeros((2, 2)), 1.0, alpha=3), "alpha"),
     ],

@@ -92,6 +92,6 @@ def test_run_writes_a_recording_and_refuses_bad_names(tmp_path):
 
 def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
     out = cli("run", "--set", "steps=5", "--rerun", "--json")  # --json is not the file
-    assert out.returncode == 1
-    assert out.stdout.startswith("{") and out.stderr.count("\n") == 1
-    assert "Rerun viewer stopped" in out.stderr and "--rerun FILE.rrd" in out.stderr
+    assert out.returncode == 2 and out.stdout == ""  # refused before any work
+    assert out.stderr.count("\n") == 1
+    assert "needs a display" in out.stderr and "--rerun FILE.rrd" in out.stderr

@@ -131,6 +131,8 @@ class UAVTrackingEnv(ParallelEnv):
         return self._observations(), self._infos()
 
     def step(self, actions: dict[str, Any]):
+        if not hasattr(self, "_state"):
+            raise RuntimeError("call reset() before step()")
         if not self.agents:
             raise RuntimeError("the episode is over: call reset()")
         k = self._state.k
@@ -177,9 +179,14 @@ class UAVTrackingEnv(ParallelEnv):
             return None
         from .plots import frame
 
+        if not hasattr(self, "_state"):
+            raise RuntimeError("call reset() before render()")
         k = self._state.k
-        if k == 0:
-            raise RuntimeError("nothing to render before the first step")
+        if k == 0:  # after reset: the first cycle as the method would close it
+            recorder = Recorder(1, timed=True)
+            recorder.record(0, finish(self._state, self._pending, self._ctx)[1])
+            trace = recorder.traces(self._trajectory[:, :1])[0]
+            return frame(trace, self.scenario, 0, f"{self.method.name} (env)")
         return frame(self.result().trace, self.scenario, k - 1, f"{self.method.name} (env)")
 
     def close(self) -> None:

@@ -184,6 +184,9 @@ class Tally:
         """OSPA and GOSPA of this step: each living UAV's estimates and the best ones."""
         s, c, p = self.sums, self.cutoff, self.order
         X = truth[..., :2]
+        if not alive.all():  # a failed UAV's estimates are NaN; its scores are masked out
+            mean = np.where(alive[..., None, None], mean, 0.0)
+            best_mean = np.where(anyone[:, None, None], best_mean, 0.0)
         if self.n_targets <= PER_UAV_SETS:
             d, g = ospa_and_gospa(X[:, None], mean[..., :2], c, p)  # (B, Nu)
             s["ospa"] += np.where(alive, d, 0.0).sum(axis=1)
@@ -366,6 +369,8 @@ def _cut_costs(X, Y, c: float, p: float) -> tuple[np.ndarray, int, int]:
             f"X and Y must be point sets (..., m, d) and (..., n, d) of the same d; "
             f"got shapes {X.shape} and {Y.shape}"
         )
+    if not (np.isfinite(X).all() and np.isfinite(Y).all()):
+        raise ValueError("X and Y must hold finite coordinates (NaN or inf found)")
     lead = np.broadcast_shapes(X.shape[:-2], Y.shape[:-2])
     X = np.broadcast_to(X, lead + X.shape[-2:])
     Y = np.broadcast_to(Y, lead + Y.shape[-2:])

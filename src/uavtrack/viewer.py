@@ -13,7 +13,6 @@ thousands of UAVs. Install with ``pip install "uavtrack[viz]"``.
 
 from __future__ import annotations
 
-import os
 import subprocess
 import sys
 import tempfile
@@ -87,16 +86,9 @@ def show(trace, scenario, name: str = "uavtrack") -> int:
                         viewer.kill()
                         viewer.wait()
         if code != 0:
-            lines = [x for x in log_file.read_text(errors="replace").splitlines() if x.strip()]
-            why = lines[-1].strip() if lines else f"exit code {code}"
-            hint = (
-                ""
-                if os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")
-                else (" (no display)")
-            )
             raise RunError(
-                f"the Rerun viewer stopped with exit code {code}{hint}: {why}; give --rerun "
-                "FILE.rrd to save the recording and open it with `rerun FILE.rrd`"
+                f"the Rerun viewer stopped with exit code {code}; give --rerun FILE.rrd to "
+                "save the recording and open it with `rerun FILE.rrd`"
             )
         return code
 

@@ -189,7 +189,8 @@ CAPTION = (
     "4 comes mostly from targets turning at the walls, which the filter cannot predict. "
     "OSPA and GOSPA compare the true targets with a set of estimates as point sets "
     "(cut-off evaluation.ospa_cutoff, order evaluation.ospa_order; per UAV up to "
-    "{per_uav} targets)."
+    "{per_uav} targets): OSPA is a mean over the targets, GOSPA a sum, so it grows with "
+    "their number."
 )
 
 
@@ -229,6 +230,11 @@ def run(
             raise UsageError(f"--rerun: {rerun} should end in .rrd")
         if rerun:
             check_output(rerun, "--rerun")
+        elif not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            raise UsageError(
+                "--rerun without a file opens the Rerun viewer, which needs a display; "
+                "give --rerun FILE.rrd to save the recording instead"
+            )
         try:
             from .. import viewer
         except ImportError as exc:
@@ -358,8 +364,8 @@ def compare(
 
     table = Table(
         title=f"{trials} trials of {scenario.steps} steps, seed {seed}: mean over trials",
-        caption="Best estimate: per target, the most confident UAV's. Decision time: trial 0, "
-        "run alone.",
+        caption="Best estimate: per target, the most confident UAV's. OSPA is a mean over "
+        "the targets, GOSPA a sum. Decision time: trial 0, run alone.",
         caption_justify="left",
     )
     table.add_column("metric", no_wrap=True)
