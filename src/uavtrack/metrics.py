@@ -220,18 +220,19 @@ class Tally:
 
     def _set_summary(self) -> dict[str, np.ndarray]:
         s = self.sums
-        uav_steps = np.where(s["pairs"] > 0, s["pairs"] / self.n_targets, np.nan)
-        steps = np.where(s["best"] > 0, s["best"] / self.n_targets, np.nan)
-        per_uav = self.n_targets <= PER_UAV_SETS
-        best = self.n_targets <= BEST_SETS
+        # the steps averaged over, NaN where nothing was scored (or too many targets)
+        uav_steps = np.where(
+            (s["pairs"] > 0) & (self.n_targets <= PER_UAV_SETS), s["pairs"] / self.n_targets, np.nan
+        )
+        steps = np.where(
+            (s["best"] > 0) & (self.n_targets <= BEST_SETS), s["best"] / self.n_targets, np.nan
+        )
         return {
-            "ospa": s["ospa"] / uav_steps if per_uav else np.full(self.batch, np.nan),
-            "ospa_best": s["ospa_best"] / steps if best else np.full(self.batch, np.nan),
-            "gospa": s["gospa"] / uav_steps if per_uav else np.full(self.batch, np.nan),
-            "gospa_best": s["gospa_best"] / steps if best else np.full(self.batch, np.nan),
-            "gospa_missed_best": (
-                s["gospa_missed_best"] / steps if best else np.full(self.batch, np.nan)
-            ),
+            "ospa": s["ospa"] / uav_steps,
+            "ospa_best": s["ospa_best"] / steps,
+            "gospa": s["gospa"] / uav_steps,
+            "gospa_best": s["gospa_best"] / steps,
+            "gospa_missed_best": s["gospa_missed_best"] / steps,
         }
 
     def per_target(self) -> np.ndarray:
