@@ -3,20 +3,28 @@
     world program: truth, each UAV's measurements, radio range, faults, clock
       | own measurements (Sense)                               ^ action (Report)
       v                                                        |
-    UAV program i  <-- beacons, D_i flooding, consensus tuples, bids (Radio) -->  UAV program q
-                   <-------------- transport: memory | zenoh -------------->
+    UAV program i  <-- D_i flooding with consensus, beacons with bids (Radio) -->  UAV program q
+                   <---------- transport: memory | zenoh, one key per program ---------->
 
 * `agent`: a UAV's program (`UavAgent`) and the central node (`CentralAgent`), calling
   the simulator's stage functions on their own slice;
 * `world`: the world program (`WorldProgram`);
-* `messages`: the typed, versioned messages;
-* `transport`: the in-process bus and Zenoh (peer mode);
+* `messages`: the typed, versioned messages and what a run admits in them;
+* `security`: keys, message authentication and replay windows (`Gate`);
+* `transport`: the in-process bus and Zenoh (peer mode, optionally TLS), the `Mailbox`;
 * `swarm`: `run_swarm`, which starts and stops everything;
 * `program`: the main loop of one program (``python -m uavtrack.agents``).
 
 With the same seed, scenario and faults, a swarm's trace equals `uavtrack.simulate`'s.
 """
 
-from .swarm import TRANSPORTS, SwarmResult, run_swarm
+import importlib
 
 __all__ = ["TRANSPORTS", "SwarmResult", "run_swarm"]
+
+
+def __getattr__(name: str):
+    # lazily: a program started as ``python -m uavtrack.agents`` reads its spec first
+    if name in __all__:
+        return getattr(importlib.import_module(".swarm", __name__), name)
+    raise AttributeError(f"module 'uavtrack.agents' has no attribute {name!r}")

@@ -1,27 +1,70 @@
-"""``python -m uavtrack.agents RUN PROGRAM ENDPOINT [LISTEN]``: one program of a swarm
-over Zenoh (started by `uavtrack swarm`; `uavtrack agent` is the documented way)."""
+"""``python -m uavtrack.agents RUN PROGRAM``: one program of a swarm over Zenoh, started
+by `uavtrack swarm` (`uavtrack agent` is the documented way to start one by hand).
 
+Its spec comes as one JSON line on standard input, read before anything heavy is
+imported: the run, the program's number, the endpoints, Zenoh's options, the program's
+key (`security.Credential`) and the pid of the process that started it. It ends with
+that process: at once if it is already gone, otherwise as soon as it goes (the kernel's
+parent-death signal where there is one, and a watch every half second).
+"""
+
+import json
 import os
 import sys
-
-from .program import serve
-from .swarm import watch_parent
-from .transport import ZenohTransport
+import threading
+import time
 
 
-def main(argv: list[str]) -> int:
-    run, me, endpoint = argv[0], int(argv[1]), argv[2]
-    listen = argv[3] if len(argv) > 3 else "tcp/127.0.0.1:0"
-    watch_parent(os.getppid())
-    transport = ZenohTransport([listen], [endpoint])
+def die_with(parent: int) -> None:
+    """End this process when `parent` is gone, even by SIGKILL, and now if it is."""
+    try:  # Linux: the kernel sends SIGKILL when the parent ends
+        import ctypes
+        import signal
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
+    except (OSError, AttributeError):
+        pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
+
+
+def main() -> int:
     try:
-        served = serve(transport, run, me)
+        spec = json.loads(sys.stdin.readline())
+    except (ValueError, OSError):
+        print("uavtrack.agents: expected the program's spec on standard input", file=sys.stderr)
+        return 2
+    die_with(int(spec["parent"]))
+    from .program import serve
+    from .security import Credential
+    from .transport import ZenohOptions, ZenohTransport, zenoh_reason
+
+    credential = Credential.from_json(spec["credential"]) if spec["credential"] else None
+    try:
+        transport = ZenohTransport([], spec["connect"], ZenohOptions(**spec["zenoh"]))
+    except Exception as exc:  # the world is already gone, or its endpoint refuses
+        print(f"program {spec['program']}: cannot join: {zenoh_reason(exc)}", file=sys.stderr)
+        return 1
+    try:
+        served = serve(transport, spec["run"], int(spec["program"]), credential=credential)
     except KeyboardInterrupt:
         return 130
     finally:
         transport.close()
-    return 0 if served.end in ("done", "failed") else 1
+    if served.end in ("done", "failed"):
+        return 0
+    at = f" at step {served.at}" if served.at >= 0 else ""
+    print(f"program {spec['program']}: {served.end}{at}", file=sys.stderr)
+    return 1
 
 
 if __name__ == "__main__":
-    sys.exit(main(sys.argv[1:]))
+    sys.exit(main())

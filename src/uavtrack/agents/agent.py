@@ -14,6 +14,12 @@ It calls the simulator's stage functions on its own slice (leading axes of size 
 `methods.take_download`. What differs from the batch simulator is only who holds which
 rows, so a swarm's trace equals `uavtrack run`'s for the same seed and faults.
 
+A radio message goes to each UAV in range, one per receiver and round, and carries
+every protocol that runs in that round: round r of the D_i flooding with round r of
+the consensus (a UAV learns in round r whether its D_i reaches r, from the same
+message), the beacon with the bids. The fault model's losses are drawn per protocol at
+the receiver, as in the simulator, so bundling changes no number.
+
 Every wait has a deadline: what has not arrived by then counts as lost, so a crashed
 or frozen neighbour costs a round's deadline, never the run.
 """
@@ -40,22 +46,8 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
-from .messages import VERSION, Radio, Report, Sense, Tick, arrays, encode, packed
-from .transport import Mailbox, Transport
-
-
-def keys(run: str) -> dict[str, str]:
-    """The key layout of a run."""
-    root = f"uavtrack/{run}/"
-    return {
-        "root": root,
-        "hello": root + "hello",
-        "sense": root + "sense/",
-        "tick": root + "tick",
-        "report": root + "report/",
-        "radio": root + "radio/",
-        "alive": root + "alive/",
-    }
+from .messages import VERSION, Part, Radio, Report, encode, packed
+from .transport import Link, Mailbox
 
 
 @dataclass
@@ -69,44 +61,41 @@ class Inbox:
 
 
 class AgentRadio:
-    """A program's side of the radio: it broadcasts, and keeps of what arrives what the
-    emulated radio delivers: round r of cycle k - delay, from a sender it could hear at
-    that cycle, unless the fault realisation (`faults.Faults`, a pure function of the
-    message) loses it. The same rule as `radio.Radio`, seen by one receiver."""
+    """A program's side of the radio: it sends to the UAVs in range, and keeps of what
+    arrives what the emulated radio delivers: round r of cycle k - delay, from a sender
+    it could hear at that cycle, unless the fault realisation (`faults.Faults`, a pure
+    function of the message) loses it. The same rule as `radio.Radio`, seen by one
+    receiver."""
 
     def __init__(
-        self,
-        me: int,
-        n: int,
-        faults: Faults,
-        transport: Transport,
-        mailbox: Mailbox,
-        run: str,
-        deadline: float,
+        self, me: int, n: int, faults: Faults, link: Link, mailbox: Mailbox, deadline: float
     ) -> None:
         self.me, self.n, self.faults = me, n, faults
-        self.transport, self.mailbox, self.run = transport, mailbox, run
+        self.link, self.mailbox, self.run = link, mailbox, link.run
         self.deadline, self.delay = deadline, faults.model.delay
         self.links: dict[int, np.ndarray] = {}  # cycle -> (N,) senders heard
         self.alive: dict[int, np.ndarray] = {}  # cycle -> (N,) alive
+        self.central: dict[int, bool] = {}  # cycle -> the central node is alive
         self.bad: dict[int, np.ndarray | None] = {}  # cycle -> (N+1, N+1) link states
-        self.key = keys(run)["radio"]
         self.missing = 0  # expected messages that never came (a crashed sender)
 
-    def begin(self, k: int, links: np.ndarray, alive: np.ndarray) -> None:
-        self.links[k], self.alive[k] = links, alive
+    def begin(self, k: int, links: np.ndarray, alive: np.ndarray, central: bool = True) -> None:
+        self.links[k], self.alive[k], self.central[k] = links, alive, central
         previous = self.bad.get(k - 1)
         states = self.faults.link_states(k, None if previous is None else previous[None])
         self.bad[k] = None if states is None else states[0]
         for old in [c for c in self.links if c < k - self.delay - 1]:
-            self.links.pop(old)
-            self.alive.pop(old)
-            self.bad.pop(old)
-        self.mailbox.forget(k - self.delay - 1)
+            for table in (self.links, self.alive, self.central, self.bad):
+                table.pop(old)
+        self.mailbox.begin(k, k - self.delay - 1)
 
-    def send(self, k: int, protocol: str, round_: int, content: dict, final: bool = False) -> None:
-        message = Radio(VERSION, self.run, k, protocol, round_, self.me, final, packed(content))
-        self.transport.publish(f"{self.key}{self.me}", encode(message))
+    def send(self, k: int, parts: list[Part], to=None) -> None:
+        """One message of these parts to each UAV in range at cycle k (or to `to`)."""
+        receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
+        body = encode(Radio(VERSION, self.run, k, self.me, parts))
+        for q in receivers:
+            if q != self.me:
+                self.link.send_body(int(q), body)
 
     def lost(self, k: int, protocol: str, round_: int, sender: np.ndarray, receiver) -> np.ndarray:
         bad = self.bad.get(k)
@@ -123,23 +112,26 @@ class AgentRadio:
         senders = senders[senders != self.me]
         lost = self.lost(sent_at, protocol, round_, senders, self.me)
         expected = [int(q) for q in senders[~lost]]
-        deadline = time.monotonic() + self.deadline
         mailbox = self.mailbox
         mailbox.wait(
             lambda: all(
                 mailbox.content(sent_at, protocol, q, round_) is not None for q in expected
             ),
-            deadline,
+            time.monotonic() + self.deadline,
         )
         contents = {}
-        for q in expected:
-            raw = mailbox.content(sent_at, protocol, q, round_)
-            value = None if raw is None else arrays(raw)
-            if value is None:
-                self.missing += 1
-                continue
-            contents[q] = value
+        with mailbox.cond:
+            for q in expected:
+                value = mailbox.content(sent_at, protocol, q, round_)
+                if value is None:
+                    self.missing += 1
+                    continue
+                contents[q] = value
         return Inbox(contents, len(senders), len(contents))
+
+
+def part(protocol: str, round_: int, content: dict | None, final: int = -1) -> Part:
+    return Part(protocol, round_, final, None if content is None else packed(content))
 
 
 class UavAgent:
@@ -151,16 +143,15 @@ class UavAgent:
         scenario: Scenario,
         method: str | Method,
         faults: Faults,
-        transport: Transport,
+        link: Link,
         mailbox: Mailbox,
-        run: str,
         deadline: float,
         prior: tuple[np.ndarray, np.ndarray],
     ) -> None:
         self.me, self.scenario, self.method = me, scenario, get(method)
         self.n, self.m = scenario.n_uavs, scenario.n_targets
-        self.transport, self.mailbox, self.run = transport, mailbox, run
-        self.radio = AgentRadio(me, self.n, faults, transport, mailbox, run, deadline)
+        self.link, self.mailbox, self.run = link, mailbox, link.run
+        self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline)
         self.ctx = simulation.Context.of(scenario, self.method, [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
         self.mean, self.cov = prior  # (Nt, 4), (Nt, 4, 4): the belief predicted to k
@@ -174,18 +165,18 @@ class UavAgent:
                 "Distributed, Greedy or Centralized"
             )
         self.central = isinstance(self.method, Centralized)
-        self.keys = keys(run)
 
     # ------------------------------------------------------------ the cycle
 
-    def cycle(self, sense: Sense) -> Report:
-        """One decision cycle from the world's message; returns the report to send."""
-        k, s = sense.k, self.scenario
-        believed = self.believed = sense.believed.array()
-        alive = sense.alive.array().astype(bool)
-        self.radio.begin(k, sense.links.array().astype(bool), alive)
-        observed = sense.observed.array().astype(bool)
-        z = sense.z.array().reshape(-1, 2)
+    def cycle(self, k: int, sense: dict[str, np.ndarray], central: bool = True) -> Report:
+        """One decision cycle from the world's message (its checked arrays); returns the
+        report to send."""
+        s = self.scenario
+        believed = self.believed = sense["believed"]
+        alive = sense["alive"]
+        self.radio.begin(k, sense["links"], alive, central)
+        observed = sense["observed"]
+        z = sense["z"]
         zc, R = simulation.convert(np.repeat(believed[None], len(z), axis=0), z, s)
         mean, cov = estimation.filter_step(
             self.mean[None], self.cov[None], observed[None], zc, R, None, None
@@ -196,7 +187,7 @@ class UavAgent:
                 k, mean, cov, believed
             )
         else:
-            fused_mean, fused_cov, rounds, sent, delivered = self.consensus(k, mean, cov, alive)
+            fused_mean, fused_cov, rounds, sent, delivered = self.consensus(k, mean, cov)
         top = None if self.central else self.method.top(self.setting, np.array([[self.largest]]))
         plan_start = time.perf_counter()
         bids, best = self.setting.plan(believed[None, None], fused_mean[None, None], top)
@@ -234,13 +225,19 @@ class UavAgent:
 
     # ------------------------------------------------------------ fusion
 
-    def consensus(self, k: int, mean, cov, alive):
-        """The D_i protocol and the max-consensus rounds (Algorithm 2 lines 15-25)."""
+    def consensus(self, k: int, mean, cov):
+        """The D_i protocol and the max-consensus rounds (Algorithm 2 lines 15-25), run
+        together: round r carries this UAV's flooding set and consensus tuple after
+        r - 1 rounds. Its consensus runs rounds = D_i (+ extra, up to the budget) rounds;
+        round r of it is adopted only once round r of the flooding shows D_i >= r.
+
+        Sends, as the two protocols apart would: flooding rounds 1 .. R (R the round it
+        stopped in) and its final set from R + 1; consensus rounds 1 .. rounds and its
+        final tuple from rounds + 1. When rounds = R - 1, the tuple of round R was already
+        the final one: round R + 1 only marks it final."""
         s = self.setting
-        depth, sent, delivered = self.learn_depth(k)
-        rounds = depth + s.extra_rounds
-        if s.budget is not None:
-            rounds = min(rounds, s.budget)
+        known = np.zeros(self.n, dtype=bool)
+        known[self.me] = True
         state = {  # per target: confidence, estimate, its time stamp and whose it is
             "gamma": estimation.confidence(cov),
             "mean": mean,
@@ -248,21 +245,69 @@ class UavAgent:
             "stamp": np.full(self.m, k, dtype=np.int64),
             "origin": np.full(self.m, self.me, dtype=np.int64),
         }
-        for r in range(1, rounds + 1):
-            self.radio.send(k, "consensus", r, state)
-            inbox = self.radio.receive(k, "consensus", r)
-            if inbox is None:
-                continue
-            sent += inbox.sent
-            delivered += inbox.delivered
-            offered = inbox.contents
-            if s.stale:
-                offered = {q: s.forward(t, k) for q, t in offered.items()}
-            if any(set(t) != set(state) for t in offered.values()):
-                offered = {q: t for q, t in offered.items() if set(t) == set(state)}
-            state = self._adopt(state, offered)
-        self.radio.send(k, "consensus", rounds + 1, state, final=True)
+        self.largest = 1
+        stopped = rounds = None  # R, and the consensus rounds once D_i is known
+        depth = sent = delivered = r = 0
+        flood_final = consensus_final = False
+        while True:
+            r += 1
+            parts = []
+            if stopped is None:
+                parts.append(part("flood", r, {"known": known}))
+            elif not flood_final:  # r = R + 1
+                parts.append(part("flood", r, {"known": known}, final=r))
+                flood_final = True
+            if rounds is None or r <= rounds:
+                parts.append(part("consensus", r, state))
+            elif not consensus_final:
+                if rounds + 1 < r:  # rounds = R - 1: the tuple of round R was the final one
+                    parts.append(part("consensus", r, None, final=rounds + 1))
+                else:
+                    parts.append(part("consensus", r, state, final=r))
+                consensus_final = True
+            if parts:
+                self.radio.send(k, parts)
+            if flood_final and consensus_final:
+                break
+            if stopped is None:
+                inbox = self.radio.receive(k, "flood", r)
+                known, depth, stopped = self._flood(inbox, known, r)
+                if inbox is not None:
+                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
+                if stopped is not None:
+                    rounds = depth + s.extra_rounds
+                    rounds = rounds if s.budget is None else min(rounds, s.budget)
+            if rounds is None or r <= rounds:
+                inbox = self.radio.receive(k, "consensus", r)
+                if inbox is not None:
+                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
+                    offered = inbox.contents
+                    if s.stale:
+                        offered = {q: s.forward(t, k) for q, t in offered.items()}
+                    state = self._adopt(state, offered)
         return state["mean"], state["cov"], rounds, sent, delivered
+
+    def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
+        """Round r of the D_i protocol (`fusion.learn_depth`) from this UAV's side: its
+        set after the round, D_i, and r if it stopped in this round (else None). Sets
+        `self.largest`, the most members of a closed neighbourhood it belongs to."""
+        if inbox is None:  # nothing in flight yet: nothing to learn
+            return known, r - 1, r
+        if r == 2:  # the sets sent now are the senders' closed neighbourhoods
+            sizes = [int(c["known"].sum()) for c in inbox.contents.values()]
+            self.largest = max([int(known.sum()), *sizes])
+        ids = sorted({self.me, *inbox.contents})
+        offered = np.stack([known if q == self.me else inbox.contents[q]["known"] for q in ids])
+        dense = np.eye(len(ids), dtype=bool)[None]
+        dense[0, ids.index(self.me), :] = True
+        grown = fusion.flood(offered[None], offered[None], network.Links(1, len(ids), dense))
+        grown = grown[0, ids.index(self.me)]
+        if not (grown != known).any():
+            return known, r - 1, r
+        budget = self.setting.budget
+        if budget is not None and r >= budget:
+            return grown, budget, r
+        return grown, r, None
 
     def _adopt(self, state: dict, offered: dict[int, dict]) -> dict:
         """eq. (27) for this UAV: `fusion.adopt` over its closed neighbourhood in index
@@ -281,51 +326,19 @@ class UavAgent:
         picked = fusion.pick(candidates, candidates, best)
         return {name: value[0, where] for name, value in picked.items()}
 
-    def learn_depth(self, k: int) -> tuple[int, int, int]:
-        """The D_i protocol (`fusion.learn_depth`) from this UAV's side; sets
-        `self.largest`, the most members of a closed neighbourhood it belongs to."""
-        known = np.zeros(self.n, dtype=bool)
-        known[self.me] = True
-        depth, sent, delivered, r = 0, 0, 0, 0
-        self.largest = 1
-        budget = self.setting.budget
-        while True:
-            r += 1
-            self.radio.send(k, "flood", r, {"known": known})
-            inbox = self.radio.receive(k, "flood", r)
-            if inbox is None:
-                depth = r - 1
-                break
-            sent += inbox.sent
-            delivered += inbox.delivered
-            if r == 2:  # the sets sent now are the senders' closed neighbourhoods
-                sizes = [int(c["known"].sum()) for c in inbox.contents.values()]
-                self.largest = max([int(known.sum()), *sizes])
-            ids = sorted({self.me, *inbox.contents})
-            offered = np.stack(
-                [known if q == self.me else inbox.contents[q]["known"] for q in ids]
-            )[None]
-            dense = np.eye(len(ids), dtype=bool)[None]
-            dense[0, ids.index(self.me), :] = True
-            grown = fusion.flood(offered, offered, network.Links(1, len(ids), dense))
-            grown = grown[0, ids.index(self.me)]
-            if not (grown != known).any():
-                depth = r - 1
-                break
-            known = grown
-            if budget is not None and r >= budget:
-                depth = budget
-                break
-        self.radio.send(k, "flood", r + 1, {"known": known}, final=True)
-        return depth, sent, delivered
-
     # ------------------------------------------------------------ assignment
 
     def auction(self, k: int, bids: np.ndarray, alive: np.ndarray):
-        """Beacons and bids to the neighbours, then this UAV's auction (`assignment.local`)."""
+        """Beacon and bids to the neighbours (one message), then this UAV's auction
+        (`assignment.local`)."""
         s, me, n = self.setting, self.me, self.n
-        self.radio.send(k, "beacon", 0, {"position": self.believed[:3]})  # who, where, when
-        self.radio.send(k, "bids", 0, {"bids": bids, "stamp": np.array(k)})
+        self.radio.send(
+            k,
+            [
+                part("beacon", 0, {"position": self.believed[:3]}),  # who, where, when
+                part("bids", 0, {"bids": bids, "stamp": np.array(k, dtype=np.int64)}),
+            ],
+        )
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
         sent = sum(a.sent for a in (beacon, inbox) if a is not None)
         delivered = sum(a.delivered for a in (beacon, inbox) if a is not None)
@@ -361,7 +374,9 @@ class UavAgent:
     def upload(self, k: int, mean, cov, believed):
         """The centralized baseline from a UAV's side: upload its tables, take the
         download of `delay` cycles ago (`methods.take_download`). Returns the fused
-        estimates, rounds, messages sent and delivered, and the target sent (-1: none)."""
+        estimates, rounds, messages sent and delivered, and the target sent (-1: none).
+        Without the central node (lost), the UAV keeps its own estimates and its last
+        target."""
         s, m = self.setting, self.m
         tuples = {
             "gamma": estimation.confidence(cov),
@@ -370,7 +385,8 @@ class UavAgent:
             "stamp": np.full(m, k, dtype=np.int64),
             "uav": believed,
         }
-        self.radio.send(k, "upload", 0, tuples)
+        if self.radio.central[k]:
+            self.radio.send(k, [part("upload", 0, tuples)], to=self.n)
         down, arrived, target = self._download(k)
         if down is None:  # nothing sent yet
             return mean, cov, 1, 0, 0, -1
@@ -393,41 +409,38 @@ class UavAgent:
         mailbox, central = self.mailbox, self.n
         lost = bool(self.radio.lost(sent_at, "download", 0, np.array(central), self.me))
         expect = bool(self.radio.alive[sent_at][self.me]) and not lost
+        expect = expect and self.radio.central[sent_at]
         if expect:
             mailbox.wait(
-                lambda: mailbox.content(sent_at, "download", central, 0) is not None,
+                lambda: (
+                    mailbox.content(sent_at, "download", central, 0) is not None
+                    or mailbox.is_gone(central)
+                ),
                 time.monotonic() + self.radio.deadline,
             )
-        raw = mailbox.content(sent_at, "download", central, 0) if expect else None
-        content = None if raw is None else arrays(raw)
+        content = mailbox.content(sent_at, "download", central, 0) if expect else None
         if content is None:
             return nothing_heard(1, 1, self.m), np.zeros((1, 1), dtype=bool), -1
         down = {name: content[name][None, None] for name in ("gamma", "mean", "cov", "stamp")}
-        return down, np.ones((1, 1), dtype=bool), int(content["target"][self.me])
+        return down, np.ones((1, 1), dtype=bool), int(content["target"])
 
 
 class CentralAgent:
     """The central node of the centralized baseline: uploads in, downloads out."""
 
     def __init__(
-        self,
-        scenario: Scenario,
-        faults: Faults,
-        transport: Transport,
-        mailbox: Mailbox,
-        run: str,
-        deadline: float,
+        self, scenario: Scenario, faults: Faults, link: Link, mailbox: Mailbox, deadline: float
     ) -> None:
         self.scenario, self.n, self.m = scenario, scenario.n_uavs, scenario.n_targets
-        self.transport, self.mailbox, self.run = transport, mailbox, run
-        self.radio = AgentRadio(self.n, self.n, faults, transport, mailbox, run, deadline)
+        self.link, self.mailbox, self.run = link, mailbox, link.run
+        self.radio = AgentRadio(self.n, self.n, faults, link, mailbox, deadline)
         self.ctx = simulation.Context.of(scenario, get("centralized"), [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
 
-    def cycle(self, tick: Tick) -> Report:
+    def cycle(self, k: int, tick: dict[str, np.ndarray], central: bool = True) -> Report:
         """One cycle: fuse and assign the uploads of `delay` cycles ago, send downloads."""
-        k, s, n, m = tick.k, self.setting, self.n, self.m
-        alive = tick.alive.array().astype(bool)
+        s, n, m = self.setting, self.n, self.m
+        alive = tick["alive"]
         self.radio.begin(k, np.zeros(n, dtype=bool), alive)
         sent = delivered = 0
         start = time.perf_counter()
@@ -452,8 +465,7 @@ class CentralAgent:
             }
             reported = np.zeros((1, n, 5))
             for q in expected:
-                raw = mailbox.content(sent_at, "upload", q, 0)
-                content = None if raw is None else arrays(raw)
+                content = mailbox.content(sent_at, "upload", q, 0)
                 if content is None:
                     continue
                 heard[0, q] = True
@@ -465,9 +477,10 @@ class CentralAgent:
             else:
                 sent = delivered = n if n > 1 else 0
             down, targets = central_node(got, heard, reported, s, k)
-        content = {name: down[name][0, 0] for name in ("gamma", "mean", "cov", "stamp")}
-        content["target"] = targets[0]
-        self.radio.send(k, "download", 0, content)
+        for i in np.flatnonzero(alive):  # each living UAV its download
+            content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
+            content["target"] = np.array(targets[0, i], dtype=np.int64)
+            self.radio.send(k, [part("download", 0, content)], to=int(i))
         seconds = time.perf_counter() - start
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(

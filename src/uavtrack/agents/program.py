@@ -1,10 +1,10 @@
 """The main loop of one program of a swarm: a UAV (0 .. N-1) or the central node (N).
 
-It subscribes to what is its own (the run, its sense messages, the radio), waits for
-the world's `Hello`, says it is ready, then runs one cycle per `Sense` (or `Tick`) until
-the last step, until the world tells it that it has failed, or until the world is gone.
-Started as ``python -m uavtrack.agents RUN UAV ENDPOINT`` by `uavtrack swarm`, or by
-hand on another machine (`uavtrack agent`).
+It subscribes to what is its own (its inbox key, the world's Hello), asks for the run
+until the world's Hello comes, says it is ready once it has heard every other program,
+then runs one cycle per `Sense` (or `Tick`) until the last step, until the world tells
+it that it has failed, or until the world is gone. Started by `uavtrack swarm` (``python
+-m uavtrack.agents``), or by hand on another machine (`uavtrack agent`).
 """
 
 from __future__ import annotations
@@ -19,9 +19,10 @@ from msgspec import structs
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import get
-from .agent import CentralAgent, UavAgent, keys
-from .messages import VERSION, Radio, Report, encode, packed
-from .transport import Mailbox, Transport
+from .agent import CentralAgent, UavAgent, part
+from .messages import VERSION, Radio, Ready, Spec, encode
+from .security import WORLD, Credential, Gate
+from .transport import Link, Mailbox, Transport, inbox_key, keys
 
 STARTUP = 120.0
 """Seconds a program waits for the world's first message."""
@@ -35,7 +36,10 @@ class Served:
     "done" (every step), "failed" (the world said this UAV failed, at step `at`),
     "world gone" (the world ended or went silent at step `at`), "no world" (no world of
     the run answered), "not in run" (this program's number is not one of the run's),
-    "taken" (another program with this number is running)."""
+    "taken" (another program with this number is running), "under way" (the run had
+    started, at step `at`), "needs key" (the run authenticates its members and this
+    program has no key), "not authentic" (the only world that answered could not prove
+    it is the run's: another key file's, or a forgery)."""
 
     ran: int
     steps: int
@@ -50,95 +54,129 @@ class Served:
 
 
 def serve(
-    transport: Transport, run: str, me: int, wait: float = STARTUP, first: float | None = None
+    transport: Transport,
+    run: str,
+    me: int,
+    wait: float = STARTUP,
+    first: float | None = None,
+    credential: Credential | None = None,
 ) -> Served:
     """Run program `me` of swarm `run` to its end. wait: seconds to wait for the other
     programs and for each message of the run; first: for the world's first message
-    (default `wait`)."""
+    (default `wait`); credential: this program's key (`security.Credential`), needed
+    when the run authenticates its members."""
     k_ = keys(run)
-    mailbox = Mailbox(run)
-    # the world's hello last: once it arrives, the declarations before it have too
-    transport.subscribe(f"{k_['sense']}{me}", mailbox.handler)
-    transport.subscribe(k_["radio"], mailbox.handler)
-    transport.subscribe(k_["tick"], mailbox.handler)
+    gate = Gate(run, me, 0, credential)
+    mailbox = Mailbox(gate, None, transport)
+    transport.subscribe(inbox_key(run, me), mailbox.handler)
     transport.watch(f"{k_['alive']}world", mailbox.lost)
     transport.subscribe(k_["hello"], mailbox.handler)
-    limit = time.monotonic() + (wait if first is None else first)
-    mailbox.wait(lambda: ("hello",) in mailbox.inbox or mailbox.gone, limit)
-    hello = mailbox.inbox.get(("hello",))
+    hello = _hello(transport, mailbox, run, wait if first is None else first)
     if hello is None:
-        return Served(0, 0, "no world")
+        end = "not authentic" if gate.drops.get("not authentic") else "no world"
+        return Served(0, 0, end)
     scenario = Scenario.from_dict(json.loads(hello.scenario), origin="the world's scenario")
     n = scenario.n_uavs
     central = get(hello.method).central
     programs = n + int(central)
+    if hello.authenticated and credential is None:
+        return Served(0, scenario.steps, "needs key", programs=programs, central=central)
     if me >= programs:
         return Served(0, scenario.steps, "not in run", programs=programs, central=central)
     if transport.alive(f"{k_['alive']}{me}"):  # another program with this number runs
         return Served(0, scenario.steps, "taken", programs=programs, central=central)
+    if hello.step >= 0:
+        return Served(0, scenario.steps, "under way", hello.step, programs, central)
+    gate.programs = programs
+    if central and me < n:  # without its central node a UAV waits for no download
+        transport.watch(f"{k_['alive']}{n}", mailbox.lost)
+    spec = Spec.of(scenario, central)
+    mailbox.learn(spec, hello.publics)
+    link = Link(transport, gate)
     faults = Faults(scenario.faults, hello.key.array()[None].astype(np.uint32), n)
     if me == n:
-        program = CentralAgent(scenario, faults, transport, mailbox, run, hello.deadline)
+        program = CentralAgent(scenario, faults, link, mailbox, hello.deadline)
     else:
         prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
         prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
-        program = UavAgent(
-            me, scenario, hello.method, faults, transport, mailbox, run, hello.deadline, prior
-        )
+        program = UavAgent(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
     transport.announce(f"{k_['alive']}{me}")
-    if not meet(transport, mailbox, run, me, programs, wait):
+    if not meet(link, mailbox, me, programs, wait):
         return Served(0, scenario.steps, "world gone", 0, programs, central)
-    empty = packed({"x": np.zeros(0)})["x"]
-    ready = Report(VERSION, run, -1, me, -1, -1, empty, empty, empty, 0, 0, 0, 0.0)
-    transport.publish(f"{k_['report']}{me}", encode(ready))
-    first = ("tick", 0) if me == n else ("sense", 0, me)
+    link.send(WORLD, Ready(VERSION, run, me))
+    first_ = ("tick", 0) if me == n else ("sense", 0)
     limit = time.monotonic() + wait
-    while first not in mailbox.inbox and not mailbox.gone and time.monotonic() < limit:
-        _presence(transport, run, me)  # until the run starts: others may still need it
-        mailbox.wait(lambda: first in mailbox.inbox or bool(mailbox.gone), time.monotonic() + 0.1)
-    published = (getattr(transport, "published", 0), getattr(transport, "bytes", 0))
+    while first_ not in mailbox.inbox and not mailbox.world_gone and time.monotonic() < limit:
+        _presence(link, mailbox, me, programs)  # until the run starts: others may need it
+        mailbox.wait(lambda: first_ in mailbox.inbox or mailbox.world_gone, time.monotonic() + 0.1)
+    counted = (transport.published, transport.bytes, mailbox.received)
     ran, end, at = 0, "done", -1
     for k in range(scenario.steps):
-        want = ("tick", k) if me == n else ("sense", k, me)
+        want = ("tick", k) if me == n else ("sense", k)
         patience = time.monotonic() + wait
-        mailbox.wait(lambda want=want: want in mailbox.inbox or bool(mailbox.gone), patience)
-        message = mailbox.take(want)
-        if message is None:  # the world is gone or silent: stop
+        mailbox.wait(lambda want=want: want in mailbox.inbox or mailbox.world_gone, patience)
+        got = mailbox.take(want)
+        if got is None:  # the world is gone or silent: stop
             end, at = "world gone", k
             break
-        if me < n and not bool(message.alive.array()[me]):
+        message, arrays = got
+        if me < n and not bool(arrays["alive"][me]):
             end, at = "failed", k  # the world says this UAV has failed
             break
-        report = program.cycle(message)
-        now = (getattr(transport, "published", 0), getattr(transport, "bytes", 0))
+        report = program.cycle(k, arrays, getattr(message, "central", True))
+        now = (transport.published, transport.bytes, mailbox.received)
         report = structs.replace(
             report,
-            published=now[0] - published[0],
-            bytes=now[1] - published[1],
-            dropped=mailbox.dropped,
+            published=now[0] - counted[0],
+            bytes=now[1] - counted[1],
+            received=now[2] - counted[2],
+            drops=mailbox.reasons(),
         )
-        published = now
-        transport.publish(f"{k_['report']}{me}", encode(report))
+        counted = now
+        link.send(WORLD, report)
         ran += 1
     # stay until the world is done: closing at once could lose the last report in flight
-    mailbox.wait(lambda: bool(mailbox.gone), time.monotonic() + LINGER)
+    mailbox.wait(lambda: mailbox.world_gone, time.monotonic() + LINGER)
     return Served(ran, scenario.steps, end, at, programs, central)
 
 
-def _presence(transport: Transport, run: str, me: int) -> None:
-    message = Radio(VERSION, run, -1, "presence", 0, me, True, {})
-    transport.publish(f"{keys(run)['radio']}{me}", encode(message))
+def _hello(transport: Transport, mailbox: Mailbox, run: str, wait: float):
+    """The world's Hello, asked for every half second until it comes (a world already
+    running answers at its next cycle), or None when none came within `wait` seconds."""
+    limit = time.monotonic() + wait
+    join = keys(run)["join"]
+    while time.monotonic() < limit and not mailbox.world_gone:
+        transport.publish(join, b"")
+        if mailbox.wait(lambda: ("hello",) in mailbox.inbox, min(limit, time.monotonic() + 0.5)):
+            break
+    return mailbox.inbox.get(("hello",))
 
 
-def meet(transport: Transport, mailbox: Mailbox, run: str, me: int, programs: int, wait: float):
+def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:
+    """Say who this program has heard, to every program that has not yet heard it."""
+    heard = np.zeros(programs, dtype=bool)
+    acknowledged = np.zeros(programs, dtype=bool)
+    with mailbox.cond:
+        for q in range(programs):
+            content = mailbox.content(-1, "presence", q, 0)
+            if content is not None:
+                heard[q] = True
+                acknowledged[q] = bool(content["heard"][me])
+    heard[me] = acknowledged[me] = True
+    body = encode(Radio(VERSION, link.run, -1, me, [part("presence", 0, {"heard": heard})]))
+    for q in np.flatnonzero(~acknowledged):
+        link.send_body(int(q), body)
+
+
+def meet(link: Link, mailbox: Mailbox, me: int, programs: int, wait: float) -> bool:
     """Announce this program to the others until it has heard every one of them (UAVs
     0 .. N-1 and the central node N if any): then the routes between all programs
     exist, and no message of the first cycle is lost to a subscription still in transit."""
     others = [p for p in range(programs) if p != me]
     heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
     limit = time.monotonic() + wait
-    while time.monotonic() < limit and not mailbox.gone:
-        _presence(transport, run, me)
+    while time.monotonic() < limit and not mailbox.world_gone:
+        _presence(link, mailbox, me, programs)
         if mailbox.wait(heard, time.monotonic() + 0.1):
             return True
     return False

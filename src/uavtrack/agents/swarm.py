@@ -6,10 +6,15 @@
   loopback endpoints; the world listens, the programs connect to it. Every process
   started here is stopped here, by pid: at the end, on an error, on Ctrl-C. A program
   whose parent dies, or whose world is gone, stops by itself.
+
+By default the world makes the run's keys (`security.Keyring`) and hands each spawned
+program its own through its standard input (with `--no-spawn`, in key files the user
+copies to the machines of the programs), so only the run's members can speak in it.
 """
 
 from __future__ import annotations
 
+import json
 import os
 import re
 import secrets
@@ -17,17 +22,21 @@ import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
 
 from ..config import Scenario
 from ..errors import RunError, UsageError
 from ..methods import get
 from ..simulation import Result, result_of
 from .program import serve
-from .transport import Bus, MemoryTransport, ZenohTransport, zenoh_reason
+from .security import Keyring
+from .transport import Bus, MemoryTransport, ZenohOptions, ZenohTransport, zenoh_reason
 from .world import Traffic, WorldProgram
 
 TRANSPORTS = ("memory", "zenoh")
@@ -45,25 +54,25 @@ class SwarmResult:
 
 def free_port(host: str = "127.0.0.1") -> int:
     """A TCP port free on `host` now."""
-    with socket.socket() as probe:
+    with socket.socket(socket.AF_INET6 if ":" in host else socket.AF_INET) as probe:
         probe.bind((host, 0))
         return probe.getsockname()[1]
 
 
-def world_endpoint(listen: str | None) -> str:
+def world_endpoint(listen: str | None, tls: bool = False) -> str:
     """The endpoint the world listens on, as the programs will reach it: a free loopback
-    port when none is given, and a free port of the host for ``tcp/HOST:0`` (the
-    programs must be told a real port)."""
+    port when none is given (tls/ with TLS), and a free port of the host for
+    ``tcp/HOST:0`` or ``tls/HOST:0`` (the programs must be told a real port)."""
     if listen is None:
-        return f"tcp/127.0.0.1:{free_port()}"
+        return f"{'tls' if tls else 'tcp'}/127.0.0.1:{free_port()}"
     if not listen.strip():
         raise UsageError("--listen is empty; give an endpoint such as tcp/127.0.0.1:7447")
-    found = re.fullmatch(r"tcp/(\[[^\]]+\]|[^:/]+):0", listen.strip())
+    found = re.fullmatch(r"(tcp|tls)/(\[[^\]]+\]|[^:/]+):0", listen.strip())
     if found is None:
-        return listen
-    host = found.group(1)
+        return listen.strip()
+    scheme, host = found.group(1), found.group(2)
     try:
-        return f"tcp/{host}:{free_port(host.strip('[]'))}"
+        return f"{scheme}/{host}:{free_port(host.strip('[]'))}"
     except OSError as exc:
         raise UsageError(f"cannot listen on {listen}: {exc.strerror or exc}") from None
 
@@ -80,7 +89,10 @@ class Options:
     trace: bool = True
     progress: Callable[[int], None] | None = None
     startup: float = 60.0
-    announce: Callable[[str, str], None] | None = None
+    announce: Callable[[str, str, list[Path]], None] | None = None
+    sign: bool = True
+    keys: Path | None = None
+    zenoh: ZenohOptions = field(default_factory=ZenohOptions)
 
 
 def run_swarm(
@@ -96,7 +108,10 @@ def run_swarm(
     trace: bool = True,
     progress: Callable[[int], None] | None = None,
     startup: float | None = None,
-    announce: Callable[[str, str], None] | None = None,
+    announce: Callable[[str, str, list[Path]], None] | None = None,
+    sign: bool = True,
+    keys: Path | None = None,
+    zenoh: ZenohOptions | None = None,
 ) -> SwarmResult:
     """Run one trial as a swarm of programs; its result equals `simulate`'s for the same
     scenario, method and seed (the same faults included).
@@ -104,12 +119,19 @@ def run_swarm(
     deadline: seconds a round waits for messages; listen: the world's endpoint (zenoh;
     default a free loopback port); connect: more endpoints for the world to join
     (programs on other machines); spawn: start the programs here (else wait for them,
-    started with `uavtrack agent`; `announce` is told the run id and the endpoint);
-    realtime: pace cycles at dt; startup: seconds to wait for the programs.
+    started with `uavtrack agent`; `announce` is told the run id, the endpoint and the
+    key files written in `keys`); realtime: pace cycles at dt; startup: seconds to wait
+    for the programs; sign: authenticate every message (`security`); zenoh: a Zenoh
+    configuration file and TLS files.
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
     get(method)  # refuses an unknown method now
+    if sign and not spawn and keys is None:
+        raise UsageError(
+            "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "
+            "key files (or --no-sign)"
+        )
     run = secrets.token_hex(6)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
@@ -123,22 +145,27 @@ def run_swarm(
         progress,
         startup if startup is not None else 30.0 + 4.0 * len(programs),
         announce,
+        sign,
+        keys,
+        zenoh or ZenohOptions(),
     )
+    keyring = Keyring(run, len(programs)) if sign else None
     go = _in_memory if transport == "memory" else _over_zenoh
-    return go(scenario, method, seed, run, programs, options)
+    return go(scenario, method, seed, run, programs, options, keyring)
 
 
-def _in_memory(scenario, method, seed, run, programs, o: Options) -> SwarmResult:
+def _in_memory(scenario, method, seed, run, programs, o: Options, keyring) -> SwarmResult:
     bus = Bus()
     world_link = MemoryTransport(bus)
     world_link.announce(f"uavtrack/{run}/alive/world")
-    world = WorldProgram(scenario, method, seed, world_link, run, o.deadline, o.startup)
+    world = WorldProgram(scenario, method, seed, world_link, run, o.deadline, o.startup, keyring)
     errors: list[BaseException] = []
 
     def program(me: int) -> None:
         link = MemoryTransport(bus)
+        credential = keyring.credential(me) if keyring is not None else None
         try:
-            serve(link, run, me, wait=o.startup)
+            serve(link, run, me, wait=o.startup, credential=credential)
         except BaseException as exc:  # reported by the world's thread
             errors.append(exc)
         finally:
@@ -158,42 +185,48 @@ def _in_memory(scenario, method, seed, run, programs, o: Options) -> SwarmResult
     return SwarmResult(result_of(batch, seed), world.traffic, run, "memory")
 
 
-def _over_zenoh(scenario, method, seed, run, programs, o: Options) -> SwarmResult:
+def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> SwarmResult:
     try:
         import zenoh  # noqa: F401
     except ImportError:
         raise UsageError(
             '--transport zenoh needs eclipse-zenoh: pip install "uavtrack[agents]"'
         ) from None
-    endpoint = world_endpoint(o.listen)
+    endpoint = world_endpoint(o.listen, o.zenoh.tls)
     try:
-        link = ZenohTransport([endpoint], list(o.connect))
+        link = ZenohTransport([endpoint], list(o.connect), o.zenoh, mode="router")
     except Exception as exc:  # zenoh reports a busy port, a bad endpoint, no answer so
         where = " and ".join([f"listen on {endpoint}", *(f"connect to {c}" for c in o.connect)])
         raise UsageError(f"cannot {where}: {zenoh_reason(exc)}") from None
-    children: list[subprocess.Popen] = []
+    children: list[Child] = []
+    written: list[Path] = []
+    finished = False
     try:
         link.announce(f"uavtrack/{run}/alive/world")
-        world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup)
+        world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup, keyring)
+        if not o.spawn and keyring is not None:
+            written = write_keys(keyring, programs, o.keys)
         if o.announce is not None:
-            o.announce(run, endpoint)
+            o.announce(run, endpoint, written)
         if o.spawn:
             for me in programs:
-                children.append(
-                    subprocess.Popen(
-                        [sys.executable, "-m", "uavtrack.agents", run, str(me), endpoint],
-                        stdin=subprocess.DEVNULL,
-                        start_new_session=True,  # Ctrl-C is the swarm's to handle
-                    )
-                )
+                spec = {
+                    "run": run,
+                    "program": me,
+                    "connect": [endpoint],
+                    "zenoh": asdict(o.zenoh),
+                    "credential": keyring.credential(me).to_json() if keyring else None,
+                    "parent": os.getpid(),
+                }
+                children.append(Child.start(me, spec))
 
         def check() -> None:
-            ended = [c for c in children if c.poll() is not None]
+            ended = [c for c in children if c.process.poll() is not None]
             if ended:
-                codes = ", ".join(str(c.returncode) for c in ended)
+                said = "; ".join(c.said() for c in ended)
                 raise RunError(
                     f"{len(ended)} of {len(children)} agent processes exited before the run "
-                    f"started (exit codes {codes}); see their messages above"
+                    f"started: {said}"
                 )
 
         world.check = check if o.spawn else None
@@ -201,10 +234,97 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options) -> SwarmResul
             batch = world.run_trial(trace=o.trace, realtime=o.realtime, progress=o.progress)
         except TimeoutError as exc:
             raise RunError(str(exc)) from None
+        finished = True
     finally:
         link.close()  # the programs see the world gone and end
-        stop(children, grace=o.deadline + 3.0)
+        # after the last cycle they finish by themselves; on an error or Ctrl-C, at once
+        stop([c.process for c in children], grace=o.deadline + 3.0 if finished else 0.0)
+        for path in written:
+            path.unlink(missing_ok=True)
+        _forward(children)
+        for child in children:
+            child.close()
     return SwarmResult(result_of(batch, seed), world.traffic, run, "zenoh")
+
+
+def write_keys(keyring: Keyring, programs: list[int], folder: Path) -> list[Path]:
+    """Each program's key file in `folder`, ``<run>-<program>.key``, readable by the
+    owner only; removed when the run ends."""
+    written = []
+    try:
+        for me in programs:
+            path = Path(folder) / f"{keyring.run}-{me}.key"
+            keyring.credential(me).write(path)
+            written.append(path)
+    except OSError as exc:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise UsageError(f"--keys: cannot write {exc.filename}: {exc.strerror}") from None
+    return written
+
+
+@dataclass
+class Child:
+    """A spawned program: its process and the file its standard error goes to (already
+    unlinked: it goes with the last process that holds it, whatever ends this one)."""
+
+    me: int
+    process: subprocess.Popen
+    log: Any
+
+    @classmethod
+    def start(cls, me: int, spec: dict) -> Child:
+        log = tempfile.TemporaryFile(prefix="uavtrack-program-")
+        process = subprocess.Popen(
+            [sys.executable, "-m", "uavtrack.agents", spec["run"], str(me)],
+            stdin=subprocess.PIPE,
+            stdout=subprocess.DEVNULL,
+            stderr=log,
+            start_new_session=True,  # Ctrl-C is the swarm's to handle
+        )
+        try:  # the program's spec and key, through a pipe only it reads
+            process.stdin.write((json.dumps(spec) + "\n").encode())
+            process.stdin.close()
+        except OSError:  # it died at once; `said` tells why
+            pass
+        return cls(me, process, log)
+
+    def printed(self) -> list[str]:
+        """The lines the program printed on its standard error."""
+        try:
+            size = os.fstat(self.log.fileno()).st_size
+            data = os.pread(self.log.fileno(), min(size, 1 << 20), max(0, size - (1 << 20)))
+        except (OSError, ValueError):
+            return []
+        return data.decode(errors="replace").strip().splitlines()
+
+    def said(self, lines: int = 3) -> str:
+        """What the program printed last, on one line, or that it printed nothing."""
+        text = self.printed()
+        code = self.process.returncode
+        if not text:
+            return f"program {self.me} (exit code {code}) printed nothing"
+        return f"program {self.me} (exit code {code}) said: " + " | ".join(text[-lines:])
+
+    def close(self) -> None:
+        if self.process.stdin is not None and not self.process.stdin.closed:
+            try:
+                self.process.stdin.close()
+            except OSError:
+                pass
+        self.log.close()
+
+
+def _forward(children: list[Child], lines: int = 20) -> None:
+    """Show on this process's standard error what the programs printed, if anything."""
+    for child in children:
+        text = child.printed()
+        if text:
+            shown = text[-lines:]
+            skipped = f" (last {lines} of {len(text)} lines)" if len(text) > lines else ""
+            print(f"program {child.me} printed{skipped}:", file=sys.stderr)
+            for line in shown:
+                print(f"  {line}", file=sys.stderr)
 
 
 def stop(children: list[subprocess.Popen], grace: float = 5.0) -> None:
@@ -224,14 +344,3 @@ def stop(children: list[subprocess.Popen], grace: float = 5.0) -> None:
         except subprocess.TimeoutExpired:
             child.kill()
             child.wait()
-
-
-def watch_parent(parent: int) -> None:
-    """End this process within a second once `parent` is gone (even by SIGKILL)."""
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()

@@ -4,12 +4,18 @@
   memory`: every program runs in a thread of one process; publishing calls the
   subscribers' handlers at once.
 * `ZenohTransport`: Eclipse Zenoh in peer mode, one session per OS process, explicit
-  endpoints, multicast scouting off, no router or daemon; liveliness tokens tell the
-  others when a program's process is gone.
+  endpoints, multicast scouting off, no router or daemon; optionally TLS (mutual: only
+  holders of a certificate of the swarm's CA connect) and a Zenoh configuration file.
 
-Keys live under ``uavtrack/<run id>/``, so two swarms never hear each other. A
-`Mailbox` keeps what a program received, decoded, and lets it wait for what it needs
-with a deadline.
+Keys live under ``uavtrack/<run id>/`` (`keys`), so two swarms never hear each other.
+Each program has a key of its own (``to/<program>``) and reads nothing else but the
+world's broadcast Hello: a radio message goes only to the programs that can hear it.
+
+A `Link` is a program's way out (`send` seals a message for one receiver, `security`);
+a `Mailbox` its way in: every payload passes the program's `security.Gate`, is decoded
+and checked against the run (`messages.Spec`); what fails is dropped and counted by
+reason. What is kept is bounded (a window of cycles, rounds up to the run's most), and a
+waiting program is woken when what it waits for is complete, not per message.
 """
 
 from __future__ import annotations
@@ -18,14 +24,38 @@ import json
 import re
 import threading
 import time
+from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
-from .messages import Hello, Message, Radio, Sense, Tick, decode
+from .messages import Hello, Message, Radio, Ready, Report, Sense, Spec, Tick, decode, encode
+from .security import EVERYONE, WORLD, Gate, peek_sender
+
+
+def keys(run: str) -> dict[str, str]:
+    """The key layout of a run: the world's Hello, requests for it, each program's
+    inbox (``to`` + number, or ``world``) and liveliness tokens (``alive`` + number)."""
+    root = f"uavtrack/{run}/"
+    return {
+        "root": root,
+        "hello": root + "hello",
+        "join": root + "join",
+        "to": root + "to/",
+        "alive": root + "alive/",
+    }
+
+
+def inbox_key(run: str, program: int) -> str:
+    """The key a program (or the world, `WORLD`) reads."""
+    return f"uavtrack/{run}/to/" + ("world" if program == WORLD else str(program))
 
 
 class Transport:
     """Publish bytes under a key, subscribe to a key prefix, announce and watch liveness."""
+
+    published = 0
+    bytes = 0
 
     def publish(self, key: str, payload: bytes) -> None:
         raise NotImplementedError
@@ -39,8 +69,9 @@ class Transport:
         """Declare this program alive under `key` until the transport closes."""
 
     def watch(self, key: str, on_gone: Callable[[str], None]) -> None:
-        """Call on_gone(key) when the program announced as `key` (or under it, when it
-        ends with a slash) is gone."""
+        """Call on_gone(key) when a token announced as `key` (or under it, when it ends
+        with a slash) is gone. Anyone on the network can make and drop a token: treat
+        it as a hint and confirm with `alive`."""
 
     def alive(self, key: str) -> set[str]:
         """The keys announced now as `key` (or under it, when it ends with a slash)."""
@@ -67,14 +98,15 @@ class Bus:
         self.lock = threading.Lock()
         self.subscribers: list[tuple[str, Callable[[str, bytes], None]]] = []
         self.watchers: list[tuple[str, Callable[[str], None]]] = []
-        self.alive: set[str] = set()
+        self.alive: list[str] = []  # one entry per token: the same key may be held twice
         self.published = 0
         self.bytes = 0
 
     def drop(self, key: str) -> None:
-        """A program is gone (a test's crash): its watchers are told."""
+        """A token is gone (a program ended or crashed): its watchers are told."""
         with self.lock:
-            self.alive.discard(key)
+            if key in self.alive:
+                self.alive.remove(key)
             watchers = [w for w in self.watchers if matches(w[0], key)]
         for _, on_gone in watchers:
             on_gone(key)
@@ -105,7 +137,7 @@ class MemoryTransport(Transport):
 
     def announce(self, key: str) -> None:
         with self.bus.lock:
-            self.bus.alive.add(key)
+            self.bus.alive.append(key)
         self.announced.append(key)
 
     def watch(self, prefix: str, on_gone: Callable[[str], None]) -> None:
@@ -122,20 +154,56 @@ class MemoryTransport(Transport):
         self.announced = []
 
 
-def zenoh_config(listen: list[str], connect: list[str], connect_timeout: float = 5.0) -> Any:
-    """A peer-mode Zenoh configuration: explicit endpoints, no multicast scouting."""
+@dataclass(frozen=True)
+class ZenohOptions:
+    """How a Zenoh session is set up beyond its endpoints: a Zenoh configuration file
+    (JSON5, Zenoh's own format) and TLS files (PEM: the CA that signs every member's
+    certificate, this member's certificate and its private key)."""
+
+    config: str | None = None
+    tls_ca: str | None = None
+    tls_cert: str | None = None
+    tls_key: str | None = None
+
+    @property
+    def tls(self) -> bool:
+        return self.tls_ca is not None
+
+
+def zenoh_config(
+    listen: list[str],
+    connect: list[str],
+    connect_timeout: float = 5.0,
+    options: ZenohOptions | None = None,
+    mode: str = "peer",
+) -> Any:
+    """A Zenoh configuration: the file of `options` if any, then `mode` and no multicast
+    scouting (where the file does not set them), the endpoints (none to listen on but
+    `listen`), and TLS (mutual: every member shows a certificate of the CA) when its
+    files are given."""
     import zenoh
 
-    conf = zenoh.Config()
-    conf.insert_json5("mode", json.dumps("peer"))
-    conf.insert_json5("scouting/multicast/enabled", "false")
-    conf.insert_json5("transport/shared_memory/enabled", "false")  # no SHM watchdog threads
-    if listen:
+    options = options or ZenohOptions()
+    conf = zenoh.Config.from_file(options.config) if options.config else zenoh.Config()
+    if conf.get_json("mode") == "null":
+        conf.insert_json5("mode", json.dumps(mode))
+    if conf.get_json("scouting/multicast/enabled") == "null":
+        conf.insert_json5("scouting/multicast/enabled", "false")
+    if conf.get_json("transport/shared_memory/enabled") == "null":
+        conf.insert_json5("transport/shared_memory/enabled", "false")  # no SHM watchdogs
+    if listen or not options.config:  # not Zenoh's default: every interface
         conf.insert_json5("listen/endpoints", json.dumps(listen))
     if connect:  # fail, rather than retry for ever, when nothing answers
         conf.insert_json5("connect/endpoints", json.dumps(connect))
         conf.insert_json5("connect/exit_on_failure", "true")
         conf.insert_json5("connect/timeout_ms", json.dumps(int(1000 * connect_timeout)))
+    if options.tls:
+        tls = "transport/link/tls/"
+        conf.insert_json5(tls + "root_ca_certificate", json.dumps(options.tls_ca))
+        for role in ("listen", "connect"):
+            conf.insert_json5(f"{tls}{role}_certificate", json.dumps(options.tls_cert))
+            conf.insert_json5(f"{tls}{role}_private_key", json.dumps(options.tls_key))
+        conf.insert_json5(tls + "enable_mtls", "true")
     return conf
 
 
@@ -148,18 +216,27 @@ def zenoh_reason(exc: BaseException) -> str:
         text = quoted.group(1)
     text = re.sub(r" at /\S+", "", text)  # source locations
     text = re.sub(r"\bSingle\(([^)]*)\)", r"\1", text)
+    text = re.sub(r"-->.*?\|\s*\d+\s*\|.*?= ", "", text)  # a JSON5 parser's drawing
     text = text.replace("[", "").replace("]", "").rstrip(".")
     return text[:200] or type(exc).__name__
 
 
 class ZenohTransport(Transport):
-    """One Zenoh session (peer mode) of one OS process."""
+    """One Zenoh session of one OS process: the world's is a router (it listens, and
+    relays between the programs, as the radio medium it emulates), a program's a client
+    of it (it listens on nothing)."""
 
-    def __init__(self, listen: list[str], connect: list[str]) -> None:
+    def __init__(
+        self,
+        listen: list[str],
+        connect: list[str],
+        options: ZenohOptions | None = None,
+        mode: str = "client",
+    ) -> None:
         import zenoh
 
         zenoh.init_log_from_env_or("error")
-        self.session = zenoh.open(zenoh_config(listen, connect))
+        self.session = zenoh.open(zenoh_config(listen, connect, options=options, mode=mode))
         self.publishers: dict[str, Any] = {}
         self.keep: list[Any] = []  # subscribers and tokens live as long as the session
         self.published = 0
@@ -202,7 +279,7 @@ class ZenohTransport(Transport):
         )
 
     def alive(self, prefix: str) -> set[str]:
-        replies = self.session.liveliness().get(expression(prefix), timeout=1.0)
+        replies = self.session.liveliness().get(expression(prefix), timeout=2.0)
         return {str(reply.ok.key_expr) for reply in replies if reply.ok is not None}
 
     def close(self) -> None:
@@ -218,40 +295,197 @@ class ZenohTransport(Transport):
             pass
 
 
-class Mailbox:
-    """What a program received, decoded and sorted, with waits that have deadlines.
+class Link:
+    """A program's way out: messages sealed by its gate, each to one receiver's key."""
 
-    Radio messages are kept by (cycle, protocol, sender) -> {round: content} and the
-    round from which a sender's content is final; others by kind. Malformed, foreign or
-    out-of-version messages are counted in `dropped` and forgotten.
+    def __init__(self, transport: Transport, gate: Gate) -> None:
+        self.transport, self.gate = transport, gate
+        self.run = gate.run
+
+    def send(self, receiver: int, message: Message) -> None:
+        self.send_body(receiver, encode(message))
+
+    def send_body(self, receiver: int, body: bytes) -> None:
+        """An encoded message to `receiver` (a program, or `WORLD`)."""
+        self.transport.publish(inbox_key(self.run, receiver), self.gate.seal(receiver, body))
+
+    def hello(self, message: Hello) -> None:
+        self.transport.publish(keys(self.run)["hello"], self.gate.seal(EVERYONE, encode(message)))
+
+
+EARLY = 4
+"""Payloads a program keeps per sender that arrive before it knows the run (from the
+Hello): the latest; older ones are superseded (presence messages, sent again and again)."""
+EARLY_SENDERS = 1024
+"""Senders named by early payloads a program keeps at most."""
+
+
+class Mailbox:
+    """What a program received, opened, checked and sorted, with waits that have
+    deadlines.
+
+    Radio parts are kept by (cycle, protocol, sender) -> {round: arrays}, with the round
+    from which a sender's content is final; other messages by kind. `now` is the
+    program's current cycle: radio messages of cycles outside `spec`'s window around it
+    are dropped, as are those of forgotten cycles. Every drop is counted in `drops`, by
+    reason. `received` counts the payloads delivered here. A liveliness token that goes
+    is a suspect until `transport` confirms it gone.
     """
 
-    def __init__(self, run: str) -> None:
-        self.run = run
+    def __init__(
+        self, gate: Gate, spec: Spec | None = None, transport: Transport | None = None
+    ) -> None:
+        self.gate, self.spec, self.transport = gate, spec, transport
+        self.run, self.me = gate.run, gate.me
+        self.hello_key = keys(gate.run)["hello"]
         self.cond = threading.Condition()
         self.radio: dict[tuple[int, str, int], dict[int, Any]] = {}
         self.final: dict[tuple[int, str, int], int] = {}
-        self.inbox: dict[tuple, Message] = {}
-        self.dropped = 0
+        self.inbox: dict[tuple, Any] = {}
+        self.drops: dict[str, int] = {}
+        self.received = 0
+        self.now = -1
+        self.oldest = -(2**62)  # radio messages of earlier cycles are no longer needed
         self.gone: set[str] = set()
+        self.suspects: set[str] = set()
+        self.joins = 0
+        self._early: dict[int, deque[bytes]] = {}
+        self._need: Callable[[], bool] | None = None
+
+    @property
+    def world_gone(self) -> bool:
+        """Whether the world program's token is gone (confirmed)."""
+        return any(key.endswith("/alive/world") for key in self.gone)
+
+    def is_gone(self, program: int) -> bool:
+        """Whether program `program`'s token is gone (confirmed)."""
+        return any(key.endswith(f"/alive/{program}") for key in self.gone)
+
+    @property
+    def dropped(self) -> int:
+        """Every payload dropped, whatever the reason (the gate's included)."""
+        return sum(self.drops.values()) + sum(self.gate.drops.values())
+
+    def reasons(self) -> dict[str, int]:
+        """Drops by reason, the gate's and the checks'."""
+        out = dict(self.gate.drops)
+        for reason, count in self.drops.items():
+            out[reason] = out.get(reason, 0) + count
+        return out
+
+    def _drop(self, reason: str) -> None:
+        self.drops[reason] = self.drops.get(reason, 0) + 1
 
     def handler(self, key: str, payload: bytes) -> None:
-        message = decode(payload, self.run)
         with self.cond:
-            if message is None:
-                self.dropped += 1
-            elif isinstance(message, Radio):
-                slot = (message.k, message.protocol, message.sender)
-                self.radio.setdefault(slot, {})[message.round] = message.content
-                if message.final:
-                    self.final[slot] = message.round
-            else:
-                self.inbox[_identity(message)] = message
+            self.received += 1
+            if self.spec is None and key != self.hello_key:
+                sender = peek_sender(payload)
+                if sender is None:
+                    self._drop("malformed")
+                elif sender in self._early or len(self._early) < EARLY_SENDERS:
+                    self._early.setdefault(sender, deque(maxlen=EARLY)).append(payload)
+                else:
+                    self._drop("before the run's keys")
+                return
+            self._take(payload)
+            if self._need is None or self._need():
+                self.cond.notify_all()
+
+    def joined(self, key: str, payload: bytes) -> None:
+        """A program asks for the Hello (the world's side; the request is not read)."""
+        with self.cond:
+            self.joins += 1
+
+    def learn(self, spec: Spec, publics: list[bytes]) -> None:
+        """The run's spec and keys (from the Hello): open what came early."""
+        with self.cond:
+            self.gate.learn(publics)
+            self.spec = spec
+            early, self._early = self._early, {}
+            for payload in (p for queue in early.values() for p in queue):
+                self._take(payload)
             self.cond.notify_all()
 
+    def _take(self, payload: bytes) -> None:
+        opened = self.gate.open(payload)
+        if isinstance(opened, str):
+            return
+        sender, body = opened
+        message = decode(body, self.run)
+        if message is None:
+            self._drop("malformed")
+            return
+        reason = self._store(sender, message)
+        if reason is not None:
+            self._drop(reason)
+
+    def _store(self, sender: int, message: Message) -> str | None:
+        """Keep `message` from `sender`, or say why not."""
+        spec = self.spec
+        if isinstance(message, Hello):
+            if sender != WORLD:
+                return "not from its sender"
+            self.inbox[("hello",)] = message
+            return None
+        if spec is None:
+            return "before the run's keys"
+        if isinstance(message, Radio):
+            if message.sender != sender:
+                return "not from its sender"
+            if message.k < self.oldest:
+                return "outside the window of cycles"
+            parts = spec.radio(message, max(self.now, 0))
+            if isinstance(parts, str):
+                return parts
+            for protocol, round_, final, content in parts:  # what is kept is not replaced
+                slot = (message.k, protocol, sender)  # (but a presence, said again and again)
+                rounds = self.radio.setdefault(slot, {})
+                if round_ in rounds and protocol != "presence" or slot in self.final:
+                    return "duplicate"
+                if content is not None:
+                    rounds[round_] = content
+                if final >= 0:
+                    self.final[slot] = final
+            return None
+        if isinstance(message, Sense | Tick):
+            if sender != WORLD:
+                return "not from its sender"
+            if not self.now <= message.k <= self.now + spec.ahead + 1:
+                return "outside the window of cycles"
+            arrays = (
+                spec.sense(message, self.me) if isinstance(message, Sense) else spec.tick(message)
+            )
+            if isinstance(arrays, str):
+                return arrays
+            kind = "sense" if isinstance(message, Sense) else "tick"
+            if (kind, message.k) in self.inbox:
+                return "duplicate"
+            self.inbox[(kind, message.k)] = (message, arrays)
+            return None
+        if isinstance(message, Ready):
+            if message.program != sender or self.me != WORLD:
+                return "not from its sender"
+            self.inbox[("ready", sender)] = message
+            return None
+        if isinstance(message, Report):
+            if message.uav != sender or self.me != WORLD:
+                return "not from its sender"
+            if message.k != self.now:
+                return "outside the window of cycles"
+            arrays = spec.report(message)
+            if isinstance(arrays, str):
+                return arrays
+            if ("report", message.k, sender) in self.inbox:
+                return "duplicate"
+            self.inbox[("report", message.k, sender)] = (message, arrays)
+            return None
+        return "not from its sender"
+
     def lost(self, key: str) -> None:
+        """A liveliness token went away: a hint, confirmed by the program before use."""
         with self.cond:
-            self.gone.add(key)
+            self.suspects.add(key)
             self.cond.notify_all()
 
     def content(self, k: int, protocol: str, sender: int, round_: int):
@@ -264,36 +498,66 @@ class Mailbox:
             return rounds[round_]
         final = self.final.get(slot)
         if final is not None and round_ >= final:
-            return rounds[final]
+            return rounds.get(final)
         return None
 
     def wait(self, ready: Callable[[], bool], deadline: float) -> bool:
-        """Wait until ready() holds (checked under the lock) or the deadline passes."""
-        with self.cond:
-            while not ready():
-                left = deadline - time.monotonic()
-                if left <= 0:
-                    return False
-                self.cond.wait(min(left, 0.5))
-            return True
+        """Wait until ready() holds (checked under the lock) or the deadline passes; the
+        program is woken when ready() holds, when a token goes (confirmed with the
+        transport before `gone` takes it), or every half second.
 
-    def take(self, identity: tuple) -> Message | None:
+        Time this process spent stopped (SIGSTOP, a suspended machine) does not count
+        against the deadline: when a half-second wait took much longer, the deadline
+        moves by as much, so a program that was stopped does not blame the others."""
+        with self.cond:
+            self._need = ready
+            try:
+                while not ready():
+                    if self.suspects:
+                        self._confirm()
+                        continue
+                    left = deadline - time.monotonic()
+                    if left <= 0:
+                        return False
+                    slice_ = min(left, 0.5)
+                    before = time.monotonic()
+                    self.cond.wait(slice_)
+                    stopped = time.monotonic() - before - slice_
+                    if stopped > 1.0:
+                        deadline += stopped
+                return True
+            finally:
+                self._need = None
+
+    def _confirm(self) -> None:
+        """Move the suspects whose tokens are really gone to `gone`; called with the lock
+        held, which it releases while it asks the transport."""
+        suspects, self.suspects = set(self.suspects), set()
+        if self.transport is None:
+            self.gone |= suspects
+            return
+        self.cond.release()
+        try:  # asked twice: one query may go unanswered on a loaded machine
+            gone = {key for key in suspects if not self.transport.alive(key)}
+            if gone:
+                time.sleep(0.2)
+                gone = {key for key in gone if not self.transport.alive(key)}
+        finally:
+            self.cond.acquire()
+        self.gone |= gone
+
+    def take(self, identity: tuple):
         with self.cond:
             return self.inbox.pop(identity, None)
 
-    def forget(self, before: int) -> None:
-        """Drop radio messages of cycles before `before` (no longer needed)."""
+    def begin(self, k: int, keep_from: int) -> None:
+        """Cycle k begins: radio messages of cycles before `keep_from` are forgotten
+        (and dropped should they still come)."""
         with self.cond:
-            for slot in [s for s in self.radio if s[0] < before]:
+            self.now = k
+            self.oldest = keep_from
+            for slot in [s for s in self.radio if s[0] < keep_from]:
                 self.radio.pop(slot, None)
                 self.final.pop(slot, None)
-
-
-def _identity(message: Message) -> tuple:
-    if isinstance(message, Hello):
-        return ("hello",)
-    if isinstance(message, Sense):
-        return ("sense", message.k, message.uav)
-    if isinstance(message, Tick):
-        return ("tick", message.k)
-    return ("report", message.k, message.uav)
+            for identity in [i for i in self.inbox if i[0] in ("sense", "tick") and i[1] < k]:
+                self.inbox.pop(identity, None)

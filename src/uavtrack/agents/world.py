@@ -9,8 +9,11 @@ deadline), flies the UAVs and records the cycle with the simulator's own `Cycle`
 `metrics.Tally` and `simulation.Recorder`, so a swarm's trace and metrics have the
 format of `uavtrack run`'s.
 
-A UAV whose report misses the deadline, or whose program is gone (its liveliness
-token dropped), has failed from the next cycle on.
+A program that misses its report of a cycle, or whose process is gone (its liveliness
+token dropped, confirmed by asking for it again), is lost from that cycle on: the cycle
+records it as failed (no estimate, no observation, no decision), so every metric masks
+it in the one place it masks failed UAVs. Without the central node (centralized
+method), each UAV keeps its own filter and its last assigned target.
 """
 
 from __future__ import annotations
@@ -25,9 +28,9 @@ from .. import simulation, world
 from ..config import G, Scenario
 from ..methods import get
 from ..metrics import Tally
-from .agent import keys
-from .messages import VERSION, Array, Hello, Report, Sense, Tick, encode
-from .transport import Mailbox, Transport
+from .messages import VERSION, Array, Hello, Sense, Spec, Tick
+from .security import WORLD, Gate, Keyring
+from .transport import Link, Mailbox, Transport, inbox_key, keys
 
 
 @dataclass
@@ -35,24 +38,34 @@ class Traffic:
     """What a swarm run cost and what happened to its programs.
 
     cycle_seconds: wall time of each cycle [s]; published, bytes: radio messages
-    published and their bytes (every program's); overruns: the steps whose cycle took
-    longer than dt (with --realtime); dropped: malformed, foreign or old messages
-    dropped (the world's and every program's); failed: UAVs failed by the fault model
-    (uav -> step); lost: programs gone or silent past their deadline (uav -> step).
+    published and their bytes (every program's); received: messages delivered to the
+    programs; overruns: the steps whose cycle took longer than dt (with --realtime);
+    drops: messages dropped by the world and every program, by reason; failed: UAVs
+    failed by the fault model (uav -> step); lost: programs gone or silent past their
+    deadline (program -> step; the central node is program N).
     """
 
     cycle_seconds: list[float] = field(default_factory=list)
     published: int = 0
     bytes: int = 0
+    received: int = 0
     overruns: list[int] = field(default_factory=list)
-    dropped: int = 0
+    drops: dict[str, int] = field(default_factory=dict)
     failed: dict[int, int] = field(default_factory=dict)
     lost: dict[int, int] = field(default_factory=dict)
-    program_dropped: dict[int, int] = field(default_factory=dict)
+    program_drops: dict[int, dict[str, int]] = field(default_factory=dict)
+
+    @property
+    def dropped(self) -> int:
+        """Messages dropped, whatever the reason, by the world and every program."""
+        return sum(self.drops.values())
 
 
 class WorldProgram:
-    """The truth of one trial of `scenario` (seeded like `simulate(scenario, seed=seed)`)."""
+    """The truth of one trial of `scenario` (seeded like `simulate(scenario, seed=seed)`).
+
+    keyring: the run's keys (`security.Keyring`; None: messages are not authenticated).
+    """
 
     def __init__(
         self,
@@ -63,23 +76,33 @@ class WorldProgram:
         run: str,
         deadline: float = 2.0,
         startup: float = 60.0,
+        keyring: Keyring | None = None,
     ) -> None:
         self.scenario, self.method = scenario, get(method)
         self.transport, self.run, self.deadline, self.startup = transport, run, deadline, startup
+        self.keyring = keyring
         self.keys = keys(run)
         self.seeds = [np.random.SeedSequence(seed)]
         self.ctx = simulation.Context.of(scenario, self.method, self.seeds)
-        self.mailbox = Mailbox(run)
-        transport.subscribe(self.keys["report"], self.mailbox.handler)
-        transport.watch(self.keys["alive"], self._gone)
-        self.gone: set[int] = set()
+        programs = len(self.programs)
+        gate = keyring.gate() if keyring is not None else Gate(run, WORLD, programs, None)
+        self.link = Link(transport, gate)
+        self.spec = Spec.of(scenario, self.method.central)
+        self.mailbox = Mailbox(gate, self.spec, transport)
+        transport.subscribe(inbox_key(run, WORLD), self.mailbox.handler)
+        transport.subscribe(self.keys["join"], self.mailbox.joined)
+        transport.watch(self.keys["alive"], self.mailbox.lost)
         self.traffic = Traffic()
         self.check: Callable[[], None] | None = None
+        self.step = -1
+        self.central_alive = self.method.central
+        self.prior: tuple[np.ndarray, np.ndarray] | None = None
+        self._answered = 0
 
-    def _gone(self, key: str) -> None:
-        tail = key.rsplit("/", 1)[-1]
-        if tail.isdigit():
-            self.gone.add(int(tail))
+    def _gone(self) -> set[int]:
+        """The programs whose processes are gone (tokens confirmed gone)."""
+        tails = (key.rsplit("/", 1)[-1] for key in self.mailbox.gone)
+        return {int(t) for t in tails if t.isdigit()}
 
     @property
     def programs(self) -> list[int]:
@@ -87,7 +110,8 @@ class WorldProgram:
         n = self.scenario.n_uavs
         return list(range(n)) + ([n] if self.method.central else [])
 
-    def hello(self, prior_mean: np.ndarray, prior_cov: np.ndarray) -> None:
+    def hello(self) -> None:
+        prior_mean, prior_cov = self.prior
         message = Hello(
             VERSION,
             self.run,
@@ -97,11 +121,14 @@ class WorldProgram:
             Array.of(prior_mean),
             Array.of(prior_cov),
             self.deadline,
+            self.link.gate.authenticates,
+            self.keyring.public() if self.keyring is not None else [],
+            self.step,
         )
-        self.transport.publish(self.keys["hello"], encode(message))
+        self.link.hello(message)
 
-    def wait_ready(self, prior_mean, prior_cov) -> None:
-        """Publish the run until every program has said it is ready (a report of step -1).
+    def wait_ready(self) -> None:
+        """Publish the run until every program has said it is ready.
 
         `self.check`, if set, is called while waiting and raises when the programs cannot
         come any more (their processes exited)."""
@@ -110,9 +137,9 @@ class WorldProgram:
         while waiting:
             if self.check is not None:
                 self.check()
-            self.hello(prior_mean, prior_cov)
+            self.hello()
             self.mailbox.wait(lambda: False, min(deadline, time.monotonic() + 0.2))
-            waiting = {p for p in waiting if self.mailbox.take(("report", -1, p)) is None}
+            waiting = {p for p in waiting if self.mailbox.take(("ready", p)) is None}
             if waiting and time.monotonic() > deadline:
                 raise TimeoutError(self._not_started(waiting))
 
@@ -137,35 +164,37 @@ class WorldProgram:
         s, ctx = self.scenario, self.ctx
         state, trajectory, sensor_rngs = simulation.initial_state(s, self.seeds)
         uavs, alive = state.uavs, state.alive
-        self.wait_ready(state.mean[0, 0], state.cov[0, 0, 0])
+        self.prior = (state.mean[0, 0], state.cov[0, 0, 0])
+        self.wait_ready()
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
         tally = Tally(
             1, Nu, Nt, timed=True, cutoff=s.evaluation.ospa_cutoff, order=s.evaluation.ospa_order
         )
         recorder = simulation.Recorder(T, timed=True) if trace else None
-        previous = np.full((1, Nu), -1, dtype=np.int64)
+        told = np.ones(Nu, dtype=bool)  # the UAVs sent a Sense last cycle
         started = time.monotonic()
         noises = simulation.sensor_noise(sensor_rngs, Nu, Nt, T)
         for k, noise in enumerate(noises):
             begin = time.monotonic()
+            self.step = k
+            self.mailbox.begin(k, k)
+            self._answer_joins()
             was = alive
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
-            alive[0, sorted(i for i in self.gone if i < Nu)] = False
-            for i in np.flatnonzero(was[0] & ~alive[0]):
-                if int(i) not in self.traffic.failed:
-                    self.traffic.lost.setdefault(int(i), k)
+            self._lose(k, alive, self._gone())
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory[:, k]
             observed, z = simulation.observe(uavs, targets, noise, alive, s)
-            self.send(k, believed[0], observed[0], z, graph[0], alive[0], was[0])
-            cycle, previous = self.collect(k, uavs, observed, alive, previous)
+            self.send(k, believed[0], observed[0], z, graph[0], alive[0], told)
+            told = alive[0].copy()
+            cycle, actions = self.collect(k, uavs, observed, alive)
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
-            new = world.fly(uavs, ctx.const.actions[self.actions], s.dt, G)
+            new = world.fly(uavs, ctx.const.actions[actions], s.dt, G)
             uavs = np.where(alive[..., None], new, uavs)
             took = time.monotonic() - begin
             self.traffic.cycle_seconds.append(took)
@@ -177,51 +206,76 @@ class WorldProgram:
                     time.sleep(due - time.monotonic())
             if progress is not None:
                 progress(k + 1)
-        self.traffic.dropped = self.mailbox.dropped + sum(self.traffic.program_dropped.values())
+        for drops in (self.mailbox.reasons(), *self.traffic.program_drops.values()):
+            for reason, count in drops.items():
+                self.traffic.drops[reason] = self.traffic.drops.get(reason, 0) + count
         traces = recorder.traces(trajectory) if recorder is not None else None
         return simulation.BatchResult(self.method.name, s, tally.summary(), traces)
 
-    def send(self, k, believed, observed, z, graph, alive, was) -> None:
+    def _answer_joins(self) -> None:
+        """A program that asked for the run hears it, with the step it is at (it cannot
+        join a run under way, and says so)."""
+        if self.mailbox.joins > self._answered:
+            self._answered = self.mailbox.joins
+            self.hello()
+
+    def _lose(self, k: int, alive: np.ndarray, programs: set[int]) -> None:
+        """Programs lost at step k (gone or silent): failed from k on, `alive` (1, N)
+        updated in place."""
+        n = self.scenario.n_uavs
+        for i in sorted(programs):
+            if i < n and alive[0, i]:
+                alive[0, i] = False
+                if i not in self.traffic.failed:
+                    self.traffic.lost.setdefault(i, k)
+            elif i == n and self.central_alive:
+                self.central_alive = False
+                self.traffic.lost.setdefault(n, k)
+
+    def send(self, k, believed, observed, z, graph, alive, told) -> None:
+        """Each UAV told last cycle its Sense (a UAV no longer alive learns it has failed),
+        and the central node its Tick."""
         rows = np.nonzero(observed)[0]  # the UAV of each measurement, in order
         alive_array = Array.of(alive)
-        for i in range(self.scenario.n_uavs):
-            if not was[i]:
-                continue  # failed before: told already
+        for i in np.flatnonzero(told):
             message = Sense(
                 VERSION,
                 self.run,
                 k,
-                i,
+                int(i),
                 Array.of(believed[i]),
                 Array.of(observed[i]),
                 Array.of(z[rows == i]),
                 Array.of(graph[i]),
                 alive_array,
+                self.central_alive,
             )
-            self.transport.publish(f"{self.keys['sense']}{i}", encode(message))
-        if self.method.central:
-            self.transport.publish(
-                self.keys["tick"], encode(Tick(VERSION, self.run, k, alive_array))
-            )
+            self.link.send(int(i), message)
+        if self.central_alive:
+            self.link.send(self.scenario.n_uavs, Tick(VERSION, self.run, k, alive_array))
 
-    def collect(self, k, uavs, observed, alive, previous):
-        """Wait for every living UAV's report (and the central node's); build the Cycle."""
+    def collect(self, k, uavs, observed, alive):
+        """Wait for every living UAV's report (and the central node's); build the Cycle.
+        A program whose report does not come is lost from this cycle on: `alive` (1, N)
+        and `observed` are updated in place. Returns the cycle and the actions (1, N)."""
         s = self.scenario
         Nu, Nt = s.n_uavs, s.n_targets
-        expected = [i for i in range(Nu) if alive[0, i]] + ([Nu] if self.method.central else [])
+        expected = [i for i in range(Nu) if alive[0, i]] + ([Nu] if self.central_alive else [])
         mailbox = self.mailbox
         limit = time.monotonic() + self.cycle_deadline()
-        mailbox.wait(
-            lambda: all(("report", k, i) in mailbox.inbox or i in self.gone for i in expected),
-            limit,
-        )
-        reports: dict[int, Report] = {}
+
+        def ready() -> bool:
+            gone = self._gone()
+            return all(("report", k, i) in mailbox.inbox or i in gone for i in expected)
+
+        mailbox.wait(ready, limit)
+        reports = {}
         for i in expected:
-            report = mailbox.take(("report", k, i))
-            if report is None:
-                self.gone.add(i)  # missed its deadline: failed from the next cycle
-            else:
-                reports[i] = report
+            got = mailbox.take(("report", k, i))
+            if got is not None:
+                reports[i] = got
+        self._lose(k, alive, set(expected) - set(reports))
+        observed &= alive[:, :, None]
         mean = np.full((1, Nu, Nt, 4), np.nan)
         cov = np.full((1, Nu, Nt, 4, 4), np.nan)
         bids = np.full((1, Nu, Nt), np.nan)
@@ -230,24 +284,18 @@ class WorldProgram:
         rounds = np.zeros((1, Nu), dtype=np.int64)
         decision = np.full((1, Nu), np.nan)
         sent = delivered = 0
-        for i, report in reports.items():
+        for i, (report, arrays) in reports.items():
             sent += report.sent
             delivered += report.delivered
             self.traffic.published += report.published
             self.traffic.bytes += report.bytes
-            self.traffic.program_dropped[i] = report.dropped
-            if i == Nu:
+            self.traffic.received += report.received
+            self.traffic.program_drops[i] = dict(report.drops)
+            if i == Nu or not alive[0, i]:
                 continue
-            try:
-                mean[0, i] = report.mean.array().reshape(Nt, 4)
-                cov[0, i] = report.cov.array().reshape(Nt, 4, 4)
-                bids[0, i] = report.bids.array().reshape(Nt)
-            except ValueError:
-                self.mailbox.dropped += 1
-                continue
+            mean[0, i], cov[0, i], bids[0, i] = arrays["mean"], arrays["cov"], arrays["bids"]
             target[0, i], actions[0, i] = report.target, report.action
             rounds[0, i], decision[0, i] = report.rounds, report.decision_ms
-        self.actions = actions
         cycle = simulation.Cycle(
             uavs=uavs,
             observed=observed,
@@ -260,10 +308,10 @@ class WorldProgram:
             messages=np.array([sent]),
             delivered=np.array([delivered]),
             conflicts=simulation.conflicts(target, alive, Nt),
-            alive=alive,
+            alive=alive.copy(),
             decision_time_ms=decision,
         )
-        return cycle, np.where(target >= 0, target, previous)
+        return cycle, actions
 
     def cycle_deadline(self) -> float:
         """How long the world waits for the reports of a cycle: every round of every

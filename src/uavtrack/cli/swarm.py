@@ -2,8 +2,11 @@
 
 from __future__ import annotations
 
+import os
+import re
+import sys
+from contextlib import contextmanager, nullcontext
 from enum import StrEnum
-from functools import partial
 from pathlib import Path
 from typing import Annotated
 
@@ -28,6 +31,98 @@ from . import (
 class TransportName(StrEnum):
     memory = "memory"
     zenoh = "zenoh"
+
+
+ZenohConfigOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--zenoh-config",
+        metavar="FILE",
+        help="zenoh: a Zenoh configuration file (JSON5, Zenoh's own format) to start from",
+    ),
+]
+TlsCaOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--tls-ca", metavar="FILE", help="zenoh: the CA certificate (PEM) of the swarm's TLS"
+    ),
+]
+TlsCertOpt = Annotated[
+    Path | None,
+    typer.Option("--tls-cert", metavar="FILE", help="zenoh: this host's TLS certificate (PEM)"),
+]
+TlsKeyOpt = Annotated[
+    Path | None,
+    typer.Option("--tls-key", metavar="FILE", help="zenoh: this host's TLS private key (PEM)"),
+]
+
+
+def zenoh_options(config, ca, cert, key, endpoints: list[str]):
+    """The Zenoh options of the command line, checked: readable files, the three TLS
+    files together, a tls/ endpoint only with them (or a configuration file)."""
+    from ..agents.transport import ZenohOptions
+
+    for option, path in (
+        ("--zenoh-config", config),
+        ("--tls-ca", ca),
+        ("--tls-cert", cert),
+        ("--tls-key", key),
+    ):
+        if path is not None and not path.is_file():
+            raise UsageError(f"{option}: {path} is not a file")
+        if path is not None and not os.access(path, os.R_OK):
+            raise UsageError(f"{option}: {path} cannot be read")
+    tls = [p for p in (ca, cert, key) if p is not None]
+    if tls and len(tls) < 3:
+        raise UsageError("TLS needs all three of --tls-ca, --tls-cert and --tls-key")
+    if not tls and config is None and any(e.strip().startswith("tls/") for e in endpoints):
+        raise UsageError(
+            "a tls/ endpoint needs --tls-ca, --tls-cert and --tls-key (or a --zenoh-config "
+            "that sets Zenoh's TLS files)"
+        )
+    absolute = lambda p: None if p is None else str(p.expanduser().resolve())  # noqa: E731
+    options = ZenohOptions(absolute(config), absolute(ca), absolute(cert), absolute(key))
+    if config is not None:
+        try:
+            import zenoh
+
+            zenoh.Config.from_file(options.config)
+        except ImportError:
+            pass  # said by the transport
+        except Exception as exc:
+            from ..agents.transport import zenoh_reason
+
+            raise UsageError(f"--zenoh-config: {config}: {zenoh_reason(exc)}") from None
+    return options
+
+
+@contextmanager
+def results_only_on_stdout():
+    """Keep this process's standard output for its result while Zenoh runs: what native
+    code (Zenoh's log) writes to file descriptor 1 goes to standard error instead.
+    (Nothing to do when Python's stdout is not file descriptor 1, as under a test's
+    capture.)"""
+    if sys.stdout is not sys.__stdout__:
+        yield
+        return
+    try:
+        sys.stdout.flush()
+        saved = os.dup(1)
+        os.dup2(2, 1)
+    except (OSError, ValueError):
+        yield
+        return
+    original = sys.stdout
+    sys.stdout = os.fdopen(saved, "w", encoding=original.encoding or "utf-8", closefd=False)
+    try:
+        yield
+    finally:
+        try:
+            sys.stdout.flush()
+        finally:
+            sys.stdout = original
+            os.dup2(saved, 1)
+            os.close(saved)
 
 
 @app.command()
@@ -56,7 +151,7 @@ def swarm(
         str | None,
         typer.Option(
             metavar="ENDPOINT",
-            help="zenoh: the world's endpoint [tcp/127.0.0.1 and a free port]",
+            help="zenoh: the world's endpoint [tcp/127.0.0.1 and a free port; tls/ with TLS]",
         ),
     ] = None,
     connect: Annotated[
@@ -70,6 +165,25 @@ def swarm(
             help="zenoh: start the UAV programs here, or wait for them (uavtrack agent)",
         ),
     ] = True,
+    sign: Annotated[
+        bool,
+        typer.Option(
+            "--sign/--no-sign",
+            help="authenticate every message: only the run's programs can speak in it",
+        ),
+    ] = True,
+    keys: Annotated[
+        Path | None,
+        typer.Option(
+            "--keys",
+            metavar="DIR",
+            help="with --no-spawn: write each program's key file here (removed at the end)",
+        ),
+    ] = None,
+    zenoh_config: ZenohConfigOpt = None,
+    tls_ca: TlsCaOpt = None,
+    tls_cert: TlsCertOpt = None,
+    tls_key: TlsKeyOpt = None,
     deadline: Annotated[
         float,
         typer.Option(min=0.05, max=60, metavar="S", help="seconds a round waits for messages"),
@@ -77,16 +191,35 @@ def swarm(
 ) -> None:
     """Run one trial as a swarm: a world program and one program per UAV exchanging
     messages; prints and writes what `uavtrack run` does."""
-    from ..agents import run_swarm
     from ..methods import get
 
     scenario = load_scenario(config, set_, team)
     if trace is not None:
         check_output(trace, "--trace")
-    if transport == TransportName.memory and (listen is not None or connect or not spawn):
-        raise UsageError("--listen, --connect and --no-spawn need --transport zenoh")
+    zenoh_given = [zenoh_config, tls_ca, tls_cert, tls_key, keys]
+    if transport == TransportName.memory and (
+        listen is not None or connect or not spawn or any(x is not None for x in zenoh_given)
+    ):
+        raise UsageError(
+            "--listen, --connect, --no-spawn, --keys, --zenoh-config and --tls-* need "
+            "--transport zenoh"
+        )
+    if not spawn and sign and keys is None:
+        raise UsageError(
+            "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "
+            "key files (or --no-sign)"
+        )
+    if keys is not None and (spawn or not sign):
+        raise UsageError("--keys is for --no-spawn with signed messages")
+    if keys is not None and not keys.is_dir():
+        raise UsageError(f"--keys: {keys} is not a directory")
+    options = zenoh_options(
+        zenoh_config, tls_ca, tls_cert, tls_key, [listen or "", *(connect or [])]
+    )
     n = scenario.n_uavs
     central = get(method.value).central
+    from ..agents import run_swarm
+
     if not spawn:
         programs = f"{n} UAV programs (0 to {n - 1})" + (
             f" and the central node (program {n})" if central else ""
@@ -97,7 +230,8 @@ def swarm(
             f"{30 + 4 * (n + central)} s",
             err=True,
         )
-    with steps_bar(scenario, label="cycles") as advance:
+    quiet = results_only_on_stdout() if transport == TransportName.zenoh else nullcontext()
+    with quiet, steps_bar(scenario, label="cycles") as advance:
         out = run_swarm(
             scenario,
             method.value,
@@ -110,7 +244,10 @@ def swarm(
             realtime=realtime,
             trace=trace is not None,
             progress=lambda _: advance(1),
-            announce=None if spawn else partial(_announce, n + central),
+            announce=None if spawn else _announcer(n + central, sign),
+            sign=sign,
+            keys=keys,
+            zenoh=options,
         )
     import numpy as np  # not at import: `uavtrack bench` pins BLAS threads first
 
@@ -121,39 +258,48 @@ def swarm(
     swarm_info = {
         "transport": out.transport,
         "run": out.run,
+        "signed": sign,
         "cycle_ms_median": 1e3 * float(np.median(seconds)),
         "cycle_ms_p90": 1e3 * float(np.percentile(seconds, 90)),
         "cycle_ms_max": 1e3 * float(seconds.max()),
         "published_per_uav_cycle": traffic.published / (uavs * cycles),
+        "received_per_uav_cycle": traffic.received / (uavs * cycles),
         "bytes_per_uav_cycle": traffic.bytes / (uavs * cycles),
         "overruns": traffic.overruns if realtime else None,
         "failed": {str(k): v for k, v in traffic.failed.items()},
         "lost": {str(k): v for k, v in traffic.lost.items()},
         "dropped_messages": traffic.dropped,
+        "dropped_by_reason": dict(sorted(traffic.drops.items())),
     }
     rows = [
-        ("transport", out.transport),
+        ("transport", out.transport + ("" if sign else ", messages not signed")),
         (
             "cycle wall time, median / 90th percentile / max [ms]",
             f"{swarm_info['cycle_ms_median']:.1f} / {swarm_info['cycle_ms_p90']:.1f} / "
             f"{swarm_info['cycle_ms_max']:.1f}",
         ),
         (
-            "radio messages published per UAV and cycle",
-            f"{swarm_info['published_per_uav_cycle']:.1f}",
+            "messages published / received per UAV and cycle",
+            f"{swarm_info['published_per_uav_cycle']:.1f} / "
+            f"{swarm_info['received_per_uav_cycle']:.1f}",
         ),
         ("bytes published per UAV and cycle", f"{swarm_info['bytes_per_uav_cycle']:.0f}"),
     ]
     if realtime:
         rows.append(("cycles longer than dt (--realtime)", f"{len(traffic.overruns)} of {cycles}"))
+    lost = {
+        (f"{k} (central node)" if central and k == n else str(k)): v
+        for k, v in traffic.lost.items()
+    }
     for name, found in (
         ("UAVs failed by the fault model (uav: step)", traffic.failed),
-        ("UAV programs lost (uav: step)", traffic.lost),
+        ("programs lost (program: step)", lost),
     ):
         if found:
             rows.append((name, ", ".join(f"{k}: {v}" for k, v in found.items())))
     if traffic.dropped:
-        rows.append(("malformed or foreign messages dropped", str(traffic.dropped)))
+        reasons = ", ".join(f"{r}: {c}" for r, c in sorted(traffic.drops.items()))
+        rows.append(("messages dropped", f"{traffic.dropped} ({reasons})"))
     show(
         out.result,
         scenario,
@@ -166,58 +312,156 @@ def swarm(
     )
 
 
-def _announce(programs: int, run: str, endpoint: str) -> None:
-    typer.echo(f"run {run}; world at {endpoint}", err=True)
-    typer.echo(
-        f"  uavtrack agent --run {run} --uav I --connect {endpoint}   (I = 0 .. {programs - 1})",
-        err=True,
-    )
+def reachable(endpoint: str) -> list[str]:
+    """The endpoint as other machines can reach it: for an unspecified address (0.0.0.0,
+    [::]) one endpoint per address of this host's interfaces, loopback last."""
+    found = re.fullmatch(r"(tcp|tls)/(0\.0\.0\.0|\[::\]):(\d+)", endpoint)
+    if found is None:
+        return [endpoint]
+    import socket
+
+    import psutil
+
+    scheme, any_, port = found.groups()
+    family = socket.AF_INET if any_ == "0.0.0.0" else socket.AF_INET6
+    addresses = []
+    for entries in psutil.net_if_addrs().values():
+        for entry in entries:
+            if entry.family == family and not entry.address.startswith("fe80"):
+                host = entry.address if family == socket.AF_INET else f"[{entry.address}]"
+                addresses.append(f"{scheme}/{host}:{port}")
+    loopback = [a for a in addresses if "/127." in a or "[::1]" in a]
+    return [a for a in addresses if a not in loopback] + loopback or [endpoint]
+
+
+def _announcer(programs: int, sign: bool):
+    def announce(run: str, endpoint: str, written: list[Path]) -> None:
+        where = reachable(endpoint)
+        typer.echo(f"run {run}; world at {', '.join(where)}", err=True)
+        if sign:
+            folder = written[0].parent if written else Path(".")
+            typer.echo(
+                f"key files {run}-0.key .. {run}-{programs - 1}.key in {folder}: copy each to "
+                "the machine of its program (they are secret; removed here when the run ends)",
+                err=True,
+            )
+            typer.echo(
+                f"  uavtrack agent --key {run}-I.key --connect {where[0]}   (I = 0 .. "
+                f"{programs - 1})",
+                err=True,
+            )
+        else:
+            typer.echo(
+                f"  uavtrack agent --run {run} --uav I --connect {where[0]}   (I = 0 .. "
+                f"{programs - 1})",
+                err=True,
+            )
+
+    return announce
+
+
+RUN_ID = re.compile(r"[0-9a-f]{12}")
+"""A run id as `uavtrack swarm` makes it."""
 
 
 @app.command()
 def agent(
-    run: Annotated[str, typer.Option("--run", metavar="ID", help="the swarm's run id")],
-    uav: Annotated[
-        int, typer.Option("--uav", min=0, metavar="I", help="which UAV (N: the central node)")
-    ],
     connect: Annotated[
         str, typer.Option("--connect", metavar="ENDPOINT", help="the world's endpoint")
     ],
-    listen: Annotated[
-        str,
-        typer.Option(metavar="ENDPOINT", help="this program's own endpoint"),
-    ] = "tcp/127.0.0.1:0",
+    key: Annotated[
+        Path | None,
+        typer.Option(
+            "--key",
+            metavar="FILE",
+            help="this program's key file, written by uavtrack swarm --no-spawn --keys "
+            "(it names the run and the program)",
+        ),
+    ] = None,
+    run: Annotated[
+        str | None,
+        typer.Option("--run", metavar="ID", help="the swarm's run id (without --key)"),
+    ] = None,
+    uav: Annotated[
+        int | None,
+        typer.Option(
+            "--uav", min=0, metavar="I", help="which UAV, N: the central node (without --key)"
+        ),
+    ] = None,
+    zenoh_config: ZenohConfigOpt = None,
+    tls_ca: TlsCaOpt = None,
+    tls_cert: TlsCertOpt = None,
+    tls_key: TlsKeyOpt = None,
 ) -> None:
     """Run one UAV's program and join a swarm started with `uavtrack swarm --no-spawn`
     (on this machine or another: give the world's reachable endpoint)."""
     from ..agents.program import serve
-    from ..agents.transport import ZenohTransport, zenoh_reason
+    from ..agents.security import Credential
+
+    credential = None
+    if key is not None:
+        try:
+            credential = Credential.read(key.expanduser())
+        except ValueError as exc:
+            raise UsageError(f"--key: {exc}") from None
+        if run is not None and run != credential.run:
+            raise UsageError(f"--run {run}: the key file {key} is of run {credential.run}")
+        if uav is not None and uav != credential.program:
+            raise UsageError(f"--uav {uav}: the key file {key} is program {credential.program}'s")
+        run, uav = credential.run, credential.program
+    if run is None or uav is None:
+        raise UsageError("give --key FILE, or --run ID and --uav I for a swarm run with --no-sign")
+    if not RUN_ID.fullmatch(run):
+        raise UsageError(
+            f"--run {run!r}: a run id is 12 hexadecimal digits, as uavtrack swarm prints it"
+        )
+    if not connect.strip():
+        raise UsageError("--connect is empty; give the world's endpoint, such as tcp/HOST:7447")
+    options = zenoh_options(zenoh_config, tls_ca, tls_cert, tls_key, [connect])
+    with results_only_on_stdout():
+        transport = _join(connect, options)
+        try:
+            served = serve(transport, run, uav, first=AGENT_WAIT, credential=credential)
+        except KeyboardInterrupt:
+            raise Interrupted("the program left the swarm") from None
+        finally:
+            transport.close()
+        _ended(served, run, uav, connect)
+
+
+def _join(connect: str, options):
+    """A Zenoh client session of the world at `connect` (it listens on nothing)."""
+    from ..agents import transport as transports
 
     try:
-        transport = ZenohTransport([listen], [connect])
+        return transports.ZenohTransport([], [connect], options)
     except ImportError:
         raise UsageError(
             'uavtrack agent needs eclipse-zenoh: pip install "uavtrack[agents]"'
         ) from None
     except Exception as exc:
-        raise UsageError(
-            f"cannot listen on {listen} and connect to {connect}: {zenoh_reason(exc)}"
-        ) from None
-    try:
-        served = serve(transport, run, uav, first=AGENT_WAIT)
-    except KeyboardInterrupt:
-        raise Interrupted("the program left the swarm") from None
-    finally:
-        transport.close()
+        raise UsageError(f"cannot connect to {connect}: {transports.zenoh_reason(exc)}") from None
+
+
+def _ended(served, run: str, uav: int, connect: str) -> None:
+    """Say how the program ended; bad input (a run it cannot join) exits 2."""
+    usage = {
+        "not in run": f"--uav {uav}: run {run} has programs 0 to {served.programs - 1} only",
+        "taken": f"--uav {uav}: program {uav} of run {run} is already running",
+        "under way": f"run {run} is under way (step {served.at}); a program joins only "
+        "before the first cycle",
+        "needs key": f"run {run} authenticates its programs: give this program's key file "
+        "with --key (uavtrack swarm --no-spawn --keys DIR writes them)",
+        "not authentic": f"the world of run {run} at {connect} did not prove it holds the "
+        "run's key: check that --key is this run's key file",
+    }
+    if served.end in usage:
+        raise UsageError(usage[served.end])
     if served.end == "no world":
         raise RunError(
             f"no world of run {run} answered at {connect} within {AGENT_WAIT:g} s; check the "
             "run id and that uavtrack swarm --no-spawn is waiting"
         )
-    if served.end == "not in run":
-        raise UsageError(f"--uav {uav}: run {run} has programs 0 to {served.programs - 1} only")
-    if served.end == "taken":
-        raise UsageError(f"--uav {uav}: program {uav} of run {run} is already running")
     name = f"{served.name(uav)} {uav} of run {run}"
     if served.end == "world gone":
         raise RunError(

@@ -1,0 +1,444 @@
+"""Only the swarm's members speak in it: authentication, replay windows, message checks,
+and attacks on a running swarm (forged, malformed and replayed messages, forged tokens)."""
+
+import threading
+
+import msgspec
+import numpy as np
+import pytest
+
+import uavtrack
+from uavtrack.agents import messages, run_swarm
+from uavtrack.agents.messages import VERSION, Array, Part, Radio, Report, Sense, Spec, encode
+from uavtrack.agents.security import EVERYONE, WINDOW, WORLD, Credential, Envelope, Gate, Keyring
+from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
+from uavtrack.equivalence import assert_same_trace
+
+pytest.importorskip("cryptography")
+
+RUN = "0123456789ab"
+
+
+def gates(programs=3):
+    """The world's gate and each program's, of one run, all knowing the public keys."""
+    ring = Keyring(RUN, programs)
+    world = ring.gate()
+    out = []
+    for p in range(programs):
+        gate = Gate(RUN, p, programs, ring.credential(p))
+        gate.learn(ring.public())
+        out.append(gate)
+    return ring, world, out
+
+
+def test_a_sealed_message_opens_only_at_its_receiver_and_only_once():
+    _, world, (g0, g1, g2) = gates()
+    payload = g0.seal(1, b"body")
+    assert g1.open(payload) == (0, b"body")
+    assert g1.open(payload) == "replayed"
+    assert g2.open(payload) == "not for this program"
+    assert world.open(g0.seal(WORLD, b"report")) == (0, b"report")
+    assert g2.open(world.seal(2, b"sense")) == (WORLD, b"sense")
+
+
+def test_one_member_cannot_speak_as_another():
+    _, _, (g0, g1, g2) = gates()
+    # program 2 holds its own key only: a message it makes in 0's name does not open at 1
+    forged = msgspec.msgpack.decode(g2.seal(1, b"bids"), type=Envelope)
+    as_zero = msgspec.msgpack.encode(Envelope(0, 1, forged.seq, b"bids", forged.tag))
+    assert g1.open(as_zero) == "not authentic"
+    # nor does a tag moved onto another body, or onto another sequence number
+    genuine = msgspec.msgpack.decode(g0.seal(1, b"bids"), type=Envelope)
+    for envelope in (
+        Envelope(0, 1, genuine.seq, b"other bids", genuine.tag),
+        Envelope(0, 1, genuine.seq + 1, genuine.body, genuine.tag),
+    ):
+        assert g1.open(msgspec.msgpack.encode(envelope)) == "not authentic"
+    assert g1.drops == {"not authentic": 3}
+
+
+def test_a_stranger_with_keys_of_its_own_is_not_heard():
+    _, _, (g0, g1, _) = gates()
+    stranger = Keyring(RUN, 3)  # the same run id, other keys
+    intruder = Gate(RUN, 0, 3, stranger.credential(0))
+    intruder.learn(stranger.public())
+    assert g1.open(intruder.seal(1, b"consensus")) == "not authentic"
+    hello = stranger.gate().seal(EVERYONE, b"hello")
+    assert g1.open(hello) == "not authentic"
+
+
+def test_only_the_world_signs_a_broadcast():
+    ring, world, (g0, g1, _) = gates()
+    assert g1.open(world.seal(EVERYONE, b"hello")) == (WORLD, b"hello")
+    # a program claiming to be the world, or broadcasting in its own name
+    envelope = msgspec.msgpack.decode(g0.seal(1, b"hello"), type=Envelope)
+    for sender in (WORLD, 0):
+        forged = Envelope(sender, EVERYONE, envelope.seq, b"hello", envelope.tag)
+        assert g1.open(msgspec.msgpack.encode(forged)) in ("not authentic", "unknown sender")
+
+
+def test_malformed_and_unknown_envelopes_are_dropped_by_reason():
+    _, _, (g0, g1, _) = gates()
+    good = g0.seal(1, b"x")
+    for payload, reason in (
+        (b"", "malformed"),
+        (b"\x93garbage", "malformed"),
+        (good[:-3], "malformed"),
+        (msgspec.msgpack.encode(Envelope(7, 1, 1, b"x", b"")), "unknown sender"),
+        (msgspec.msgpack.encode(Envelope(1, 1, 1, b"x", b"")), "unknown sender"),
+        (msgspec.msgpack.encode(Envelope(0, 1, -5, b"x", b"")), "malformed"),
+    ):
+        assert g1.open(payload) == reason
+
+
+def test_the_replay_window_takes_late_numbers_once_and_refuses_old_ones():
+    _, _, (g0, g1, _) = gates()
+    sealed = [g0.seal(1, bytes([i])) for i in range(5)]
+    for i in (4, 0, 2):  # out of order: each once
+        assert g1.open(sealed[i]) == (0, bytes([i]))
+    assert g1.open(sealed[2]) == "replayed"
+    assert g1.open(sealed[1]) == (0, b"\x01")
+    g0._seq += WINDOW + 10  # a sender far ahead: the oldest numbers fall out of the window
+    assert g1.open(g0.seal(1, b"late")) == (0, b"late")
+    assert g1.open(sealed[3]) == "replayed"
+
+
+def test_a_key_file_is_private_never_overwritten_and_read_back(tmp_path):
+    ring = Keyring(RUN, 2)
+    path = tmp_path / "k.key"
+    ring.credential(1).write(path)
+    assert oct(path.stat().st_mode & 0o777) == "0o600"
+    assert Credential.read(path) == ring.credential(1)
+    with pytest.raises(FileExistsError):
+        ring.credential(0).write(path)
+    (tmp_path / "link").symlink_to(path)
+    with pytest.raises(ValueError, match="cannot read"):
+        Credential.read(tmp_path / "link")
+    (tmp_path / "bad").write_text('{"uavtrack_credential": 1, "run": "x"}')
+    with pytest.raises(ValueError, match="missing or malformed"):
+        Credential.read(tmp_path / "bad")
+
+
+# ------------------------------------------------------------------ what a run admits
+
+
+def spec(n=3, m=2):
+    return Spec(n=n, m=m, programs=n, actions=3, rounds=n + 3, behind=1)
+
+
+def radio(parts, k=0, sender=1):
+    return Radio(VERSION, RUN, k, sender, parts)
+
+
+def test_radio_parts_of_the_wrong_shape_type_value_round_or_cycle_are_refused():
+    s = spec()
+    good = {"known": Array.of(np.array([True, False, True]))}
+    assert isinstance(s.radio(radio([Part("flood", 1, -1, good)]), 0), list)
+    cases = {
+        "wrong shape or type": [
+            Part("flood", 1, -1, {"known": Array.of(np.ones(4, dtype=bool))}),
+            Part("flood", 1, -1, {"known": Array.of(np.ones(3))}),
+            Part("beacon", 0, -1, {"position": Array("<f8", (3,), b"\x00" * 5)}),
+        ],
+        "not finite": [Part("beacon", 0, -1, {"position": Array.of(np.array([0, np.nan, 1.0]))})],
+        "unexpected fields": [Part("flood", 1, -1, {"known": good["known"], "x": good["known"]})],
+        "unknown protocol": [Part("gossip", 1, -1, good), Part("presence", 0, 0, good)],
+        "round out of range": [Part("flood", 99, -1, good), Part("flood", 2, 3, good)],
+    }
+    for reason, parts in cases.items():
+        for p in parts:
+            assert s.radio(radio([p]), 0) == reason, (reason, p)
+    assert s.radio(radio([Part("flood", 1, -1, good)], k=9), 0) == "outside the window of cycles"
+    # a bid may be NaN (not scored), never infinite; a confidence may be -inf, never +inf
+    bids = {"bids": Array.of(np.array([np.nan, 1.0])), "stamp": Array.of(np.array(0))}
+    assert isinstance(s.radio(radio([Part("bids", 0, -1, bids)]), 0), list)
+    bids["bids"] = Array.of(np.array([np.inf, 1.0]))
+    assert s.radio(radio([Part("bids", 0, -1, bids)]), 0) == "not finite"
+
+
+def report(**change):
+    fields = dict(
+        version=VERSION,
+        run=RUN,
+        k=0,
+        uav=1,
+        action=2,
+        target=1,
+        mean=Array.of(np.zeros((2, 4))),
+        cov=Array.of(np.zeros((2, 4, 4))),
+        bids=Array.of(np.zeros(2)),
+        rounds=1,
+        sent=1,
+        delivered=1,
+        decision_ms=1.0,
+    )
+    return Report(**{**fields, **change})
+
+
+@pytest.mark.parametrize(
+    "change,reason",
+    [
+        ({"action": 99}, "action or target out of range"),
+        ({"action": -1}, "action or target out of range"),
+        ({"target": 2}, "action or target out of range"),
+        ({"target": -1}, "action or target out of range"),
+        ({"mean": Array.of(np.zeros((3, 4)))}, "wrong shape or type"),
+        ({"cov": Array.of(np.full((2, 4, 4), np.inf))}, "not finite"),
+        ({"rounds": -3}, "count out of range"),
+        ({"decision_ms": float("nan")}, "not finite"),
+    ],
+)
+def test_a_report_the_run_cannot_fly_is_refused(change, reason):
+    assert isinstance(spec().report(report()), dict)
+    assert spec().report(report(**change)) == reason
+
+
+def test_a_sense_of_another_uav_or_of_the_wrong_shape_is_refused():
+    s = spec()
+
+    def sense(**change):
+        fields = dict(
+            version=VERSION,
+            run=RUN,
+            k=0,
+            uav=1,
+            believed=Array.of(np.zeros(5)),
+            observed=Array.of(np.array([True, False])),
+            z=Array.of(np.zeros((1, 2))),
+            links=Array.of(np.zeros(3, dtype=bool)),
+            alive=Array.of(np.ones(3, dtype=bool)),
+        )
+        return Sense(**{**fields, **change})
+
+    assert isinstance(s.sense(sense(), 1), dict)
+    assert s.sense(sense(), 2) == "not for this program"
+    assert s.sense(sense(z=Array.of(np.zeros((2, 2)))), 1) == "wrong shape or type"
+    assert s.sense(sense(links=Array.of(np.zeros(30, dtype=bool))), 1) == "wrong shape or type"
+    assert s.sense(sense(believed=Array.of(np.full(5, np.nan))), 1) == "not finite"
+
+
+def test_a_mailbox_keeps_a_bounded_window_whatever_a_member_sends():
+    ring, _, (g0, g1, _) = gates()
+    box = Mailbox(g1, spec())
+    box.begin(5, 4)
+    known = {"known": Array.of(np.ones(3, dtype=bool))}
+    for k in range(0, 200):  # a member floods every cycle, past and future, every round
+        for r in range(0, 10):
+            message = radio([Part("flood", r, -1, known)], k=k, sender=0)
+            box.handler("k", g0.seal(1, encode(message)))
+    cycles = {slot[0] for slot in box.radio}
+    assert cycles <= set(range(4, 8)) and len(box.radio) == len(cycles)
+    assert all(len(rounds) <= spec().rounds + 1 for rounds in box.radio.values())
+    assert box.drops["outside the window of cycles"] > 1500
+    assert box.drops["round out of range"] > 0
+
+
+# ------------------------------------------------------------------ attacks on a swarm
+
+
+class Intruder:
+    """A party on a swarm's bus: it hears every publication (as anyone reaching the
+    endpoint of an unencrypted swarm can) and publishes what `act` returns for it."""
+
+    def __init__(self, bus: Bus, act) -> None:
+        self.link = MemoryTransport(bus)
+        self.act, self.seen, self.busy = act, [], threading.local()
+        self.link.subscribe("uavtrack/", self.hear)
+
+    def hear(self, key: str, payload: bytes) -> None:
+        if getattr(self.busy, "on", False):
+            return
+        self.seen.append((key, payload))
+        self.busy.on = True
+        try:
+            for out_key, out in self.act(key, payload):
+                self.link.publish(out_key, out)
+        finally:
+            self.busy.on = False
+
+
+def attacked_swarm(act, scenario, method="distributed", sign=True, seed=1, patch=None):
+    """A memory swarm with an intruder acting on its bus; returns (swarm, intruder)."""
+    from uavtrack.agents import swarm as swarm_module
+
+    made = {}
+    original = swarm_module.Bus
+
+    def bus():
+        made["bus"] = original()
+        made["intruder"] = Intruder(made["bus"], act)
+        return made["bus"]
+
+    swarm_module.Bus = bus
+    try:
+        out = run_swarm(scenario, method, seed=seed, transport="memory", sign=sign)
+    finally:
+        swarm_module.Bus = original
+    return out, made["intruder"]
+
+
+def decode_any(payload):
+    """The envelope and message of a payload, whatever the run (None if not one)."""
+    try:
+        envelope = msgspec.msgpack.decode(payload, type=Envelope)
+        message = msgspec.msgpack.Decoder(messages.Message).decode(envelope.body)
+    except (msgspec.DecodeError, msgspec.ValidationError):
+        return None, None
+    return envelope, message
+
+
+def forge(envelope, message, seq_offset=10**6, **change):
+    """The message changed, in a new envelope that claims the same sender (no valid tag)."""
+    body = encode(msgspec.structs.replace(message, **change))
+    forged = Envelope(envelope.sender, envelope.receiver, envelope.seq + seq_offset, body, b"")
+    return msgspec.msgpack.encode(forged)
+
+
+def forgeries(key, payload):
+    """What a stranger makes of each message it hears: the worst it can say in its name."""
+    envelope, message = decode_any(payload)
+    if message is None:
+        return []
+    out = []
+    if isinstance(message, Radio) and message.k >= 0:
+        parts = []
+        for p in message.parts:
+            content = p.content
+            if p.protocol == "consensus" and content is not None:  # a tuple of certainty
+                content = dict(content)
+                content["gamma"] = Array.of(np.full(content["gamma"].shape[0], 1e12))
+                content["mean"] = Array.of(np.full(content["mean"].shape, 5000.0))
+            if p.protocol == "bids" and content is not None:  # everyone wants target 0
+                content = dict(content)
+                bids = np.zeros(content["bids"].shape[0])
+                bids[0] = 1e9
+                content["bids"] = Array.of(bids)
+            parts.append(Part(p.protocol, p.round, p.final, content))
+        out.append((key, forge(envelope, message, parts=parts)))
+    if isinstance(message, Report):
+        out.append((key, forge(envelope, message, action=0, target=0)))
+    if isinstance(message, Sense):
+        out.append((key, forge(envelope, message, alive=Array.of(np.zeros(5, dtype=bool)))))
+    if isinstance(message, messages.Hello):
+        prior = np.asarray(message.prior_mean.array()) + 60.0
+        out.append((key, forge(envelope, message, prior_mean=Array.of(prior))))
+    return out
+
+
+def test_a_strangers_forgeries_change_nothing_and_are_counted():
+    scenario = uavtrack.Scenario(steps=12)
+    swarm, intruder = attacked_swarm(forgeries, scenario)
+    reference = uavtrack.simulate(scenario, "distributed", seed=1)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.lost == {}
+    forged = swarm.traffic.drops.get("not authentic", 0)
+    assert forged >= 12 * 5  # at least a forged Sense and Report per UAV and cycle
+    assert set(swarm.traffic.drops) <= {"not authentic", "outside the window of cycles"}
+
+
+def test_without_signing_the_same_forgeries_take_the_swarm_over():
+    # the attack above is real: unsigned, the forged Sense messages fail every UAV
+    scenario = uavtrack.Scenario(steps=12)
+    swarm, _ = attacked_swarm(forgeries, scenario, sign=False)
+    reference = uavtrack.simulate(scenario, "distributed", seed=1)
+    assert swarm.result.observation_rate < reference.observation_rate
+
+
+def test_replayed_messages_are_dropped_and_change_nothing():
+    scenario = uavtrack.Scenario(steps=10)
+    heard = []
+
+    def replay(key, payload):
+        heard.append((key, payload))
+        return heard[-3:-1]  # the two messages before, again
+
+    swarm, _ = attacked_swarm(replay, scenario)
+    reference = uavtrack.simulate(scenario, "distributed", seed=1)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.drops.get("replayed", 0) > 100
+    assert set(swarm.traffic.drops) <= {"replayed", "outside the window of cycles"}
+
+
+def test_malformed_payloads_on_every_key_change_nothing():
+    scenario = uavtrack.Scenario(steps=8)
+
+    def garbage(key, payload):
+        envelope, _ = decode_any(payload)
+        junk = [b"\xc1not msgpack", payload[: len(payload) // 2]]
+        if envelope is not None:
+            seq = envelope.seq + 7
+            bad = Envelope(envelope.sender, envelope.receiver, seq, b"\x93xyz", b"")
+            junk.append(msgspec.msgpack.encode(bad))
+        return [(key, j) for j in junk]
+
+    swarm, _ = attacked_swarm(garbage, scenario)
+    reference = uavtrack.simulate(scenario, "distributed", seed=1)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.drops["malformed"] > 50
+
+
+def test_a_faulty_member_is_dropped_by_reason_and_never_crashes_the_others(monkeypatch):
+    # UAV 2 reports a bank angle that does not exist at step 4, UAV 1 sends consensus
+    # tuples of the wrong shape: the world and the neighbours drop them and go on
+    from uavtrack.agents import agent
+
+    cycle, send = agent.UavAgent.cycle, agent.AgentRadio.send
+
+    def faulty_cycle(self, k, sense, central=True):
+        report = cycle(self, k, sense, central)
+        if self.me == 2 and k == 4:
+            return msgspec.structs.replace(report, action=99)
+        return report
+
+    def faulty_send(self, k, parts, to=None):
+        if self.me == 1:
+            parts = [
+                Part(p.protocol, p.round, p.final, {n: Array.of(np.zeros(7)) for n in p.content})
+                if p.protocol == "consensus" and p.content is not None
+                else p
+                for p in parts
+            ]
+        send(self, k, parts, to)
+
+    monkeypatch.setattr(agent.UavAgent, "cycle", faulty_cycle)
+    monkeypatch.setattr(agent.AgentRadio, "send", faulty_send)
+    scenario = uavtrack.Scenario(steps=10, comm_range=80.0)
+    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.3)
+    drops = swarm.traffic.drops
+    assert drops["action or target out of range"] == 1
+    assert drops["wrong shape or type"] > 0
+    assert swarm.traffic.lost == {2: 4}  # its report was refused: it decided nothing
+    trace = swarm.result.trace
+    assert not trace.alive[4:, 2].any() and trace.alive[:, [0, 1, 3, 4]].all()
+    assert np.isfinite(swarm.result.ospa) and np.isfinite(swarm.result.rmse)
+
+
+def test_a_forged_liveliness_token_loses_no_healthy_uav():
+    scenario = uavtrack.Scenario(steps=10)
+    done = {}
+
+    from uavtrack.agents import swarm as swarm_module
+
+    original = swarm_module.Bus
+
+    class Watched(original):
+        def __init__(self):
+            super().__init__()
+            Intruder(self, lambda key, payload: self.forge(key))
+
+        def forge(self, key):
+            if key.endswith("/to/world") and not done:
+                done["key"] = f"uavtrack/{key.split('/')[1]}/alive/2"
+                with self.lock:
+                    self.alive.append(done["key"])
+                self.drop(done["key"])  # its watchers hear that UAV 2 is gone
+            return []
+
+    swarm_module.Bus = Watched
+    try:
+        swarm = run_swarm(scenario, "distributed", seed=1, transport="memory")
+    finally:
+        swarm_module.Bus = original
+    assert "key" in done
+    assert swarm.traffic.lost == {}
+    assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "distributed", seed=1).trace)
