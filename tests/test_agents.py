@@ -95,10 +95,19 @@ def zenoh_or_skip():
     pytest.importorskip("zenoh")
 
 
-@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
-def test_zenoh_swarm_of_processes_equals_run(method):
+@pytest.mark.parametrize(
+    "method,faults",
+    [
+        ("distributed", {}),
+        ("centralized", {}),
+        ("greedy", {}),
+        ("distributed", {"faults.loss": 0.3, "faults.delay": 1, "robust.stale": True}),
+        ("centralized", {"faults.loss": 0.3, "faults.failures": [[2, 6]]}),
+    ],
+)
+def test_zenoh_swarm_of_processes_equals_run(method, faults):
     zenoh_or_skip()
-    scenario = uavtrack.Scenario(steps=15)
+    scenario = uavtrack.Scenario(steps=15).with_overrides(faults)
     swarm = run_swarm(scenario, method, seed=4, transport="zenoh")
     reference = uavtrack.simulate(scenario, method, seed=4)
     assert_same_trace(swarm.result.trace, reference.trace)

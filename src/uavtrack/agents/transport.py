@@ -221,6 +221,12 @@ def zenoh_reason(exc: BaseException) -> str:
     return text[:200] or type(exc).__name__
 
 
+ZENOH_LOG = "error,zenoh::net::routing::hat::client::token=off"
+"""Zenoh's log level unless RUST_LOG says otherwise: errors, but not those of a client
+hearing a token dropped that it had not heard declared (a program's watch on a token of
+the world, declared before the watch), which is harmless and says so at every end."""
+
+
 class ZenohTransport(Transport):
     """One Zenoh session of one OS process: the world's is a router (it listens, and
     relays between the programs, as the radio medium it emulates), a program's a client
@@ -235,7 +241,7 @@ class ZenohTransport(Transport):
     ) -> None:
         import zenoh
 
-        zenoh.init_log_from_env_or("error")
+        zenoh.init_log_from_env_or(ZENOH_LOG)
         self.session = zenoh.open(zenoh_config(listen, connect, options=options, mode=mode))
         self.publishers: dict[str, Any] = {}
         self.keep: list[Any] = []  # subscribers and tokens live as long as the session

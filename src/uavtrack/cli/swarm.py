@@ -244,7 +244,7 @@ def swarm(
             realtime=realtime,
             trace=trace is not None,
             progress=lambda _: advance(1),
-            announce=None if spawn else _announcer(n + central, sign),
+            announce=None if spawn else _announcer(n + central, sign, options.tls),
             sign=sign,
             keys=keys,
             zenoh=options,
@@ -334,7 +334,9 @@ def reachable(endpoint: str) -> list[str]:
     return [a for a in addresses if a not in loopback] + loopback or [endpoint]
 
 
-def _announcer(programs: int, sign: bool):
+def _announcer(programs: int, sign: bool, tls: bool):
+    tail = " --tls-ca CA --tls-cert CERT --tls-key KEY" if tls else ""
+
     def announce(run: str, endpoint: str, written: list[Path]) -> None:
         where = reachable(endpoint)
         typer.echo(f"run {run}; world at {', '.join(where)}", err=True)
@@ -346,13 +348,13 @@ def _announcer(programs: int, sign: bool):
                 err=True,
             )
             typer.echo(
-                f"  uavtrack agent --key {run}-I.key --connect {where[0]}   (I = 0 .. "
+                f"  uavtrack agent --key {run}-I.key --connect {where[0]}{tail}   (I = 0 .. "
                 f"{programs - 1})",
                 err=True,
             )
         else:
             typer.echo(
-                f"  uavtrack agent --run {run} --uav I --connect {where[0]}   (I = 0 .. "
+                f"  uavtrack agent --run {run} --uav I --connect {where[0]}{tail}   (I = 0 .. "
                 f"{programs - 1})",
                 err=True,
             )
