@@ -336,3 +336,34 @@ def test_progress_bar_on_a_terminal(tmp_path):
     os.close(leader)
     assert proc.returncode == 0
     assert b"trial-steps" in shown and b"180/180" in shown  # 3 methods x 2 trials x 30 steps
+
+
+@pytest.mark.parametrize("command", ["run", "swarm"])
+def test_steps_is_taken_by_every_command_that_runs_a_trial(capsys, command):
+    code, out, err = run_cli(capsys, command, "--steps", "7", "--json")
+    assert code == 0, err
+    assert json.loads(out)["scenario"]["steps"] == 7
+    code, _, err = run_cli(capsys, command, "--steps", "7", "--set", "steps=9")
+    assert code == 2 and "--steps 7 and --set steps=9 disagree" in err
+
+
+@pytest.mark.parametrize(
+    "args,hint",
+    [
+        (["sweep", "uav.altitude_spacing", "-5", "0", "5"], "put -- before the values"),
+        (["run", "--set", "comm_range", "80"], "--set comm_range=80"),
+        (["run", "--set", "comm_rang=80"], "did you mean comm_range?"),
+        (["run", "--set", "sensor.half_fov=5"], "did you mean sensor.half_fov_deg?"),
+        (["run", "--set", "half_fov_deg=5"], "did you mean sensor.half_fov_deg?"),
+    ],
+)
+def test_refused_arguments_come_with_what_was_meant(capsys, args, hint):
+    code, out, err = run_cli(capsys, *args)
+    assert code == 2 and hint in err and err.count("\n") == 1 and out == ""
+
+
+def test_two_outputs_at_one_path_are_refused(capsys, tmp_path):
+    path = tmp_path / "x.rrd"
+    code, _, err = run_cli(capsys, "run", "--rerun", str(path), "--trace", str(path))
+    assert code == 2 and "name the same file" in err
+    assert not path.exists()

@@ -407,7 +407,9 @@ def test_workers_exit_with_a_killed_parent(tmp_path):
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    deadline = time.monotonic() + 60
+    # the bounds only stop a test that would hang: a loaded machine takes its time to
+    # start the workers, and the kernel's parent-death signal ends them at once
+    deadline = time.monotonic() + 300
     workers = []
     while time.monotonic() < deadline and len(workers) < 2:
         time.sleep(0.2)
@@ -415,7 +417,7 @@ def test_workers_exit_with_a_killed_parent(tmp_path):
     assert len(workers) >= 2, "no worker processes started"
     proc.kill()
     proc.wait()
-    deadline = time.monotonic() + 10
+    deadline = time.monotonic() + 120
     while time.monotonic() < deadline and any(alive(w) for w in workers):
         time.sleep(0.2)
     assert not any(alive(w) for w in workers)
@@ -537,3 +539,34 @@ def test_robustness_refuses_faults_in_the_base_scenario(tmp_path, capsys):
         capsys, "robustness", "--quick", "--set", "robust.stale=true", "--out", str(tmp_path / "r")
     )
     assert code == 2 and "robust.stale=True" in err and not (tmp_path / "r").exists()
+
+
+def test_an_output_that_cannot_be_written_is_refused_before_any_job_runs(tmp_path, capsys):
+    out = tmp_path / "s"
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 0, err
+    raw = sorted((out / "raw").glob("*.json"))
+    raw[0].unlink()  # a job to compute again on resume
+    (out / "summary.json").unlink()
+    (out / "summary.json").mkdir()
+    code, _, err = run_cli(capsys, *tiny_sweep(out))
+    assert code == 2 and "summary.json exists and is not a regular file" in err
+    assert not raw[0].exists()  # refused before the missing job was computed
+    assert sorted((out / "raw").glob("*.json")) == raw[1:]
+
+
+def test_a_full_disk_under_the_results_folder_names_the_folder(tmp_path, capsys, monkeypatch):
+    import errno
+
+    from uavtrack import runner
+
+    def full(fd, data, offset):
+        raise OSError(errno.ENOSPC, "No space left on device")
+
+    monkeypatch.setattr(runner.os, "pwrite", full)
+    code, out, err = run_cli(capsys, *tiny_sweep(tmp_path / "s"))
+    assert code == 2 and out == ""
+    assert err.strip() == (
+        f"uavtrack: error: results folder {tmp_path / 's'}: cannot write in it "
+        "(No space left on device)"
+    )

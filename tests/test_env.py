@@ -113,3 +113,33 @@ def test_bad_input_is_named():
         env.step({"uav_9": 1})
     with pytest.raises(uavtrack.ScenarioError, match="steps"):
         parallel_env(steps=0)
+
+
+def test_a_scenario_too_large_is_refused_when_the_env_is_made():
+    from uavtrack.config import ScenarioError
+
+    huge = uavtrack.Scenario().scaled(1000, 1000).with_overrides({"steps": 20000})
+    with pytest.raises(ScenarioError, match="of memory"):
+        parallel_env(huge)
+
+
+def test_misuse_gets_a_clear_error():
+    env = parallel_env(steps=5)
+    with pytest.raises(RuntimeError, match=r"call reset\(\) and step\(\) before result"):
+        env.result()
+    env.reset(seed=0)
+    with pytest.raises(TypeError, match="actions must be a dict"):
+        env.step(None)
+
+
+def test_changing_an_observation_changes_nothing_of_the_trial():
+    # a common normalisation, done in place on what the env handed out
+    def meddle(a, o, info):
+        o["estimates"][:, :2] -= o["uav"][:2]
+        o["uav"][:] = 0.0
+        return info["paper_action"]
+
+    env = parallel_env(steps=30)
+    fly(env, meddle, seed=2)
+    reference = uavtrack.simulate(uavtrack.Scenario(steps=30), "distributed", seed=2)
+    assert_same_trace(env.result().trace, reference.trace)

@@ -90,3 +90,37 @@ def test_animation_frames_legend_and_link_colour(tmp_path, monkeypatch):
     link = next(h for h in legends[0] if h.get_label() == "radio link")
     uav0 = plots.plt.cm.tab10(0)
     assert link.get_color() == "dimgray" and link.get_color() != uav0
+
+
+def test_uav_labels_never_overlap_even_when_the_uavs_do():
+    # the first frame of the default scenario: all five UAVs start within metres
+    for points in (np.zeros((5, 2)), np.array([[0, 0], [3, 1], [1, 4], [5, 5], [2, 2.0]])):
+        offsets = np.asarray(plots.label_offsets(points))
+        boxes = points + offsets
+        w, h = plots.LABEL
+        for a in range(len(boxes)):
+            for b in range(a):
+                dx, dy = np.abs(boxes[a] - boxes[b])
+                assert dx >= w or dy >= h, (a, b)
+
+
+def test_a_gif_is_written_frame_by_frame(tmp_path):
+    # frames come from a generator and are written as they come: a frame drawn before
+    # the previous one was written would show in the order of these calls
+    made, written = [], []
+    colours = [(255, 0, 0), (0, 128, 0), (0, 0, 255)]
+
+    def frames():
+        for k, colour in enumerate(colours):
+            made.append(k)
+            assert written == list(range(k))  # everything before was written already
+            yield np.full((20, 30, 3), colour, dtype=np.uint8)
+
+    with open(tmp_path / "x.gif", "wb") as out:
+        n = plots.write_gif(out, frames(), fps=5, progress=lambda _: written.append(len(written)))
+    assert n == 3
+    with Image.open(tmp_path / "x.gif") as im:
+        assert im.n_frames == 3 and im.info["duration"] == 200 and im.info["loop"] == 0
+        for k, colour in enumerate(colours):
+            im.seek(k)
+            assert im.convert("RGB").getpixel((10, 10)) == colour

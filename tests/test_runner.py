@@ -140,3 +140,61 @@ def test_fault_realisations_do_not_depend_on_the_workers(tmp_path):
         np.concatenate([a[j.key]["observation_rate"] for j in jobs]).tolist()
         == whole["observation_rate"]
     )
+
+
+def test_a_lock_file_that_is_a_link_is_refused_and_its_target_kept(tmp_path):
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    out = tmp_path / "out"
+    runner.Store(out, manifest()).close()
+    (out / ".lock").unlink(missing_ok=True)
+    (out / ".lock").symlink_to(notes)
+    with pytest.raises(UsageError, match=r"\.lock is a symbolic link"):
+        runner.Store(out, manifest())
+    assert notes.read_text() == "my notes\n"
+    (out / ".lock").unlink()
+    (out / ".lock").mkdir()
+    with pytest.raises(UsageError, match=r"\.lock is not a regular file"):
+        runner.Store(out, manifest())
+
+
+def test_the_writability_probe_never_writes_through_a_link(tmp_path, monkeypatch):
+    # the probe has a name of its own, created exclusively: a link planted at any name
+    # it could have had stays a link to an untouched file
+    notes = tmp_path / "notes.txt"
+    notes.write_text("my notes\n")
+    out = tmp_path / "out"
+    import os
+
+    for folder in (out / "raw", out / "failed"):
+        folder.mkdir(parents=True)
+        (folder / f".probe-{os.getpid()}").symlink_to(notes)
+    runner.Store(out, manifest()).close()
+    assert notes.read_text() == "my notes\n"
+
+
+def test_a_clean_run_leaves_no_lock_file_and_no_empty_failed_folder(tmp_path):
+    jobs = small_jobs(trials=2)
+    with runner.Store(tmp_path / "out", manifest()) as store:
+        assert (tmp_path / "out" / ".lock").exists()  # held while the store is open
+        runner.execute(jobs, store, workers=1, progress=False)
+    names = {p.name for p in (tmp_path / "out").iterdir()}
+    assert names == {"manifest.json", "raw"}
+
+
+def test_every_rejection_of_a_job_file_is_kept(tmp_path):
+    jobs = small_jobs(trials=2)
+    out = tmp_path / "out"
+    with runner.Store(out, manifest()) as store:
+        runner.execute(jobs, store, workers=1, progress=False)
+    path = out / "raw" / f"{jobs[0].key}.json"
+    for attempt in range(3):  # edited again and again: each piece of evidence stays
+        path.write_text(json.dumps({"edited": attempt}))
+        with runner.Store(out, manifest()) as store:
+            assert not store.done(jobs[0])
+            runner.execute(jobs, store, workers=1, progress=False)
+    rejected = sorted((out / "failed").glob(f"{jobs[0].key}.rejected*.json"))
+    assert len(rejected) == 3
+    assert sorted(json.loads(p.read_text())["content"] for p in rejected) == [
+        json.dumps({"edited": a}) for a in range(3)
+    ]

@@ -95,3 +95,31 @@ def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
     assert out.returncode == 2 and out.stdout == ""  # refused before any work
     assert out.stderr.count("\n") == 1
     assert "needs a display" in out.stderr and "--rerun FILE.rrd" in out.stderr
+
+
+def test_a_recording_that_cannot_be_finished_leaves_no_file_and_says_so(tmp_path, monkeypatch):
+    from uavtrack.errors import RunError
+
+    def stopped(self, *args, **kwargs):
+        raise RuntimeError("File-writer thread shut down prematurely")
+
+    monkeypatch.setattr(viewer.rr.RecordingStream, "flush", stopped)
+    scenario = uavtrack.Scenario(steps=5)
+    trace = uavtrack.simulate(scenario, seed=0).trace
+    path = tmp_path / "x.rrd"
+    with pytest.raises(RunError, match=f"cannot write {path}: Rerun's file writer stopped"):
+        viewer.save(trace, scenario, path)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recording_of_a_team_that_all_failed_warns_of_nothing(tmp_path):
+    import warnings
+
+    failures = [[i, 0] for i in range(5)]
+    scenario = uavtrack.Scenario(steps=6, faults={"failures": failures})
+    trace = uavtrack.simulate(scenario, seed=0).trace
+    assert not trace.alive.any()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        viewer.save(trace, scenario, tmp_path / "x.rrd")
+    assert (tmp_path / "x.rrd").stat().st_size > 0

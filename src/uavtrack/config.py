@@ -666,13 +666,30 @@ def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     for depth, key in enumerate(keys):
         if not isinstance(node, dict) or key not in node:
             where = ".".join(keys[: depth + 1])
-            raise ScenarioError(f"unknown scenario field '{where}'")
+            raise ScenarioError(f"unknown scenario field '{where}'{_did_you_mean(dotted, data)}")
         if depth == len(keys) - 1:
             if isinstance(node[key], dict):
                 raise ScenarioError(f"'{dotted}' is a group of fields; set one of its fields")
             node[key] = value
         else:
             node = node[key]
+
+
+def _did_you_mean(dotted: str, data: dict[str, Any]) -> str:
+    """'; did you mean X?' for the field names of `data` closest to `dotted`, or ''."""
+    import difflib
+
+    names = list(flatten(data))
+    leaves = {name.rsplit(".", 1)[-1]: name for name in names}
+    close = difflib.get_close_matches(dotted, names, n=1, cutoff=0.6)
+    if not close:  # a leaf name without its group, or a typo in it
+        found = difflib.get_close_matches(dotted.rsplit(".", 1)[-1], leaves, n=1, cutoff=0.7)
+        close = [leaves[found[0]]] if found else []
+    return (
+        f"; did you mean {close[0]}? (uavtrack params lists every field)"
+        if close
+        else (" (uavtrack params lists every field)")
+    )
 
 
 def describe_errors(exc: ValidationError) -> str:

@@ -50,6 +50,7 @@ from .simulation import (
     Context,
     Recorder,
     Result,
+    check_memory,
     decide,
     finish,
     graph,
@@ -85,6 +86,9 @@ class UAVTrackingEnv(ParallelEnv):
     ) -> None:
         if render_mode not in (None, "rgb_array"):
             raise ValueError(f"render_mode must be None or 'rgb_array', got {render_mode!r}")
+        if not isinstance(scenario, Scenario):
+            raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
+        check_memory(scenario, 1, trace=True)  # as simulate does: refused now, not at step 1
         self.scenario, self.method, self.render_mode = scenario, get(method), render_mode
         nu, nt = scenario.n_uavs, scenario.n_targets
         self.possible_agents = [f"uav_{i}" for i in range(nu)]
@@ -133,6 +137,11 @@ class UAVTrackingEnv(ParallelEnv):
     def step(self, actions: dict[str, Any]):
         if not hasattr(self, "_state"):
             raise RuntimeError("call reset() before step()")
+        if not isinstance(actions, dict):
+            raise TypeError(
+                f"actions must be a dict of agent name -> action (an empty dict flies the "
+                f"method's actions), not {type(actions).__name__}"
+            )
         if not self.agents:
             raise RuntimeError("the episode is over: call reset()")
         k = self._state.k
@@ -166,6 +175,8 @@ class UAVTrackingEnv(ParallelEnv):
 
     def result(self) -> Result:
         """The trial so far as `simulate` reports it: metrics and trace."""
+        if not hasattr(self, "_state"):
+            raise RuntimeError("call reset() and step() before result()")
         k = self._state.k
         if k == 0:
             raise RuntimeError("no step flown yet")
@@ -225,9 +236,9 @@ class UAVTrackingEnv(ParallelEnv):
         for agent in agents:
             i = self._index(agent)
             P = cov[i]
-            out[agent] = {
-                "uav": np.asarray(uavs[i], dtype=np.float64),
-                "estimates": np.asarray(mean[i], dtype=np.float64),
+            out[agent] = {  # copies: the agent's code may change them, never the trial
+                "uav": np.array(uavs[i], dtype=np.float64),
+                "estimates": np.array(mean[i], dtype=np.float64),
                 "covariance": np.stack([P[:, 0, 0], P[:, 1, 1], P[:, 0, 1]], axis=-1),
                 "neighbours": links[i].astype(np.int8),
             }

@@ -48,6 +48,33 @@ def check_output(path: str | Path, option: str) -> Path:
     return path
 
 
+def check_outputs(folder: str | Path, names: list[str]) -> None:
+    """Refuse, before any computation, a results folder where one of the files a command
+    will write (`names`) exists as something it cannot replace (a directory, a device,
+    a link)."""
+    folder = Path(folder).expanduser()
+    for name in names:
+        path = folder / name
+        if path.is_symlink() or (path.exists() and not path.is_file()):
+            raise UsageError(
+                f"{path} exists and is not a regular file; uavtrack writes its {name} there "
+                "(move it away or use another --out)"
+            )
+
+
+def check_distinct(outputs: dict[str, str | Path | None]) -> None:
+    """Refuse two outputs of one command at one path: the second would replace the first.
+    `outputs` maps each option to its path (None: not asked for)."""
+    seen: dict[Path, str] = {}
+    for option, path in outputs.items():
+        if path is None or path == "":
+            continue
+        where = Path(path).expanduser().resolve()
+        if where in seen:
+            raise UsageError(f"{seen[where]} and {option} name the same file {path}; give two")
+        seen[where] = option
+
+
 @contextmanager
 def replacing(path: str | Path) -> Iterator[Path]:
     """Yield a temporary path in `path`'s folder; on success it replaces `path`.

@@ -521,12 +521,47 @@ def _scene(trace, scenario, title: str):
             uav_names[i].xy = uavs[i, :2]
             j = trace.assignment[k, i]
             assigned[i].set_data([uavs[i, 0], mean[i, j, 0]], [uavs[i, 1], mean[i, j, 1]])
+        points = ax.transData.transform(uavs[:, :2]) * 72.0 / fig.dpi
+        for label, offset in zip(uav_names, label_offsets(points), strict=True):
+            label.xyann = offset
         arrows.set_offsets(uavs[:, :2])
         arrows.set_UVC(15 * np.cos(uavs[:, 4]), 15 * np.sin(uavs[:, 4]))
         seen = trace.observed[: k + 1].any(axis=1).mean()
         heading.set_text(f"{title}, step {k}, observation rate so far {seen:.2f}")
 
     return fig, draw
+
+
+LABEL = (18.0, 10.0)
+"""The box of a UAV's label (U12) in points: width, height."""
+
+
+def label_offsets(points: np.ndarray, most: int = 60) -> list[tuple[float, float]]:
+    """Offsets (in points) of labels anchored at `points` (n, 2) [points], chosen so that
+    no two labels overlap: each label takes the first place around its anchor, ring by
+    ring, that is clear of the labels placed before it. Beyond `most` labels every one
+    takes the first place (a crowd is unreadable anyway)."""
+    w, h = LABEL
+    rings = [(-14.0, -14.0)] + [
+        (r * np.cos(a) - w / 2, r * np.sin(a) - h / 2)
+        for r in (14.0, 24.0, 34.0, 46.0)
+        for a in np.radians(np.arange(0, 360, 45) + 225)
+    ]
+    if len(points) > most:
+        return [rings[0]] * len(points)
+    placed: list[tuple[float, float]] = []  # lower-left corners of the placed boxes
+    out = []
+    for x, y in points:
+        for dx, dy in rings:
+            cx, cy = x + dx, y + dy
+            if all(abs(cx - px) >= w or abs(cy - py) >= h for px, py in placed):
+                break
+        else:
+            dx, dy = rings[0]
+            cx, cy = x + dx, y + dy
+        placed.append((cx, cy))
+        out.append((float(dx), float(dy)))
+    return out
 
 
 def frame(trace, scenario, k: int, title: str = "") -> np.ndarray:
@@ -539,6 +574,37 @@ def frame(trace, scenario, k: int, title: str = "") -> np.ndarray:
         return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
     finally:
         plt.close(fig)
+
+
+def _drawn(fig, draw, k: int) -> np.ndarray:
+    """Step k drawn into the figure, as an RGB array (H, W, 3)."""
+    draw(k)
+    fig.canvas.draw()
+    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+
+
+def write_gif(out, frames, fps: int, progress: Callable[[int], None] | None = None) -> int:
+    """Write RGB frames (an iterable of (H, W, 3) arrays) to the binary file `out` as a
+    looping GIF, each frame as it comes: memory stays that of one frame, however long the
+    animation. Each frame has a 256-colour palette of its own (the first's is the
+    file's). Returns the number of frames."""
+    from PIL import GifImagePlugin, Image
+
+    count = 0
+    duration = int(round(1000 / fps))
+    for rgb in frames:
+        indexed = Image.fromarray(rgb).quantize(colors=256, method=Image.Quantize.MEDIANCUT)
+        if count == 0:
+            header, _ = GifImagePlugin.getheader(indexed, info={"loop": 0})
+            out.write(b"".join(header))
+        local = {"include_color_table": True} if count else {}
+        for chunk in GifImagePlugin.getdata(indexed, duration=duration, **local):
+            out.write(chunk)
+        count += 1
+        if progress is not None:
+            progress(1)
+    out.write(b";")  # the trailer
+    return count
 
 
 def animate(
@@ -559,20 +625,11 @@ def animate(
     target. Frames are 1000 x 800 pixels, the legend on the right. `progress`, if given,
     is called once per frame.
     """
-    from matplotlib.animation import FuncAnimation, PillowWriter
-
     fig, draw = _scene(trace, scenario, title)
     frames = animation_frames(trace.observed.shape[0], every)
-    anim = FuncAnimation(fig, draw, frames=frames)
-    callback = (lambda done, total: progress(1)) if progress is not None else None
     try:
-        with replacing(path) as tmp:
-            anim.save(
-                tmp,
-                writer=PillowWriter(fps=fps),
-                dpi=100,
-                progress_callback=callback,
-            )
+        with replacing(path) as tmp, open(tmp, "wb") as out:
+            write_gif(out, (_drawn(fig, draw, k) for k in frames), fps, progress)
     finally:
         plt.close(fig)
     return len(frames)

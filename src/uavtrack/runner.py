@@ -29,6 +29,8 @@ import hashlib
 import json
 import os
 import signal
+import stat
+import tempfile
 import threading
 import time
 import traceback
@@ -141,8 +143,16 @@ class Store:
             )
 
     def close(self) -> None:
-        """Release the folder's lock."""
+        """Release the folder's lock; leave no empty failed/ and no lock file behind."""
         if self._lock is not None:
+            try:
+                self.failed.rmdir()  # only if empty
+            except OSError:
+                pass
+            try:  # removed while held: a run that opened it meanwhile opens it again
+                (self.root / LOCK).unlink()
+            except OSError:
+                pass
             self._lock.close()  # closing the descriptor releases the flock
             self._lock = None
 
@@ -212,7 +222,7 @@ class Store:
         except OSError as exc:
             content = f"(unreadable: {_reason(exc)})"
         write_json(
-            self.failed / f"{job.key}.rejected.json",
+            _unused(self.failed, f"{job.key}.rejected", ".json"),
             {"job": describe_job(job), "reason": problem, "content": content},
         )
         path.unlink()
@@ -240,40 +250,85 @@ class Store:
         return self._seconds[job.key]
 
 
+def _unused(folder: Path, stem: str, suffix: str) -> Path:
+    """``folder/stem.suffix``, or with -2, -3, ... before the suffix: a name not taken, so
+    an earlier file is never replaced."""
+    path, n = folder / f"{stem}{suffix}", 1
+    while path.exists() or path.is_symlink():
+        n += 1
+        path = folder / f"{stem}-{n}{suffix}"
+    return path
+
+
 def _take_lock(root: Path):
-    """Open and exclusively lock ``root/.lock``; refuse if another process holds it."""
+    """Open and exclusively lock ``root/.lock`` (a regular file, never through a link);
+    refuse if another process holds it. The lock is the file the path names once it is
+    held: a lock file removed by its last holder between the open and the lock is
+    opened again."""
     path = root / LOCK
-    try:
-        handle = open(path, "a+", encoding="utf-8")  # noqa: SIM115 (held until close)
-    except OSError as exc:
-        raise UsageError(f"results folder {root}: cannot write in it ({_reason(exc)})") from None
-    try:
-        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
-    except OSError as exc:
-        if exc.errno not in (errno.EWOULDBLOCK, errno.EACCES):
+    for _ in range(10):
+        handle = _open_lock(root, path)
+        try:
+            fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except OSError as exc:
+            if exc.errno not in (errno.EWOULDBLOCK, errno.EACCES):
+                handle.close()
+                reason = _reason(exc)
+                raise UsageError(f"results folder {root}: cannot lock it ({reason})") from None
+            holder = os.pread(handle.fileno(), 32, 0).decode(errors="replace").strip()
+            holder = holder or "unknown"
             handle.close()
-            raise UsageError(f"results folder {root}: cannot lock it ({_reason(exc)})") from None
-        handle.seek(0)
-        holder = handle.read().strip() or "unknown"
+            raise UsageError(
+                f"results folder {root} is in use by another uavtrack run (pid {holder}); "
+                "wait for it to finish or use another --out"
+            ) from None
+        try:
+            current = os.stat(path, follow_symlinks=False)
+        except FileNotFoundError:
+            current = None
+        held = os.fstat(handle.fileno())
+        if current is not None and (current.st_ino, current.st_dev) == (held.st_ino, held.st_dev):
+            break
+        handle.close()  # its holder removed it as we opened it: take the new one
+    else:
+        raise UsageError(f"results folder {root}: cannot lock it (its lock file keeps changing)")
+    try:  # unbuffered: a full disk shows here, with the folder's name
+        os.ftruncate(handle.fileno(), 0)
+        os.pwrite(handle.fileno(), str(os.getpid()).encode(), 0)
+    except OSError as exc:
         handle.close()
-        raise UsageError(
-            f"results folder {root} is in use by another uavtrack run (pid {holder}); "
-            "wait for it to finish or use another --out"
-        ) from None
-    handle.seek(0)
-    handle.truncate()
-    handle.write(str(os.getpid()))
-    handle.flush()
+        raise UsageError(f"results folder {root}: cannot write in it ({_reason(exc)})") from None
     return handle
 
 
+def _open_lock(root: Path, path: Path):
+    """The lock file, opened for reading and writing without following a link."""
+    flags = os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0) | getattr(os, "O_CLOEXEC", 0)
+    try:
+        fd = os.open(path, flags, 0o644)
+    except OSError as exc:
+        if exc.errno == errno.ELOOP:
+            raise UsageError(
+                f"results folder {root}: {LOCK} is a symbolic link; uavtrack writes only its "
+                "own lock file there (remove the link)"
+            ) from None
+        if exc.errno == errno.EISDIR:
+            raise UsageError(f"results folder {root}: {LOCK} is not a regular file") from None
+        raise UsageError(f"results folder {root}: cannot write in it ({_reason(exc)})") from None
+    if not stat.S_ISREG(os.fstat(fd).st_mode):
+        os.close(fd)
+        raise UsageError(f"results folder {root}: {LOCK} is not a regular file")
+    return os.fdopen(fd, "rb+", buffering=0)
+
+
 def _check_writable(folder: Path) -> None:
-    """Create `folder` if needed and prove that files can be written in it."""
+    """Create `folder` if needed and prove that files can be written in it (a probe file
+    of a new name, created exclusively: never an existing file or a link's target)."""
     try:
         folder.mkdir(exist_ok=True)
-        probe = folder / f".probe-{os.getpid()}"
-        probe.write_bytes(b"")
-        probe.unlink()
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".probe-")
+        os.close(fd)
+        os.unlink(probe)
     except OSError as exc:
         raise UsageError(f"results folder {folder}: cannot write in it ({_reason(exc)})") from None
 
@@ -330,19 +385,12 @@ class EngineError(RunError):
 
 
 def exit_with_parent(parent: int) -> None:
-    """Worker initialiser: end this process within a second once `parent` is gone.
+    """Worker initialiser: end this process once `parent` is gone, even by SIGKILL
+    (`lifeline.die_with`); Ctrl-C is the parent's to handle."""
+    from .lifeline import die_with
 
-    A worker whose parent dies (even by SIGKILL) is adopted by another process, so its
-    parent pid changes; a daemon thread watches for that.
-    """
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    die_with(parent)
 
 
 def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
@@ -439,7 +487,8 @@ def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Itera
             threads_per_worker=1,
             processes=True,
             dashboard_address=None,
-            death_timeout=5,
+            death_timeout=60,  # a loaded machine starts a worker slowly; orphans end by
+            # themselves within seconds of this process, whatever it is
         )
         client = Client(cluster)
     from distributed.scheduler import KilledWorker

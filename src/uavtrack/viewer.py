@@ -13,9 +13,12 @@ thousands of UAVs. Install with ``pip install "uavtrack[viz]"``.
 
 from __future__ import annotations
 
+import os
+import shutil
 import subprocess
 import sys
 import tempfile
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -53,13 +56,44 @@ THIN = 0.05  # [m] the vertical half-size of flat ellipsoids (disks, ellipses)
 
 
 def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
-    """Write the recording of a run's trace to `path` (.rrd), atomically."""
-    with replacing(Path(path)) as tmp:
-        rec = rr.RecordingStream("uavtrack", recording_id=name)
-        rec.save(tmp)
-        log(rec, trace, scenario)
-        rec.flush()
-        rec.disconnect()
+    """Write the recording of a run's trace to `path` (.rrd), atomically: a recording
+    that cannot be finished (a full disk) leaves no file and raises a one-line
+    RunError."""
+    path = Path(path)
+    failed = None
+    with replacing(path) as tmp:
+        with _quiet_stderr():  # Rerun's writer logs its own failure: ours says it once
+            rec = rr.RecordingStream("uavtrack", recording_id=name)
+            rec.save(tmp)
+            log(rec, trace, scenario)
+            try:
+                rec.flush()
+                rec.disconnect()
+            except RuntimeError as exc:
+                failed = str(exc)
+            del rec  # its writer thread ends here, while its complaints go nowhere
+        if failed is not None:
+            why = "; the disk is full" if shutil.disk_usage(path.parent).free < 1 << 20 else ""
+            raise RunError(f"cannot write {path}: Rerun's file writer stopped ({failed}){why}")
+
+
+@contextmanager
+def _quiet_stderr():
+    """Native writes to file descriptor 2 go nowhere for the duration."""
+    try:
+        sys.stderr.flush()
+        saved = os.dup(2)
+        null = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(null, 2)
+        os.close(null)
+    except (OSError, ValueError):
+        yield
+        return
+    try:
+        yield
+    finally:
+        os.dup2(saved, 2)
+        os.close(saved)
 
 
 def show(trace, scenario, name: str = "uavtrack") -> int:
@@ -201,7 +235,7 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
     in_view = trace.observed.any(axis=1).mean(axis=1)
     series = {
         "metrics/observation_rate": np.cumsum(in_view) / np.arange(1, T + 1),
-        "metrics/rounds": np.nanmean(np.where(alive, trace.rounds, np.nan), axis=1),
+        "metrics/rounds": (trace.rounds * alive).sum(axis=1) / np.maximum(alive.sum(axis=1), 1),
         "metrics/messages": trace.messages.astype(float),
     }
     for entity, values in series.items():

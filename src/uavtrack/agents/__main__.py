@@ -9,31 +9,9 @@ parent-death signal where there is one, and a watch every half second).
 """
 
 import json
-import os
 import sys
-import threading
-import time
 
-
-def die_with(parent: int) -> None:
-    """End this process when `parent` is gone, even by SIGKILL, and now if it is."""
-    try:  # Linux: the kernel sends SIGKILL when the parent ends
-        import ctypes
-        import signal
-
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(1, int(signal.SIGKILL), 0, 0, 0)  # PR_SET_PDEATHSIG
-    except (OSError, AttributeError):
-        pass
-    if os.getppid() != parent:
-        os._exit(1)
-
-    def watch() -> None:
-        while os.getppid() == parent:
-            time.sleep(0.5)
-        os._exit(1)
-
-    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
+from ..lifeline import die_with
 
 
 def main() -> int:

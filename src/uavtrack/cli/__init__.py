@@ -24,7 +24,7 @@ from .. import registry
 from .._version import __version__
 from ..config import Scenario, ScenarioError, parse_value
 from ..errors import Interrupted, RunError, UsageError
-from ..files import check_output, dumps, write_npz
+from ..files import check_distinct, check_output, dumps, write_npz
 from ..progress import bar, on_terminal
 
 
@@ -108,6 +108,10 @@ MethodOpt = Annotated[
     typer.Option(metavar="METHOD", help=", ".join(registry.names())),
 ]
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
+TrialStepsOpt = Annotated[
+    int | None,
+    typer.Option("--steps", min=1, metavar="N", help="steps of the trial [the scenario's]"),
+]
 
 
 def load_scenario(
@@ -201,6 +205,7 @@ def run(
     seed: SeedOpt = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,
+    steps: TrialStepsOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
     trace: Annotated[
         Path | None,
@@ -221,7 +226,8 @@ def run(
     """Simulate one trial and print its metrics."""
     from ..simulation import simulate
 
-    scenario = load_scenario(config, set_, team)
+    scenario = with_steps(load_scenario(config, set_, team), steps, set_)
+    check_distinct({"--trace": trace, "--rerun": rerun or None})
     if trace is not None:
         check_output(trace, "--trace")
     viewer = None
@@ -441,7 +447,7 @@ def main(argv: list[str] | None = None) -> int:
         sys.stdout.flush()  # a full or closed stdout shows here, not at interpreter exit
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
-        return fail(exc.format_message())
+        return fail(exc.format_message() + _hint(exc.format_message(), argv))
     except UsageError as exc:
         return fail(str(exc))
     except Interrupted as exc:
@@ -456,6 +462,21 @@ def main(argv: list[str] | None = None) -> int:
         return fail("out of memory; make the scenario smaller (see uavtrack params)", code=1)
     except OSError as exc:
         return fail(os_error(exc), code=1)
+
+
+def _hint(message: str, argv: list[str]) -> str:
+    """What a user most likely meant by an argument the parser refused, or ''."""
+    if re.match(r"No such option: -\d", message):
+        return (
+            "; a negative value? put -- before the values, as in "
+            "uavtrack sweep uav.altitude_spacing -- -5 0 5"
+        )
+    if message.startswith("Got unexpected extra argument"):
+        for k, token in enumerate(argv[:-1]):
+            if token == "--set" and "=" not in argv[k + 1]:
+                name, value = argv[k + 1], argv[k + 2] if k + 2 < len(argv) else "VALUE"
+                return f"; --set takes FIELD=VALUE in one word: --set {name}={value}"
+    return ""
 
 
 OPTIONAL_VALUES = ("--rerun",)
@@ -497,13 +518,16 @@ def os_error(exc: OSError) -> str:
     """An OSError as one line: what could not be done, where, and why.
 
     Files are written through `files`, which names them in its errors; an error with no
-    file name comes from writing the standard output.
-    """
+    file name is the standard output's if it cannot be flushed, else said as it is."""
     reason = exc.strerror or str(exc)
     if exc.filename is not None:
         return f"cannot write {exc.filename}: {reason}"
-    _silence_stdout()
-    return f"cannot write standard output: {reason}"
+    try:
+        sys.stdout.flush()
+    except (OSError, ValueError):
+        _silence_stdout()
+        return f"cannot write standard output: {reason}"
+    return f"a file could not be written: {reason}"
 
 
 def _silence_stdout() -> None:

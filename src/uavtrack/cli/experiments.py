@@ -12,18 +12,20 @@ import typer
 
 from ..config import ScenarioError, parse_value, read_toml
 from ..errors import Interrupted, UsageError
-from ..files import check_output, write_json, write_text
+from ..files import check_output, check_outputs, write_json, write_text
 from . import (
     ConfigOpt,
     MethodName,
     MethodOpt,
     SetOpt,
     TeamOpt,
+    TrialStepsOpt,
     app,
     console,
     load_scenario,
     parse_overrides,
     steps_bar,
+    with_steps,
 )
 
 
@@ -64,9 +66,10 @@ def note(message: str) -> None:
 
 
 @contextmanager
-def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress):
+def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress, outputs=()):
     """Execute a plan into `out`; yields (results by job key, info) with the folder locked,
-    so the caller writes its summary, figures and report under the same lock.
+    so the caller writes its summary, figures and report under the same lock. `outputs`:
+    the files the caller will write in `out`, checked before any job runs.
 
     Raises Interrupted on Ctrl-C and RunError when jobs failed; finished jobs are kept.
     """
@@ -81,6 +84,7 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
     jobs = unique(j for group in plan.values() for j in group)
     if address and engine != EngineName.dask:
         raise UsageError("--address needs --engine dask")
+    check_outputs(out, ["summary.json", "report.md", *outputs])
     if address:
         check_scheduler(address)  # before anything is written
     workers, capped = resolve_workers(workers)
@@ -217,7 +221,11 @@ def reproduce(
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     plan = reproduce_plan(scenario, profile, seed, sensitivity)
     manifest = manifest_of("reproduce", seed, profile, scenario)
-    with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
+    figures = [f"fig{k}.png" for k in range(5, 10)] + ["sensitivity.png"]
+    with run_jobs(plan, out, manifest, engine, workers, address, progress, figures) as (
+        results,
+        info,
+    ):
         info["seed"] = seed
         summary = summarize_reproduction(plan, results, profile, scenario)
         summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
@@ -311,7 +319,10 @@ def sweep(
         "scenario": scenario.to_dict(),
         "plan": {"field": field, "values": parsed, "methods": names, "trials": trials},
     }
-    with run_jobs(plan, out, manifest, engine, workers, address, progress) as (results, info):
+    with run_jobs(plan, out, manifest, engine, workers, address, progress, ["sweep.png"]) as (
+        results,
+        info,
+    ):
         info["seed"] = seed
         summary = summarize_sweep(plan, results, field, parsed, names)
         summary["unit"] = scenario.unit(field)
@@ -347,6 +358,7 @@ def animate(
     seed: Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")] = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,
+    steps: TrialStepsOpt = None,
     every: Annotated[int, typer.Option(min=1, metavar="K", help="draw every K-th step")] = 2,
     fps: Annotated[
         int, typer.Option(min=1, max=60, metavar="F", help="frames per second, 1 to 60")
@@ -360,7 +372,7 @@ def animate(
     if out.suffix.lower() != ".gif":
         raise UsageError(f"--out must name a .gif file, got {out}")
     check_output(out, "--out")
-    scenario = load_scenario(config, set_, team)
+    scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     with steps_bar(scenario) as advance:
         result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))
     frames = len(plots.animation_frames(scenario.steps, every))

@@ -76,7 +76,11 @@ def robustness(
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     jobs = experiment.plan(scenario, profile, seed)
     manifest = manifest_of("robustness", seed, profile, scenario)
-    with run_jobs(jobs, out, manifest, engine, workers, address, progress) as (results, info):
+    figures = [f"fault_{name}.png" for name in jobs if name != "ablation"]
+    with run_jobs(jobs, out, manifest, engine, workers, address, progress, figures) as (
+        results,
+        info,
+    ):
         info["seed"] = seed
         summary = experiment.summarize(jobs, results, profile, scenario)
         summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}

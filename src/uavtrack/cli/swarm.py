@@ -21,10 +21,12 @@ from . import (
     SeedOpt,
     SetOpt,
     TeamOpt,
+    TrialStepsOpt,
     app,
     load_scenario,
     show,
     steps_bar,
+    with_steps,
 )
 
 
@@ -132,6 +134,7 @@ def swarm(
     seed: SeedOpt = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,
+    steps: TrialStepsOpt = None,
     transport: Annotated[
         TransportName,
         typer.Option(
@@ -193,7 +196,7 @@ def swarm(
     messages; prints and writes what `uavtrack run` does."""
     from ..methods import get
 
-    scenario = load_scenario(config, set_, team)
+    scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     if trace is not None:
         check_output(trace, "--trace")
     zenoh_given = [zenoh_config, tls_ca, tls_cert, tls_key, keys]
