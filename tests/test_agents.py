@@ -6,7 +6,6 @@ import subprocess
 import sys
 import threading
 import time
-from pathlib import Path
 
 import msgspec
 import numpy as np
@@ -17,6 +16,8 @@ from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.security import WORLD, Envelope, Gate
 from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
 from uavtrack.equivalence import assert_same_trace
+
+from .processes import alive, children_of, wait_until
 
 pytest.importorskip("msgspec")
 
@@ -355,36 +356,6 @@ def test_zenoh_logs_never_reach_the_json_on_stdout():
     result = __import__("json").loads(out.stdout)
     assert result["swarm"]["signed"] and result["swarm"]["received_per_uav_cycle"] > 0
     assert "zenoh" in out.stderr.lower()  # the log went to stderr, where logs belong
-
-
-def children_of(pid):
-    found = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                found.append(int(entry.name))
-    return found
-
-
-def alive(pid):
-    try:
-        return Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0] != "Z"
-    except OSError:
-        return False
-
-
-def wait_until(condition, limit=120.0, step=0.1):
-    """Poll `condition` until it holds; the limit only stops a test that would hang."""
-    end = time.monotonic() + limit
-    while not condition():
-        if time.monotonic() > end:
-            return False
-        time.sleep(step)
-    return True
 
 
 def test_ctrl_c_stops_every_program(tmp_path):

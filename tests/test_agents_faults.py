@@ -20,7 +20,7 @@ import uavtrack
 from uavtrack.agents import run_swarm
 from uavtrack.errors import RunError
 
-from .test_agents import alive, children_of, wait_until
+from .processes import alive, children_of, wait_until
 
 pytest.importorskip("zenoh")
 

@@ -5,6 +5,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -134,9 +135,19 @@ def test_trace_into_missing_directory(capsys, tmp_path):
     assert code == 2 and "does not exist" in err
 
 
-def test_params_lists_every_field(capsys):
-    code, out, _ = run_cli(capsys, "params", "--toml")
-    assert code == 0 and "comm_range = 50.0" in out and "[sensor]" in out
+def test_params_lists_every_field(capsys, tmp_path):
+    code, out, _ = run_cli(capsys, "params", "--toml", "--set", "comm_range=60")
+    assert code == 0 and "comm_range = 60.0" in out and "[sensor]" in out
+    lines = out.splitlines()
+    # each field's unit, range and source just above it, as TOML comments
+    above = lines[lines.index("comm_range = 60.0") - 1]
+    assert above.startswith("# communication range r_C") and "[m]" in above
+    assert "# round_budget =   (not set)" in lines
+    (tmp_path / "s.toml").write_text(out)  # and it reads back as the same scenario
+    import uavtrack
+
+    again = uavtrack.Scenario.from_toml(tmp_path / "s.toml")
+    assert again == uavtrack.Scenario().with_overrides({"comm_range": 60.0})
 
 
 def test_console_script_exit_code():
@@ -286,6 +297,21 @@ def test_memory_refusal_names_the_field(capsys, monkeypatch):
     assert code == 2 and "of memory" in err and "reduce n_uavs" in err
 
 
+def handles(pid: int, signum: int, limit: float = 300.0) -> bool:
+    """Wait until process `pid` catches `signum` (its SigCgt mask in /proc): an event, not
+    a guess of how long a loaded machine takes to import; the limit only stops a hang."""
+    end = time.monotonic() + limit
+    while time.monotonic() < end:
+        try:
+            for line in open(f"/proc/{pid}/status"):
+                if line.startswith("SigCgt:") and int(line.split()[1], 16) >> (signum - 1) & 1:
+                    return True
+        except OSError:
+            return False
+        time.sleep(0.05)
+    return False
+
+
 @pytest.mark.parametrize(
     "sent,code,word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")]
 )
@@ -296,9 +322,10 @@ def test_ctrl_c_or_sigterm_on_run_says_so(tmp_path, sent, code, word):
         stderr=subprocess.PIPE,
         text=True,
     )
-    time.sleep(4)
+    assert handles(proc.pid, signal.SIGTERM)  # the command runs: its handler is in place
+    time.sleep(1)
     proc.send_signal(sent)
-    out, err = proc.communicate(timeout=30)
+    out, err = proc.communicate(timeout=120)
     assert proc.returncode == code
     assert err.strip().startswith(f"uavtrack: {word}") and err.count("\n") == 1
     assert not any(tmp_path.iterdir())
@@ -367,3 +394,61 @@ def test_two_outputs_at_one_path_are_refused(capsys, tmp_path):
     code, _, err = run_cli(capsys, "run", "--rerun", str(path), "--trace", str(path))
     assert code == 2 and "name the same file" in err
     assert not path.exists()
+
+
+def test_long_work_off_a_terminal_says_how_far_it_is_once_a_minute(capsys, monkeypatch):
+    from uavtrack import progress
+
+    clock = {"now": 0.0}
+    monkeypatch.setattr(progress.time, "monotonic", lambda: clock["now"])
+    monkeypatch.setattr(progress, "on_terminal", lambda: False)
+    with progress.bar(10, "trial-steps", "trial-steps") as advance:
+        for _ in range(10):
+            clock["now"] += 25.0  # a step every 25 s: a line at 75 s, 150 s, 225 s
+            advance(1)
+    lines = capsys.readouterr().err.splitlines()
+    assert lines == [
+        "uavtrack: trial-steps: 3 of 10 (30%), 1 min 15 s elapsed, about 2 min 55 s left",
+        "uavtrack: trial-steps: 6 of 10 (60%), 2 min 30 s elapsed, about 1 min 40 s left",
+        "uavtrack: trial-steps: 9 of 10 (90%), 3 min 45 s elapsed, about 25 s left",
+    ]
+    with progress.bar(10, "steps", "steps", enabled=False) as advance:
+        clock["now"] += 1000
+        advance(5)
+    assert capsys.readouterr().err == ""
+
+
+def test_a_large_team_is_summarised_and_absent_metrics_say_why(capsys):
+    code, out, err = run_cli(
+        capsys, "compare", "--team", "30x30", "--trials", "1", "--steps", "6", "--method",
+        "greedy",
+    )  # fmt: skip
+    assert code == 0, err
+    rows = [line for line in out.splitlines() if "target" in line and "│" in line]
+    assert not any("target 29" in line for line in rows)  # not one row per target
+    for place in ("lowest of 30", "median of 30", "highest of 30", "std over the 30"):
+        assert any(place in line for line in rows), place
+    code, out, err = run_cli(capsys, "run", "--team", "30x30", "--steps", "4")
+    assert code == 0 and "n/a" in out and "not computed above 20 targets" in " ".join(out.split())
+
+
+def test_the_run_table_says_the_team_and_where_the_scenario_came_from(
+    capsys, tmp_path, monkeypatch
+):
+    monkeypatch.chdir(tmp_path)
+    Path("s.toml").write_text("comm_range = 70.0\n")
+    code, out, _ = run_cli(
+        capsys, "run", "--config", "s.toml", "--team", "6x5", "--set", "dt=0.4", "--steps", "5"
+    )
+    text = " ".join(out.split())
+    assert code == 0 and "6 UAVs x 5 targets, 5 steps" in text
+    assert "config s.toml, --team 6x5, --set dt=0.4" in text
+
+
+def test_a_world_on_every_interface_prints_endpoints_others_can_reach():
+    from uavtrack.cli.swarm import reachable
+
+    found = reachable("tcp/0.0.0.0:7447")
+    assert found and all(e.startswith("tcp/") and e.endswith(":7447") for e in found)
+    assert "tcp/0.0.0.0:7447" not in found and "tcp/127.0.0.1:7447" in found
+    assert reachable("tls/10.1.2.3:7447") == ["tls/10.1.2.3:7447"]

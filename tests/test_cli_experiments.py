@@ -12,6 +12,8 @@ from PIL import Image
 
 from uavtrack import cli
 
+from .processes import alive, children_of
+
 
 def run_cli(capsys, *args):
     code = cli.main(list(args))
@@ -86,6 +88,12 @@ def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
             assert entry["near_centralized"].split(",")[0] in ("yes", "no")
     report = (quick / "report.md").read_text()
     assert "## Sensitivity of the conclusions" in report and "| `dt` (0.5) | 0.25 |" in report
+    for claim in ("distributed within 0.03 of centralized", "distributed well above greedy"):
+        said = next(line for line in out.splitlines() if line.strip().startswith(claim))
+        written = next(line for line in report.splitlines() if line.startswith(f"*{claim}*"))
+        assert said.split("fails at: ")[1] == written.split("fails at: ")[1].rstrip(".").replace(
+            "`", ""
+        )
     with Image.open(quick / "sensitivity.png") as im:
         assert im.size[0] > 800
     # without the flag the report leaves the section out, and nothing is recomputed
@@ -366,28 +374,6 @@ def test_workers_are_capped_at_the_cores(tmp_path, capsys):
     assert summary["settings"]["workers"] <= os.cpu_count()
 
 
-def children(pid):
-    """Pids of the processes whose parent is `pid` (from /proc)."""
-    out = []
-    for entry in Path("/proc").iterdir():
-        if entry.name.isdigit():
-            try:
-                stat = (entry / "stat").read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(")", 1)[1].split()[1]) == pid:
-                out.append(int(entry.name))
-    return out
-
-
-def alive(pid):
-    try:
-        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != "Z"
-
-
 def test_workers_exit_with_a_killed_parent(tmp_path):
     proc = subprocess.Popen(
         [
@@ -413,7 +399,7 @@ def test_workers_exit_with_a_killed_parent(tmp_path):
     workers = []
     while time.monotonic() < deadline and len(workers) < 2:
         time.sleep(0.2)
-        workers = children(proc.pid)
+        workers = children_of(proc.pid)
     assert len(workers) >= 2, "no worker processes started"
     proc.kill()
     proc.wait()
@@ -508,6 +494,7 @@ def test_robustness_writes_a_figure_per_fault_and_a_report(tmp_path, capsys):
     report = (out / "report.md").read_text()
     assert "## loss: `faults.loss`" in report and "Which mechanism helps" in report
     assert "fault" in stdout and "robust" in stdout
+    assert "burst (at loss 0.3)" in stdout  # its rows run at 30% loss, and say so
 
 
 def test_sweep_of_a_fault_field(tmp_path, capsys):

@@ -147,3 +147,24 @@ def test_with_every_uav_failed_nothing_is_averaged():
     assert r.failed == 5 and r.observation_rate == 0.0
     for name in ("rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms"):
         assert np.isnan(getattr(r, name)), name
+
+
+@pytest.mark.parametrize("method", ["distributed", "greedy", "centralized"])
+def test_with_delay_messages_are_counted_when_sent(method):
+    # a delay longer than the run: nothing is ever read, yet every UAV sends every cycle
+    scenario = uavtrack.Scenario(steps=12).with_overrides({"faults.delay": 50})
+    trace = uavtrack.simulate(scenario, method, seed=1).trace
+    assert (trace.messages > 0).all() and (trace.delivered == trace.messages).all()
+    # what is sent: per link of the cycle, the rounds each UAV runs (no flooding knowledge
+    # ever arrives, so one flooding round, no consensus round, a beacon and bids)
+    adjacency = np.stack(
+        [uavtrack.network.adjacency(trace.uavs[k], scenario.comm_range) for k in range(12)]
+    )
+    links = adjacency.sum(axis=(1, 2))
+    expected = {"distributed": 3 * links, "greedy": links, "centralized": 2 * 5 + 0 * links}
+    np.testing.assert_array_equal(trace.messages, expected[method])
+    # losses count among what was sent
+    lossy = scenario.with_overrides({"faults.loss": 0.5})
+    lossy_trace = uavtrack.simulate(lossy, method, seed=1).trace
+    assert (lossy_trace.delivered <= lossy_trace.messages).all()
+    assert lossy_trace.delivered.sum() < lossy_trace.messages.sum()

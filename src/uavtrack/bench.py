@@ -24,6 +24,7 @@ import numpy as np
 
 from . import estimation, planning, sensing, world
 from .config import Scenario
+from .errors import install_hint
 from .experiments import resized
 from .methods import get
 from .simulation import (
@@ -422,7 +423,7 @@ def bench(quick: bool = False, progress: Callable[[str], None] | None = None) ->
         cases.append(
             {
                 "name": "kalman predict+update, 100 filters",
-                "skipped": 'filterpy is not installed (pip install "uavtrack[bench]")',
+                "skipped": f"filterpy is not installed ({install_hint('bench')})",
             }
         )
     say("OSPA and GOSPA")

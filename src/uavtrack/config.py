@@ -617,9 +617,16 @@ class Scenario(_Part):
                 return found.group(1) if found and found.group(1) != "-" else ""
         raise ScenarioError(f"unknown scenario field '{dotted}'")
 
-    def to_toml(self) -> str:
-        """The scenario as TOML text (round-trips through `from_toml`)."""
-        return dump_toml(self.model_dump(mode="json", exclude_none=True))
+    def to_toml(self, comments: bool = False) -> str:
+        """The scenario as TOML text (round-trips through `from_toml`); with `comments`,
+        each field's unit, range and source above it, and the fields not set (None) as
+        commented-out lines."""
+        data = self.model_dump(mode="json", exclude_none=True)
+        if not comments:
+            return dump_toml(data)
+        docs = {name: doc for name, _, doc in self.describe()}
+        unset = [name for name, value, _ in self.describe() if value is None]
+        return dump_toml(data, docs, unset)
 
     def describe(self) -> list[tuple[str, Any, str]]:
         """Every leaf field as (dotted name, value, description)."""
@@ -724,20 +731,40 @@ def parse_value(text: str, where: str = "value") -> Any:
         return text
 
 
-def dump_toml(data: dict[str, Any]) -> str:
-    """Minimal TOML writer for the scenario's shape: scalars, lists, nested tables."""
-    lines: list[str] = []
-    tables = []
-    for key, value in data.items():
-        if isinstance(value, dict):
-            tables.append((key, value))
-        else:
-            lines.append(f"{key} = {_toml_value(value)}")
-    for key, table in tables:
-        lines.append("")
-        lines.append(f"[{key}]")
-        lines.extend(f"{k} = {_toml_value(v)}" for k, v in table.items())
+def dump_toml(
+    data: dict[str, Any], docs: dict[str, str] | None = None, unset: list[str] = ()
+) -> str:
+    """Minimal TOML writer for the scenario's shape: scalars, lists, nested tables; with
+    `docs` (dotted name -> description) each key gets its description as a comment, and
+    the dotted names in `unset` are written as commented-out keys."""
+    import textwrap
+
+    def entry(prefix: str, key: str, value: Any) -> list[str]:
+        name = prefix + key
+        lines = []
+        if docs is not None and docs.get(name):
+            lines += [f"# {part}" for part in textwrap.wrap(docs[name], 86)]
+        lines.append(
+            f"# {key} =   (not set)" if value is _UNSET else f"{key} = {_toml_value(value)}"
+        )
+        return lines
+
+    def keys(table: dict[str, Any], prefix: str) -> list[str]:
+        missing = {n[len(prefix) :]: _UNSET for n in unset if n.startswith(prefix)}
+        missing = {k: v for k, v in missing.items() if "." not in k and k not in table}
+        out = []
+        for key, value in {**table, **missing}.items():
+            if not isinstance(value, dict):
+                out += entry(prefix, key, value)
+        return out
+
+    lines: list[str] = keys(data, "")
+    for key, table in ((k, v) for k, v in data.items() if isinstance(v, dict)):
+        lines += ["", f"[{key}]", *keys(table, f"{key}.")]
     return "\n".join(lines) + "\n"
+
+
+_UNSET = object()
 
 
 def _toml_value(value: Any) -> str:

@@ -3,7 +3,7 @@
 Each cycle runs the simulator's own stages (`simulation.decide`, then
 `simulation.finish` with the agents' actions), so sensing, filtering, fusion, planning
 and the method's assignment are exactly those of `simulate`; only the flown actions come
-from the agents. Install with ``pip install "uavtrack[env]"``.
+from the agents. Needs the env extra (pettingzoo, gymnasium).
 
 Agents ``uav_0 ... uav_{N-1}``.
 
@@ -34,12 +34,14 @@ from typing import Any
 
 import numpy as np
 
+from .errors import install_hint
+
 try:
     from gymnasium import spaces
     from pettingzoo import ParallelEnv
 except ImportError as exc:  # an optional extra
     raise ImportError(
-        f'uavtrack.env needs pettingzoo and gymnasium: pip install "uavtrack[env]" ({exc})'
+        f"uavtrack.env needs pettingzoo and gymnasium: {install_hint('env')} ({exc})"
     ) from None
 
 from .config import Scenario, flatten

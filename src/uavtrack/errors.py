@@ -20,3 +20,18 @@ class RunError(RuntimeError):
 
 class Interrupted(RunError):
     """The user interrupted a run (Ctrl-C); the message says what was kept."""
+
+
+EXTRAS = {
+    "agents": "eclipse-zenoh",
+    "bench": "filterpy threadpoolctl pyinstrument",
+    "dask": '"dask[distributed]"',
+    "env": "pettingzoo gymnasium",
+    "viz": "rerun-sdk",
+}
+"""The packages of each optional extra (as pyproject.toml lists them)."""
+
+
+def install_hint(extra: str) -> str:
+    """How to install an extra: from a checkout of uavtrack, or its packages alone."""
+    return f'pip install ".[{extra}]" in a uavtrack checkout, or pip install {EXTRAS[extra]}'

@@ -118,12 +118,14 @@ class Depth:
     """Outcome of the D_i protocol: depth (B, N) rounds learned; sent and delivered (B,)
     messages (one per link into a receiver still running, per round); largest (B, N):
     the most members of any closed neighbourhood the UAV belongs to (its own and its
-    neighbours'), learned in round 2 from the sets K_q(1) = N_q its neighbours send."""
+    neighbours'), learned in round 2 from the sets K_q(1) = N_q its neighbours send;
+    ran (B, N): the rounds each UAV ran, the one it stopped in included."""
 
     depth: np.ndarray
     sent: np.ndarray
     delivered: np.ndarray
     largest: np.ndarray
+    ran: np.ndarray
 
 
 def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) -> Depth:
@@ -144,12 +146,14 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
     idx = np.arange(n)
     known[:, idx, idx] = running  # K(0): each UAV knows itself
     depth = np.zeros((B, n), dtype=np.int64)
+    ran = np.zeros((B, n), dtype=np.int64)
     largest = np.ones((B, n), dtype=np.int64)  # a UAV alone (it stops in round 1)
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
     running = running.copy()
     r = 0
     while running.any():
         r += 1
+        ran[running] = r
         radio.send("flood", {"known": known})
         inbox = radio.receive("flood", r)
         if inbox is None:  # nothing in flight yet: nothing to learn
@@ -172,7 +176,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = budget
             break
     radio.send("flood", {"known": known})  # the final sets, for later rounds (with delay)
-    return Depth(depth, sent, delivered, largest)
+    return Depth(depth, sent, delivered, largest, ran)
 
 
 def count(inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray):

@@ -170,7 +170,14 @@ def consensus(inputs: Inputs) -> Fused:
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
-    sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
+    if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
+        flood, tuples_ = (
+            radio.transmitted("flood", depth.ran),
+            radio.transmitted("consensus", rounds),
+        )
+        sent, delivered = flood[0] + tuples_[0], flood[1] + tuples_[1]
+    else:
+        sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
     return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest)
 
 
@@ -208,7 +215,12 @@ class Distributed(Method):
         sent = np.zeros(B, dtype=np.int64)
         delivered = np.zeros(B, dtype=np.int64)
         everyone = np.ones((B, n), dtype=bool)
-        for arrived in (beacon, inbox):
+        if s.delay > 0:  # counted when sent, as the fusion's
+            once = inputs.alive.astype(np.int64)
+            for protocol in ("beacon", "bids"):
+                more = radio.transmitted(protocol, once, first=0)
+                sent, delivered = sent + more[0], delivered + more[1]
+        for arrived in (beacon, inbox) if s.delay == 0 else ():
             if arrived is not None:
                 sent, delivered = fusion.count(arrived, everyone, sent, delivered)
         alive = inputs.alive
@@ -299,25 +311,33 @@ class Centralized(Method):
         upload, up_ok = radio.receive_central("upload")
         sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
         seconds = np.zeros((B, n))
+        if s.delay > 0:  # counted when sent: uploads now, downloads below
+            up = radio.transmitted_central("upload")
+            sent, delivered = sent + up[0], delivered + up[1]
         if upload is None:
             down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
         else:
             up_ok = up_ok & upload["alive"]
-            sent += upload["alive"].sum(axis=1)
-            delivered += up_ok.sum(axis=1)
+            if s.delay == 0:
+                sent += upload["alive"].sum(axis=1)
+                delivered += up_ok.sum(axis=1)
             start = time.perf_counter()
             down, down_target = central_node(
                 {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
             )
             seconds += (time.perf_counter() - start) / B
         radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
+        if s.delay > 0:
+            down_sent = radio.transmitted_central("download")
+            sent, delivered = sent + down_sent[0], delivered + down_sent[1]
         download, down_ok = radio.receive_central("download")
         mean, cov = inputs.mean, inputs.cov
         target = None
         if download is not None:
             down_ok = down_ok & inputs.alive
-            sent += download["alive"].sum(axis=1)
-            delivered += down_ok.sum(axis=1)
+            if s.delay == 0:
+                sent += download["alive"].sum(axis=1)
+                delivered += down_ok.sum(axis=1)
             mean, cov = take_download(mean, cov, download, down_ok, s, k)
             target = np.where(down_ok, download["target"], -1)
         rounds = np.where(inputs.alive, 1, 0)

@@ -73,9 +73,11 @@ METRICS: dict[str, tuple[str, str]] = {
         "",
         "radio messages sent per step, all protocols: beacons, D_i flooding, consensus "
         "tuples and bids (distributed), flooding and tuples (greedy), uploads and "
-        "downloads (centralized); one per link into a receiver that needs it",
+        "downloads (centralized); one per link into a receiver that needs it; with "
+        "faults.delay, counted when sent, one per link and round the sender runs (whether "
+        "a receiver reads it d cycles later is not known then)",
     ),
-    "delivered": ("", "radio messages per step that arrived (messages minus those lost)"),
+    "delivered": ("", "radio messages per step that arrive (messages minus those lost)"),
     "conflicts": (
         "",
         "targets per step followed by two or more UAVs while another target has none",

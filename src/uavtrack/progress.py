@@ -1,8 +1,9 @@
-"""Progress bars on standard error (rich), for every command that can take a while.
+"""Progress on standard error, for every command that can take a while.
 
-`bar` returns a function to call with the amount of work just done; when disabled (not
-a terminal, or ``--no-progress``) it returns a function that does nothing, so callers
-need no branches.
+`bar` returns a function to call with the amount of work just done: on a terminal it
+moves a live bar (rich); elsewhere (a log file, a CI job) it prints a line every
+`EVERY` seconds of work, so a long run is never silent; with ``--no-progress`` it does
+nothing. Callers need no branches.
 """
 
 from __future__ import annotations
@@ -21,13 +22,24 @@ def on_terminal() -> bool:
         return False
 
 
+EVERY = 60.0
+"""Seconds between two lines of progress when standard error is not a terminal."""
+
+
 @contextmanager
 def bar(
-    total: float, label: str, unit: str, enabled: bool = True, completed: float = 0
+    total: float, label: str, unit: str, enabled: bool | None = None, completed: float = 0
 ) -> Iterator[Callable[[float], None]]:
-    """A bar for `total` units of work named `label`: done/total, rate, elapsed, left."""
-    if not enabled or total <= 0:
+    """Progress of `total` units of work named `label`: done/total, rate, elapsed, left.
+
+    enabled: True a live bar, False nothing, None (the default) a live bar on a terminal
+    and a line every `EVERY` seconds elsewhere."""
+    if enabled is False or total <= 0:
         yield lambda amount=1: None
+        return
+    if enabled is None and not on_terminal():
+        with lines(total, label, completed) as advance:
+            yield advance
         return
     from rich.console import Console
     from rich.progress import (
@@ -64,3 +76,40 @@ def bar(
         yield advance
     finally:
         progress.stop()
+
+
+@contextmanager
+def lines(total: float, label: str, completed: float = 0) -> Iterator[Callable[[float], None]]:
+    """A line on standard error every `EVERY` seconds: how much of `total` is done."""
+    start = time.monotonic()
+    state = {"done": completed, "said": start}
+
+    def advance(amount: float = 1) -> None:
+        state["done"] += amount
+        now = time.monotonic()
+        if now - state["said"] >= EVERY:
+            state["said"] = now
+            elapsed = now - start
+            share = state["done"] / total
+            left = elapsed * (1 - share) / share if share > 0 else float("nan")
+            print(
+                f"uavtrack: {label}: {state['done']:g} of {total:g} ({100 * share:.0f}%), "
+                f"{_duration(elapsed)} elapsed, about {_duration(left)} left",
+                file=sys.stderr,
+                flush=True,
+            )
+
+    yield advance
+
+
+def _duration(seconds: float) -> str:
+    if seconds != seconds:
+        return "?"
+    seconds = int(round(seconds))
+    if seconds < 60:
+        return f"{seconds} s"
+    minutes, seconds = divmod(seconds, 60)
+    if minutes < 60:
+        return f"{minutes} min {seconds:02d} s"
+    hours, minutes = divmod(minutes, 60)
+    return f"{hours} h {minutes:02d} min"

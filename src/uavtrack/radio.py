@@ -107,6 +107,45 @@ class Radio:
         lost = self.faults.lost(sent.k, protocol, 0, trial, sender, receiver, sent.bad)
         return content, sent.alive & ~lost
 
+    def transmitted(
+        self, protocol: str, rounds: np.ndarray, first: int = 1
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Messages sent now, counted when sent (with delay, whether a receiver will read
+        one d cycles later is not known yet): UAV i sends rounds[b, i] rounds of
+        `protocol`, numbered first, first + 1, ..., one message per link of this cycle and
+        round. Returns (sent, delivered) per trial (B,): delivered are those the fault
+        realisation does not lose."""
+        links = self.now.links
+        if links.edges:
+            other = ~links.own
+            trial, receiver, sender = links.trial[other], links.receiver[other], links.sender[other]
+        else:
+            trial, receiver, sender = np.nonzero(links.adjacency())
+        count = rounds[trial, sender]
+        B = links.batch
+        sent = np.bincount(trial, weights=count, minlength=B).astype(np.int64)
+        if self.faults.model.loss <= 0:
+            return sent, sent.copy()
+        delivered = np.zeros(B, dtype=np.int64)
+        for r in range(int(count.max(initial=0))):
+            on = count > r
+            lost = self.faults.lost(
+                self.k, protocol, first + r, trial[on], sender[on], receiver[on], self.now.bad
+            )
+            delivered += np.bincount(trial[on][~lost], minlength=B)
+        return sent, delivered
+
+    def transmitted_central(self, protocol: str) -> tuple[np.ndarray, np.ndarray]:
+        """An upload (each living UAV to the central node) or a download (the node to each
+        living UAV) sent now, counted when sent: (sent, delivered) per trial (B,)."""
+        alive = self.now.alive
+        B, n = alive.shape
+        trial, uav = np.ogrid[:B, :n]
+        central = np.full_like(uav, n)
+        sender, receiver = (uav, central) if protocol == "upload" else (central, uav)
+        lost = self.faults.lost(self.k, protocol, 0, trial, sender, receiver, self.now.bad)
+        return alive.sum(axis=1), (alive & ~lost).sum(axis=1)
+
     def close(self) -> RadioState:
         """The state to carry into the next cycle."""
         history = (*self.history, self.now)[-self.delay :] if self.delay else ()

@@ -273,6 +273,24 @@ _PAIR = {
 }
 
 
+def sensitivity_verdicts(sens: dict[str, Any], code: str = "") -> list[tuple[str, list[str]]]:
+    """Each of the paper's two conclusions and the settings where it fails (field = value
+    with its paired difference's 95% CI); `code` quotes the field names."""
+    out = []
+    for key, claim in (
+        ("near_centralized", "distributed within 0.03 of centralized"),
+        ("above_greedy", "distributed well above greedy"),
+    ):
+        fails = [
+            f"{code}{r['field']}{code} = {level_text(e['value'])} ({ci(e[_PAIR[key]])})"
+            for r in sens["rows"]
+            for e in r["values"]
+            if e[key].startswith("no")
+        ]
+        out.append((claim, fails))
+    return out
+
+
 def _sensitivity(sens: dict[str, Any]) -> list[str]:
     """The table of `reproduce --sensitivity`."""
     base = sens["base"]
@@ -319,16 +337,7 @@ def _sensitivity(sens: dict[str, Any]) -> list[str]:
                     entry,
                 )
             )
-    for key, claim in (
-        ("near_centralized", "distributed within 0.03 of centralized"),
-        ("above_greedy", "distributed well above greedy"),
-    ):
-        fails = [
-            f"`{r['field']}` = {level_text(e['value'])} ({ci(e[_PAIR[key]])})"
-            for r in sens["rows"]
-            for e in r["values"]
-            if e[key].startswith("no")
-        ]
+    for claim, fails in sensitivity_verdicts(sens, code="`"):
         out += ["", f"*{claim}* fails at: {'; '.join(fails) if fails else 'no setting'}."]
     out += [
         "",

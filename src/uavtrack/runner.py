@@ -40,7 +40,7 @@ from typing import Any
 
 from ._version import __version__
 from .config import flatten
-from .errors import RunError, UsageError
+from .errors import RunError, UsageError, install_hint
 from .experiments import Job, run_job
 from .files import dumps, write_json
 from .progress import bar
@@ -472,7 +472,7 @@ def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Itera
     try:
         from dask.distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise UsageError('--engine dask needs Dask: pip install "uavtrack[dask]"') from None
+        raise UsageError(f"--engine dask needs Dask: {install_hint('dask')}") from None
     if address:
         try:
             cluster, client = None, Client(address, timeout="10s")
@@ -514,7 +514,7 @@ def execute(
     engine: str = "local",
     workers: int | None = None,
     address: str | None = None,
-    progress: bool = True,
+    progress: bool | None = True,
     on_result: Callable[[Job], None] | None = None,
 ) -> tuple[int, list[Job]]:
     """Run the jobs not yet in the store. Returns (jobs skipped, jobs that failed)."""

@@ -8,7 +8,7 @@ series (observation rate so far, consensus rounds D_i, messages per step).
 
 Everything is logged in columns, one `send_columns` call per kind of thing over all the
 steps, and one entity per kind rather than one per UAV: the viewer stays usable with
-thousands of UAVs. Install with ``pip install "uavtrack[viz]"``.
+thousands of UAVs. Needs the viz extra (rerun-sdk).
 """
 
 from __future__ import annotations
@@ -23,12 +23,12 @@ from pathlib import Path
 
 import numpy as np
 
+from .errors import install_hint
+
 try:
     import rerun as rr
 except ImportError as exc:  # an optional extra
-    raise ImportError(
-        f'uavtrack.viewer needs rerun-sdk: pip install "uavtrack[viz]" ({exc})'
-    ) from None
+    raise ImportError(f"uavtrack.viewer needs rerun-sdk: {install_hint('viz')} ({exc})") from None
 
 from .errors import RunError
 from .files import replacing

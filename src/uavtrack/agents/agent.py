@@ -103,6 +103,18 @@ class AgentRadio:
             k, protocol, round_, 0, sender, receiver, None if bad is None else bad[None]
         )
 
+    def transmitted(self, k: int, protocol: str, rounds: int, first: int = 1, to=None):
+        """Messages this program sends at cycle k, counted when sent (`radio.Radio.
+        transmitted`, seen by one sender): `rounds` rounds of `protocol` from round
+        `first` to each UAV in range (or to `to`). Returns (sent, delivered)."""
+        receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
+        receivers = receivers[receivers != self.me]
+        delivered = sum(
+            int((~self.lost(k, protocol, first + r, np.array(self.me), receivers)).sum())
+            for r in range(rounds)
+        )
+        return len(receivers) * rounds, delivered
+
     def receive(self, k: int, protocol: str, round_: int) -> Inbox | None:
         """What arrives now of `protocol`'s round, or None when nothing was sent yet."""
         sent_at = k - self.delay
@@ -285,6 +297,10 @@ class UavAgent:
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
+        if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
+            flood = self.radio.transmitted(k, "flood", stopped)
+            tuples = self.radio.transmitted(k, "consensus", rounds)
+            sent, delivered = flood[0] + tuples[0], flood[1] + tuples[1]
         return state["mean"], state["cov"], rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
@@ -340,8 +356,12 @@ class UavAgent:
             ],
         )
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
-        sent = sum(a.sent for a in (beacon, inbox) if a is not None)
-        delivered = sum(a.delivered for a in (beacon, inbox) if a is not None)
+        if s.delay > 0:  # counted when sent, as the fusion's
+            counts = [self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")]
+            sent, delivered = (sum(c[i] for c in counts) for i in (0, 1))
+        else:
+            sent = sum(a.sent for a in (beacon, inbox) if a is not None)
+            delivered = sum(a.delivered for a in (beacon, inbox) if a is not None)
         if inbox is None:  # nothing has arrived yet: alone
             members, view = np.zeros(n, dtype=bool), np.broadcast_to(bids, (n, self.m)).copy()
         else:
@@ -387,17 +407,22 @@ class UavAgent:
         }
         if self.radio.central[k]:
             self.radio.send(k, [part("upload", 0, tuples)], to=self.n)
+        # with delay, this UAV counts its upload when sent (the central node its downloads)
+        upload = self.radio.transmitted(k, "upload", 1, 0, to=self.n) if s.delay else None
         down, arrived, target = self._download(k)
         if down is None:  # nothing sent yet
-            return mean, cov, 1, 0, 0, -1
+            return mean, cov, 1, *(upload or (0, 0)), -1
         mean, cov = (
             x[0, 0] for x in take_download(mean[None, None], cov[None, None], down, arrived, s, k)
         )
         if not s.faulty:
             one = int(self.n > 1)
             return mean, cov, one, one, one, target
-        sent = int(self.radio.alive[k - self.radio.delay][self.me])
-        return mean, cov, 1, sent, int(arrived[0, 0]), target if arrived[0, 0] else -1
+        sent, delivered = upload or (
+            int(self.radio.alive[k - self.radio.delay][self.me]),
+            int(arrived[0, 0]),
+        )
+        return mean, cov, 1, sent, delivered, target if arrived[0, 0] else -1
 
     def _download(self, k: int):
         """The central node's download sent `delay` cycles ago: this UAV's tuples (1, 1,
@@ -472,11 +497,17 @@ class CentralAgent:
                 for name in got:
                     got[name][0, q] = content[name]
                 reported[0, q] = content["uav"]
-            if s.faulty:
+            if s.delay > 0:
+                pass  # counted when sent: the downloads below
+            elif s.faulty:
                 sent, delivered = int(alive_then.sum()), int(heard.sum())
             else:
                 sent = delivered = n if n > 1 else 0
             down, targets = central_node(got, heard, reported, s, k)
+        if s.delay > 0:
+            for i in np.flatnonzero(alive):
+                more = self.radio.transmitted(k, "download", 1, 0, to=int(i))
+                sent, delivered = sent + more[0], delivered + more[1]
         for i in np.flatnonzero(alive):  # each living UAV its download
             content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
             content["target"] = np.array(targets[0, i], dtype=np.int64)

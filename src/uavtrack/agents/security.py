@@ -83,7 +83,7 @@ def _crypto():
         from cryptography.hazmat.primitives.kdf.hkdf import HKDF
     except ImportError as exc:  # pragma: no cover - a dependency of the package
         raise ImportError(
-            'authenticated swarms need cryptography: pip install "uavtrack[agents]"'
+            "authenticated swarms need cryptography: pip install cryptography"
         ) from exc
     return hashes, ed25519, x25519, HKDF
 

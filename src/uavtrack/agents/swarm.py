@@ -31,7 +31,7 @@ from pathlib import Path
 from typing import Any
 
 from ..config import Scenario
-from ..errors import RunError, UsageError
+from ..errors import RunError, UsageError, install_hint
 from ..methods import get
 from ..simulation import Result, result_of
 from .program import serve
@@ -190,7 +190,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         import zenoh  # noqa: F401
     except ImportError:
         raise UsageError(
-            '--transport zenoh needs eclipse-zenoh: pip install "uavtrack[agents]"'
+            f"--transport zenoh needs eclipse-zenoh: {install_hint('agents')}"
         ) from None
     endpoint = world_endpoint(o.listen, o.zenoh.tls)
     try:

@@ -25,7 +25,7 @@ from .._version import __version__
 from ..config import Scenario, ScenarioError, parse_value
 from ..errors import Interrupted, RunError, UsageError
 from ..files import check_distinct, check_output, dumps, write_npz
-from ..progress import bar, on_terminal
+from ..progress import bar
 
 
 def _plain_argument_help() -> None:
@@ -130,6 +130,17 @@ def load_scenario(
     return scenario.with_overrides(changes, origin="--set")
 
 
+def source_of(config: Path | None, overrides: list[str] | None, team: str | None) -> str:
+    """Where a scenario came from, in words: the defaults or a config file, then --team
+    and --set."""
+    parts = [f"config {config}" if config is not None else "the defaults"]
+    if team is not None:
+        parts.append(f"--team {team.strip()}")
+    if overrides:
+        parts.append("--set " + ", ".join(o.strip() for o in overrides))
+    return ", ".join(parts)
+
+
 def parse_team(text: str) -> tuple[int, int]:
     """``"300x300"`` -> (300, 300): UAVs and targets, each a positive integer."""
     match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
@@ -158,8 +169,8 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
 
 
 def steps_bar(scenario: Scenario, trials: int = 1, label: str = "steps"):
-    """A progress bar over trial-steps, shown when stderr is a terminal."""
-    return bar(scenario.steps * trials, label, label, enabled=on_terminal())
+    """Progress over trial-steps: a bar on a terminal, a line a minute elsewhere."""
+    return bar(scenario.steps * trials, label, label)
 
 
 RUN_ROWS = (
@@ -180,6 +191,55 @@ FAULT_ROWS = (
     ("conflicts", "conflicts per step (doubled targets while one is free)", "{:.3f}"),
     ("failed", "UAVs failed by the end", "{:.0f}"),
 )
+
+
+MANY_TARGETS = 12
+"""Above this many targets, tables show the spread of the per-target rates, not each."""
+
+
+def target_rows(rates: list[list[float]]) -> list[tuple[str, list[str]]]:
+    """Table rows of per-target observation rates, one column per method: every target
+    up to `MANY_TARGETS`, else the three lowest, the median, the three highest and the
+    spread (every target is in --json)."""
+    import numpy as np
+
+    rates = [np.asarray(r, dtype=float) for r in rates]
+    n = len(rates[0])
+    if n <= MANY_TARGETS:
+        return [(f"  target {j}", [f"{r[j]:.3f}" for r in rates]) for j in range(n)]
+    ordered = [np.sort(r) for r in rates]
+    picks = [
+        ("lowest", 0), ("2nd lowest", 1), ("3rd lowest", 2), ("median", None),
+        ("3rd highest", n - 3), ("2nd highest", n - 2), ("highest", n - 1),
+    ]  # fmt: skip
+    rows = [
+        (
+            f"  target rate, {name} of {n}",
+            [f"{np.median(r) if k is None else r[k]:.3f}" for r in ordered],
+        )
+        for name, k in picks
+    ]
+    rows.append((f"  target rate, std over the {n}", [f"{np.std(r):.3f}" for r in rates]))
+    return rows
+
+
+def not_computed(n_targets: int, per_uav: bool = True) -> str:
+    """Why OSPA and GOSPA read n/a for this many targets ('' when they do not); per_uav:
+    whether the table shows those of every UAV's estimates."""
+    from ..metrics import BEST_SETS, PER_UAV_SETS
+
+    if n_targets > BEST_SETS:
+        return (
+            f" OSPA and GOSPA are n/a: not computed above {BEST_SETS} targets for the best "
+            f"estimates, {PER_UAV_SETS} for each UAV's (their assignments would cost more "
+            "than the run)."
+        )
+    if n_targets > PER_UAV_SETS and per_uav:
+        return (
+            f" OSPA and GOSPA of every UAV's estimates are n/a: not computed above "
+            f"{PER_UAV_SETS} targets (an assignment per UAV and step)."
+        )
+    return ""
 
 
 def number(fmt: str, value) -> str:
@@ -218,7 +278,7 @@ def run(
             metavar="[FILE.rrd]",
             help=(
                 "log the run to Rerun: save it to FILE.rrd, or with no FILE open it in the "
-                'viewer and wait until it is closed (pip install "uavtrack[viz]")'
+                "viewer and wait until it is closed (the viz extra)"
             ),
         ),
     ] = None,
@@ -255,7 +315,7 @@ def run(
         )
     if viewer is not None and rerun:
         viewer.save(result.trace, scenario, Path(rerun).expanduser(), f"{method.value}-{seed}")
-    show(result, scenario, seed, as_json, trace)
+    show(result, scenario, seed, as_json, trace, source=source_of(config, set_, team))
     if viewer is not None and rerun:
         typer.echo(f"Rerun recording written to {rerun}", err=as_json)
     elif viewer is not None:
@@ -271,6 +331,7 @@ def show(
     extra: dict[str, Any] | None = None,
     title: str = "uavtrack run",
     rows: list[tuple[str, str]] | None = None,
+    source: str = "",
 ) -> None:
     """Write the trace if asked, then print a run's metrics as a table (with more `rows`)
     or one JSON object (with `extra`, such as a swarm's traffic)."""
@@ -288,14 +349,18 @@ def show(
     from ..metrics import PER_UAV_SETS
 
     table = Table(
-        title=f"{title}: {summary['method']}, seed {seed}, {scenario.steps} steps",
-        caption=CAPTION.format(per_uav=PER_UAV_SETS),
+        title=f"{title}: {summary['method']}, seed {seed}",
+        caption=CAPTION.format(per_uav=PER_UAV_SETS) + not_computed(scenario.n_targets),
         caption_justify="left",
         show_header=False,
     )
+    team = f"{scenario.n_uavs} UAVs x {scenario.n_targets} targets, {scenario.steps} steps"
+    table.add_row("team", team)
+    if source:
+        table.add_row("scenario from", escape(source))
     table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
-    for j, rate in enumerate(summary["per_target"]):
-        table.add_row(f"  target {j}", f"{rate:.4f}")
+    for label, (value,) in target_rows([summary["per_target"]]):
+        table.add_row(label, value)
     for key, label, fmt in RUN_ROWS:
         table.add_row(escape(label), number(fmt, summary[key]))
     if scenario.faults != type(scenario.faults)():
@@ -371,7 +436,8 @@ def compare(
     table = Table(
         title=f"{trials} trials of {scenario.steps} steps, seed {seed}: mean over trials",
         caption="Best estimate: per target, the most confident UAV's. OSPA is a mean over "
-        "the targets, GOSPA a sum. Decision time: trial 0, run alone.",
+        "the targets, GOSPA a sum. Decision time: trial 0, run alone."
+        + not_computed(scenario.n_targets, per_uav=False),
         caption_justify="left",
     )
     table.add_column("metric", no_wrap=True)
@@ -384,10 +450,8 @@ def compare(
             for r in results.values()
         ),
     )
-    for j in range(scenario.n_targets):
-        table.add_row(
-            f"  target {j}", *(f"{r['per_target']['mean'][j]:.3f}" for r in results.values())
-        )
+    for label, values in target_rows([r["per_target"]["mean"] for r in results.values()]):
+        table.add_row(label, *values)
     for key, label, fmt in COMPARE_ROWS:
         table.add_row(escape(label), *(number(fmt, r[key]["mean"]) for r in results.values()))
     console().print(table)
@@ -408,12 +472,17 @@ def params(
     config: ConfigOpt = None,
     set_: SetOpt = None,
     team: TeamOpt = None,
-    toml: Annotated[bool, typer.Option("--toml", help="print the scenario as TOML")] = False,
+    toml: Annotated[
+        bool,
+        typer.Option(
+            "--toml", help="print the scenario as TOML, each field's unit and range above it"
+        ),
+    ] = False,
 ) -> None:
     """Show every scenario parameter with its value, unit, range and source."""
     scenario = load_scenario(config, set_, team)
     if toml:
-        typer.echo(scenario.to_toml(), nl=False)
+        typer.echo(scenario.to_toml(comments=True), nl=False)
         return
     from rich.markup import escape
     from rich.table import Table
@@ -444,7 +513,7 @@ def main(argv: list[str] | None = None) -> int:
         code = code if isinstance(code, int) else 0
         if code == 130:
             return interrupted(NO_PARTIAL)
-        sys.stdout.flush()  # a full or closed stdout shows here, not at interpreter exit
+        flush_stdout()  # a full or closed stdout shows here, not at interpreter exit
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
         return fail(exc.format_message() + _hint(exc.format_message(), argv))
@@ -518,16 +587,28 @@ def os_error(exc: OSError) -> str:
     """An OSError as one line: what could not be done, where, and why.
 
     Files are written through `files`, which names them in its errors; an error with no
-    file name is the standard output's if it cannot be flushed, else said as it is."""
+    file name is the standard output's when it came from writing it (an echo, the final
+    flush), else said as it is."""
     reason = exc.strerror or str(exc)
     if exc.filename is not None:
         return f"cannot write {exc.filename}: {reason}"
-    try:
-        sys.stdout.flush()
-    except (OSError, ValueError):
+    if _from_stdout(exc):
         _silence_stdout()
         return f"cannot write standard output: {reason}"
     return f"a file could not be written: {reason}"
+
+
+def _from_stdout(exc: BaseException) -> bool:
+    """Whether `exc` was raised writing the standard output."""
+    frames = []
+    tb = exc.__traceback__
+    while tb is not None:
+        frames.append(tb.tb_frame)
+        tb = tb.tb_next
+    return any(
+        f.f_code.co_name in ("echo", "flush_stdout") or "rich/console" in f.f_code.co_filename
+        for f in frames
+    )
 
 
 def _silence_stdout() -> None:
@@ -538,6 +619,10 @@ def _silence_stdout() -> None:
         os.close(null)
     except (OSError, ValueError):
         pass
+
+
+def flush_stdout() -> None:
+    sys.stdout.flush()
 
 
 def fail(message: str, code: int = 2) -> int:

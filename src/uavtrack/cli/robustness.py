@@ -99,9 +99,11 @@ def _print(summary: dict, out: Path, info: dict) -> None:
     for col in ("fault", "level", "distributed", "robust", "centralized", "greedy"):
         table.add_column(col, justify="left" if col == "fault" else "right")
     for name, fault in summary["faults"].items():
+        fixed = ", ".join(f"{f.split('.')[-1]} {v}" for f, v in fault.get("fixed", {}).items())
+        label = f"{name} (at {fixed})" if fixed else name  # the burst rows run at 30% loss
         for k, level in enumerate(fault["levels"]):
             table.add_row(
-                name if k == 0 else "",
+                label if k == 0 else "",
                 level_text(level),
                 *(f"{fault['series'][s][k]['mean']:.3f}" for s in fault["series"]),
             )

@@ -12,7 +12,7 @@ from typing import Annotated
 
 import typer
 
-from ..errors import Interrupted, RunError, UsageError
+from ..errors import Interrupted, RunError, UsageError, install_hint
 from ..files import check_output
 from . import (
     ConfigOpt,
@@ -25,6 +25,7 @@ from . import (
     app,
     load_scenario,
     show,
+    source_of,
     steps_bar,
     with_steps,
 )
@@ -312,6 +313,7 @@ def swarm(
         extra={"swarm": swarm_info},
         title="uavtrack swarm",
         rows=rows,
+        source=source_of(config, set_, team),
     )
 
 
@@ -441,9 +443,7 @@ def _join(connect: str, options):
     try:
         return transports.ZenohTransport([], [connect], options)
     except ImportError:
-        raise UsageError(
-            'uavtrack agent needs eclipse-zenoh: pip install "uavtrack[agents]"'
-        ) from None
+        raise UsageError(f"uavtrack agent needs eclipse-zenoh: {install_hint('agents')}") from None
     except Exception as exc:
         raise UsageError(f"cannot connect to {connect}: {transports.zenoh_reason(exc)}") from None
 
