@@ -274,8 +274,24 @@ def test_uavtrack_agent_exit_codes(capsys, monkeypatch):
     try:
         code, _, err = run_cli(capsys, "agent", "--run", run, "--uav", "6", "--connect", "x")
         assert code == 2 and f"run {run} has programs 0 to 5 only" in err
+        # the world there runs another run: said at once (a key file of another run)
+        other = "0123456789ab"
+        code, _, err = run_cli(capsys, "agent", "--run", other, "--uav", "1", "--connect", "x")
+        assert code == 2 and f"the world at x runs {run}, not run {other}" in err
     finally:
         stop.set()
+
+
+def test_the_endpoints_are_uavtracks_whatever_a_zenoh_file_says(tmp_path):
+    zenoh_or_skip()
+    from uavtrack.agents.transport import ZenohOptions, zenoh_config
+
+    path = tmp_path / "z.json5"
+    path.write_text('{ listen: { endpoints: ["tcp/0.0.0.0:7447"] }, mode: "peer" }')
+    conf = zenoh_config([], ["tcp/127.0.0.1:1"], options=ZenohOptions(config=str(path)))
+    assert conf.get_json("listen/endpoints") == "[]"  # a program listens on nothing
+    assert conf.get_json("mode") == '"peer"'  # what uavtrack does not set stays the file's
+    assert conf.get_json("scouting/multicast/enabled") == "false"
 
 
 @pytest.mark.parametrize(
@@ -299,7 +315,7 @@ def test_uavtrack_agent_bad_input_is_one_line(capsys, args, message):
         (["--transport", "pigeon"], "'pigeon' is not one of"),
         (["--listen", "tcp/127.0.0.1:7447"], "need --transport zenoh"),
         (["--tls-ca", "x.pem"], "need --transport zenoh"),
-        (["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"], "cannot listen on"),
+        (["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"], "cannot connect to tcp/"),
         (["--transport", "zenoh", "--listen", "tcp/no-such-host:x"], "cannot listen on"),
         (["--transport", "zenoh", "--listen", ""], "--listen is empty"),
         (["--transport", "zenoh", "--listen", "tls/127.0.0.1:0"], "a tls/ endpoint needs"),

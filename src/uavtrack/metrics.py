@@ -82,7 +82,7 @@ METRICS: dict[str, tuple[str, str]] = {
         "",
         "targets per step followed by two or more UAVs while another target has none",
     ),
-    "failed": ("", "UAVs failed by the end of the trial (faults)"),
+    "failed": ("", "UAVs failed by the end of the trial (faults; in a swarm, lost programs too)"),
     "decision_time_ms": (
         "ms",
         "wall time per cycle of one UAV's own planning and assignment (distributed, greedy) "

@@ -22,7 +22,7 @@ from ..methods import get
 from .agent import CentralAgent, UavAgent, part
 from .messages import VERSION, Radio, Ready, Spec, encode
 from .security import WORLD, Credential, Gate
-from .transport import Link, Mailbox, Transport, inbox_key, keys
+from .transport import ANY_HELLO, Link, Mailbox, Transport, inbox_key, keys
 
 STARTUP = 120.0
 """Seconds a program waits for the world's first message."""
@@ -39,7 +39,8 @@ class Served:
     "taken" (another program with this number is running), "under way" (the run had
     started, at step `at`), "needs key" (the run authenticates its members and this
     program has no key), "not authentic" (the only world that answered could not prove
-    it is the run's: another key file's, or a forgery)."""
+    it is the run's: another key file's, or a forgery), "other run" (only worlds of
+    other runs, `others`, answered)."""
 
     ran: int
     steps: int
@@ -47,6 +48,7 @@ class Served:
     at: int = -1
     programs: int = 0
     central: bool = False
+    others: tuple[str, ...] = ()
 
     def name(self, me: int) -> str:
         """How to call program `me` of this run."""
@@ -71,8 +73,10 @@ def serve(
     transport.subscribe(inbox_key(run, me), mailbox.handler)
     transport.watch(f"{k_['alive']}world", mailbox.lost)
     transport.subscribe(k_["hello"], mailbox.handler)
-    hello = _hello(transport, mailbox, run, wait if first is None else first)
+    hello, others = _hello(transport, mailbox, run, wait if first is None else first)
     if hello is None:
+        if others:
+            return Served(0, 0, "other run", others=tuple(sorted(others)))
         end = "not authentic" if gate.drops.get("not authentic") else "no world"
         return Served(0, 0, end)
     scenario = Scenario.from_dict(json.loads(hello.scenario), origin="the world's scenario")
@@ -142,14 +146,32 @@ def serve(
 
 def _hello(transport: Transport, mailbox: Mailbox, run: str, wait: float):
     """The world's Hello, asked for every half second until it comes (a world already
-    running answers at its next cycle), or None when none came within `wait` seconds."""
-    limit = time.monotonic() + wait
+    running answers at its next cycle), or None when none came within `wait` seconds;
+    and the runs of the other worlds heard meanwhile. When only worlds of other runs
+    answer for `OTHERS` seconds, the wait ends early: this program is at the wrong world,
+    or holds another run's key."""
+    others: set[str] = set()
+
+    def other(key: str, payload: bytes) -> None:
+        found = key.split("/")[1] if key.count("/") >= 2 else ""
+        if found and found != run:
+            others.add(found)
+
+    transport.subscribe(ANY_HELLO, other)
+    start = time.monotonic()
+    limit = start + wait
     join = keys(run)["join"]
     while time.monotonic() < limit and not mailbox.world_gone:
         transport.publish(join, b"")
         if mailbox.wait(lambda: ("hello",) in mailbox.inbox, min(limit, time.monotonic() + 0.5)):
             break
-    return mailbox.inbox.get(("hello",))
+        if others and time.monotonic() - start > OTHERS:
+            break
+    return mailbox.inbox.get(("hello",)), others
+
+
+OTHERS = 3.0
+"""Seconds a program waits for its own world once worlds of other runs have answered."""
 
 
 def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:

@@ -196,10 +196,14 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
     try:
         link = ZenohTransport([endpoint], list(o.connect), o.zenoh, mode="router")
     except Exception as exc:  # zenoh reports a busy port, a bad endpoint, no answer so
-        where = " and ".join([f"listen on {endpoint}", *(f"connect to {c}" for c in o.connect)])
-        raise UsageError(f"cannot {where}: {zenoh_reason(exc)}") from None
+        reason = zenoh_reason(exc)
+        if o.connect and "Unable to connect" in reason:  # listening worked
+            where = " or ".join(o.connect)
+            raise UsageError(f"cannot connect to {where}: {reason}") from None
+        raise UsageError(f"cannot listen on {endpoint}: {reason}") from None
     children: list[Child] = []
     written: list[Path] = []
+    quoted: set[int] = set()  # programs whose words the error already quotes
     finished = False
     try:
         link.announce(f"uavtrack/{run}/alive/world")
@@ -222,11 +226,13 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
 
         def check() -> None:
             ended = [c for c in children if c.process.poll() is not None]
-            if ended:
-                said = "; ".join(c.said() for c in ended)
+            if ended:  # the others may be failing the same way: a moment for them to say so
+                wait_for([c.process for c in children], 2.0)
+                ended = [c for c in children if c.process.poll() is not None]
+                quoted.update(c.me for c in ended)
                 raise RunError(
                     f"{len(ended)} of {len(children)} agent processes exited before the run "
-                    f"started: {said}"
+                    f"started: {said_by(ended)}"
                 )
 
         world.check = check if o.spawn else None
@@ -241,7 +247,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         stop([c.process for c in children], grace=o.deadline + 3.0 if finished else 0.0)
         for path in written:
             path.unlink(missing_ok=True)
-        _forward(children)
+        _forward([c for c in children if c.me not in quoted])
         for child in children:
             child.close()
     return SwarmResult(result_of(batch, seed), world.traffic, run, "zenoh")
@@ -285,7 +291,7 @@ class Child:
         try:  # the program's spec and key, through a pipe only it reads
             process.stdin.write((json.dumps(spec) + "\n").encode())
             process.stdin.close()
-        except OSError:  # it died at once; `said` tells why
+        except OSError:  # it died at once; what it printed tells why
             pass
         return cls(me, process, log)
 
@@ -298,14 +304,6 @@ class Child:
             return []
         return data.decode(errors="replace").strip().splitlines()
 
-    def said(self, lines: int = 3) -> str:
-        """What the program printed last, on one line, or that it printed nothing."""
-        text = self.printed()
-        code = self.process.returncode
-        if not text:
-            return f"program {self.me} (exit code {code}) printed nothing"
-        return f"program {self.me} (exit code {code}) said: " + " | ".join(text[-lines:])
-
     def close(self) -> None:
         if self.process.stdin is not None and not self.process.stdin.closed:
             try:
@@ -313,6 +311,34 @@ class Child:
             except OSError:
                 pass
         self.log.close()
+
+
+def said_by(children: list[Child]) -> str:
+    """What programs said last: each different saying once, with the programs that said
+    it and their exit codes."""
+    sayings: dict[str, list[Child]] = {}
+    for child in children:
+        lines = child.printed()
+        sayings.setdefault(" | ".join(lines[-3:]), []).append(child)
+    parts = []
+    for text, group in sayings.items():
+        who = ", ".join(str(c.me) for c in group)
+        codes = ", ".join(str(code) for code in sorted({c.process.returncode for c in group}))
+        name = "program" if len(group) == 1 else "programs"
+        parts.append(
+            f"{name} {who} (exit code {codes}) " + (f"said: {text}" if text else "printed nothing")
+        )
+    return "; ".join(parts)
+
+
+def wait_for(processes: list[subprocess.Popen], seconds: float) -> None:
+    """Wait until every process has ended, or `seconds` have passed."""
+    limit = time.monotonic() + seconds
+    for process in processes:
+        try:
+            process.wait(timeout=max(0.0, limit - time.monotonic()))
+        except subprocess.TimeoutExpired:
+            return
 
 
 def _forward(children: list[Child], lines: int = 20) -> None:

@@ -32,6 +32,11 @@ from typing import Any
 from .messages import Hello, Message, Radio, Ready, Report, Sense, Spec, Tick, decode, encode
 from .security import EVERYONE, WORLD, Gate, peek_sender
 
+ANY_HELLO = "uavtrack/*/hello"
+"""Every world's Hello: a program listens to them to tell a world of another run."""
+ANY_JOIN = "uavtrack/*/join"
+"""Requests for a Hello, whatever the run: a world answers each with its own."""
+
 
 def keys(run: str) -> dict[str, str]:
     """The key layout of a run: the world's Hello, requests for it, each program's
@@ -82,8 +87,14 @@ class Transport:
 
 
 def matches(subscription: str, key: str) -> bool:
-    """Whether `key` is `subscription`, or under it when it ends with a slash."""
-    return key == subscription or (subscription.endswith("/") and key.startswith(subscription))
+    """Whether `key` is `subscription`, or under it when it ends with a slash; a chunk
+    ``*`` of the subscription stands for any one chunk of the key (as in Zenoh)."""
+    if "*" not in subscription:
+        return key == subscription or (subscription.endswith("/") and key.startswith(subscription))
+    want, have = subscription.split("/"), key.split("/")
+    if subscription.endswith("/"):
+        want, have = want[:-1], have[: len(want) - 1]
+    return len(want) == len(have) and all(w in ("*", h) for w, h in zip(want, have, strict=True))
 
 
 def expression(subscription: str) -> str:
@@ -178,8 +189,8 @@ def zenoh_config(
     mode: str = "peer",
 ) -> Any:
     """A Zenoh configuration: the file of `options` if any, then `mode` and no multicast
-    scouting (where the file does not set them), the endpoints (none to listen on but
-    `listen`), and TLS (mutual: every member shows a certificate of the CA) when its
+    scouting (where the file does not set them), the endpoints (to listen on: `listen`,
+    none else), and TLS (mutual: every member shows a certificate of the CA) when its
     files are given."""
     import zenoh
 
@@ -191,8 +202,9 @@ def zenoh_config(
         conf.insert_json5("scouting/multicast/enabled", "false")
     if conf.get_json("transport/shared_memory/enabled") == "null":
         conf.insert_json5("transport/shared_memory/enabled", "false")  # no SHM watchdogs
-    if listen or not options.config:  # not Zenoh's default: every interface
-        conf.insert_json5("listen/endpoints", json.dumps(listen))
+    # the endpoints are uavtrack's, whatever the file says: a program listens on nothing
+    # (not Zenoh's default, every interface), the world where --listen says
+    conf.insert_json5("listen/endpoints", json.dumps(listen))
     if connect:  # fail, rather than retry for ever, when nothing answers
         conf.insert_json5("connect/endpoints", json.dumps(connect))
         conf.insert_json5("connect/exit_on_failure", "true")

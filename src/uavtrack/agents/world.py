@@ -30,7 +30,7 @@ from ..methods import get
 from ..metrics import Tally
 from .messages import VERSION, Array, Hello, Sense, Spec, Tick
 from .security import WORLD, Gate, Keyring
-from .transport import Link, Mailbox, Transport, inbox_key, keys
+from .transport import ANY_JOIN, Link, Mailbox, Transport, inbox_key, keys
 
 
 @dataclass
@@ -90,7 +90,8 @@ class WorldProgram:
         self.spec = Spec.of(scenario, self.method.central)
         self.mailbox = Mailbox(gate, self.spec, transport)
         transport.subscribe(inbox_key(run, WORLD), self.mailbox.handler)
-        transport.subscribe(self.keys["join"], self.mailbox.joined)
+        transport.subscribe(ANY_JOIN, self.mailbox.joined)  # any run's: a program of
+        # another run hears this world's Hello, and can tell its user
         transport.watch(self.keys["alive"], self.mailbox.lost)
         self.traffic = Traffic()
         self.check: Callable[[], None] | None = None
@@ -213,8 +214,9 @@ class WorldProgram:
         return simulation.BatchResult(self.method.name, s, tally.summary(), traces)
 
     def _answer_joins(self) -> None:
-        """A program that asked for the run hears it, with the step it is at (it cannot
-        join a run under way, and says so)."""
+        """A program that asked for a Hello hears this run's, with the step it is at: one
+        of this run learns that it cannot join a run under way, one of another run that
+        it came to the wrong world."""
         if self.mailbox.joins > self._answered:
             self._answered = self.mailbox.joins
             self.hello()

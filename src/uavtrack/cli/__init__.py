@@ -242,6 +242,13 @@ def not_computed(n_targets: int, per_uav: bool = True) -> str:
     return ""
 
 
+def _central_methods() -> set[str]:
+    """The methods whose decisions one node makes for the team."""
+    from ..methods import get
+
+    return {name for name in registry.names() if get(name).central}
+
+
 def number(fmt: str, value) -> str:
     """A metric for a table: n/a when it could not be computed (None or NaN)."""
     return "n/a" if value is None or value != value else fmt.format(value)
@@ -361,7 +368,10 @@ def show(
     table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
     for label, (value,) in target_rows([summary["per_target"]]):
         table.add_row(label, value)
+    central = summary["method"] in _central_methods()
     for key, label, fmt in RUN_ROWS:
+        if key == "decision_time_ms" and central:
+            label = "decision time per cycle, the central node's for the whole team [ms]"
         table.add_row(escape(label), number(fmt, summary[key]))
     if scenario.faults != type(scenario.faults)():
         for key, label, fmt in FAULT_ROWS:

@@ -459,6 +459,8 @@ def _ended(served, run: str, uav: int, connect: str) -> None:
         "with --key (uavtrack swarm --no-spawn --keys DIR writes them)",
         "not authentic": f"the world of run {run} at {connect} did not prove it holds the "
         "run's key: check that --key is this run's key file",
+        "other run": f"the world at {connect} runs {', '.join(served.others)}, not run {run}"
+        " (a key file or run id of another run; use those the world printed)",
     }
     if served.end in usage:
         raise UsageError(usage[served.end])
