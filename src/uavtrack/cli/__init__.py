@@ -543,6 +543,25 @@ def main(argv: list[str] | None = None) -> int:
         return fail(os_error(exc), code=1)
 
 
+def entry() -> None:
+    """The console script (and ``python -m uavtrack.cli``): `main`, then exit with its code.
+
+    An interrupted run (130, 143) has stopped its workers and left no partial file by the
+    time `main` returns; it ends at once with its code. (A Ctrl-C that lands while an
+    extension module initialises leaves CPython's "unhandled interrupt" mark set even
+    though `main` handled it, and the interpreter would then end itself by SIGINT instead
+    of with the code.)"""
+    code = main()
+    if code in (130, 143):
+        for stream in (sys.stdout, sys.stderr):
+            try:
+                stream.flush()
+            except (OSError, ValueError):
+                pass
+        os._exit(code)
+    sys.exit(code)
+
+
 def _hint(message: str, argv: list[str]) -> str:
     """What a user most likely meant by an argument the parser refused, or ''."""
     if re.match(r"No such option: -\d", message):
