@@ -4,8 +4,6 @@ No timing is asserted here; speed is measured by `uavtrack bench`.
 """
 
 import json
-import subprocess
-import sys
 
 import pytest
 
@@ -45,18 +43,6 @@ def test_cycle_cases_report_each_method():
 
 def test_team_keeps_altitude_spread():
     assert bench.team(100, 100).altitudes()[0] == pytest.approx(415.0)
-
-
-def test_import_does_not_load_numpy_and_bench_pins_threads(tmp_path):
-    code = (
-        "import sys, uavtrack, uavtrack.cli.benchmark as cli\n"
-        "assert 'numpy' not in sys.modules\n"
-        "print(cli.pin_threads())\n"
-        "import numpy, os\n"
-        "print(os.environ['OPENBLAS_NUM_THREADS'])\n"
-    )
-    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-    assert out.stdout.split() == ["environment", "1"]
 
 
 def test_bench_json_is_written_atomically(tmp_path, monkeypatch):

@@ -14,10 +14,13 @@ planning and neighbourhood Hungarian auctions, with centralized and greedy basel
 import importlib
 from typing import TYPE_CHECKING
 
+from . import threads as _threads
 from ._version import __version__
 
+_threads.pin()  # BLAS threads for every entry point, before numpy loads (see `threads`)
+
 # the public names load their module on first use, so that the command line answers
-# bad input without loading numpy, and `uavtrack bench` can pin BLAS threads first
+# bad input without loading numpy
 _PUBLIC = {
     "EstimationModel": "config",
     "PlannerModel": "config",

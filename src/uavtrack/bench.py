@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, planning, sensing, world
+from . import estimation, planning, sensing, threads, world
 from .config import Scenario
 from .errors import install_hint
 from .experiments import resized
@@ -401,10 +401,8 @@ def machine() -> dict[str, Any]:
         "scipy": scipy.__version__,
         "blas": blas,
         "uavtrack": __version__,
-        "threads": {
-            name: os.environ.get(name)
-            for name in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS")
-        },
+        "threads": {name: os.environ.get(name) for name in threads.THREAD_VARIABLES[:3]},
+        "blas_threads": threads.describe(),
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
 

@@ -29,14 +29,10 @@ from pydantic import (
     model_validator,
 )
 
-from .errors import UsageError
+from .errors import ScenarioError
 
 G = 9.81
 """Gravitational acceleration [m/s^2], eq. (1)."""
-
-
-class ScenarioError(UsageError):
-    """A scenario, config file or override that cannot be used; the message is one line."""
 
 
 def _integer(value: Any) -> Any:

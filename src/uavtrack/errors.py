@@ -14,6 +14,10 @@ class UsageError(ValueError):
     """Bad input: the message names what is wrong, in one line."""
 
 
+class ScenarioError(UsageError):
+    """A scenario, config file or override that cannot be used; the message is one line."""
+
+
 class RunError(RuntimeError):
     """A run that could not finish; finished work is kept. The message is one line."""
 
@@ -24,7 +28,7 @@ class Interrupted(RunError):
 
 EXTRAS = {
     "agents": "eclipse-zenoh",
-    "bench": "filterpy threadpoolctl pyinstrument",
+    "bench": "filterpy pyinstrument",
     "dask": '"dask[distributed]"',
     "env": "pettingzoo gymnasium",
     "viz": "rerun-sdk",

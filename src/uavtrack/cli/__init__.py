@@ -14,18 +14,20 @@ import re
 import sys
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 from typer import core as typer_core
 from typer.exceptions import TyperException
 
-from .. import registry
+from .. import registry, threads
 from .._version import __version__
-from ..config import Scenario, ScenarioError, parse_value
-from ..errors import Interrupted, RunError, UsageError
+from ..errors import Interrupted, RunError, ScenarioError, UsageError
 from ..files import check_distinct, check_output, dumps, write_npz
 from ..progress import bar
+
+if TYPE_CHECKING:
+    from ..config import Scenario
 
 
 def _plain_argument_help() -> None:
@@ -119,6 +121,8 @@ def load_scenario(
 ) -> Scenario:
     """The scenario from an optional TOML file, scaled to --team NxM, then the
     FIELD=VALUE overrides."""
+    from ..config import Scenario
+
     changes = parse_overrides(overrides or [])
     scenario = Scenario.from_toml(config) if config is not None else Scenario()
     if team is not None:
@@ -156,6 +160,8 @@ def parse_overrides(items: list[str]) -> dict[str, Any]:
 
     A field set twice is refused: which of the two was meant cannot be told.
     """
+    from ..config import parse_value
+
     out: dict[str, Any] = {}
     for item in items:
         name, sep, text = item.partition("=")
@@ -518,6 +524,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = _optional_values(sys.argv[1:] if argv is None else list(argv))
     _terminate_as_interrupt()
     try:
+        threads.check()
         # without standalone mode typer returns exit codes (typer.Exit, Ctrl-C -> 130)
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
         code = code if isinstance(code, int) else 0
@@ -527,7 +534,7 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
         return fail(exc.format_message() + _hint(exc.format_message(), argv))
-    except UsageError as exc:
+    except (UsageError, threads.ThreadsError) as exc:
         return fail(str(exc))
     except Interrupted as exc:
         return interrupted(str(exc))

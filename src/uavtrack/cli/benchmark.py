@@ -2,13 +2,13 @@
 
 from __future__ import annotations
 
-import os
 import sys
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
+from .. import threads
 from ..files import check_output, write_json
 from . import app, console
 
@@ -33,7 +33,7 @@ def bench(
         check_output(json_out, "--json")
     if figure is not None:
         check_output(figure, "--figure")
-    pinning = pin_threads()  # before numpy loads
+    pinning = threads.describe()  # set on `import uavtrack`, before numpy loaded
     from ..bench import bench as run_bench
 
     results = run_bench(quick, progress=lambda what: print(f"bench: {what}", file=sys.stderr))
@@ -69,34 +69,6 @@ def bench(
 
         scaling_figure(results["cases"], figure)
         typer.echo(f"wrote {figure}")
-
-
-THREAD_VARIABLES = (
-    "OMP_NUM_THREADS",
-    "OPENBLAS_NUM_THREADS",
-    "MKL_NUM_THREADS",
-    "VECLIB_MAXIMUM_THREADS",
-    "NUMEXPR_NUM_THREADS",
-)
-
-
-def pin_threads() -> str:
-    """Pin BLAS threads to 1; returns how ('environment', 'threadpoolctl' or 'not pinned').
-
-    Through the environment when numpy is not loaded yet (the command line), else
-    with threadpoolctl when it is installed.
-    """
-    loaded = "numpy" in sys.modules
-    for name in THREAD_VARIABLES:
-        os.environ[name] = "1"
-    if not loaded:
-        return "environment"
-    try:
-        from threadpoolctl import threadpool_limits
-    except ImportError:
-        return "not pinned (numpy was loaded first and threadpoolctl is missing)"
-    threadpool_limits(1)
-    return "threadpoolctl"
 
 
 def _si(seconds: float) -> str:

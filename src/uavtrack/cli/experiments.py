@@ -10,8 +10,7 @@ from typing import Annotated
 
 import typer
 
-from ..config import ScenarioError, parse_value, read_toml
-from ..errors import Interrupted, UsageError
+from ..errors import Interrupted, ScenarioError, UsageError
 from ..files import check_output, check_outputs, write_json, write_text
 from . import (
     ConfigOpt,
@@ -162,6 +161,8 @@ def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | Non
     overrides = parse_overrides(set_ or [])
     if "steps" in overrides:
         given["--set steps"] = overrides["steps"]
+    from ..config import read_toml
+
     if config is not None and "steps" in read_toml(config):
         given[f"{config} steps"] = read_toml(config)["steps"]
     values = list(given.items())
@@ -302,6 +303,7 @@ def sweep(
 ) -> None:
     """Vary one scenario field; every method on the same trials at every value."""
     from .. import plots, report
+    from ..config import parse_value
     from ..experiments import summarize_sweep, sweep_plan, sweep_values
 
     if team is not None and field in ("n_uavs", "n_targets"):

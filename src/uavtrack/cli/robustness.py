@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..config import Scenario
 from ..errors import UsageError
 from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
@@ -61,7 +60,7 @@ def robustness(
     scenario = load_scenario(config, set_, team)
     set_here = {
         k: v
-        for k, v in difference(Scenario(), scenario).items()
+        for k, v in difference(type(scenario)(), scenario).items()
         if k.startswith(("faults.", "robust."))
     }
     if set_here:

@@ -1,0 +1,108 @@
+"""BLAS threads: set in this one place, on ``import uavtrack``, for every command, worker,
+agent program and library entry point.
+
+uavtrack's arrays are small per call (a cycle of the default team is about 200 numpy
+calls on 4 to 260 elements) or, for large teams, memory-bound; a second BLAS thread
+then costs more in hand-off than it gains. On the 2-core development machine the
+distributed cycle of 300 UAVs and 300 targets took 84 ms of CPU with one thread and
+183 ms with two. So uavtrack runs BLAS on one thread unless told otherwise:
+
+* ``UAVTRACK_BLAS_THREADS=n`` sets n threads; ``UAVTRACK_BLAS_THREADS=keep`` leaves
+  BLAS as it is.
+* A thread count already in the environment (``OMP_NUM_THREADS``,
+  ``OPENBLAS_NUM_THREADS``, ``MKL_NUM_THREADS``, ...) is the user's choice and is kept.
+* Otherwise, one thread. Before numpy loads this goes through the environment (so
+  worker processes and agent programs inherit it); when numpy was loaded first, through
+  threadpoolctl, for this process.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+
+VARIABLE = "UAVTRACK_BLAS_THREADS"
+THREAD_VARIABLES = (
+    "OMP_NUM_THREADS",
+    "OPENBLAS_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+    "BLIS_NUM_THREADS",
+)
+DEFAULT = 1
+
+class ThreadsError(ValueError):
+    """``UAVTRACK_BLAS_THREADS`` holds a value that cannot be used."""
+
+
+state: dict[str, str | None] = {"how": None, "problem": None}
+
+
+def wanted() -> int | None:
+    """The thread count asked for: an int, or None to leave BLAS alone. Raises ThreadsError
+    naming the variable for a value that is not a positive integer or 'keep'."""
+    text = os.environ.get(VARIABLE)
+    if text is None or not text.strip():
+        return DEFAULT
+    text = text.strip()
+    if text.lower() == "keep":
+        return None
+    try:
+        count = int(text)
+    except ValueError:
+        count = 0
+    if count < 1:
+        raise ThreadsError(
+            f"{VARIABLE}={text!r}: give a positive number of threads, "
+            "or 'keep' to leave BLAS as it is"
+        )
+    return count
+
+
+def pin() -> str:
+    """Set BLAS threads as the module docstring says; returns how it was done. Never
+    raises: a bad ``UAVTRACK_BLAS_THREADS`` leaves BLAS alone and is reported by `check`."""
+    try:
+        count = wanted()
+    except ThreadsError as exc:
+        state["problem"] = str(exc)
+        state["how"] = "not pinned (bad value)"
+        return state["how"]
+    given = [name for name in THREAD_VARIABLES if os.environ.get(name, "").strip()]
+    if count is None:
+        how = "kept (UAVTRACK_BLAS_THREADS=keep)"
+    elif given and VARIABLE not in os.environ:
+        how = f"kept ({given[0]}={os.environ[given[0]]})"
+    elif "numpy" not in sys.modules:
+        for name in THREAD_VARIABLES:
+            os.environ[name] = str(count)
+        how = f"{count} (environment)"
+    else:
+        how = _limit(count)
+    state["how"] = how
+    return how
+
+
+def _limit(count: int) -> str:
+    """Limit the loaded BLAS with threadpoolctl; the environment too, for child processes."""
+    for name in THREAD_VARIABLES:
+        os.environ[name] = str(count)
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return "not pinned (numpy was loaded first and threadpoolctl is missing)"
+    threadpool_limits(count, user_api="blas")
+    return f"{count} (threadpoolctl)"
+
+
+def check() -> None:
+    """Raise ThreadsError if ``UAVTRACK_BLAS_THREADS`` could not be used (the command
+    line turns it into its one-line error)."""
+    if state["problem"] is not None:
+        raise ThreadsError(state["problem"])
+
+
+def describe() -> str:
+    """How BLAS threads were set in this process, for benchmark records."""
+    return state["how"] or "not set"
