@@ -149,3 +149,78 @@ def test_auction_with_ranked_bidders_equals_one_full_solve_per_uav(n, m, seed):
         rows = np.flatnonzero(links[b, i] | (np.arange(n) == i))
         me = int(np.flatnonzero(rows == i)[0])
         assert fast[b, i] == full_problem(bids[b, rows])[me]
+
+
+def stacks(levels: int, scale: float, k: int, m: int, count: int, seed: int) -> np.ndarray:
+    """(count, k, m) problems; few levels make ties common, a scale tests relative margins."""
+    rng = np.random.default_rng(seed)
+    bids = rng.integers(0, levels, (count, k, m)).astype(float) * scale
+    near = rng.random((count, k, m)) < 0.2  # some bids a rounding error apart
+    return np.where(near, bids * (1 + 1e-15), bids)
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.integers(2, 1000),
+    st.sampled_from([1e-12, 1.0, 1e9]),
+    st.integers(1, 7),
+    st.integers(1, 8),
+    st.integers(1, 12),
+    st.integers(0, 2**32 - 1),
+)
+def test_solve_many_equals_the_exact_solver_ties_included(levels, scale, k, m, count, seed):
+    bids = stacks(levels, scale, k, m, count, seed)
+    expected = np.stack([assignment._solve(p) for p in bids])
+    assert np.array_equal(assignment.solve_many(bids), expected)
+    if k < m:  # with each row's k best given, as the auction passes them
+        best = assignment.ranked(bids.reshape(-1, m), k).reshape(count, k, k)
+        assert np.array_equal(assignment.solve_many(bids, best), expected)
+
+
+def test_solve_many_enumerates_without_the_exact_solver_when_optima_are_unique(monkeypatch):
+    calls = []
+    exact = assignment.linear_sum_assignment
+    monkeypatch.setattr(
+        assignment, "linear_sum_assignment", lambda *a, **kw: calls.append(1) or exact(*a, **kw)
+    )
+    rng = np.random.default_rng(0)
+    for k, m in [(2, 4), (3, 4), (4, 4), (5, 4), (6, 3), (3, 9)]:
+        bids = rng.random((50, k, m))
+        expected = np.stack([assignment._solve(p) for p in bids])
+        calls.clear()
+        assert np.array_equal(assignment.solve_many(bids), expected)
+        assert not calls, (k, m)
+    ties = np.zeros((3, 4, 4))  # every assignment ties: the exact solver decides
+    calls.clear()
+    assert np.array_equal(assignment.solve_many(ties), np.tile(np.arange(4), (3, 1)))
+    assert len(calls) == 3
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(2, 9), st.integers(1, 7), st.integers(2, 6), st.integers(0, 2**32 - 1))
+def test_batched_auction_equals_one_solve_per_problem(n, m, levels, seed):
+    rng = np.random.default_rng(seed)
+    bids = rng.integers(0, levels, (3, n, m)).astype(float)
+    members = rng.random((3, n, n)) < 0.5
+    members |= members.transpose(0, 2, 1)
+    one_by_one = assignment.auction(bids, members, lambda p: assignment._solve(p))[0]
+    assert np.array_equal(assignment.auction(bids, members)[0], one_by_one)
+    views = np.where(rng.random((3, n, n, m)) < 0.3, bids[:, None] + 1, bids[:, None])
+    one_by_one = assignment.auction(views, members, lambda p: assignment._solve(p))[0]
+    assert np.array_equal(assignment.auction(views, members)[0], one_by_one)
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 8), st.integers(1, 7), st.integers(2, 6), st.integers(0, 2**32 - 1))
+def test_centralized_equals_one_solve_per_trial(n, m, levels, seed):
+    rng = np.random.default_rng(seed)
+    bids = rng.integers(0, levels, (6, n, m)).astype(float)
+    members = rng.random((6, n)) < 0.7
+    members[0] = True
+    target, _ = assignment.centralized(bids, members)
+    for b in range(6):
+        rows = np.flatnonzero(members[b])
+        expected = np.full(n, -1)
+        if rows.size:
+            expected[rows] = assignment._solve(bids[b, rows])
+        assert np.array_equal(target[b], expected)

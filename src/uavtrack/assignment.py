@@ -9,12 +9,19 @@ Ties break deterministically toward lower indices.
 `neighbourhood` is the driver that runs every UAV's rule for a batch of trials: UAVs
 that see the same problem (the same members with the same bids) share one solve, and
 the driver measures how long each solve takes; the rules themselves never time.
+Problems of the same size are solved together (`solve_many`): small ones by
+enumerating every assignment as arrays, with the exact solver for the rest and for
+every problem whose optimum is not unique by a clear margin, so the answers are those
+of `hungarian`, ties included.
 """
 
 from __future__ import annotations
 
+import itertools
+import math
 import time
 from collections.abc import Callable
+from functools import cache
 
 import numpy as np
 from scipy.optimize import linear_sum_assignment
@@ -119,6 +126,148 @@ def _solve(bids: np.ndarray) -> np.ndarray:
     return choice
 
 
+ENUMERATED = 720
+"""Most candidate assignments enumerated for one problem (720 = 6!); a problem with more
+goes to the exact solver."""
+
+MARGIN = 1e-9
+"""An enumerated optimum is taken only when it beats the second-best assignment by more
+than this, relative to the problem's scale (k times its largest |bid|): far above the
+exact solver's rounding, so the solver would find the same one. Otherwise (a tie or a
+near-tie) the problem goes to the exact solver, which breaks the tie its own way."""
+
+
+def solve_many(bids: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
+    """`hungarian` of each problem of a stack, the same answers, ties included.
+
+    bids: (Q, k, m) problems of k rows each; best: (Q, k, k) each row's k best columns
+    (`ranked`), when already known and k < m. Returns (Q, k) the column of each row.
+    Small problems are solved for the whole stack at once by enumeration; a problem
+    whose optimum is not unique by `MARGIN`, or is too large to enumerate, is solved
+    alone by the exact solver (`_solve`), as is one with unscored bids where every bid
+    is needed (which raises as `hungarian` does).
+    """
+    Q, k, m = bids.shape
+    if k < m:
+        if best is None:
+            best = ranked(bids.reshape(Q * k, m), k).reshape(Q, k, k)
+        return _restricted_many(bids, best)
+    out = np.empty((Q, k), dtype=np.int64)
+    scored = ~np.isnan(bids).any(axis=(1, 2))
+    for q in np.flatnonzero(~scored):
+        out[q] = _solve(bids[q])  # raises: every bid is needed here
+    if scored.any():
+        out[scored] = _rounds_many(bids[scored])
+    return out
+
+
+def _restricted_many(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
+    """`_restricted` of each problem: (Q, k, m) bids, (Q, k, k) each row's k best."""
+    Q, k, _ = best.shape
+    if k == 1:
+        for q in np.flatnonzero(best[:, 0, 0] < 0):
+            _restricted(bids[q], best[q])  # raises: the row's best bid is needed
+        return best[:, :, 0].copy()
+    out = np.empty((Q, k), dtype=np.int64)
+    values = np.take_along_axis(bids, np.maximum(best, 0), axis=2)
+    first = best[:, :, 0]
+    ordered = np.sort(first, axis=1)
+    easy = (
+        (ordered[:, 1:] != ordered[:, :-1]).all(axis=1)
+        & (values[:, :, 0] > values[:, :, 1]).all(axis=1)
+        & (best >= 0).all(axis=(1, 2))
+    )
+    out[easy] = first[easy]  # every row's first choice, strictly: the unique optimum
+    rest = np.flatnonzero(~easy & (best >= 0).all(axis=(1, 2)))
+    alone = np.flatnonzero((best < 0).any(axis=(1, 2)))  # raises in `_restricted`
+    if rest.size and k**k <= ENUMERATED:
+        place = _positions(k)  # (E, k): the place in its list each row takes
+        rows = np.arange(k)
+        cols = best[rest][:, rows, place]  # (R, E, k)
+        total = values[rest][:, rows, place].sum(axis=2)
+        total[~_distinct_columns(cols)] = -np.inf
+        pick, unique = _unique_best(total, np.abs(values[rest]).max(axis=(1, 2)) * k)
+        done = rest[unique]
+        out[done] = cols[unique, pick[unique]]
+        rest = rest[~unique]
+    for q in np.concatenate([rest, alone]):
+        out[q] = _restricted(bids[q], best[q])
+    return out
+
+
+def _rounds_many(bids: np.ndarray) -> np.ndarray:
+    """`_solve`'s rounds (k >= m, every bid scored) for each problem of (Q, k, m)."""
+    Q, k, m = bids.shape
+    choice = np.empty((Q, k), dtype=np.int64)
+    left = np.broadcast_to(np.arange(k), (Q, k))
+    while left.shape[1]:
+        sub = np.take_along_axis(bids, left[:, :, None], axis=1)
+        cols = _lsa_many(sub)  # (Q, r), -1 for a row left for the next round
+        np.put_along_axis(choice, left, cols, axis=1)
+        # every problem leaves the same number of rows (min(r, m) are assigned a round)
+        left = left[cols < 0].reshape(Q, -1)
+    return choice
+
+
+def _lsa_many(bids: np.ndarray) -> np.ndarray:
+    """One `linear_sum_assignment(maximize=True)` of each problem of (Q, r, c), every bid
+    finite: (Q, r) the column of each row, -1 for a row left out (r > c)."""
+    Q, r, c = bids.shape
+    out = np.full((Q, r), -1, dtype=np.int64)
+    todo = np.arange(Q)
+    if math.perm(max(r, c), min(r, c)) <= ENUMERATED:
+        if r <= c:  # each row a distinct column
+            cols = _permutations(c, r)  # (E, r)
+            total = bids[:, np.arange(r), cols].sum(axis=2)  # (Q, E)
+        else:  # each column a distinct row
+            owner = _permutations(r, c)  # (E, c)
+            total = bids[:, owner, np.arange(c)].sum(axis=2)
+        pick, unique = _unique_best(total, np.abs(bids).max(axis=(1, 2)) * min(r, c))
+        done = np.flatnonzero(unique)
+        if r <= c:
+            out[done] = cols[pick[done]]
+        else:
+            out[done[:, None], owner[pick[done]]] = np.arange(c)
+        todo = np.flatnonzero(~unique)
+    for q in todo:
+        rows, cols = linear_sum_assignment(bids[q], maximize=True)
+        out[q, rows] = cols
+    return out
+
+
+def _unique_best(total: np.ndarray, scale: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Per problem (rows of `total`, candidates along axis 1, -inf for none): the best
+    candidate, and whether it beats every other by more than MARGIN * scale."""
+    pick = np.argmax(total, axis=1)
+    rows = np.arange(total.shape[0])
+    top = total[rows, pick]
+    other = total.copy()
+    other[rows, pick] = -np.inf
+    second = other.max(axis=1) if total.shape[1] > 1 else np.full(top.shape, -np.inf)
+    return pick, np.isfinite(top) & (top - second > MARGIN * np.maximum(scale, 1e-300))
+
+
+def _distinct_columns(cols: np.ndarray) -> np.ndarray:
+    """(..., k) -> (...): whether the k columns are pairwise different."""
+    k = cols.shape[-1]
+    ok = np.ones(cols.shape[:-1], dtype=bool)
+    for a, b in itertools.combinations(range(k), 2):
+        ok &= cols[..., a] != cols[..., b]
+    return ok
+
+
+@cache
+def _positions(k: int) -> np.ndarray:
+    """Every tuple of k places in 0..k-1, (k**k, k)."""
+    return np.array(list(itertools.product(range(k), repeat=k)), dtype=np.int64).reshape(-1, k)
+
+
+@cache
+def _permutations(n: int, r: int) -> np.ndarray:
+    """Every ordered choice of r distinct items of n, (n!/(n-r)!, r)."""
+    return np.array(list(itertools.permutations(range(n), r)), dtype=np.int64).reshape(-1, r)
+
+
 def neighbourhood(
     bids: np.ndarray, adjacency: np.ndarray, solve: Callable | None = None
 ) -> np.ndarray:
@@ -183,16 +332,28 @@ def auction(
         lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
         lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
         share = (time.perf_counter() - start) / bidders.size
-    for u, k in enumerate(first):  # one solve per distinct problem
-        problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-        start = time.perf_counter()
-        if lists is not None and size[u] < m:
-            who = np.flatnonzero(rows[k]) + n * b[k]
-            solved = _restricted(problem, lists[who, : size[u]])
-        else:
+    if solve is _solve:  # problems of one size together (`solve_many`)
+        for width in np.unique(size):
+            group = np.flatnonzero(size == width)
+            k = first[group]
+            who = np.nonzero(rows[k])[1].reshape(-1, width)  # members, in index order
+            start = time.perf_counter()
+            if views:
+                problem = bids[b[k][:, None], i[k][:, None], who]
+            else:
+                problem = bids[b[k][:, None], who]
+            best = None
+            if lists is not None and width < m:
+                best = lists[who + n * b[k][:, None], :width]
+            choice[group, :width] = solve_many(problem, best)
+            cost[group] = (time.perf_counter() - start) / group.size + share * width
+    else:
+        for u, k in enumerate(first):  # a method's own solver: one call per problem
+            problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
+            start = time.perf_counter()
             solved = solve(problem)
-        cost[u] = time.perf_counter() - start + share * size[u]
-        choice[u, : solved.size] = solved
+            cost[u] = time.perf_counter() - start
+            choice[u, : solved.size] = solved
     out[b, i] = choice[which, row]
     seconds[b, i] = cost[which]
     return out, seconds
@@ -233,19 +394,21 @@ def centralized(
     """One global assignment per trial over the member UAVs (all by default).
 
     bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
-    out; seconds (B,) of each trial's solve).
+    out; seconds (B,) of each trial's solve, the solve of trials with as many members
+    shared among them).
     """
     B, n, _ = bids.shape
     members = np.ones((B, n), dtype=bool) if members is None else members
     _check(bids[members])
     out = np.full((B, n), -1, dtype=np.int64)
     seconds = np.zeros(B)
-    for b in range(B):
-        rows = np.flatnonzero(members[b])
-        if rows.size:
-            start = time.perf_counter()
-            out[b, rows] = _solve(bids[b, rows])
-            seconds[b] = time.perf_counter() - start
+    count = members.sum(axis=1)
+    for size in np.unique(count[count > 0]):  # trials with as many members together
+        trials = np.flatnonzero(count == size)
+        who = np.nonzero(members[trials])[1].reshape(-1, size)
+        start = time.perf_counter()
+        out[trials[:, None], who] = solve_many(bids[trials[:, None], who])
+        seconds[trials] = (time.perf_counter() - start) / trials.size
     return out, seconds
 
 

@@ -32,6 +32,7 @@ THREAD_VARIABLES = (
 )
 DEFAULT = 1
 
+
 class ThreadsError(ValueError):
     """``UAVTRACK_BLAS_THREADS`` holds a value that cannot be used."""
 
