@@ -24,7 +24,15 @@ from collections.abc import Callable
 from functools import cache
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
+
+
+def linear_sum_assignment(cost: np.ndarray, maximize: bool = False):
+    """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
+    second to load, and the default team's problems are solved by `solve_many` without
+    it unless bids tie."""
+    from scipy.optimize import linear_sum_assignment as solve
+
+    return solve(cost, maximize=maximize)
 
 
 def hungarian(bids: np.ndarray) -> np.ndarray:

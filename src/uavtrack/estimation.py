@@ -117,9 +117,10 @@ def filter_step(
     Returns (mean, cov) of the same shapes.
     """
     if A is not None:
-        mean, cov = predict(mean, cov, A, Q)
+        mean, cov = predict(mean, cov, A, Q)  # new arrays: updated in place below
+    elif z.shape[0]:
+        mean, cov = mean.copy(), cov.copy()  # the caller's arrays stay as they were
     if z.shape[0]:
-        mean, cov = mean.copy(), cov.copy()
         mean[observed], cov[observed] = update(mean[observed], cov[observed], z, R)
     return mean, cov
 

@@ -105,6 +105,7 @@ class Fused:
     seconds: np.ndarray | None = None
     target: np.ndarray | None = None
     largest: np.ndarray | None = None
+    gamma: np.ndarray | None = None  # 1 / trace(cov), when the fusion already has it
 
 
 @dataclass(frozen=True)
@@ -164,12 +165,14 @@ def consensus(inputs: Inputs) -> Fused:
         out = fusion.consensus(radio, tuples, rounds)
         source = out.tuples["source"]
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+        gamma = out.tuples["gamma"]  # travelled with the source: confidence(cov) exactly
     else:
         stamp = np.full(inputs.gamma.shape, inputs.k)
         tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
+        gamma = None
     if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
         flood, tuples_ = (
             radio.transmitted("flood", depth.ran),
@@ -178,7 +181,7 @@ def consensus(inputs: Inputs) -> Fused:
         sent, delivered = flood[0] + tuples_[0], flood[1] + tuples_[1]
     else:
         sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
-    return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest)
+    return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest, gamma=gamma)
 
 
 class Distributed(Method):

@@ -12,7 +12,6 @@ from functools import cache
 from typing import NamedTuple
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
 
 from .estimation import confidence, nees
 
@@ -145,7 +144,7 @@ class Tally:
         s["squared_error"] += squared.sum(axis=(1, 2, 3))
         s["pairs"] += alive.sum(axis=1) * self.n_targets
         # the team's best estimate of each target: its most confident UAV (lowest on ties)
-        gamma = confidence(cov)
+        gamma = confidence(cov) if cycle.confidence is None else cycle.confidence
         if not everyone:
             gamma = np.where(alive[..., None], gamma, -np.inf)
         best = np.argmax(gamma, axis=1)  # (B, Nt)
@@ -156,7 +155,6 @@ class Tally:
         s["squared_error_best"] += np.where(anyone, (err * err).sum(axis=(1, 2)), 0.0)
         s["best"] += anyone * self.n_targets
         self._pending.append((mean, cov, best_mean, best_cov, truth, None if everyone else alive))
-        self._sets(mean, best_mean, truth, alive, anyone)
         if len(self._pending) == self._block:
             self._flush()
         if everyone:
@@ -182,22 +180,30 @@ class Tally:
         s["decision"] += decision
         self.failed = (~alive).sum(axis=1).astype(float)
 
-    def _sets(self, mean, best_mean, truth, alive, anyone) -> None:
-        """OSPA and GOSPA of this step: each living UAV's estimates and the best ones."""
+    def _sets(self, mean, best_mean, truth, alive) -> None:
+        """OSPA and GOSPA of the pending steps (S, B, ...): each living UAV's estimates
+        and the best ones, computed for the steps at once and added step by step (the
+        sums are those of one step at a time, bit for bit)."""
         s, c, p = self.sums, self.cutoff, self.order
         X = truth[..., :2]
+        anyone = alive.any(axis=2)  # (S, B)
         if not alive.all():  # a failed UAV's estimates are NaN; its scores are masked out
             mean = np.where(alive[..., None, None], mean, 0.0)
-            best_mean = np.where(anyone[:, None, None], best_mean, 0.0)
+            best_mean = np.where(anyone[..., None, None], best_mean, 0.0)
         if self.n_targets <= PER_UAV_SETS:
-            d, g = ospa_and_gospa(X[:, None], mean[..., :2], c, p)  # (B, Nu)
-            s["ospa"] += np.where(alive, d, 0.0).sum(axis=1)
-            s["gospa"] += np.where(alive, g.distance, 0.0).sum(axis=1)
+            d, g = ospa_and_gospa(X[:, :, None], mean[..., :2], c, p)  # (S, B, Nu)
+            d, gd = np.where(alive, d, 0.0), np.where(alive, g.distance, 0.0)
+            for step in range(d.shape[0]):
+                s["ospa"] += d[step].sum(axis=1)
+                s["gospa"] += gd[step].sum(axis=1)
         if self.n_targets <= BEST_SETS:
-            d, g = ospa_and_gospa(X, best_mean[..., :2], c, p)
-            s["ospa_best"] += np.where(anyone, d, 0.0)
-            s["gospa_best"] += np.where(anyone, g.distance, 0.0)
-            s["gospa_missed_best"] += np.where(anyone, g.missed / (c**p / 2), 0.0)
+            d, g = ospa_and_gospa(X, best_mean[..., :2], c, p)  # (S, B)
+            d, gd = np.where(anyone, d, 0.0), np.where(anyone, g.distance, 0.0)
+            missed = np.where(anyone, g.missed / (c**p / 2), 0.0)
+            for step in range(d.shape[0]):
+                s["ospa_best"] += d[step]
+                s["gospa_best"] += gd[step]
+                s["gospa_missed_best"] += missed[step]
 
     def _flush(self) -> None:
         if self._pending:
@@ -207,10 +213,11 @@ class Tally:
                 for parts in list(zip(*self._pending, strict=True))[:5]
             )
             q = nees(mean, cov, truth[:, :, None])  # (S, B, Nu, Nt)
+            alive = np.stack(
+                [np.ones(q.shape[1:3], dtype=bool) if m is None else m for m in masks]
+            )
+            self._sets(mean, best_mean, truth, alive)
             if any(m is not None for m in masks):
-                alive = np.stack(
-                    [np.ones(q.shape[1:3], dtype=bool) if m is None else m for m in masks]
-                )
                 q = np.where(alive[..., None], q, 0.0)
                 anyone = alive.any(axis=2)  # (S, B)
                 best = np.where(anyone[..., None], nees(best_mean, best_cov, truth), 0.0)
@@ -394,6 +401,8 @@ def _optimal(cost: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray, np.n
         return chosen.sum(axis=-1), np.where(close, chosen, 0.0).sum(axis=-1), close.sum(-1)
     total, local, paired = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     if m and n:
+        from scipy.optimize import linear_sum_assignment  # loaded when first needed
+
         for index in np.ndindex(shape):
             C = cost[index]
             chosen = C[linear_sum_assignment(C)]

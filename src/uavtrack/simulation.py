@@ -219,6 +219,13 @@ class Cycle:
     decision_time_ms: np.ndarray = _record(
         "(Nu,)", "planning and assignment per UAV [ms] (NaN inside a batch)"
     )
+    confidence: np.ndarray | None = field(default=None, repr=False, compare=False)
+    """1 / trace(cov) (Nu, Nt) when the method already has it (not recorded: the
+    metrics read it instead of computing it again)."""
+
+
+RECORDED = tuple(f for f in fields(Cycle) if "shape" in f.metadata)
+"""The fields of `Cycle` a trace holds."""
 
 
 def _trace_arrays(self) -> dict[str, np.ndarray]:
@@ -227,7 +234,7 @@ def _trace_arrays(self) -> dict[str, np.ndarray]:
 
 Trace = make_dataclass(
     "Trace",
-    [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in fields(Cycle)],
+    [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in RECORDED],
     frozen=True,
     namespace={
         "arrays": _trace_arrays,
@@ -336,6 +343,7 @@ def finish(
         conflicts=conflicts(target, alive, bids.shape[-1]),
         alive=alive,
         decision_time_ms=np.where(alive, 1e3 * (share + assigned.seconds), np.nan),
+        confidence=fused.gamma,
     )
     mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
     new = State(
@@ -522,7 +530,7 @@ class Recorder:
 
     def record(self, k: int, cycle: Cycle) -> None:
         if not self.arrays:
-            for f in fields(Cycle):
+            for f in RECORDED:
                 value = getattr(cycle, f.name)
                 B = value.shape[0]
                 self.arrays[f.name] = np.empty(
