@@ -201,6 +201,8 @@ def test_progress_is_called_once_per_step(short):
 )
 def test_memory_estimate_bounds_the_measured_peak(fields, batch, trace):
     scenario = uavtrack.Scenario(**fields)
+    import scipy.optimize  # noqa: F401  (loaded on first use: its import is not the run's)
+
     tracemalloc.start()
     try:
         uavtrack.run(scenario, "distributed", list(range(batch)), trace=trace)

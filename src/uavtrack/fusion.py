@@ -50,7 +50,10 @@ def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> n
         t, i, q = delivered.trial, delivered.receiver, delivered.sender
         out = known.copy()
         if t.size:
-            rows = np.where(delivered.own[:, None], known[t, i], offered[t, q])
+            if known is offered:  # without delay a self-link offers the current set
+                rows = offered[t, q]
+            else:
+                rows = np.where(delivered.own[:, None], known[t, i], offered[t, q])
             heard = np.logical_or.reduceat(rows, delivered.starts, axis=0)
             out[delivered.heads] = heard
         return out
@@ -73,7 +76,10 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
         t, i, q = delivered.trial, delivered.receiver, delivered.sender
         best = identity(own.shape)
         if t.size:
-            values = np.where(delivered.own[:, None], own[t, i], offered[t, q])  # (E, M)
+            if own is offered:  # without delay a self-link offers the current tuple
+                values = offered[t, q]  # (E, M)
+            else:
+                values = np.where(delivered.own[:, None], own[t, i], offered[t, q])
             top = np.maximum.reduceat(values, delivered.starts, axis=0)
             lowest = np.where(values == top[delivered.ordinal], q[:, None], n)
             best[delivered.heads] = np.minimum.reduceat(lowest, delivered.starts, axis=0)
