@@ -243,7 +243,8 @@ def test_run_table_explains_what_its_estimates_cover(capsys):
         "position RMSE, team's best estimate [m]",
         "position RMSE, every UAV's estimate [m]",
         "NEES, team's best estimate (4 if consistent)",
-        "decision time per UAV and cycle [ms]",
+        "decision time per UAV and cycle [ms of CPU time]",
+        "the same in wall time [ms]",
         "includes the stale ones",
     ):
         assert label in " ".join(out.split()), label
@@ -254,6 +255,7 @@ def test_json_names_the_decision_time_unit_and_is_strict(capsys):
     code, out, _ = run_cli(capsys, "run", "--set", "steps=10", "--json")
     data = json.loads(out)
     assert data["decision_time_ms"] > 0 and "decision_time" not in data
+    assert data["decision_wall_ms"] > 0
     assert data["rmse_best"] <= data["rmse"]
     code, out, _ = run_cli(capsys, "compare", "--trials", "3", "--steps", "10", "--json")
     assert code == 0

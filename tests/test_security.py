@@ -171,6 +171,7 @@ def report(**change):
         sent=1,
         delivered=1,
         decision_ms=1.0,
+        decision_wall_ms=1.5,
     )
     return Report(**{**fields, **change})
 
@@ -186,6 +187,7 @@ def report(**change):
         ({"cov": Array.of(np.full((2, 4, 4), np.inf))}, "not finite"),
         ({"rounds": -3}, "count out of range"),
         ({"decision_ms": float("nan")}, "not finite"),
+        ({"decision_wall_ms": -1.0}, "not finite"),
     ],
 )
 def test_a_report_the_run_cannot_fly_is_refused(change, reason):

@@ -1,5 +1,6 @@
 import hashlib
 import json
+import time
 import tracemalloc
 from pathlib import Path
 
@@ -159,9 +160,28 @@ def test_decision_time_is_measured_alone_never_in_a_batch():
     alone = uavtrack.run(scenario, "distributed", [0], trace=True)
     assert (alone.metrics["decision_time_ms"] > 0).all()
     assert (alone.traces[0].decision_time_ms > 0).all()
+    assert (alone.traces[0].decision_wall_ms > 0).all()
     batch = uavtrack.run(scenario, "distributed", [0, 1], trace=True)
     assert np.isnan(batch.metrics["decision_time_ms"]).all()
     assert np.isnan(batch.traces[0].decision_time_ms).all()
+    assert np.isnan(batch.traces[0].decision_wall_ms).all()
+
+
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_decision_time_is_cpu_time_with_wall_time_beside_it(method, monkeypatch):
+    """A planner that waits (as on a machine busy with other work) costs wall time only."""
+    plan = simulation._plan
+
+    def waiting(*args, **kwargs):
+        time.sleep(0.05)
+        return plan(*args, **kwargs)
+
+    monkeypatch.setattr(simulation, "_plan", waiting)
+    trace = uavtrack.run(uavtrack.Scenario(steps=4), method, [0], trace=True).traces[0]
+    share = 50.0 / (1 if method == "centralized" else 5)  # the wait, per deciding UAV [ms]
+    assert (trace.decision_wall_ms >= share).all()
+    assert (trace.decision_time_ms < share / 2).all()
+    assert (trace.decision_time_ms > 0).all()
 
 
 def test_best_estimate_metrics_agree_with_the_trace(short):

@@ -19,11 +19,12 @@ from __future__ import annotations
 
 import itertools
 import math
-import time
 from collections.abc import Callable
 from functools import cache
 
 import numpy as np
+
+from . import timing
 
 
 def linear_sum_assignment(cost: np.ndarray, maximize: bool = False):
@@ -299,8 +300,9 @@ def auction(
     receiver, sender], the UAVs in each receiver's auction; a receiver is always a
     member of its own. solve: the neighbourhood problem's solver (default `hungarian`).
 
-    Returns (target (B, N), seconds (B, N)): the time of the solve each UAV needed,
-    charged to every UAV that shares it, as each would solve it on its own processor.
+    Returns (target (B, N), seconds (B, N, 2)): the time of the solve each UAV needed,
+    CPU and wall (`timing`), charged to every UAV that shares it, as each would solve it
+    on its own processor (problems solved together share their time).
     A UAV alone takes its best bid (the lowest target on ties, as the solver does).
     """
     solve = solve or _solve
@@ -310,9 +312,10 @@ def auction(
     B, n = members.shape[:2]
     views = bids.ndim == 4
     own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
-    start = time.perf_counter()
+    start = timing.start()
     out = greedy(own)
-    seconds = np.full(out.shape, (time.perf_counter() - start) / max(out.size, 1))
+    seconds = np.empty(out.shape + (2,))
+    seconds[...] = timing.since(start) / max(out.size, 1)
     idx = np.arange(n)
     members = members.copy()
     members[:, idx, idx] = True
@@ -326,26 +329,26 @@ def auction(
         first, which = _distinct(b, rows)
     row = np.cumsum(rows, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
     choice = np.empty((first.size, n), dtype=np.int64)
-    cost = np.empty(first.size)
+    cost = np.empty((first.size, 2))
     size = rows[first].sum(axis=1)
     m = bids.shape[-1]
-    lists, share = None, 0.0
+    lists, share = None, np.zeros(2)
     if solve is _solve and not views and (size < m).any():
         # the built-in solver reads each member's k best bids only: rank every bidder's
         # once, as many as the largest problem needs (`ranked` keeps the order of each
         # shorter prefix), and charge the ranking to the problems by their members
-        start = time.perf_counter()
+        start = timing.start()
         problem, member = np.nonzero(rows[first])
         bidders = np.unique(b[first][problem] * n + member)
         lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
         lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
-        share = (time.perf_counter() - start) / bidders.size
+        share = timing.since(start) / bidders.size
     if solve is _solve:  # problems of one size together (`solve_many`)
         for width in np.unique(size):
             group = np.flatnonzero(size == width)
             k = first[group]
             who = np.nonzero(rows[k])[1].reshape(-1, width)  # members, in index order
-            start = time.perf_counter()
+            start = timing.start()
             if views:
                 problem = bids[b[k][:, None], i[k][:, None], who]
             else:
@@ -354,13 +357,13 @@ def auction(
             if lists is not None and width < m:
                 best = lists[who + n * b[k][:, None], :width]
             choice[group, :width] = solve_many(problem, best)
-            cost[group] = (time.perf_counter() - start) / group.size + share * width
+            cost[group] = timing.since(start) / group.size + share * width
     else:
         for u, k in enumerate(first):  # a method's own solver: one call per problem
             problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-            start = time.perf_counter()
+            start = timing.start()
             solved = solve(problem)
-            cost[u] = time.perf_counter() - start
+            cost[u] = timing.since(start)
             choice[u, : solved.size] = solved
     out[b, i] = choice[which, row]
     seconds[b, i] = cost[which]
@@ -402,21 +405,21 @@ def centralized(
     """One global assignment per trial over the member UAVs (all by default).
 
     bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
-    out; seconds (B,) of each trial's solve, the solve of trials with as many members
-    shared among them).
+    out; seconds (B, 2) of each trial's solve, CPU and wall, the solve of trials with as
+    many members shared among them).
     """
     B, n, _ = bids.shape
     members = np.ones((B, n), dtype=bool) if members is None else members
     _check(bids[members])
     out = np.full((B, n), -1, dtype=np.int64)
-    seconds = np.zeros(B)
+    seconds = np.zeros((B, 2))
     count = members.sum(axis=1)
     for size in np.unique(count[count > 0]):  # trials with as many members together
         trials = np.flatnonzero(count == size)
         who = np.nonzero(members[trials])[1].reshape(-1, size)
-        start = time.perf_counter()
+        start = timing.start()
         out[trials[:, None], who] = solve_many(bids[trials[:, None], who])
-        seconds[trials] = (time.perf_counter() - start) / trials.size
+        seconds[trials] = timing.since(start) / trials.size
     return out, seconds
 
 

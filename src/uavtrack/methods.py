@@ -28,14 +28,13 @@ and the experiments read, and other packages can add theirs by entry point.
 
 from __future__ import annotations
 
-import time
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
 
 import numpy as np
 
-from . import assignment, fusion, registry
+from . import assignment, fusion, registry, timing
 from .radio import Radio
 
 
@@ -93,8 +92,8 @@ class Inputs:
 @dataclass(frozen=True)
 class Fused:
     """Each UAV's fused estimates (mean, cov), the rounds it ran (B, N), messages sent
-    and delivered (B,), seconds of central work (B, N), for the centralized method
-    under faults the targets the central node sent (B, N), and from the D_i protocol
+    and delivered (B,), seconds of central work (B, N, 2; CPU, wall), for the centralized
+    method under faults the targets the central node sent (B, N), and from the D_i protocol
     the largest closed neighbourhood each UAV belongs to (B, N) (`fusion.Depth`)."""
 
     mean: np.ndarray
@@ -110,8 +109,9 @@ class Fused:
 
 @dataclass(frozen=True)
 class Assigned:
-    """Targets (B, N) (-1 for a failed UAV), seconds of each UAV's assignment (B, N),
-    messages sent and delivered (B,), and the bids held for the next cycle."""
+    """Targets (B, N) (-1 for a failed UAV), seconds of each UAV's assignment (B, N, 2):
+    CPU and wall (`timing`; a method's own (B, N) stands for both), messages sent and
+    delivered (B,), and the bids held for the next cycle."""
 
     target: np.ndarray
     seconds: np.ndarray
@@ -313,7 +313,7 @@ class Centralized(Method):
         radio.send("upload", {**tuples, "uavs": inputs.believed, "alive": inputs.alive})
         upload, up_ok = radio.receive_central("upload")
         sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
-        seconds = np.zeros((B, n))
+        seconds = np.zeros((B, n, 2))
         if s.delay > 0:  # counted when sent: uploads now, downloads below
             up = radio.transmitted_central("upload")
             sent, delivered = sent + up[0], delivered + up[1]
@@ -324,11 +324,11 @@ class Centralized(Method):
             if s.delay == 0:
                 sent += upload["alive"].sum(axis=1)
                 delivered += up_ok.sum(axis=1)
-            start = time.perf_counter()
+            start = timing.start()
             down, down_target = central_node(
                 {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
             )
-            seconds += (time.perf_counter() - start) / B
+            seconds += timing.since(start) / B
         radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
         if s.delay > 0:
             down_sent = radio.transmitted_central("download")
@@ -351,7 +351,7 @@ class Centralized(Method):
         none = np.zeros(B, dtype=np.int64)
         if not inputs.setting.faulty:
             target, seconds = assignment.centralized(bids)
-            return Assigned(target, np.repeat(seconds[:, None], n, axis=-1), none, none)
+            return Assigned(target, np.repeat(seconds[:, None], n, axis=1), none, none)
         # the node's target if its download arrived, else the previous one, else the own best
         target = fused.target if fused.target is not None else np.full((B, n), -1)
         target = np.where(target >= 0, target, inputs.previous)
@@ -434,9 +434,10 @@ class Greedy(Method):
         return np.ones(largest.shape, dtype=np.int64)
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
-        start = time.perf_counter()
+        start = timing.start()
         out = assignment.greedy(bids)
-        seconds = np.full(out.shape, (time.perf_counter() - start) / out.size)
+        seconds = np.empty(out.shape + (2,))
+        seconds[...] = timing.since(start) / out.size
         none = np.zeros(bids.shape[0], dtype=np.int64)
         return Assigned(np.where(inputs.alive, out, -1), seconds, none, none)
 

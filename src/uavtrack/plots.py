@@ -144,7 +144,7 @@ def fig7(summary: dict[str, Any], path: Path) -> None:
     ax.yaxis.set_minor_formatter(matplotlib.ticker.NullFormatter())
     low, high = ax.get_ylim()
     ax.set_ylim(low, high * 3)  # room above the bars for the legend
-    ax.set_ylabel("decision time per cycle [ms]")
+    ax.set_ylabel("decision time per cycle [ms of CPU time]")
     ax.set_xlabel("UAVs vs targets")
     ax.set_title(
         "Decision time per cycle (Fig. 7): a UAV's own (distributed, greedy),\n"

@@ -14,7 +14,6 @@ derived from it.
 from __future__ import annotations
 
 import os
-import time
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import cache
@@ -23,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, network, planning, sensing, world
+from . import estimation, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import Faults, trial_key
 from .methods import Held, Inputs, Method, Setting, get
@@ -217,7 +216,10 @@ class Cycle:
     )
     alive: np.ndarray = _record("(Nu,)", "the UAV has not failed", bool)
     decision_time_ms: np.ndarray = _record(
-        "(Nu,)", "planning and assignment per UAV [ms] (NaN inside a batch)"
+        "(Nu,)", "planning and assignment per UAV [ms of CPU time] (NaN inside a batch)"
+    )
+    decision_wall_ms: np.ndarray = _record(
+        "(Nu,)", "the same in wall time [ms] (NaN inside a batch)"
     )
     confidence: np.ndarray | None = field(default=None, repr=False, compare=False)
     """1 / trace(cov) (Nu, Nt) when the method already has it (not recorded: the
@@ -262,7 +264,7 @@ class Pending:
     bids: np.ndarray
     assigned: Any
     own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
-    plan_seconds: float
+    plan_seconds: np.ndarray  # (2,): CPU, wall (`timing`)
 
 
 def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -> Pending:
@@ -292,9 +294,9 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
         ctx.setting,
     )
     fused = method.fuse(inputs)
-    start = time.perf_counter()
+    start = timing.start()
     bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
-    plan_seconds = time.perf_counter() - start
+    plan_seconds = timing.since(start)
     assigned = method.assign(inputs, fused, bids)
     chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
     own = np.where(alive, chosen, STRAIGHT)
@@ -323,7 +325,8 @@ def finish(
     if not alive.all():
         new_uavs = np.where(alive[..., None], new_uavs, uavs)  # a failed UAV is down
     B, Nu = alive.shape
-    share = pending.plan_seconds / (B if method.central else B * Nu)
+    share = pending.plan_seconds / (B if method.central else B * Nu)  # (2,): CPU, wall
+    ms = 1e3 * (share + timing.both(assigned.seconds, alive.shape))
     recorded = (fused.mean, fused.cov, bids)
     if not alive.all():  # a failed UAV holds no estimate and makes no bid: NaN
         recorded = tuple(
@@ -342,7 +345,8 @@ def finish(
         delivered=fused.delivered + assigned.delivered,
         conflicts=conflicts(target, alive, bids.shape[-1]),
         alive=alive,
-        decision_time_ms=np.where(alive, 1e3 * (share + assigned.seconds), np.nan),
+        decision_time_ms=np.where(alive, ms[..., timing.CPU], np.nan),
+        decision_wall_ms=np.where(alive, ms[..., timing.WALL], np.nan),
         confidence=fused.gamma,
     )
     mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
@@ -540,6 +544,7 @@ class Recorder:
             array[:, k] = getattr(cycle, name)
         if not self.timed:
             self.arrays["decision_time_ms"][:, k] = np.nan
+            self.arrays["decision_wall_ms"][:, k] = np.nan
 
     def traces(self, trajectory: np.ndarray) -> list:
         """One Trace per trial, over the steps of `trajectory` (B, T', Nt, 4), T' at
@@ -642,7 +647,7 @@ class Result:
     observation_rate (Sec. 7); per_target (Nt,); rmse and nees over every UAV's fused
     estimate; rmse_best and nees_best of the team's best estimate; rounds: mean D_i per
     UAV and step; messages and delivered per step; conflicts per step; failed: UAVs
-    failed by the end; decision_time_ms per UAV and cycle.
+    failed by the end; decision_time_ms (CPU) and decision_wall_ms per UAV and cycle.
     """
 
     method: str
@@ -666,6 +671,7 @@ class Result:
     conflicts: float
     failed: float
     decision_time_ms: float
+    decision_wall_ms: float
     trace: Trace | None = field(default=None, repr=False)
 
     def summary(self) -> dict:

@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import assignment, estimation, fusion, network, simulation
+from .. import assignment, estimation, fusion, network, simulation, timing
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -201,16 +201,16 @@ class UavAgent:
         else:
             fused_mean, fused_cov, rounds, sent, delivered = self.consensus(k, mean, cov)
         top = None if self.central else self.method.top(self.setting, np.array([[self.largest]]))
-        plan_start = time.perf_counter()
+        plan_start = timing.start()
         bids, best = self.setting.plan(believed[None, None], fused_mean[None, None], top)
         bids, best = bids[0, 0], best[0, 0]
-        plan_seconds = time.perf_counter() - plan_start
+        plan_seconds = timing.since(plan_start)
         if self.central:
             target = target if target >= 0 else self.target
             target = target if target >= 0 else int(assignment.greedy(bids))
-            solve_seconds, more = 0.0, (0, 0)
+            solve_seconds, more = np.zeros(2), (0, 0)
         elif isinstance(self.method, Greedy):
-            target, solve_seconds, more = int(assignment.greedy(bids)), 0.0, (0, 0)
+            target, solve_seconds, more = int(assignment.greedy(bids)), np.zeros(2), (0, 0)
         else:
             target, solve_seconds, more = self.auction(k, bids, alive)
         action = int(best[target])
@@ -228,7 +228,7 @@ class UavAgent:
             int(rounds),
             int(sent + more[0]),
             int(delivered + more[1]),
-            1e3 * (plan_seconds + solve_seconds),
+            *(1e3 * (plan_seconds + solve_seconds)).tolist(),  # CPU, wall
         )
         self.mean, self.cov = estimation.predict(
             fused_mean, fused_cov, self.ctx.const.A, self.ctx.const.Q
@@ -382,12 +382,12 @@ class UavAgent:
         members = members & alive
         members[me] = True
         rows = np.flatnonzero(members)
-        start = time.perf_counter()
+        start = timing.start()
         if rows.size == 1:
             target = int(assignment.greedy(bids))
         else:
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
-        return target, time.perf_counter() - start, (sent, delivered)
+        return target, timing.since(start), (sent, delivered)
 
     # ------------------------------------------------------------ centralized
 
@@ -468,7 +468,7 @@ class CentralAgent:
         alive = tick["alive"]
         self.radio.begin(k, np.zeros(n, dtype=bool), alive)
         sent = delivered = 0
-        start = time.perf_counter()
+        start = timing.start()
         sent_at = k - self.radio.delay
         down, targets = nothing_heard(1, n, m), np.full((1, n), -1, dtype=np.int64)
         if sent_at >= 0:
@@ -512,8 +512,8 @@ class CentralAgent:
             content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
             content["target"] = np.array(targets[0, i], dtype=np.int64)
             self.radio.send(k, [part("download", 0, content)], to=int(i))
-        seconds = time.perf_counter() - start
+        cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(
-            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, 1e3 * seconds
+            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, cpu, wall
         )

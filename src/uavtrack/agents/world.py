@@ -284,7 +284,7 @@ class WorldProgram:
         target = np.full((1, Nu), -1, dtype=np.int64)
         actions = np.full((1, Nu), simulation.STRAIGHT, dtype=np.int64)
         rounds = np.zeros((1, Nu), dtype=np.int64)
-        decision = np.full((1, Nu), np.nan)
+        decision, wall = np.full((1, Nu), np.nan), np.full((1, Nu), np.nan)
         sent = delivered = 0
         for i, (report, arrays) in reports.items():
             sent += report.sent
@@ -298,6 +298,7 @@ class WorldProgram:
             mean[0, i], cov[0, i], bids[0, i] = arrays["mean"], arrays["cov"], arrays["bids"]
             target[0, i], actions[0, i] = report.target, report.action
             rounds[0, i], decision[0, i] = report.rounds, report.decision_ms
+            wall[0, i] = report.decision_wall_ms
         cycle = simulation.Cycle(
             uavs=uavs,
             observed=observed,
@@ -312,6 +313,7 @@ class WorldProgram:
             conflicts=simulation.conflicts(target, alive, Nt),
             alive=alive.copy(),
             decision_time_ms=decision,
+            decision_wall_ms=wall,
         )
         return cycle, actions
 
