@@ -47,7 +47,7 @@ def test_reproduce_quick_writes_everything(quick):
     )
     assert "95% confidence interval" in report and "`dt` | 0.5 |" in report
     assert json.loads((quick / "manifest.json").read_text())["kind"] == "reproduce"
-    assert len(list((quick / "raw").glob("*.json"))) == 24
+    assert len(list((quick / "raw").glob("*.json"))) == 15
     # the first guess before calibration, beside the defaults, on the same trials
     first = summary["first_guess"]
     assert first["overrides"] == {"dt": 1.0, "uav.altitude": 500.0}
@@ -59,7 +59,7 @@ def test_reproduce_quick_writes_everything(quick):
 def test_reproduce_again_reuses_every_job(quick, capsys):
     before = (quick / "summary.json").read_text()
     code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
-    assert code == 0 and "0 jobs run, 24 reused" in out
+    assert code == 0 and "0 jobs run, 15 reused" in out
     after = json.loads((quick / "summary.json").read_text())
     assert (
         after["compare"]["distributed"]["mean"]
@@ -74,7 +74,7 @@ def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
         capsys, "reproduce", "--quick", "--sensitivity", "--out", str(quick), "--no-progress"
     )
     n_values = sum(len(v) for v in SENSITIVITY.values())
-    assert code == 0 and f"{n_values * 3 * 2} jobs run, 24 reused" in out
+    assert code == 0 and f"{n_values * 3} jobs run, 15 reused" in out
     sens = json.loads((quick / "summary.json").read_text())["sensitivity"]
     assert [r["field"] for r in sens["rows"]] == list(SENSITIVITY)
     base = sens["base"]["rates"]
@@ -98,7 +98,7 @@ def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
         assert im.size[0] > 800
     # without the flag the report leaves the section out, and nothing is recomputed
     code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
-    assert code == 0 and "0 jobs run, 24 reused" in out
+    assert code == 0 and "0 jobs run, 15 reused" in out
     assert "## Sensitivity" not in (quick / "report.md").read_text()
     assert not (quick / "sensitivity.png").exists()  # no chart left that the report lacks
 

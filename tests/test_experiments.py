@@ -18,9 +18,9 @@ def test_reproduce_plan_shares_the_default_runs():
     assert len(jobs) == len({j.key for j in jobs})
     trial_jobs = [j for j in jobs if j.kind == "trials"]
     # 3 methods at the defaults and at the first guess + 7 other ranges + 5 other FOVs,
-    # 2 chunks of 25 trials each
-    assert len(trial_jobs) == (3 + 3 + 7 + 5) * 2
-    assert {j.count for j in trial_jobs} == {25}
+    # one job of all 50 trials each
+    assert len(trial_jobs) == 3 + 3 + 7 + 5
+    assert {j.count for j in trial_jobs} == {50}
     assert all(j.scenario.steps == 500 for j in trial_jobs)
 
 
