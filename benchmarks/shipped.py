@@ -90,7 +90,9 @@ def case(trees: dict[str, Path], args: list[str], repeats: int) -> dict[str, dic
 
 def cycle(trees: dict[str, Path], n: int, repeats: int) -> dict[str, dict]:
     """CPU and wall seconds of one distributed cycle of an n x n team, as shipped."""
-    short, long = (2, 6) if n >= 1000 else (5, 25) if n >= 300 else (10, 60)
+    short, long = (
+        (2, 6) if n >= 1000 else (5, 25) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
+    )
     team = ["run", "--team", f"{n}x{n}", "--json"]
     a = case(trees, team + ["--steps", str(short)], repeats)
     b = case(trees, team + ["--steps", str(long)], repeats)
