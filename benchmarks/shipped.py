@@ -146,7 +146,7 @@ def main() -> None:
     say("uavtrack run --help", case(trees, ["run", "--help"], 5))
     say("uavtrack run (one default trial)", case(trees, ["run", "--json"], few + 2))
     for n in TEAMS:
-        say(f"distributed cycle, {n}x{n}", cycle(trees, n, 1 if n >= 300 else few))
+        say(f"distributed cycle, {n}x{n}", cycle(trees, n, few))
     say("uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few))
     if not options.quick:
         say("uavtrack reproduce", case(trees, ["reproduce", "--out", FRESH], 1))

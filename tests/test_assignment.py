@@ -203,11 +203,13 @@ def test_batched_auction_equals_one_solve_per_problem(n, m, levels, seed):
     bids = rng.integers(0, levels, (3, n, m)).astype(float)
     members = rng.random((3, n, n)) < 0.5
     members |= members.transpose(0, 2, 1)
-    one_by_one = assignment.auction(bids, members, lambda p: assignment._solve(p))[0]
-    assert np.array_equal(assignment.auction(bids, members)[0], one_by_one)
     views = np.where(rng.random((3, n, n, m)) < 0.3, bids[:, None] + 1, bids[:, None])
-    one_by_one = assignment.auction(views, members, lambda p: assignment._solve(p))[0]
-    assert np.array_equal(assignment.auction(views, members)[0], one_by_one)
+    for together in (assignment.TOGETHER, 1):  # few problems each alone; all together
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(assignment, "TOGETHER", together)
+            for held in (bids, views):
+                one_by_one = assignment.auction(held, members, lambda p: assignment._solve(p))
+                assert np.array_equal(assignment.auction(held, members)[0], one_by_one[0])
 
 
 @settings(max_examples=60, deadline=None)
@@ -217,10 +219,13 @@ def test_centralized_equals_one_solve_per_trial(n, m, levels, seed):
     bids = rng.integers(0, levels, (6, n, m)).astype(float)
     members = rng.random((6, n)) < 0.7
     members[0] = True
-    target, _ = assignment.centralized(bids, members)
-    for b in range(6):
-        rows = np.flatnonzero(members[b])
-        expected = np.full(n, -1)
-        if rows.size:
-            expected[rows] = assignment._solve(bids[b, rows])
-        assert np.array_equal(target[b], expected)
+    for together in (assignment.TOGETHER, 1):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(assignment, "TOGETHER", together)
+            target, _ = assignment.centralized(bids, members)
+        for b in range(6):
+            rows = np.flatnonzero(members[b])
+            expected = np.full(n, -1)
+            if rows.size:
+                expected[rows] = assignment._solve(bids[b, rows])
+            assert np.array_equal(target[b], expected)

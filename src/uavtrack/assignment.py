@@ -29,11 +29,18 @@ from . import timing
 
 def linear_sum_assignment(cost: np.ndarray, maximize: bool = False):
     """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
-    second to load, and the default team's problems are solved by `solve_many` without
+    second to load, and batches of trials solve their problems by `solve_many`, without
     it unless bids tie."""
+    return load_solver()(cost, maximize=maximize)
+
+
+def load_solver() -> Callable:
+    """scipy's `linear_sum_assignment`, importing `scipy.optimize` if not yet loaded. A
+    run of one trial, whose decision times are measured, loads it before its first
+    cycle, so that no decision time holds the import."""
     from scipy.optimize import linear_sum_assignment as solve
 
-    return solve(cost, maximize=maximize)
+    return solve
 
 
 def hungarian(bids: np.ndarray) -> np.ndarray:
@@ -134,6 +141,11 @@ def _solve(bids: np.ndarray) -> np.ndarray:
         left = left[keep]
     return choice
 
+
+TOGETHER = 8
+"""Fewest problems of one size that the auction solves together (`solve_many`): below
+it each is solved alone, which costs less than building the arrays (a single trial's
+UAVs, where the decision time of Fig. 7 is measured, see few problems of each size)."""
 
 ENUMERATED = 720
 """Most candidate assignments enumerated for one problem (720 = 6!); a problem with more
@@ -343,9 +355,22 @@ def auction(
         lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
         lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
         share = timing.since(start) / bidders.size
-    if solve is _solve:  # problems of one size together (`solve_many`)
+    if solve is _solve:  # problems of one size together (`solve_many`) when many
         for width in np.unique(size):
             group = np.flatnonzero(size == width)
+            if group.size < TOGETHER:  # a few: each alone costs less than the arrays
+                for u in group:
+                    k = first[u]
+                    problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
+                    start = timing.start()
+                    if lists is not None and width < m:
+                        who = np.flatnonzero(rows[k]) + n * b[k]
+                        solved = _restricted(problem, lists[who, :width])
+                    else:
+                        solved = _solve(problem)
+                    cost[u] = timing.since(start) + share * width
+                    choice[u, :width] = solved
+                continue
             k = first[group]
             who = np.nonzero(rows[k])[1].reshape(-1, width)  # members, in index order
             start = timing.start()
@@ -416,6 +441,13 @@ def centralized(
     count = members.sum(axis=1)
     for size in np.unique(count[count > 0]):  # trials with as many members together
         trials = np.flatnonzero(count == size)
+        if trials.size < TOGETHER:  # a few: each alone
+            for b in trials:
+                rows = np.flatnonzero(members[b])
+                start = timing.start()
+                out[b, rows] = _solve(bids[b, rows])
+                seconds[b] = timing.since(start)
+            continue
         who = np.nonzero(members[trials])[1].reshape(-1, size)
         start = timing.start()
         out[trials[:, None], who] = solve_many(bids[trials[:, None], who])

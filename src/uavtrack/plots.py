@@ -227,8 +227,11 @@ def scaling_figure(cases: list[dict[str, Any]], path: Path) -> None:
             label=f"slope {power} (time ~ N^{power})",
         )
     ax.set_xlabel("team size N (N UAVs x N targets, constant density)")
-    ax.set_ylabel("time per decision cycle [ms]")
-    ax.set_title("Cost of a cycle against team size, 1 process")
+    ax.set_ylabel("wall time per decision cycle [ms]")
+    ax.set_title(
+        "Cost of a cycle against team size\n(uavtrack bench: one process, BLAS on 1 thread)",
+        fontsize=10,
+    )
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)
     save(fig, path)
