@@ -1,5 +1,7 @@
 import hashlib
 import json
+import subprocess
+import sys
 import time
 import tracemalloc
 from pathlib import Path
@@ -306,3 +308,27 @@ def test_ospa_and_gospa_metrics_are_those_of_the_trace():
     assert result.gospa_best == pytest.approx(np.mean([x.distance for x in g]), rel=1e-12)
     assert result.gospa_missed_best == pytest.approx(np.mean([x.missed / 18 for x in g]))
     assert result.gospa_missed_best > 0  # greedy loses targets: some estimates drift off
+
+
+def test_set_up_inside_a_timed_stage_is_left_out():
+    from uavtrack import timing
+
+    mark = timing.start()
+    with timing.set_up():  # 50 ms of CPU, as a module loaded on first use
+        until = time.thread_time() + 0.05
+        while time.thread_time() < until:
+            pass
+    cpu, wall = timing.since(mark)
+    assert 0 <= cpu < 0.005 and 0 <= wall < 0.05
+
+
+def test_no_decision_time_holds_a_module_loaded_on_first_use():
+    code = (
+        "import sys, uavtrack\n"
+        "assert 'scipy.optimize' not in sys.modules\n"
+        "t = uavtrack.run(uavtrack.Scenario(steps=5), 'distributed', [0], trace=True).traces[0]\n"
+        "assert 'scipy.optimize' in sys.modules  # loaded during the run\n"
+        "print(t.decision_time_ms.max())\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert float(out.stdout) < 100.0  # loading scipy.optimize alone takes about 500 ms of CPU

@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import assignment, estimation, network, planning, sensing, timing, world
+from . import estimation, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import Faults, trial_key
 from .methods import Held, Inputs, Method, Setting, get
@@ -90,8 +90,6 @@ class Context:
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
         const = Constants.of(scenario)
-        if len(seeds) == 1:  # a timed run: the exact solver's import is not a decision's
-            assignment.load_solver()
         keys = np.stack([trial_key(world.children(s)[2]) for s in seeds])
         faults = Faults(scenario.faults, keys, scenario.n_uavs)
         f, robust = scenario.faults, scenario.robust

@@ -10,21 +10,46 @@ their seconds with a last axis of two: [..., 0] CPU, [..., 1] wall.
 from __future__ import annotations
 
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 
 import numpy as np
+import numpy.ma  # noqa: F401  (np.unique loads it on first use: here, not inside a timed stage)
 
 CPU, WALL = 0, 1
 """Indices of the two clocks along the last axis of a timed stage's seconds."""
 
 
-def start() -> tuple[float, float]:
+_set_up = [0.0, 0.0]
+"""Seconds of one-time set-up (`set_up`) so far, [CPU, wall]: left out of every timing."""
+
+
+def start() -> tuple[float, float, float, float]:
     """A mark on both clocks."""
-    return time.thread_time(), time.perf_counter()
+    return time.thread_time(), time.perf_counter(), _set_up[0], _set_up[1]
 
 
-def since(mark: tuple[float, float]) -> np.ndarray:
-    """Seconds since `mark` on both clocks, (2,): [CPU, wall]."""
-    return np.array([time.thread_time() - mark[0], time.perf_counter() - mark[1]])
+def since(mark: tuple[float, float, float, float]) -> np.ndarray:
+    """Seconds since `mark` on both clocks, (2,): [CPU, wall], without the set-up done
+    in between."""
+    return np.array(
+        [
+            time.thread_time() - mark[0] - (_set_up[0] - mark[2]),
+            time.perf_counter() - mark[1] - (_set_up[1] - mark[3]),
+        ]
+    )
+
+
+@contextmanager
+def set_up() -> Iterator[None]:
+    """One-time work inside a timed stage (loading a module on first use): it is not a
+    decision's time, so `since` leaves it out."""
+    cpu, wall = time.thread_time(), time.perf_counter()
+    try:
+        yield
+    finally:
+        _set_up[0] += time.thread_time() - cpu
+        _set_up[1] += time.perf_counter() - wall
 
 
 def both(seconds: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
