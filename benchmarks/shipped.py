@@ -116,7 +116,7 @@ def main() -> None:
     trees = {"this": HERE}
     if options.before is not None:
         if not (options.before / "uavtrack").is_dir():
-            raise SystemExit(f"--before {options.before}: not a src folder holding uavtrack")
+            parser.error(f"--before {options.before}: not a src folder holding uavtrack")
         trees = {"before": options.before.resolve(), "this": HERE}
     few = 1 if options.quick else 3
     results: dict = {
