@@ -332,3 +332,22 @@ def test_no_decision_time_holds_a_module_loaded_on_first_use():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) < 100.0  # loading scipy.optimize alone takes about 500 ms of CPU
+
+
+def test_set_up_in_one_thread_is_not_left_out_of_another():
+    """In the in-memory swarm every UAV is a thread: each loads the solver on first use."""
+    code = (
+        "import threading\n"
+        "from uavtrack import assignment, timing\n"
+        "out = []\n"
+        "def uav():\n"
+        "    mark = timing.start()\n"
+        "    assignment.load_solver()\n"
+        "    out.append(timing.since(mark))\n"
+        "threads = [threading.Thread(target=uav) for _ in range(3)]\n"
+        "for t in threads: t.start()\n"
+        "for t in threads: t.join()\n"
+        "print(min(float(x.min()) for x in out))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert float(out.stdout) >= 0.0

@@ -34,13 +34,17 @@ def linear_sum_assignment(cost: np.ndarray, maximize: bool = False):
     return load_solver()(cost, maximize=maximize)
 
 
+_SOLVER: list[Callable] = []
+
+
 def load_solver() -> Callable:
     """scipy's `linear_sum_assignment`, importing `scipy.optimize` on first use; the
     import is set-up, not a decision's time (`timing.set_up`)."""
-    with timing.set_up():
-        from scipy.optimize import linear_sum_assignment as solve
-
-    return solve
+    if not _SOLVER:
+        with timing.set_up():
+            from scipy.optimize import linear_sum_assignment as solve
+        _SOLVER.append(solve)
+    return _SOLVER[0]
 
 
 def hungarian(bids: np.ndarray) -> np.ndarray:

@@ -364,6 +364,8 @@ def gather(source: np.ndarray, values: np.ndarray) -> np.ndarray:
     array.
     """
     B, n, m = source.shape
+    if not source.size:
+        return values.copy()
     # rows of the flattened (B * N * M, event) array: one `take` copies whole rows,
     # two to three times faster than indexing (b, source, j) on large teams
     rows = (np.arange(B)[:, None, None] * n + source) * m + np.arange(m)

@@ -9,6 +9,7 @@ their seconds with a last axis of two: [..., 0] CPU, [..., 1] wall.
 
 from __future__ import annotations
 
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -20,36 +21,48 @@ CPU, WALL = 0, 1
 """Indices of the two clocks along the last axis of a timed stage's seconds."""
 
 
-_set_up = [0.0, 0.0]
-"""Seconds of one-time set-up (`set_up`) so far, [CPU, wall]: left out of every timing."""
+_local = threading.local()
+
+
+def _set_up() -> list[float]:
+    """This thread's seconds of one-time set-up (`set_up`) so far, [CPU, wall]: left out
+    of its timings. Per thread, as the CPU clock is: in the in-memory swarm every UAV is
+    a thread of one process, and one UAV's set-up is no other's."""
+    tally = getattr(_local, "set_up", None)
+    if tally is None:
+        tally = _local.set_up = [0.0, 0.0]
+    return tally
 
 
 def start() -> tuple[float, float, float, float]:
     """A mark on both clocks."""
-    return time.thread_time(), time.perf_counter(), _set_up[0], _set_up[1]
+    tally = _set_up()
+    return time.thread_time(), time.perf_counter(), tally[0], tally[1]
 
 
 def since(mark: tuple[float, float, float, float]) -> np.ndarray:
-    """Seconds since `mark` on both clocks, (2,): [CPU, wall], without the set-up done
-    in between."""
+    """Seconds since `mark` on both clocks, (2,): [CPU, wall], without the set-up this
+    thread did in between."""
+    tally = _set_up()
     return np.array(
         [
-            time.thread_time() - mark[0] - (_set_up[0] - mark[2]),
-            time.perf_counter() - mark[1] - (_set_up[1] - mark[3]),
+            time.thread_time() - mark[0] - (tally[0] - mark[2]),
+            time.perf_counter() - mark[1] - (tally[1] - mark[3]),
         ]
     )
 
 
 @contextmanager
 def set_up() -> Iterator[None]:
-    """One-time work inside a timed stage (loading a module on first use): it is not a
-    decision's time, so `since` leaves it out."""
+    """One-time work inside a timed stage (loading a module on first use, or waiting for
+    another thread to load it): it is not a decision's time, so `since` leaves it out."""
     cpu, wall = time.thread_time(), time.perf_counter()
     try:
         yield
     finally:
-        _set_up[0] += time.thread_time() - cpu
-        _set_up[1] += time.perf_counter() - wall
+        tally = _set_up()
+        tally[0] += time.thread_time() - cpu
+        tally[1] += time.perf_counter() - wall
 
 
 def both(seconds: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
