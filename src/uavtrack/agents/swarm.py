@@ -355,12 +355,7 @@ def _forward(children: list[Child], lines: int = 20) -> None:
 
 def stop(children: list[subprocess.Popen], grace: float = 5.0) -> None:
     """Stop the processes started here, by pid: let them finish, then terminate, then kill."""
-    limit = time.monotonic() + grace
-    for child in children:
-        try:
-            child.wait(timeout=max(0.0, limit - time.monotonic()))
-        except subprocess.TimeoutExpired:
-            pass
+    wait_for(children, grace)
     for child in children:
         if child.poll() is None:
             child.send_signal(signal.SIGTERM)
