@@ -53,7 +53,7 @@ def test_bench_json_is_written_atomically(tmp_path, monkeypatch):
         bench,
         "bench",
         lambda quick, progress=None: {
-            "machine": {"cores": 2},
+            "machine": {"cores": 2, "blas_threads": "1 (environment)"},
             "quick": quick,
             "cases": [bench.case("x", 2e-3, 4e-3, unit="call")],
         },

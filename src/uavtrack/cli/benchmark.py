@@ -8,7 +8,6 @@ from typing import Annotated
 
 import typer
 
-from .. import threads
 from ..files import check_output, write_json
 from . import app, console
 
@@ -33,11 +32,9 @@ def bench(
         check_output(json_out, "--json")
     if figure is not None:
         check_output(figure, "--figure")
-    pinning = threads.describe()  # set on `import uavtrack`, before numpy loaded
     from ..bench import bench as run_bench
 
     results = run_bench(quick, progress=lambda what: print(f"bench: {what}", file=sys.stderr))
-    results["machine"]["thread_pinning"] = pinning
     if json_out is not None:
         write_json(json_out, results)
     from rich.markup import escape
@@ -45,7 +42,8 @@ def bench(
 
     table = Table(
         title=f"uavtrack bench{' --quick' if quick else ''} "
-        f"({results['machine']['cores']} cores, BLAS threads: {pinning})"
+        f"({results['machine']['cores']} cores, BLAS threads: "
+        f"{results['machine']['blas_threads']})"
     )
     for col in ("case", "ours", "reference", "speedup", "memory peak"):
         table.add_column(col, justify="left" if col == "case" else "right")
