@@ -351,3 +351,29 @@ def test_set_up_in_one_thread_is_not_left_out_of_another():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) >= 0.0
+
+
+@pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
+def test_set_up_is_not_interrupted_half_way_and_the_interrupt_still_comes(signum):
+    """A Ctrl-C during `import scipy.optimize` could end it with ImportError: initialization
+    failed (seen 1 in 40) instead of the interrupt the command line stops on."""
+    code = (
+        "import os, signal\n"
+        "from uavtrack import timing\n"
+        "def stop(number, frame):\n"
+        "    raise KeyboardInterrupt\n"
+        "signal.signal(signal.SIGTERM, stop)  # as the command line does\n"
+        "done = False\n"
+        "try:\n"
+        "    with timing.set_up():\n"
+        f"        os.kill(os.getpid(), signal.{signum})\n"
+        "        for _ in range(200_000):  # bytecode runs: an interrupt would land here\n"
+        "            pass\n"
+        "        done = True\n"
+        "except KeyboardInterrupt:\n"
+        "    print('interrupted after the set-up:', done)\n"
+        "print(signal.getsignal(signal.SIGTERM) is stop, signal.getsignal(signal.SIGINT)"
+        " is signal.default_int_handler)\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.splitlines() == ["interrupted after the set-up: True", "True True"]

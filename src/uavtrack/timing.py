@@ -9,6 +9,7 @@ their seconds with a last axis of two: [..., 0] CPU, [..., 1] wall.
 
 from __future__ import annotations
 
+import signal
 import threading
 import time
 from collections.abc import Iterator
@@ -55,14 +56,49 @@ def since(mark: tuple[float, float, float, float]) -> np.ndarray:
 @contextmanager
 def set_up() -> Iterator[None]:
     """One-time work inside a timed stage (loading a module on first use, or waiting for
-    another thread to load it): it is not a decision's time, so `since` leaves it out."""
+    another thread to load it): it is not a decision's time, so `since` leaves it out.
+
+    Nor is it interrupted half-way: a Ctrl-C (or SIGTERM) that lands while an extension
+    module initialises can leave it failing with an ImportError instead of the
+    interrupt. In the main thread the two signals are held until the work is done, then
+    delivered to the handlers they were meant for."""
     cpu, wall = time.thread_time(), time.perf_counter()
+    held = _hold(HELD)
     try:
         yield
     finally:
         tally = _set_up()
         tally[0] += time.thread_time() - cpu
         tally[1] += time.perf_counter() - wall
+        _release(held)
+
+
+HELD = (signal.SIGINT, signal.SIGTERM)
+"""The signals `set_up` holds: those the command line turns into an orderly stop."""
+
+
+def _hold(signals: tuple[int, ...]) -> dict[int, tuple[object, list[int]]] | None:
+    """Replace the Python handlers of `signals` with ones that only note the signal;
+    None outside the main thread (where handlers cannot be set, nor run)."""
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    held = {}
+    for signum in signals:
+        handler = signal.getsignal(signum)
+        if callable(handler):  # a Python handler (SIG_DFL and SIG_IGN are left alone)
+            seen: list[int] = []
+            signal.signal(signum, lambda number, frame, seen=seen: seen.append(number))
+            held[signum] = (handler, seen)
+    return held
+
+
+def _release(held: dict[int, tuple[object, list[int]]] | None) -> None:
+    """Put the handlers back, and deliver to them the signals that came meanwhile."""
+    for signum, (handler, _) in (held or {}).items():
+        signal.signal(signum, handler)
+    for signum, (_, seen) in (held or {}).items():
+        if seen:
+            signal.raise_signal(signum)
 
 
 def both(seconds: np.ndarray, shape: tuple[int, ...]) -> np.ndarray:
