@@ -146,6 +146,68 @@ class UAVModel(_Part):
             "assumed: the team takes off together"
         ),
     )
+    dynamics: Literal["unicycle", "jsbsim"] = Field(
+        "unicycle",
+        description=(
+            "how the world flies a UAV [-], (unicycle, jsbsim); unicycle: the paper's eq. (1), "
+            "the bank angle turns the heading at once; jsbsim: a JSBSim fixed-wing aircraft "
+            "(uav.aircraft) whose autopilot holds the bank angle, altitude and airspeed, "
+            "integrated at uav.jsbsim_rate_hz; beyond the paper (its Sec. 8 names the "
+            "simplified kinematics as its first limit); the planner keeps eq. (1) either way"
+        ),
+    )
+    aircraft: str = Field(
+        "trackwing",
+        min_length=1,
+        max_length=200,
+        description=(
+            "the JSBSim model flown with uav.dynamics = jsbsim; beyond the paper: trackwing "
+            "(uavtrack's 2.5 kg UAV, trimmed at 15 m/s), a model shipped with JSBSim, or the "
+            "folder of another model; its autopilot must answer uavtrack's (README, Real flight)"
+        ),
+    )
+    jsbsim_rate_hz: Float = Field(
+        120.0,
+        ge=50,
+        le=1000,
+        description=(
+            "rate JSBSim integrates the aircraft and runs its autopilot [Hz], [50, 1000]; "
+            "beyond the paper; JSBSim's default 120 Hz; each cycle of dt is split into "
+            "round(dt x rate) steps"
+        ),
+    )
+
+
+class WindModel(_Part):
+    """Steady wind and JSBSim's turbulence, felt by the aircraft of uav.dynamics = jsbsim."""
+
+    speed: Float = Field(
+        0.0,
+        ge=0,
+        le=50,
+        description=(
+            "steady wind speed [m/s], [0, 50]; beyond the paper; the autopilot holds the "
+            "airspeed, so a UAV's ground speed grows downwind and shrinks upwind"
+        ),
+    )
+    direction_deg: Float = Field(
+        0.0,
+        ge=0,
+        lt=360,
+        description=(
+            "direction the wind blows from [deg], [0, 360), clockwise from the scenario's +y "
+            "axis (north), as a weather report gives it: 270 blows towards +x; beyond the paper"
+        ),
+    )
+    turbulence: Literal["none", "light", "moderate", "severe"] = Field(
+        "none",
+        description=(
+            "beyond the paper: JSBSim's Dryden turbulence (MIL-F-8785C, Tustin form) at the "
+            "intensities of "
+            "the milspec: light, moderate, severe (wind at 20 ft of 15, 30, 45 kt, probability "
+            "of exceedance 1e-2, 1e-3, 1e-5), or none; seeded from each trial's flight stream"
+        ),
+    )
 
 
 class TargetModel(_Part):
@@ -455,6 +517,9 @@ class Scenario(_Part):
         ),
     )
     uav: UAVModel = Field(default_factory=UAVModel, description="UAV kinematics (eq. 1)")
+    wind: WindModel = Field(
+        default_factory=WindModel, description="wind and turbulence (uav.dynamics = jsbsim)"
+    )
     sensor: SensorModel = Field(default_factory=SensorModel, description="sensor (eq. 2-4)")
     target: TargetModel = Field(default_factory=TargetModel, description="targets (eq. 13-15)")
     estimation: EstimationModel = Field(
@@ -479,6 +544,20 @@ class Scenario(_Part):
             super().__init__(**data)
         except ValidationError as exc:
             raise ScenarioError(describe_errors(exc)) from None
+
+    @model_validator(mode="after")
+    def _flight(self) -> Scenario:
+        calm = self.wind.speed == 0 and self.wind.turbulence == "none"
+        if self.uav.dynamics == "unicycle" and not calm:
+            raise ValueError(
+                "wind needs uav.dynamics = jsbsim (the paper's unicycle flies in still air); "
+                "set uav.dynamics=jsbsim or leave wind.speed 0 and wind.turbulence none"
+            )
+        if self.uav.dynamics == "jsbsim":
+            from .flight.jsbsim import check_aircraft
+
+            check_aircraft(self.uav.aircraft)
+        return self
 
     @model_validator(mode="after")
     def _altitude_count(self) -> Scenario:

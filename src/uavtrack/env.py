@@ -197,7 +197,7 @@ class UAVTrackingEnv(ParallelEnv):
         k = self._state.k
         if k == 0:  # after reset: the first cycle as the method would close it
             recorder = Recorder(1, timed=True)
-            recorder.record(0, finish(self._state, self._pending, self._ctx)[1])
+            recorder.record(0, finish(self._state, self._pending, self._ctx, fly=False)[1])
             trace = recorder.traces(self._trajectory[:, :1])[0]
             return frame(trace, self.scenario, 0, f"{self.method.name} (env)")
         return frame(self.result().trace, self.scenario, k - 1, f"{self.method.name} (env)")

@@ -31,6 +31,7 @@ EXTRAS = {
     "bench": "filterpy pyinstrument",
     "dask": '"dask[distributed]"',
     "env": "pettingzoo gymnasium",
+    "flight": "jsbsim pymavlink",
     "viz": "rerun-sdk",
 }
 """The packages of each optional extra (as pyproject.toml lists them)."""

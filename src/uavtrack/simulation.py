@@ -22,9 +22,10 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, network, planning, sensing, timing, world
+from . import estimation, flight, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import Faults, trial_key
+from .flight.unicycle import Unicycle
 from .methods import Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
@@ -160,7 +161,9 @@ class State:
     uavs: (B, Nu, 5) true UAV states; mean (B, Nu, Nt, 4) and cov (B, Nu, Nt, 4, 4):
     each UAV's beliefs predicted to k (the prior at k = 0); alive (B, Nu); target (B,
     Nu) each UAV's last target (-1: none yet); radio: messages in flight and link
-    states; held: the bids each UAV holds of the others (only when messages get lost).
+    states; held: the bids each UAV holds of the others (only when messages get lost);
+    flight: the autopilot that flies the UAVs (`flight`; None: the paper's unicycle). An
+    aircraft has more state than `uavs` and flying it moves it on: a State is stepped once.
     """
 
     k: int
@@ -171,6 +174,7 @@ class State:
     target: np.ndarray
     radio: RadioState = RadioState()
     held: Held | None = None
+    flight: flight.Autopilot | None = None
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -186,7 +190,9 @@ class Cycle:
     """
 
     uavs: np.ndarray = _record(
-        "(Nu, 5)", "true UAV states x, y, h, V, heading [m, m, m, m/s, rad] when deciding"
+        "(Nu, 5)",
+        "true UAV states x, y, h, V, heading [m, m, m, m/s, rad] when deciding (with "
+        "uav.dynamics = jsbsim: V the ground speed, heading the course over ground)",
     )
     observed: np.ndarray = _record(
         "(Nu, Nt)", "target inside the UAV's observation disk (a failed UAV sees nothing)", bool
@@ -306,11 +312,18 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
 
 
 def finish(
-    state: State, pending: Pending, ctx: Context, actions: np.ndarray | None = None
+    state: State,
+    pending: Pending,
+    ctx: Context,
+    actions: np.ndarray | None = None,
+    fly: bool = True,
 ) -> tuple[State, Cycle]:
     """The rest of the cycle: fly the method's actions, or `actions` (B, Nu) indices into
     the action set instead (a failed UAV does not move), record the cycle and predict
-    the estimates to k + 1. Returns the state at k + 1 and the cycle's record."""
+    the estimates to k + 1. Returns the state at k + 1 and the cycle's record.
+
+    fly=False records the cycle without flying (the UAVs stay where they are): a look at
+    what the cycle would decide that leaves the aircraft of `state.flight` untouched."""
     scenario, method, const = ctx.scenario, ctx.method, ctx.const
     uavs, alive, fused, assigned, bids = (
         pending.uavs,
@@ -321,9 +334,11 @@ def finish(
     )
     target = assigned.target
     actions = pending.own if actions is None else np.where(alive, actions, STRAIGHT)
-    new_uavs = world.fly(uavs, const.actions[actions], scenario.dt, G)
-    if not alive.all():
-        new_uavs = np.where(alive[..., None], new_uavs, uavs)  # a failed UAV is down
+    pilot = state.flight if state.flight is not None else Unicycle(scenario.dt)
+    if fly:
+        new_uavs = pilot.fly(uavs, const.actions[actions], alive)  # a failed UAV is down
+    else:
+        new_uavs = uavs
     B, Nu = alive.shape
     share = pending.plan_seconds / (B if method.central else B * Nu)  # (2,): CPU, wall
     ms = 1e3 * (share + timing.both(assigned.seconds, alive.shape))
@@ -359,6 +374,7 @@ def finish(
         np.where(target >= 0, target, state.target),
         pending.radio.close(),
         assigned.held,
+        state.flight,
     )
     return new, cycle
 
@@ -454,6 +470,7 @@ def initial_state(
     held = None
     if scenario.faults.loss > 0:
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
+    pilot, uavs = flight.start(scenario, seeds, uavs)
     state = State(
         0,
         uavs,
@@ -463,6 +480,7 @@ def initial_state(
         np.full((B, Nu), -1, dtype=np.int64),
         RadioState(),
         held,
+        pilot,
     )
     return state, trajectory, list(sensor_rngs)
 

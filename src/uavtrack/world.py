@@ -121,6 +121,15 @@ def children(seed: int | np.random.SeedSequence) -> tuple[np.random.SeedSequence
     )
 
 
+def flight_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
+    """The flight stream of one trial (turbulence, `flight.jsbsim`): a fourth child of its
+    seed, so the three of `children` are the same with or without it."""
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, 3), pool_size=seq.pool_size
+    )
+
+
 def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
     """(truth, sensor) generators of one trial (see `children`)."""
     truth, sensor, _ = children(seed)

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .. import simulation, world
-from ..config import G, Scenario
+from ..config import Scenario
 from ..methods import get
 from ..metrics import Tally
 from .messages import VERSION, Array, Hello, Sense, Spec, Tick
@@ -195,8 +195,7 @@ class WorldProgram:
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
-            new = world.fly(uavs, ctx.const.actions[actions], s.dt, G)
-            uavs = np.where(alive[..., None], new, uavs)
+            uavs = state.flight.fly(uavs, ctx.const.actions[actions], alive)
             took = time.monotonic() - begin
             self.traffic.cycle_seconds.append(took)
             if realtime:
