@@ -546,20 +546,6 @@ class Scenario(_Part):
             raise ScenarioError(describe_errors(exc)) from None
 
     @model_validator(mode="after")
-    def _flight(self) -> Scenario:
-        calm = self.wind.speed == 0 and self.wind.turbulence == "none"
-        if self.uav.dynamics == "unicycle" and not calm:
-            raise ValueError(
-                "wind needs uav.dynamics = jsbsim (the paper's unicycle flies in still air); "
-                "set uav.dynamics=jsbsim or leave wind.speed 0 and wind.turbulence none"
-            )
-        if self.uav.dynamics == "jsbsim":
-            from .flight.jsbsim import check_aircraft
-
-            check_aircraft(self.uav.aircraft)
-        return self
-
-    @model_validator(mode="after")
     def _altitude_count(self) -> Scenario:
         if self.uav.altitudes is not None and len(self.uav.altitudes) != self.n_uavs:
             raise ValueError(
@@ -588,6 +574,20 @@ class Scenario(_Part):
                 f"to this team with --team {self.n_uavs}x{self.n_targets} (Scenario.scaled), "
                 "which keeps the altitude band"
             )
+        return self
+
+    @model_validator(mode="after")
+    def _flight(self) -> Scenario:
+        calm = self.wind.speed == 0 and self.wind.turbulence == "none"
+        if self.uav.dynamics == "unicycle" and not calm:
+            raise ValueError(
+                "wind needs uav.dynamics = jsbsim (the paper's unicycle flies in still air); "
+                "set uav.dynamics=jsbsim or leave wind.speed 0 and wind.turbulence none"
+            )
+        if self.uav.dynamics == "jsbsim":
+            from .flight.jsbsim import check
+
+            check(self)
         return self
 
     def acceleration_std(self) -> tuple[float, float]:

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from ..config import Scenario
-from ..errors import RunError, install_hint
+from ..errors import RunError, ScenarioError, install_hint
 from ..world import HEADING, H, V, X, Y, flight_stream
 
 FT = 0.3048
@@ -128,6 +128,18 @@ def check_aircraft(aircraft: str) -> None:
         )
 
 
+def check(scenario: Scenario) -> None:
+    """Refuse (ValueError, one line) a scenario whose aircraft cannot be flown: a model
+    that does not load, has no uavtrack autopilot, or cannot fly level at the scenario's
+    airspeed at its lowest and highest altitude."""
+    check_aircraft(scenario.uav.aircraft)
+    folder = model_path(scenario.uav.aircraft)
+    dt = scenario.dt / max(1, round(scenario.dt * scenario.uav.jsbsim_rate_hz))
+    heights = scenario.altitudes()
+    for altitude in {min(heights), max(heights)}:
+        trim(folder, float(altitude), scenario.uav.speed, dt)
+
+
 @cache
 def trim(folder: Path, altitude: float, airspeed: float, dt: float) -> tuple[float, ...]:
     """(alpha [rad], elevator command [-1, 1], throttle [0, 1], pitch [rad]) of level
@@ -155,37 +167,69 @@ def trim(folder: Path, altitude: float, airspeed: float, dt: float) -> tuple[flo
             d = np.zeros(3)
             d[j] = 1e-6
             J[:, j] = (accelerations(x + d) - r) / 1e-6
-        x = x - np.linalg.solve(J, r)
-    else:
+        try:
+            x = x - np.linalg.solve(J, r)
+        except np.linalg.LinAlgError:  # beyond the stall the lift no longer answers alpha
+            x = np.full(3, np.nan)
+            break
+    if not np.isfinite(x).all() or np.abs(r).max() >= 1e-8:
         raise ValueError(
             f"uav.aircraft {folder.name!r} cannot fly level at {airspeed:g} m/s and "
             f"{altitude:g} m (its trim does not converge); change uav.speed or uav.altitude"
         )
-    if not (-1 <= x[1] <= 1 and 0 <= x[2] <= 1):
+    if not (-1 <= x[1] <= 1 and 0 <= x[2] <= 1 and -0.1 < x[0] < 0.3):
         raise ValueError(
             f"uav.aircraft {folder.name!r} cannot fly level at {airspeed:g} m/s and "
-            f"{altitude:g} m (it would need elevator {x[1]:.2f} and throttle {x[2]:.2f}); "
+            f"{altitude:g} m (it would need angle of attack {math.degrees(x[0]):.0f} deg, "
+            f"elevator {x[1]:.2f} and throttle {x[2]:.2f}); "
             "change uav.speed or uav.altitude"
         )
     theta = fdm["attitude/theta-rad"]
     return float(x[0]), float(x[1]), float(x[2]), float(theta)
 
 
-def _initial(fdm, x: float, y: float, altitude: float, airspeed: float, course: float, trimmed):
-    """Place the aircraft at (x, y, altitude) flying level towards `course` (eq. 1's
-    heading) at `airspeed`, with the trimmed alpha, elevator and throttle."""
+def _initial(
+    fdm,
+    x: float,
+    y: float,
+    altitude: float,
+    airspeed: float,
+    course: float,
+    trimmed,
+    wind: tuple[float, float] = (0.0, 0.0),
+) -> float:
+    """Place the aircraft at (x, y, altitude) flying level over the ground towards
+    `course` (eq. 1's heading) at true `airspeed`, in the steady `wind` (its speed [m/s]
+    and the direction it blows towards [rad, eq. 1's convention]), crabbed into the wind,
+    with the trimmed alpha, elevator and throttle. Returns the ground speed [m/s]."""
     alpha, elevator, throttle = trimmed[:3]
+    w = wind[0] * np.array([math.cos(wind[1]), math.sin(wind[1])])  # east, north
+    along = np.array([math.cos(course), math.sin(course)])
+    across = w[0] * along[1] - w[1] * along[0]
+    if abs(across) >= airspeed:
+        raise ScenarioError(
+            f"wind.speed {wind[0]:g} m/s: a UAV at {airspeed:g} m/s cannot hold its course "
+            "across it; lower wind.speed below uav.speed"
+        )
+    ground = float(w @ along + math.sqrt(airspeed**2 - across**2))
+    air = ground * along - w  # the velocity through the air mass: where the nose points
     fdm["uavtrack/engaged"] = 0
     fdm["ic/lat-geod-rad"] = y / NORTH
     fdm["ic/long-gc-rad"] = x / EAST
     fdm["ic/h-sl-ft"] = altitude / FT
-    fdm["ic/psi-true-rad"] = (math.pi / 2 - course) % (2 * math.pi)
-    fdm["ic/vt-fps"] = airspeed / FT
-    fdm["ic/alpha-rad"] = alpha
-    fdm["ic/gamma-rad"] = 0.0
+    fdm["ic/psi-true-rad"] = (math.pi / 2 - math.atan2(air[1], air[0])) % (2 * math.pi)
+    fdm["ic/theta-rad"] = alpha  # level flight: the pitch is the angle of attack
+    fdm["ic/phi-rad"] = 0.0
+    fdm["ic/vn-fps"] = ground * along[1] / FT
+    fdm["ic/ve-fps"] = ground * along[0] / FT
+    fdm["ic/vd-fps"] = 0.0
+    # the wind last: JSBSim keeps the ground velocity and derives the airspeed from it
+    fdm["ic/vw-mag-fps"] = wind[0] / FT
+    fdm["ic/vw-dir-deg"] = math.degrees(math.pi / 2 - wind[1])
     fdm["fcs/pitch-trim-cmd-norm"] = elevator
     fdm["uavtrack/throttle-trim"] = throttle
     fdm.run_ic()
+    return ground
 
 
 class Fleet:
@@ -204,8 +248,9 @@ class Fleet:
         dt = scenario.dt / self.substeps
         folder = model_path(scenario.uav.aircraft)
         wind = scenario.wind
-        towards = math.radians(wind.direction_deg) + math.pi  # the air moves away from it
-        north, east = wind.speed * math.cos(towards), wind.speed * math.sin(towards)
+        # the wind blows from direction_deg (clockwise from north): towards the opposite,
+        # counterclockwise from +x (east) as eq. (1) measures headings
+        towards = (math.pi / 2 - math.radians(wind.direction_deg) - math.pi) % (2 * math.pi)
         severity, at_20ft = TURBULENCE[wind.turbulence]
         airspeed = scenario.uav.speed
         self.aircraft = []
@@ -215,15 +260,16 @@ class Fleet:
                 x, y, h, _, course = uavs[b, i]
                 fdm = _load(folder, dt)
                 fdm["simulation/randomseed"] = int(streams[i])
-                fdm["atmosphere/randomseed"] = int(streams[i])
-                fdm["atmosphere/wind-north-fps"] = north / FT
-                fdm["atmosphere/wind-east-fps"] = east / FT
-                if severity:
+                try:
+                    trimmed = trim(folder, float(h), airspeed, dt)
+                except ValueError as exc:  # an altitude between those `check` tried
+                    raise ScenarioError(str(exc)) from None
+                _initial(fdm, x, y, h, airspeed, course, trimmed, (wind.speed, towards))
+                if severity:  # after the initial conditions, which start at zero speed
+                    fdm["atmosphere/randomseed"] = int(streams[i])
                     fdm["atmosphere/turb-type"] = TUSTIN
                     fdm["atmosphere/turbulence/milspec/windspeed_at_20ft_AGL-fps"] = at_20ft
                     fdm["atmosphere/turbulence/milspec/severity"] = severity
-                trimmed = trim(folder, float(h), airspeed, dt)
-                _initial(fdm, x, y, h, airspeed, course, trimmed)
                 fdm["uavtrack/pitch-trim-rad"] = trimmed[3]
                 fdm["uavtrack/altitude-cmd-ft"] = h / FT
                 fdm["uavtrack/airspeed-cmd-fps"] = airspeed / FT
