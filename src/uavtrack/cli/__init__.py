@@ -1,5 +1,5 @@
-"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | swarm | agent |
-animate | bench | params``.
+"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | flight | swarm |
+agent | animate | bench | params``.
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
 ``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130
@@ -677,4 +677,4 @@ def interrupted(kept: str) -> int:
 
 
 # the other commands register themselves on `app`
-from . import benchmark, experiments, robustness, swarm  # noqa: E402, F401
+from . import benchmark, experiments, flight, robustness, swarm  # noqa: E402, F401

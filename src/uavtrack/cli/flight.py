@@ -1,0 +1,115 @@
+"""`uavtrack flight`: the paper's comparison with every UAV a JSBSim aircraft."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import UsageError
+from ..files import write_json, write_text
+from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
+from .experiments import (
+    AddressOpt,
+    EngineName,
+    EngineOpt,
+    ProgressOpt,
+    SeedOpt,
+    StepsOpt,
+    WorkersOpt,
+    explicit_steps,
+    manifest_of,
+    run_jobs,
+    sized,
+)
+
+
+@app.command()
+def flight(
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            metavar="DIR",
+            help="results folder [results/flight; results/flight-quick with --quick]",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="trials per condition [50]")
+    ] = None,
+    steps: StepsOpt = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 40 steps")
+    ] = False,
+    workers: WorkersOpt = None,
+    engine: EngineOpt = EngineName.local,
+    address: AddressOpt = None,
+    seed: SeedOpt = 0,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    team: TeamOpt = None,
+    progress: ProgressOpt = None,
+) -> None:
+    """The paper's three methods with every UAV a JSBSim aircraft (trackwing) in calm
+    air, wind and turbulence, paired against the unicycle; the autopilot's bank
+    tracking; into a folder."""
+    from ..experiments import difference
+    from ..flight import experiment
+
+    scenario = load_scenario(config, set_, team)
+    set_here = {
+        k: v
+        for k, v in difference(type(scenario)(), scenario).items()
+        if k.startswith("wind.") or k == "uav.dynamics"
+    }
+    if set_here:
+        shown = ", ".join(f"{k}={v}" for k, v in set_here.items())
+        raise UsageError(
+            f"flight sets uav.dynamics and the wind itself; leave them at their defaults "
+            f"in the base scenario (got {shown})"
+        )
+    steps = explicit_steps(config, set_, steps)
+    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
+    out = out or Path("results") / ("flight-quick" if quick else "flight")
+    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
+    jobs = experiment.plan(scenario, profile, seed)
+    manifest = manifest_of("flight", seed, profile, scenario)
+    with run_jobs(jobs, out, manifest, engine, workers, address, progress, ["flight.png"]) as (
+        results,
+        info,
+    ):
+        info["seed"] = seed
+        summary = experiment.summarize(jobs, results, profile, scenario)
+        summary["autopilot"] = experiment.characterise(scenario, 10.0 if quick else 60.0, seed)
+        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
+        write_json(out / "summary.json", summary)
+        experiment.figure(summary, out / "flight.png")
+        write_text(out / "report.md", experiment.report(summary, scenario, info))
+    _print(summary, out, info)
+
+
+def _print(summary: dict, out: Path, info: dict) -> None:
+    from rich.table import Table
+
+    table = Table(title="observation rate under real flight (mean over trials)")
+    for col in ("condition", "distributed", "centralized", "greedy", "distributed - unicycle"):
+        table.add_column(col, justify="left" if col == "condition" else "right")
+    for name, c in summary["conditions"].items():
+        against = c.get("against_unicycle", {}).get("distributed")
+        table.add_row(
+            name,
+            *(f"{c['methods'][m]['mean']:.3f}" for m in ("distributed", "centralized", "greedy")),
+            f"{against['mean']:+.3f}" if against else "",
+        )
+    console().print(table)
+    auto = summary["autopilot"]
+    typer.echo(
+        f"autopilot: bank to 63% in {auto['step']['t63_s']:.2f} s, reversal in "
+        f"{auto['reversal']['t63_s']:.2f} s; bank error over a cycle "
+        f"{auto['tracking']['mean_error_deg']:.1f} deg on average"
+    )
+    typer.echo(
+        f"wrote {out}/summary.json, report.md, flight.png ({info['jobs_run']} jobs run, "
+        f"{info['jobs_skipped']} reused, {info['seconds']:.1f} s)"
+    )
