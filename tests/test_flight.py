@@ -77,7 +77,7 @@ def test_a_steady_coordinated_turn_turns_at_g_tan_phi_over_v(bank_deg):
 
 def test_the_bank_is_reached_within_half_a_cycle_or_so():
     # the roll response from level to 45 deg: 63% of the step within 0.35 s, 95% within
-    # 0.8 s (the README's roll time constant comes from bench.flight, which measures it)
+    # 0.8 s (the README's roll times come from `uavtrack flight`, which measures them)
     scenario, aircraft = fleet({"dt": 0.05})
     alive = np.ones((1, 1), dtype=bool)
     uavs, bank = aircraft.states(), []
@@ -220,3 +220,87 @@ def test_without_jsbsim_the_setting_names_the_extra(monkeypatch):
         flight.check_aircraft.cache_clear()
     assert "\n" not in str(info.value)
     Scenario()  # the default needs no JSBSim
+
+
+# ---------------------------------------------------------------- the command line
+
+
+def run_cli(capsys, *args):
+    from uavtrack import cli
+
+    code = cli.main(list(args))
+    out, err = capsys.readouterr()
+    return code, out, err
+
+
+def test_run_flies_jsbsim_with_one_setting(capsys):
+    import json
+
+    args = ("run", "--set", "steps=12", "--set", "uav.dynamics=jsbsim", "--json", "--seed", "1")
+    code, out, err = run_cli(capsys, *args, "--set", "wind.speed=6")
+    assert code == 0, err
+    data = json.loads(out)
+    scenario = Scenario(steps=12).with_overrides({**JSBSIM, "wind.speed": 6.0})
+    assert data["observation_rate"] == uavtrack.simulate(scenario, seed=1).observation_rate
+    assert data["scenario"]["wind"]["speed"] == 6.0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (("run", "--set", "wind.speed=5"), "wind needs uav.dynamics = jsbsim"),
+        (("run", "--set", "uav.dynamics=jsbsim", "--set", "uav.aircraft=c172x"), "autopilot"),
+        (("compare", "--set", "uav.dynamics=jsbsim", "--set", "wind.turbulence=2"), "turbulence"),
+        (("flight", "--quick", "--set", "uav.dynamics=jsbsim"), "flight sets uav.dynamics"),
+    ],
+)
+def test_bad_flight_input_on_the_command_line_is_one_line(capsys, tmp_path, args, message):
+    code, out, err = run_cli(
+        capsys, *args, *(("--out", str(tmp_path / "f")) * (args[0] == "flight"))
+    )
+    assert code == 2 and message in err and err.count("\n") == 1, err
+    assert not (tmp_path / "f").exists()
+
+
+def test_flight_writes_its_report_and_figure(tmp_path, capsys):
+    import json
+
+    from PIL import Image
+
+    out = tmp_path / "f"
+    code, stdout, err = run_cli(capsys, "flight", "--quick", "--out", str(out), "--no-progress")
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["conditions"]) == ["unicycle", "jsbsim, wind 10 m/s"]
+    windy = summary["conditions"]["jsbsim, wind 10 m/s"]
+    unicycle = summary["conditions"]["unicycle"]
+    for method in ("distributed", "centralized", "greedy"):
+        rates = [windy["methods"][method]["mean"], unicycle["methods"][method]["mean"]]
+        against = windy["against_unicycle"][method]["mean"]
+        assert against == pytest.approx(rates[0] - rates[1])  # paired on the same trials
+    auto = summary["autopilot"]
+    assert 0 < auto["step"]["t63_s"] < auto["step"]["t95_s"] < 1.0
+    assert abs(auto["turn"]["left"]["relative_error"]) < 0.05
+    assert auto["turn"]["right"]["rate_rad_s"] < 0 < auto["turn"]["left"]["rate_rad_s"]
+    report = (out / "report.md").read_text()
+    assert "| jsbsim, wind 10 m/s |" in report and "| level to +phi |" in report
+    with Image.open(out / "flight.png") as im:
+        assert im.size[0] > 1000
+
+
+def test_a_users_own_aircraft_folder_flies(tmp_path):
+    import shutil
+
+    # a user's model: trackwing copied under another name, its mass raised by 20%
+    folder = tmp_path / "heavywing"
+    shutil.copytree(flight.AIRCRAFT / "trackwing", folder)
+    text = (folder / "trackwing.xml").read_text()
+    (folder / "trackwing.xml").unlink()
+    text = text.replace('name="trackwing"', 'name="heavywing"')
+    text = text.replace('<emptywt unit="KG"> 2.5 </emptywt>', '<emptywt unit="KG"> 3.0 </emptywt>')
+    (folder / "heavywing.xml").write_text(text)
+    scenario = Scenario(steps=6).with_overrides({**JSBSIM, "uav.aircraft": str(folder)})
+    alpha = flight.trim(folder, 425.0, 15.0, 1 / 120)[0]
+    # 20% more weight needs 20% more lift: CL 0.445 instead of 0.371
+    assert alpha == pytest.approx((1.2 * 0.371 - 0.25) / 5.25, abs=2e-3)
+    assert uavtrack.simulate(scenario, seed=0).trace.uavs.shape == (6, 5, 5)
