@@ -399,3 +399,20 @@ def animate(
             progress=advance,
         )
     typer.echo(f"wrote {out} ({frames} frames, observation rate {result.observation_rate:.3f})")
+
+
+def refuse_set(scenario, fields: tuple[str, ...], command: str, what: str) -> None:
+    """Refuse a base scenario that sets any of `fields` (names or "group." prefixes),
+    which `command` sets itself."""
+    from ..errors import UsageError
+    from ..experiments import difference
+
+    set_here = {
+        k: v for k, v in difference(type(scenario)(), scenario).items() if k.startswith(fields)
+    }
+    if set_here:
+        shown = ", ".join(f"{k}={v}" for k, v in set_here.items())
+        raise UsageError(
+            f"{command} sets {what} itself; leave them at their defaults in the base "
+            f"scenario (got {shown})"
+        )

@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..errors import UsageError
 from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
@@ -20,6 +19,7 @@ from .experiments import (
     WorkersOpt,
     explicit_steps,
     manifest_of,
+    refuse_set,
     run_jobs,
     sized,
 )
@@ -54,21 +54,10 @@ def flight(
     """The paper's three methods with every UAV a JSBSim aircraft (trackwing) in calm
     air, wind and turbulence, paired against the unicycle; the autopilot's bank
     tracking; into a folder."""
-    from ..experiments import difference
     from ..flight import experiment
 
     scenario = load_scenario(config, set_, team)
-    set_here = {
-        k: v
-        for k, v in difference(type(scenario)(), scenario).items()
-        if k.startswith("wind.") or k == "uav.dynamics"
-    }
-    if set_here:
-        shown = ", ".join(f"{k}={v}" for k, v in set_here.items())
-        raise UsageError(
-            f"flight sets uav.dynamics and the wind itself; leave them at their defaults "
-            f"in the base scenario (got {shown})"
-        )
+    refuse_set(scenario, ("wind.", "uav.dynamics"), "flight", "uav.dynamics and the wind")
     steps = explicit_steps(config, set_, steps)
     profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
     out = out or Path("results") / ("flight-quick" if quick else "flight")

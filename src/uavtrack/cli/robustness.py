@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..errors import UsageError
 from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
@@ -20,6 +19,7 @@ from .experiments import (
     WorkersOpt,
     explicit_steps,
     manifest_of,
+    refuse_set,
     run_jobs,
     sized,
 )
@@ -55,20 +55,9 @@ def robustness(
     position error, with and without the robustness options, into a folder."""
     from .. import plots, report
     from .. import robustness as experiment
-    from ..experiments import difference
 
     scenario = load_scenario(config, set_, team)
-    set_here = {
-        k: v
-        for k, v in difference(type(scenario)(), scenario).items()
-        if k.startswith(("faults.", "robust."))
-    }
-    if set_here:
-        shown = ", ".join(f"{k}={v}" for k, v in set_here.items())
-        raise UsageError(
-            f"robustness sets the faults and the robust options itself; leave them at "
-            f"their defaults in the base scenario (got {shown})"
-        )
+    refuse_set(scenario, ("faults.", "robust."), "robustness", "the faults and the robust options")
     steps = explicit_steps(config, set_, steps)
     profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
     out = out or Path("results") / ("robustness-quick" if quick else "robustness")
