@@ -304,3 +304,16 @@ def test_a_users_own_aircraft_folder_flies(tmp_path):
     # 20% more weight needs 20% more lift: CL 0.445 instead of 0.371
     assert alpha == pytest.approx((1.2 * 0.371 - 0.25) / 5.25, abs=2e-3)
     assert uavtrack.simulate(scenario, seed=0).trace.uavs.shape == (6, 5, 5)
+
+
+def test_the_wind_aware_planner_changes_nothing_without_wind():
+    scenario = Scenario(steps=15)
+    aware = scenario.with_overrides({"planner.wind": True})
+    assert_same_trace(
+        uavtrack.simulate(aware, seed=2).trace, uavtrack.simulate(scenario, seed=2).trace
+    )
+    windy = scenario.with_overrides({**JSBSIM, "wind.speed": 8.0, "wind.direction_deg": 200.0})
+    plain = uavtrack.simulate(windy, seed=2)
+    knows = uavtrack.simulate(windy.with_overrides({"planner.wind": True}), seed=2)
+    assert np.array_equal(plain.trace.uavs[0], knows.trace.uavs[0])  # the same start
+    assert not np.array_equal(plain.trace.bids, knows.trace.bids)  # planned otherwise

@@ -147,3 +147,41 @@ def test_pruned_planner_skips_targets_out_of_reach():
     assert (scored < 60).all() and (scored >= 3).all()
     full = planning.plan(uavs, mean, *args)
     assert np.array_equal(np.nanargmax(part.value, axis=-1), full.value.argmax(axis=-1))
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    horizon=st.integers(2, 4),
+    speed=st.floats(0.5, 12.0),
+    direction=st.floats(0, 2 * np.pi),
+)
+def test_planning_in_a_moving_air_mass_equals_flying_each_sequence(seed, horizon, speed, direction):
+    # the wind-aware planner (planner.wind): eq. (1) through the air, plus the drift
+    rng = np.random.default_rng(seed)
+    uavs, mean = random_case(rng, batch=(2,), nu=3, nt=6)
+    drift = speed * np.array([np.cos(direction), np.sin(direction)])
+    air = planning.air_relative(uavs, drift)
+    args = (SensorModel(), np.radians(45), horizon, 0.5, 1.0)
+    fast = planning.plan(air, mean, *args, drift=drift)
+    slow = planning.plan_exhaustive(air, mean, *args, drift=drift)
+    assert np.array_equal(fast.action, slow.action)
+    assert np.allclose(fast.value, slow.value, rtol=1e-12, atol=0)
+    # the pruned planner's bound covers the drift: what it must score, it scores exactly
+    top = rng.integers(1, 4, size=(2, 3))
+    part = planning.plan(air, mean, *args, top=top, drift=drift)
+    scored = ~np.isnan(part.value)
+    assert np.array_equal(part.value[scored], fast.value[scored])
+    kth = np.take_along_axis(-np.sort(-fast.value, axis=-1), top[..., None] - 1, axis=-1)
+    assert scored[fast.value >= kth].all()
+
+
+def test_air_relative_states_add_the_drift_back_to_the_ground_velocity(rng):
+    uavs, _ = random_case(rng, nu=5)
+    drift = np.array([4.0, -3.0])
+    air = planning.air_relative(uavs, drift)
+    ground = uavs[:, 3, None] * np.stack([np.cos(uavs[:, 4]), np.sin(uavs[:, 4])], axis=-1)
+    through_air = air[:, 3, None] * np.stack([np.cos(air[:, 4]), np.sin(air[:, 4])], axis=-1)
+    assert np.allclose(through_air + drift, ground)
+    assert np.array_equal(air[:, :3], uavs[:, :3])
+    assert np.allclose(planning.air_relative(uavs, np.zeros(2)), uavs)

@@ -209,6 +209,12 @@ class WindModel(_Part):
         ),
     )
 
+    def velocity(self) -> tuple[float, float]:
+        """The air mass's velocity (east, north) = (+x, +y) [m/s]: it moves away from
+        the direction the wind blows from."""
+        towards = math.radians(self.direction_deg) + math.pi  # clockwise from north
+        return self.speed * math.sin(towards), self.speed * math.cos(towards)
+
 
 class TargetModel(_Part):
     """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
@@ -331,6 +337,15 @@ class PlannerModel(_Part):
             "skipping targets whose upper bound of det G cannot reach them; false: score "
             "every bid, so that the "
             "trace holds them all (as it always does when messages can be lost or late)"
+        ),
+    )
+    wind: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: plan with the steady wind (wind.speed and "
+            "wind.direction_deg, as an autopilot's wind estimate gives it): eq. (1) flown in "
+            "the air mass at the UAV's airspeed, plus the wind's drift; false: eq. (1) over "
+            "the ground at the ground speed, the paper's model"
         ),
     )
 

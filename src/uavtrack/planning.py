@@ -125,6 +125,17 @@ def _rollout(uavs, actions, horizon, dt, g):
     return out[0], out[1]
 
 
+def air_relative(uavs: np.ndarray, drift: np.ndarray) -> np.ndarray:
+    """UAV states (..., 5) over the ground (V the ground speed, heading the course) as
+    states in an air mass moving at `drift` (2,) [m/s]: V the airspeed, heading the
+    direction through the air."""
+    out = uavs.copy()
+    east = uavs[..., V] * np.cos(uavs[..., HEADING]) - drift[0]
+    north = uavs[..., V] * np.sin(uavs[..., HEADING]) - drift[1]
+    out[..., V], out[..., HEADING] = np.hypot(east, north), np.arctan2(north, east)
+    return out
+
+
 def predict_positions(mean: np.ndarray, horizon: int, dt: float) -> np.ndarray:
     """Predicted target positions H A^t s = p + t dT v for t = 1..h (eq. 14).
 
@@ -161,6 +172,7 @@ def plan(
     discount: float = 1.0,
     g: float = G,
     top: np.ndarray | None = None,
+    drift: np.ndarray | None = None,
 ) -> Plan:
     """Algorithm 1 lines 1-4 for every UAV and target, on the shared-prefix tree.
 
@@ -171,14 +183,18 @@ def plan(
     top: (..., Nu) int, how many of its best bids each UAV needs (None: all). Then only
     the targets that can be among them are scored (`plan_top`); the others get value
     NaN and action and sequence -1. Every value returned equals the full search's.
+
+    drift: (2,) a steady wind [m/s] (east, north) the UAVs drift with (None: none, the
+    paper's eq. 1). Then `uavs` hold airspeed and air heading (`air_relative`), each
+    node is flown in the air mass and moved by the drift over its time from now.
     """
     if top is not None:
-        return plan_top(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, top)
+        return plan_top(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, top, drift)
     lead, nt = uavs.shape[:-1], mean.shape[-2]
     per_row = nt * floats_per_pair(3, horizon) * 8
     rows = int(np.prod(lead))
     if rows * per_row <= CHUNK_BYTES:
-        return _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g)
+        return _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, drift)
     flat_uavs, flat_mean = uavs.reshape(rows, 5), mean.reshape(rows, nt, 4)
     block = max(1, CHUNK_BYTES // per_row)
     parts = [
@@ -191,6 +207,7 @@ def plan(
             dt,
             discount,
             g,
+            drift,
         )
         for r in range(0, rows, block)
     ]
@@ -216,10 +233,11 @@ def plan_top(
     discount: float,
     g: float,
     top: np.ndarray,
+    drift: np.ndarray | None = None,
 ) -> Plan:
     """`plan` scoring only the targets that can be among each UAV's `top` best bids.
 
-    Within the horizon a UAV moves at most h V dT and target j's predicted position at
+    Within the horizon a UAV moves at most h (V + |drift|) dT and target j's predicted position at
     most h dT |v_j| (eq. 14), so every slant range the search evaluates is at least
     d_lb = sqrt(max(0, r - h dT (V + |v_j|))^2 + h_i^2), r the ground distance now, and
     since `sensing.fisher_det_bound` is non-increasing, V_ij <= bound(d_lb) sum_t
@@ -242,13 +260,14 @@ def plan_top(
     action = np.full((rows, nt), -1, dtype=np.int64)
     sequence = np.full((rows, nt), -1, dtype=np.int64)
     altitude = flat_uavs[:, 2, None]
-    reach = horizon * dt * (flat_uavs[:, V, None] + np.hypot(flat_mean[..., 2], flat_mean[..., 3]))
+    speed = flat_uavs[:, V, None] + (0.0 if drift is None else float(np.hypot(*drift)))
+    reach = horizon * dt * (speed + np.hypot(flat_mean[..., 2], flat_mean[..., 3]))
     ground = np.hypot(
         flat_mean[..., 0] - flat_uavs[:, X, None], flat_mean[..., 1] - flat_uavs[:, Y, None]
     )
     gap = ground - reach - 1e-6 * (1.0 + ground)  # the slack covers round-off
     weight = sum(discount**t for t in range(horizon))
-    args = (sensor, bank_angle, horizon, dt, discount, g)
+    args = (sensor, bank_angle, horizon, dt, discount, g, None, drift)
     width = need + PRUNE_SLACK  # per UAV: what is scored depends on its own data only
     pending = np.arange(rows)
     while pending.size:
@@ -285,11 +304,13 @@ def plan_top(
     )
 
 
-def _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g) -> Plan:
+def _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, drift=None) -> Plan:
     actions = action_set(bank_angle)
     t = tree(len(actions), horizon)
     east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)
     lead = dt * (t.depth + 1.0)  # time from now to each node
+    if drift is not None:  # flown in the air mass, which moves
+        east, north = east + lead * drift[0], north + lead * drift[1]
     dx = lead * mean[..., 2, None]  # (..., Nu, Nt, K): target minus node, along x
     dx += mean[..., 0, None]
     dx -= east[..., None, :]
@@ -325,11 +346,13 @@ def plan_exhaustive(
     dt: float,
     discount: float = 1.0,
     g: float = G,
+    drift: np.ndarray | None = None,
 ) -> Plan:
     """Reference: roll out every one of the |A|^h sequences step by step with eq. (1).
 
     Same arguments and result as `plan`; cost |A|^h * h per UAV and target.
     """
+    moved = np.zeros(2) if drift is None else np.asarray(drift, dtype=float)
     actions = action_set(bank_angle)
     sequences = np.array(list(itertools.product(range(len(actions)), repeat=horizon)))
     targets = predict_positions(mean, horizon, dt)  # (..., Nu, Nt, h, 2)
@@ -338,7 +361,8 @@ def plan_exhaustive(
     score = 0.0
     for t in range(horizon):
         state = fly(state, actions[sequences[:, t]], dt, g)
-        delta = targets[..., None, :, t, :] - state[..., :, None, :2]  # (..., Nu, S, Nt, 2)
+        ground = state[..., :2] + (t + 1) * dt * moved  # the air mass moved meanwhile
+        delta = targets[..., None, :, t, :] - ground[..., :, None, :]  # (..., Nu, S, Nt, 2)
         d = np.sqrt(np.einsum("...k,...k->...", delta, delta) + h * h)
         score = score + discount**t * fisher_det(d, edge_range(h, sensor), sensor)
     score = np.swapaxes(score, -1, -2)  # (..., Nu, Nt, S)

@@ -113,6 +113,10 @@ class Context:
 def _plan(
     uavs: np.ndarray, mean: np.ndarray, scenario: Scenario, top: np.ndarray | None
 ) -> tuple[np.ndarray, ...]:
+    drift = None
+    if scenario.planner.wind and scenario.wind.speed > 0:  # plan in the moving air mass
+        drift = np.array(scenario.wind.velocity())
+        uavs = planning.air_relative(uavs, drift)
     p = planning.plan(
         uavs,
         mean,
@@ -123,6 +127,7 @@ def _plan(
         scenario.planner.discount,
         G,
         top,
+        drift,
     )
     return p.value, p.action
 
@@ -209,7 +214,9 @@ class Cycle:
     assignment: np.ndarray = _record(
         "(Nu,)", "the target each UAV tracks (-1: the UAV has failed)", np.int64
     )
-    action: np.ndarray = _record("(Nu,)", "the bank angle flown [rad]")
+    action: np.ndarray = _record(
+        "(Nu,)", "the bank angle flown [rad] (with uav.dynamics = jsbsim, the autopilot's setpoint)"
+    )
     rounds: np.ndarray = _record(
         "(Nu,)", "consensus rounds the UAV ran (D_i, plus robust.extra_rounds)", np.int64
     )

@@ -26,10 +26,23 @@ CONDITIONS = {
     "jsbsim, wind 5 m/s": {**JSBSIM, "wind.speed": 5.0, "wind.direction_deg": 270.0},
     "jsbsim, wind 10 m/s": {**JSBSIM, "wind.speed": 10.0, "wind.direction_deg": 270.0},
     "jsbsim, moderate turbulence": {**JSBSIM, "wind.turbulence": "moderate"},
+    "jsbsim, wind 5 m/s, planner.wind": {
+        **JSBSIM,
+        "wind.speed": 5.0,
+        "wind.direction_deg": 270.0,
+        "planner.wind": True,
+    },
+    "jsbsim, wind 10 m/s, planner.wind": {
+        **JSBSIM,
+        "wind.speed": 10.0,
+        "wind.direction_deg": 270.0,
+        "planner.wind": True,
+    },
 }
 """The flight conditions: the paper's unicycle, then JSBSim's trackwing in calm air, in a
 steady west wind of 5 and 10 m/s (a third and two thirds of the airspeed), and in
-moderate turbulence (MIL-F-8785C, no steady wind)."""
+moderate turbulence (MIL-F-8785C, no steady wind); then the two winds again with the
+remedy, a planner that knows the steady wind (`planner.wind`)."""
 
 METHODS = ("distributed", "centralized", "greedy")
 

@@ -199,16 +199,16 @@ def _initial(
     wind: tuple[float, float] = (0.0, 0.0),
 ) -> float:
     """Place the aircraft at (x, y, altitude) flying level over the ground towards
-    `course` (eq. 1's heading) at true `airspeed`, in the steady `wind` (its speed [m/s]
-    and the direction it blows towards [rad, eq. 1's convention]), crabbed into the wind,
-    with the trimmed alpha, elevator and throttle. Returns the ground speed [m/s]."""
+    `course` (eq. 1's heading) at true `airspeed`, in the steady `wind` (the air mass's
+    velocity east, north [m/s]), crabbed into the wind, with the trimmed alpha, elevator
+    and throttle. Returns the ground speed [m/s]."""
     alpha, elevator, throttle = trimmed[:3]
-    w = wind[0] * np.array([math.cos(wind[1]), math.sin(wind[1])])  # east, north
+    w = np.asarray(wind, dtype=float)
     along = np.array([math.cos(course), math.sin(course)])
     across = w[0] * along[1] - w[1] * along[0]
     if abs(across) >= airspeed:
         raise ScenarioError(
-            f"wind.speed {wind[0]:g} m/s: a UAV at {airspeed:g} m/s cannot hold its course "
+            f"wind.speed {math.hypot(*w):g} m/s: a UAV at {airspeed:g} m/s cannot hold its course "
             "across it; lower wind.speed below uav.speed"
         )
     ground = float(w @ along + math.sqrt(airspeed**2 - across**2))
@@ -224,8 +224,8 @@ def _initial(
     fdm["ic/ve-fps"] = ground * along[0] / FT
     fdm["ic/vd-fps"] = 0.0
     # the wind last: JSBSim keeps the ground velocity and derives the airspeed from it
-    fdm["ic/vw-mag-fps"] = wind[0] / FT
-    fdm["ic/vw-dir-deg"] = math.degrees(math.pi / 2 - wind[1])
+    fdm["ic/vw-mag-fps"] = math.hypot(*w) / FT
+    fdm["ic/vw-dir-deg"] = math.degrees(math.atan2(w[0], w[1]))  # towards, clockwise from N
     fdm["fcs/pitch-trim-cmd-norm"] = elevator
     fdm["uavtrack/throttle-trim"] = throttle
     fdm.run_ic()
@@ -248,9 +248,7 @@ class Fleet:
         dt = scenario.dt / self.substeps
         folder = model_path(scenario.uav.aircraft)
         wind = scenario.wind
-        # the wind blows from direction_deg (clockwise from north): towards the opposite,
-        # counterclockwise from +x (east) as eq. (1) measures headings
-        towards = (math.pi / 2 - math.radians(wind.direction_deg) - math.pi) % (2 * math.pi)
+        air = wind.velocity()
         severity, at_20ft = TURBULENCE[wind.turbulence]
         airspeed = scenario.uav.speed
         self.aircraft = []
@@ -264,7 +262,7 @@ class Fleet:
                     trimmed = trim(folder, float(h), airspeed, dt)
                 except ValueError as exc:  # an altitude between those `check` tried
                     raise ScenarioError(str(exc)) from None
-                _initial(fdm, x, y, h, airspeed, course, trimmed, (wind.speed, towards))
+                _initial(fdm, x, y, h, airspeed, course, trimmed, air)
                 if severity:  # after the initial conditions, which start at zero speed
                     fdm["atmosphere/randomseed"] = int(streams[i])
                     fdm["atmosphere/turb-type"] = TUSTIN
