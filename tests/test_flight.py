@@ -201,6 +201,7 @@ def test_the_agent_form_flies_jsbsim_as_the_batch_does(method):
         ({**JSBSIM, "uav.aircraft": "c172x"}, "has no uavtrack autopilot"),
         ({**JSBSIM, "uav.jsbsim_rate_hz": 10.0}, "uav.jsbsim_rate_hz: Input should be greater"),
         ({**JSBSIM, "uav.speed": 4.0}, "cannot fly level at 4 m/s"),
+        ({**JSBSIM, "wind.speed": 15.0}, "wind.speed 15 m/s must be below uav.speed 15 m/s"),
     ],
 )
 def test_bad_flight_settings_are_refused_in_one_line(overrides, message):

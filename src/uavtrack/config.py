@@ -599,6 +599,11 @@ class Scenario(_Part):
                 "wind needs uav.dynamics = jsbsim (the paper's unicycle flies in still air); "
                 "set uav.dynamics=jsbsim or leave wind.speed 0 and wind.turbulence none"
             )
+        if self.wind.speed >= self.uav.speed:
+            raise ValueError(
+                f"wind.speed {self.wind.speed:g} m/s must be below uav.speed "
+                f"{self.uav.speed:g} m/s: a UAV could not make way against it"
+            )
         if self.uav.dynamics == "jsbsim":
             from .flight.jsbsim import check
 

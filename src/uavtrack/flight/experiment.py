@@ -8,6 +8,7 @@ noise and starting layout), so every difference against the unicycle is paired.
 from __future__ import annotations
 
 import math
+import textwrap
 from dataclasses import dataclass
 from typing import Any
 
@@ -219,10 +220,13 @@ def figure(summary: dict[str, Any], path) -> None:
         half = [summary["conditions"][c]["methods"][method]["ci95"] for c in names]
         x = np.arange(len(names)) + (k - 1) * width
         left.bar(x, means, width, yerr=np.nan_to_num(half), capsize=3, label=method)
-    left.set_xticks(np.arange(len(names)), [n.replace(", ", "\n") for n in names], fontsize=8)
+    labels = [
+        "\n".join(textwrap.wrap(n.replace(",", ""), 12, break_long_words=False)) for n in names
+    ]
+    left.set_xticks(np.arange(len(names)), labels, fontsize=7.5)
     left.set_ylabel("observation rate")
-    left.set_ylim(0, 1)
-    left.legend(loc="lower left", fontsize=8)
+    left.set_ylim(0, 1.12)
+    left.legend(loc="upper center", ncol=3, fontsize=8)
     left.set_title("the paper's comparison under real flight (mean, 95% CI)")
     trace = summary["autopilot"]["trace"]
     right.plot(trace["t"], trace["command_deg"], drawstyle="steps-post", label="decided bank")
