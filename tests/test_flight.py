@@ -253,6 +253,10 @@ def test_run_flies_jsbsim_with_one_setting(capsys):
         (("run", "--set", "uav.dynamics=jsbsim", "--set", "uav.aircraft=c172x"), "autopilot"),
         (("compare", "--set", "uav.dynamics=jsbsim", "--set", "wind.turbulence=2"), "turbulence"),
         (("flight", "--quick", "--set", "uav.dynamics=jsbsim"), "flight sets uav.dynamics"),
+        (("flight", "--quick", "--set", "planner.wind=true"), "do not set planner.wind"),
+        (("flight", "--quick", "--set", "wind.speed=3"), "do not set wind.speed"),
+        (("run", "--set", "uav.aircraft=c172x"), "uav.aircraft 'c172x' needs uav.dynamics"),
+        (("run", "--set", "uav.jsbsim_rate_hz=200"), "needs uav.dynamics = jsbsim"),
     ],
 )
 def test_bad_flight_input_on_the_command_line_is_one_line(capsys, tmp_path, args, message):

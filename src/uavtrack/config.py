@@ -599,6 +599,14 @@ class Scenario(_Part):
                 "wind needs uav.dynamics = jsbsim (the paper's unicycle flies in still air); "
                 "set uav.dynamics=jsbsim or leave wind.speed 0 and wind.turbulence none"
             )
+        flown = UAVModel.model_fields
+        for name in ("aircraft", "jsbsim_rate_hz"):
+            value = getattr(self.uav, name)
+            if self.uav.dynamics == "unicycle" and value != flown[name].default:
+                raise ValueError(
+                    f"uav.{name} {value!r} needs uav.dynamics = jsbsim (the unicycle flies no "
+                    f"aircraft); set uav.dynamics=jsbsim or leave uav.{name} unset"
+                )
         if self.wind.speed >= self.uav.speed:
             raise ValueError(
                 f"wind.speed {self.wind.speed:g} m/s must be below uav.speed "

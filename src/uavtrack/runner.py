@@ -428,6 +428,17 @@ def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
             _stop(executor)
 
 
+def stop_workers() -> None:
+    """Stop the local engine's idle workers, if any (a command interrupted after its jobs
+    finished: its workers would otherwise outlive it, their semaphores reported leaked)."""
+    import sys
+
+    module = sys.modules.get("joblib.externals.loky.reusable_executor")
+    executor = getattr(module, "_executor", None) if module is not None else None
+    if executor is not None:
+        _stop(executor)
+
+
 def _stop(executor) -> None:
     """Kill the executor's workers. Its manager thread may report the jobs it loses
     as it goes down; those reports are expected here and are not shown."""

@@ -669,6 +669,9 @@ def fail(message: str, code: int = 2) -> int:
 
 
 def interrupted(kept: str) -> int:
+    from ..runner import stop_workers
+
+    stop_workers()
     if _signal["terminated"]:  # SIGTERM: 128 + 15
         print(f"uavtrack: terminated; {kept}", file=sys.stderr)
         return 143

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from ..errors import UsageError
 from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
@@ -53,24 +54,40 @@ def flight(
 ) -> None:
     """The paper's three methods with every UAV a JSBSim aircraft (trackwing) in calm
     air, wind and turbulence, paired against the unicycle; the autopilot's bank
-    tracking; into a folder."""
-    from ..flight import experiment
+    tracking; into a folder.
 
+    Conditions: unicycle; jsbsim in calm air, in a west wind of 5 and 10 m/s, in
+    moderate turbulence; and the two winds with planner.wind (the planner knows the
+    wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps."""
+    from ..config import Scenario, flatten, read_toml
+    from ..flight import experiment
+    from . import parse_overrides
+
+    own = ("wind.", "uav.dynamics", "planner.wind")
+    given = [*parse_overrides(set_ or []), *(flatten(read_toml(config)) if config else {})]
+    for name in given:  # before the scenario is checked, whose advice would differ
+        if name.startswith(own):
+            raise UsageError(
+                f"flight sets uav.dynamics, planner.wind and the wind itself; do not set "
+                f"{name} (its conditions are listed in uavtrack flight --help)"
+            )
+    Scenario().with_overrides(experiment.JSBSIM, origin="uavtrack flight")  # JSBSim there?
     scenario = load_scenario(config, set_, team)
-    refuse_set(scenario, ("wind.", "uav.dynamics"), "flight", "uav.dynamics and the wind")
+    refuse_set(scenario, own, "flight", "uav.dynamics, planner.wind and the wind")
     steps = explicit_steps(config, set_, steps)
     profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
     out = out or Path("results") / ("flight-quick" if quick else "flight")
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     jobs = experiment.plan(scenario, profile, seed)
     manifest = manifest_of("flight", seed, profile, scenario)
+    autopilot = experiment.characterise(scenario, 10.0 if quick else 60.0, seed)
     with run_jobs(jobs, out, manifest, engine, workers, address, progress, ["flight.png"]) as (
         results,
         info,
     ):
         info["seed"] = seed
         summary = experiment.summarize(jobs, results, profile, scenario)
-        summary["autopilot"] = experiment.characterise(scenario, 10.0 if quick else 60.0, seed)
+        summary["autopilot"] = autopilot
         summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
         write_json(out / "summary.json", summary)
         experiment.figure(summary, out / "flight.png")
