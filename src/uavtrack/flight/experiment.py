@@ -122,12 +122,12 @@ def characterise(scenario: Scenario, seconds: float = 60.0, seed: int = 0) -> di
       (as the method flies): the bank error |phi - phi_cmd| over each cycle (mean, max,
       and the mean at the cycle's end), and the altitude and airspeed excursions.
     """
-    from .jsbsim import FT, Fleet
+    from .jsbsim import FT, Fleet, substeps
 
     base = scenario.with_overrides({"n_uavs": 1, "uav.altitudes": None, **JSBSIM})
     phi = math.radians(base.uav.bank_angle_deg)
     h0, v0 = base.altitudes()[0], base.uav.speed
-    n = max(1, round(base.dt * base.uav.jsbsim_rate_hz))
+    n = substeps(base)
     fine = base.with_overrides({"dt": base.dt / n, "uav.jsbsim_rate_hz": n / base.dt})
     start = np.array([[[100.0, 100.0, h0, v0, 0.0]]])
     alive = np.ones((1, 1), dtype=bool)

@@ -128,13 +128,18 @@ def check_aircraft(aircraft: str) -> None:
         )
 
 
+def substeps(scenario: Scenario) -> int:
+    """JSBSim steps per cycle: dt x uav.jsbsim_rate_hz, rounded (at least one)."""
+    return max(1, round(scenario.dt * scenario.uav.jsbsim_rate_hz))
+
+
 def check(scenario: Scenario) -> None:
     """Refuse (ValueError, one line) a scenario whose aircraft cannot be flown: a model
     that does not load, has no uavtrack autopilot, or cannot fly level at the scenario's
     airspeed at its lowest and highest altitude."""
     check_aircraft(scenario.uav.aircraft)
     folder = model_path(scenario.uav.aircraft)
-    dt = scenario.dt / max(1, round(scenario.dt * scenario.uav.jsbsim_rate_hz))
+    dt = scenario.dt / substeps(scenario)
     heights = scenario.altitudes()
     for altitude in {min(heights), max(heights)}:
         trim(folder, float(altitude), scenario.uav.speed, dt)
@@ -244,7 +249,7 @@ class Fleet:
     ) -> None:
         B, Nu = uavs.shape[:2]
         self.shape = (B, Nu)
-        self.substeps = max(1, round(scenario.dt * scenario.uav.jsbsim_rate_hz))
+        self.substeps = substeps(scenario)
         dt = scenario.dt / self.substeps
         folder = model_path(scenario.uav.aircraft)
         wind = scenario.wind
@@ -295,7 +300,8 @@ class Fleet:
         B, Nu = self.shape
         out = np.empty((B, Nu, 5))
         for n, fdm in enumerate(self.aircraft):
-            out[divmod(n, Nu)] = self._state(fdm, *divmod(n, Nu))
+            b, i = divmod(n, Nu)
+            out[b, i] = self._state(fdm, b, i)
         return out
 
     def bank(self) -> np.ndarray:
