@@ -7,6 +7,7 @@ covariances ``(..., 4, 4)``. The measurement is the converted position z^C = H s
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -176,3 +177,89 @@ def _nees(P: np.ndarray, e: np.ndarray) -> np.ndarray:
     s22 = P[15] - (p03 * c0 + p13 * c1)
     second = (s22 * f0 * f0 - 2.0 * s12 * f0 * f1 + s11 * f1 * f1) / (s11 * s22 - s12 * s12)
     return e0 * u0 + e1 * u1 + second
+
+
+# ---------------------------------------------------------------- interacting multiple models
+
+
+@dataclass(frozen=True)
+class Modes:
+    """The mode-conditioned estimates of an interacting multiple model (IMM) filter, for
+    every (UAV, target): mean (..., M, 4), cov (..., M, 4, 4) and the mode
+    probabilities prob (..., M), M modes. Between `imm_predict` and `imm_update` they
+    are the predicted ones (prob the predicted mode probabilities, c-bar)."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    prob: np.ndarray
+
+
+def imm_start(mean: np.ndarray, cov: np.ndarray, prob: np.ndarray) -> Modes:
+    """Every mode at the prior (mean (..., 4), cov (..., 4, 4)); prob (M,) the initial
+    mode probabilities."""
+    M = len(prob)
+    return Modes(
+        np.repeat(mean[..., None, :], M, axis=-2),
+        np.repeat(cov[..., None, :, :], M, axis=-3),
+        np.broadcast_to(np.asarray(prob, dtype=float), mean.shape[:-1] + (M,)).copy(),
+    )
+
+
+def combine(modes: Modes) -> tuple[np.ndarray, np.ndarray]:
+    """The IMM's combined estimate: x = sum_j mu_j x_j, P = sum_j mu_j (P_j + d_j d_j^T)
+    with d_j = x_j - x (the moment-matched Gaussian of the mixture)."""
+    mu = modes.prob[..., None]
+    mean = (mu * modes.mean).sum(axis=-2)
+    d = modes.mean - mean[..., None, :]
+    spread = modes.cov + d[..., :, None] * d[..., None, :]
+    return mean, (mu[..., None] * spread).sum(axis=-3)
+
+
+def imm_predict(modes: Modes, transition_matrix: np.ndarray, A: np.ndarray, Q: np.ndarray) -> Modes:
+    """Interaction (mixing) and mode-matched prediction.
+
+    With p_ij = P(mode j at k+1 | mode i at k) (`transition_matrix`, rows sum to 1):
+    c_j = sum_i p_ij mu_i, w_ij = p_ij mu_i / c_j; each mode j restarts from the mix
+    x0_j = sum_i w_ij x_i, P0_j = sum_i w_ij (P_i + (x_i - x0_j)(x_i - x0_j)^T) and is
+    predicted with A and its own Q_j (Q: (M, 4, 4)). Returns the predicted modes with
+    prob = c (the predicted mode probabilities).
+    """
+    T = np.asarray(transition_matrix, dtype=float)
+    c = modes.prob @ T  # (..., M)
+    w = T * modes.prob[..., :, None] / np.maximum(c, np.finfo(float).tiny)[..., None, :]
+    mean0 = np.einsum("...ij,...ik->...jk", w, modes.mean)  # (..., M, 4)
+    d = modes.mean[..., None, :, :] - mean0[..., :, None, :]  # (..., j, i, 4)
+    spread = modes.cov[..., None, :, :, :] + d[..., :, None] * d[..., None, :]
+    cov0 = np.einsum("...ij,...jikl->...jkl", w, spread)
+    mean, cov = predict(mean0, cov0, A, np.zeros((4, 4)))
+    return Modes(mean, cov + np.asarray(Q), c)
+
+
+def imm_update(modes: Modes, observed: np.ndarray, z: np.ndarray, R: np.ndarray) -> Modes:
+    """Mode-matched updates and the mode probabilities of the pairs that observed.
+
+    Each mode is updated as `update` does; its likelihood is N(nu_j; 0, S_j) of its
+    innovation nu_j = z - H x_j, S_j = H P_j H^T + R, and mu_j = c_j L_j / sum_i c_i L_i
+    (in logarithms, so that no likelihood underflows to zero). Unobserved pairs keep
+    their predictions (mu = c). observed (...) bool; z (K, 2), R (K, 2, 2) as in
+    `filter_step`.
+    """
+    if not z.shape[0]:
+        return modes
+    mean, cov, prob = modes.mean.copy(), modes.cov.copy(), modes.prob.copy()
+    m, P, c = mean[observed], cov[observed], prob[observed]  # (K, M, ...)
+    S = P[..., :2, :2] + R[:, None]
+    nu = z[:, None, :] - m[..., :2]
+    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    quad = (
+        S[..., 1, 1] * nu[..., 0] ** 2
+        - 2 * S[..., 0, 1] * nu[..., 0] * nu[..., 1]
+        + S[..., 0, 0] * nu[..., 1] ** 2
+    ) / det
+    log_l = -0.5 * quad - 0.5 * np.log(det) - np.log(2 * np.pi)
+    log_post = np.log(np.maximum(c, np.finfo(float).tiny)) + log_l
+    log_post -= log_post.max(axis=-1, keepdims=True)
+    post = np.exp(log_post)
+    mean[observed], cov[observed] = update(m, P, z[:, None, :], R[:, None])
+    prob[observed] = post / post.sum(axis=-1, keepdims=True)
+    return Modes(mean, cov, prob)

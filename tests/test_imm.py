@@ -1,0 +1,124 @@
+"""The interacting multiple model filter against filterpy's IMMEstimator (an oracle from
+the test extras), and the facts a wrong mixing step would break."""
+
+import numpy as np
+import pytest
+
+from uavtrack import estimation
+
+filterpy = pytest.importorskip("filterpy.kalman")
+
+DT = 0.5
+A = estimation.transition(DT)
+QS = np.stack([estimation.process_noise(DT, 0.16, 0.16), estimation.process_noise(DT, 2.0, 2.0)])
+T = np.array([[0.95, 0.05], [0.10, 0.90]])
+
+
+def measurements(rng, steps=40):
+    """A target that goes straight, turns hard, then stops; noisy positions, and each
+    step's R (a distance-dependent sensor gives each its own)."""
+    x, out = np.array([0.0, 0.0, 3.0, 1.0]), []
+    for k in range(steps):
+        if 15 <= k < 25:  # a 0.3 rad/s turn
+            c, s = np.cos(0.3 * DT), np.sin(0.3 * DT)
+            x[2:] = [c * x[2] - s * x[3], s * x[2] + c * x[3]]
+        if k >= 32:
+            x[2:] *= 0.3  # stopping
+        x[:2] += DT * x[2:]
+        L = rng.normal(size=(2, 2)) * 0.3
+        R = L @ L.T + np.eye(2) * rng.uniform(0.2, 2.0)
+        out.append((x[:2] + rng.multivariate_normal(np.zeros(2), R), R, rng.random() < 0.8))
+    return out
+
+
+def filterpy_imm(mean0, cov0, prob0):
+    filters = []
+    for Q in QS:
+        f = filterpy.KalmanFilter(dim_x=4, dim_z=2)
+        f.x, f.P, f.F, f.Q = mean0.copy(), cov0.copy(), A.copy(), Q.copy()
+        f.H = np.hstack([np.eye(2), np.zeros((2, 2))])
+        filters.append(f)
+    return filterpy.IMMEstimator(filters, prob0.copy(), T.copy())
+
+
+def test_the_imm_equals_filterpys_on_the_same_measurements(rng):
+    mean0, cov0, prob0 = (
+        np.array([1.0, -1.0, 0.0, 0.0]),
+        np.diag([25.0, 25, 1, 1]),
+        np.array([0.9, 0.1]),
+    )
+    oracle = filterpy_imm(mean0, cov0, prob0)
+    ours = estimation.imm_start(mean0[None], cov0[None], prob0)
+    for z, R, seen in measurements(rng):
+        oracle.predict()
+        ours = estimation.imm_predict(ours, T, A, QS)
+        for j, f in enumerate(oracle.filters):  # the mixed, predicted modes
+            assert np.allclose(ours.mean[0, j], f.x, rtol=1e-9, atol=1e-9)
+            assert np.allclose(ours.cov[0, j], f.P, rtol=1e-9, atol=1e-9)
+        assert np.allclose(ours.prob[0], oracle.cbar, rtol=1e-9, atol=1e-12)
+        if not seen:  # no measurement: filterpy's IMM has no "skip"; ours keeps the prior
+            mean, cov = estimation.combine(ours)
+            oracle.mu = oracle.cbar.copy()
+            oracle._compute_mixing_probabilities()
+            oracle._compute_state_estimate()
+            assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
+            continue
+        for f in oracle.filters:
+            f.R = R.copy()
+        oracle.update(z)
+        ours = estimation.imm_update(ours, np.array([True]), z[None], R[None])
+        mean, cov = estimation.combine(ours)
+        assert np.allclose(ours.prob[0], oracle.mu, rtol=1e-9, atol=1e-12)
+        assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
+        assert np.allclose(cov[0], oracle.P, rtol=1e-9, atol=1e-9)
+    assert ours.prob[0, 1] > 0.3  # the stop made the manoeuvre mode likely at the end
+
+
+def test_the_imm_is_batched_over_any_leading_axes(rng):
+    # a (2, 3) stack of filters, some observing: each equals its own run alone
+    mean = rng.normal(size=(2, 3, 4))
+    cov = np.broadcast_to(np.diag([4.0, 4, 1, 1]), (2, 3, 4, 4)).copy()
+    modes = estimation.imm_start(mean, cov, np.array([0.7, 0.3]))
+    observed = np.array([[True, False, True], [False, True, True]])
+    z, R = rng.normal(size=(4, 2)), np.broadcast_to(np.eye(2), (4, 2, 2))
+    both = estimation.imm_update(estimation.imm_predict(modes, T, A, QS), observed, z, R)
+    for n, (b, i) in enumerate(zip(*np.nonzero(observed), strict=True)):
+        alone = estimation.imm_start(mean[b, i][None], cov[b, i][None], np.array([0.7, 0.3]))
+        alone = estimation.imm_update(
+            estimation.imm_predict(alone, T, A, QS), np.array([True]), z[n][None], R[n][None]
+        )
+        assert np.array_equal(both.mean[b, i], alone.mean[0])
+        assert np.array_equal(both.prob[b, i], alone.prob[0])
+    # an unobserved pair keeps its prediction: mu = c-bar
+    predicted = estimation.imm_predict(modes, T, A, QS)
+    assert np.array_equal(both.prob[0, 1], predicted.prob[0, 1])
+
+
+def test_identical_modes_make_the_imm_a_kalman_filter(rng):
+    # with Q_1 = Q_2, mixing changes nothing and the IMM is the Kalman filter exactly
+    Q = np.stack([QS[0], QS[0]])
+    mean, cov = np.array([[0.0, 0.0, 1.0, 0.0]]), np.diag([25.0, 25, 1, 1])[None]
+    modes = estimation.imm_start(mean, cov, np.array([0.5, 0.5]))
+    for z, R, _ in measurements(rng, 10):
+        chain = modes.prob @ T  # equal likelihoods: only the Markov chain moves them
+        modes = estimation.imm_update(
+            estimation.imm_predict(modes, T, A, Q), np.array([True]), z[None], R[None]
+        )
+        mean, cov = estimation.predict(mean, cov, A, QS[0])
+        mean, cov = estimation.update(mean, cov, z[None], R[None])
+        combined = estimation.combine(modes)
+        assert np.allclose(combined[0], mean, rtol=1e-10, atol=1e-10)
+        assert np.allclose(combined[1], cov, rtol=1e-10, atol=1e-10)
+        assert np.allclose(modes.prob, chain, rtol=1e-12)
+
+
+def test_the_combined_covariance_holds_the_spread_of_the_modes():
+    modes = estimation.Modes(
+        np.array([[[0.0, 0, 0, 0], [2.0, 0, 0, 0]]]),
+        np.broadcast_to(np.eye(4), (1, 2, 4, 4)).copy(),
+        np.array([[0.5, 0.5]]),
+    )
+    mean, cov = estimation.combine(modes)
+    assert np.allclose(mean, [[1.0, 0, 0, 0]])
+    assert cov[0, 0, 0] == pytest.approx(1.0 + 1.0)  # P plus the squared distance to the mean
+    assert np.allclose(cov[0, 1:, 1:], np.eye(3))
