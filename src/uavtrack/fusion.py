@@ -91,6 +91,34 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
     return np.argmax(values, axis=-2)  # first maximum = lowest index
 
 
+def intersect(
+    mean: np.ndarray, cov: np.ndarray, weight: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """Covariance intersection of n estimates with convex weights (Julier and Uhlmann):
+    P^-1 = sum_i w_i P_i^-1, x = P sum_i w_i P_i^-1 x_i.
+
+    Whatever the correlation between the estimates, the result is consistent if each of
+    them is (P is then an upper bound of the fused error's covariance). mean (..., n, 4),
+    cov (..., n, 4, 4), weight (..., n) non-negative, summing to 1 (an estimate of weight
+    0 takes no part). Returns (..., 4) and (..., 4, 4).
+    """
+    info = np.linalg.inv(cov) * weight[..., None, None]  # w_i P_i^-1
+    fused_info = info.sum(axis=-3)
+    vector = np.einsum("...nij,...nj->...i", info, mean)
+    fused = np.linalg.inv(fused_info)
+    fused = 0.5 * (fused + np.swapaxes(fused, -1, -2))
+    return np.einsum("...ij,...j->...i", fused, vector), fused
+
+
+def fast_weights(cov: np.ndarray, present: np.ndarray) -> np.ndarray:
+    """The closed-form weights of fast covariance intersection (Niehsen 2002, for n
+    estimates Franken and Huepper 2005): w_i proportional to 1 / trace(P_i), the
+    confidence of eq. (22), among the estimates `present`. cov (..., n, 4, 4), present
+    (..., n) bool with at least one True. Returns (..., n)."""
+    gamma = np.where(present, 1.0 / np.trace(cov, axis1=-2, axis2=-1), 0.0)
+    return gamma / gamma.sum(axis=-1, keepdims=True)
+
+
 def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) -> dict:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
     offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
