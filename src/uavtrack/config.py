@@ -216,6 +216,61 @@ class WindModel(_Part):
         return self.speed * math.sin(towards), self.speed * math.cos(towards)
 
 
+class ManoeuvreModel(_Part):
+    """Manoeuvring targets (target.motion = "manoeuvring"), beyond the paper: each target
+    flies segments of random length, each straight or a coordinated turn, at a new speed
+    or stopping, with the white acceleration of eq. (15) on top."""
+
+    interval: Float = Field(
+        8.0,
+        gt=0,
+        le=1000,
+        description=(
+            "mean length of a segment [s], (0, 1000], exponentially distributed; assumed: a "
+            "ground vehicle changes what it does every few seconds"
+        ),
+    )
+    turn_probability: Float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="probability that a segment is a turn [-], [0, 1]; assumed: half of them",
+    )
+    turn_rate_max_deg: Float = Field(
+        15.0,
+        ge=0,
+        le=90,
+        description=(
+            "largest turn rate [deg/s], [0, 90], a turn's rate uniform in +-it; assumed: a "
+            "vehicle at 3 m/s turning at 15 deg/s follows an 11 m radius"
+        ),
+    )
+    speed_max: Float = Field(
+        3.0,
+        gt=0,
+        le=50,
+        description=(
+            "largest speed [m/s], (0, 50], a segment's speed uniform in [speed_max / 4, "
+            "speed_max]; assumed: slow vehicles, as target.initial_velocity_std"
+        ),
+    )
+    stop_probability: Float = Field(
+        0.15,
+        ge=0,
+        le=1,
+        description="probability that a segment is a stop [-], [0, 1]; assumed",
+    )
+    acceleration_max: Float = Field(
+        0.5,
+        gt=0,
+        le=20,
+        description=(
+            "largest acceleration along the path when the speed changes [m/s^2], (0, 20]; "
+            "assumed: a gentle vehicle"
+        ),
+    )
+
+
 class TargetModel(_Part):
     """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
 
@@ -246,6 +301,17 @@ class TargetModel(_Part):
             "vehicles or pedestrians; the paper says only that targets move randomly"
         ),
     )
+    motion: Literal["ncv", "manoeuvring"] = Field(
+        "ncv",
+        description=(
+            "how targets move [-], (ncv, manoeuvring); ncv: the paper's nearly constant "
+            "velocity (eq. 13); manoeuvring: beyond the paper, straight legs, coordinated "
+            "turns, speed changes and stops (target.manoeuvre), reflected at the walls"
+        ),
+    )
+    manoeuvre: ManoeuvreModel = Field(
+        default_factory=ManoeuvreModel, description="manoeuvres (target.motion = manoeuvring)"
+    )
     noise_form: Literal["acceleration", "printed"] = Field(
         "acceleration",
         description=(
@@ -254,6 +320,66 @@ class TargetModel(_Part):
             "as the printed matrix sigma^2 [[dT^2/4, dT/2], [dT/2, 1]], a velocity "
             "increment of std sigma per step; the two agree at dT = 1 s; assumed "
             "'acceleration' (sigma keeps its unit at any time step); filter and truth alike"
+        ),
+    )
+
+
+class TrackerModel(_Part):
+    """The local filter of each (UAV, target): the paper's Kalman filter or an IMM."""
+
+    model: Literal["cv", "imm"] = Field(
+        "cv",
+        description=(
+            "the filter [-], (cv, imm); cv: the paper's nearly-constant-velocity Kalman filter "
+            "(eq. 22-25); imm: beyond the paper, an interacting multiple model filter whose "
+            "first mode is that filter and whose other modes have the larger accelerations "
+            "of tracker.manoeuvre_std; fusion and planning read its combined estimate"
+        ),
+    )
+    manoeuvre_std: tuple[Annotated[Float, Field(gt=0, le=100)], ...] = Field(
+        (1.0, 5.0),
+        min_length=1,
+        max_length=5,
+        description=(
+            "white-acceleration std of each further IMM mode [m/s^2], each in (0, 100], 1 to "
+            "5 modes; assumed: 1 m/s^2 covers the targets' turns and stops, 5 m/s^2 a "
+            "reflection at the field's wall"
+        ),
+    )
+    transition: tuple[tuple[Annotated[Float, Field(ge=0, le=1)], ...], ...] = Field(
+        ((0.90, 0.08, 0.02), (0.15, 0.80, 0.05), (0.30, 0.30, 0.40)),
+        description=(
+            "IMM mode transition matrix [-], entries in [0, 1], each row summing to 1, one "
+            "row and column per mode (the cv mode first); p_ij = P(mode j at k+1 | mode i "
+            "at k); assumed: a manoeuvre lasts a few cycles, a jump one or two"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _square(self) -> TrackerModel:
+        m = 1 + len(self.manoeuvre_std)
+        if len(self.transition) != m or any(len(row) != m for row in self.transition):
+            raise ValueError(
+                f"transition must be {m} x {m} (one row and column per mode: the cv "
+                f"mode and {len(self.manoeuvre_std)} of tracker.manoeuvre_std)"
+            )
+        for i, row in enumerate(self.transition):
+            if abs(sum(row) - 1.0) > 1e-9:
+                raise ValueError(f"transition row {i} sums to {sum(row):g}, not 1")
+        return self
+
+
+class FusionModel(_Part):
+    """How a UAV combines its estimate with its neighbours' (Algorithm 2, lines 15-25)."""
+
+    rule: Literal["max_consensus", "covariance_intersection"] = Field(
+        "max_consensus",
+        description=(
+            "the fusion rule of each consensus round [-], (max_consensus, "
+            "covariance_intersection); max_consensus: the paper's eq. (27), adopt the most "
+            "confident tuple; covariance_intersection: beyond the paper, fuse the received "
+            "estimates by covariance intersection with weights 1 / trace(P) (fast CI), "
+            "consistent whatever their correlation"
         ),
     )
 
@@ -540,6 +666,10 @@ class Scenario(_Part):
     estimation: EstimationModel = Field(
         default_factory=EstimationModel, description="initial belief"
     )
+    tracker: TrackerModel = Field(
+        default_factory=TrackerModel, description="local filters (eq. 22-25)"
+    )
+    fusion: FusionModel = Field(default_factory=FusionModel, description="fusion (eq. 26-27)")
     planner: PlannerModel = Field(
         default_factory=PlannerModel, description="planning (Algorithm 1)"
     )

@@ -263,3 +263,68 @@ def imm_update(modes: Modes, observed: np.ndarray, z: np.ndarray, R: np.ndarray)
     mean[observed], cov[observed] = update(m, P, z[:, None, :], R[:, None])
     prob[observed] = post / post.sum(axis=-1, keepdims=True)
     return Modes(mean, cov, prob)
+
+
+@dataclass(frozen=True)
+class Tracker:
+    """The local filter of a run, as the cycle uses it: the paper's Kalman filter
+    (`transition_matrix` None) or an IMM whose first mode is that filter.
+
+    Its three stages take and return each (UAV, target)'s belief: the combined mean
+    (..., 4) and cov (..., 4, 4), and for the IMM its `Modes`:
+
+    * `start`: the prior at step 0;
+    * `update`: the measurements of the cycle (Algorithm 2, lines 1-13);
+    * `close`: after fusion, predicted to the next step (eq. 23). A pair whose fused
+      estimate is not its own (adopted or intersected) restarts every mode from the
+      fused estimate with its mode probabilities kept: what fusion loses is the spread
+      of the modes, which a combined estimate cannot carry.
+    """
+
+    A: np.ndarray
+    Q: np.ndarray
+    transition_matrix: np.ndarray | None = None
+    mode_Q: np.ndarray | None = None
+
+    @classmethod
+    def of(cls, dt: float, sigma: tuple[float, float], tracker) -> Tracker:
+        """From the time step, the targets' acceleration std per axis and a
+        `config.TrackerModel`."""
+        A, Q = transition(dt), process_noise(dt, *sigma)
+        if tracker.model == "cv":
+            return cls(A, Q)
+        extra = [process_noise(dt, s, s) for s in tracker.manoeuvre_std]
+        return cls(A, Q, np.array(tracker.transition, dtype=float), np.stack([Q, *extra]))
+
+    def start(self, mean: np.ndarray, cov: np.ndarray) -> tuple:
+        if self.transition_matrix is None:
+            return mean, cov, None
+        return mean, cov, imm_start(mean, cov, _stationary(self.transition_matrix))
+
+    def update(self, mean, cov, modes, observed, z, R) -> tuple:
+        if modes is None:
+            return (*filter_step(mean, cov, observed, z, R, None, None), None)
+        modes = imm_update(modes, observed, z, R)
+        return (*combine(modes), modes)
+
+    def close(self, mean, cov, modes, fused_mean, fused_cov) -> tuple:
+        if modes is None:
+            return (*predict(fused_mean, fused_cov, self.A, self.Q), None)
+        changed = (fused_mean != mean).any(axis=-1) | (fused_cov != cov).any(axis=(-2, -1))
+        if changed.any():
+            reset = changed[..., None]
+            modes = Modes(
+                np.where(reset[..., None], fused_mean[..., None, :], modes.mean),
+                np.where(reset[..., None, None], fused_cov[..., None, :, :], modes.cov),
+                modes.prob,
+            )
+        modes = imm_predict(modes, self.transition_matrix, self.A, self.mode_Q)
+        return (*combine(modes), modes)
+
+
+def _stationary(T: np.ndarray) -> np.ndarray:
+    """The stationary distribution of a Markov chain (the IMM's initial mode
+    probabilities): the left eigenvector of T for eigenvalue 1, normalised."""
+    values, vectors = np.linalg.eig(T.T)
+    p = np.real(vectors[:, np.argmin(np.abs(values - 1.0))])
+    return p / p.sum()

@@ -119,6 +119,53 @@ def fast_weights(cov: np.ndarray, present: np.ndarray) -> np.ndarray:
     return gamma / gamma.sum(axis=-1, keepdims=True)
 
 
+def intersect_round(own: dict, offered: dict, delivered: network.Links) -> dict:
+    """One round of covariance intersection for every receiver (`fusion.rule` =
+    covariance_intersection, beside `adopt`): per target, the receiver's own current
+    estimate and the estimates delivered to it, fused by `intersect` with the weights of
+    `fast_weights` (each proportional to its confidence 1 / trace P).
+
+    own, offered: tuples {"mean": (B, N, M, 4), "cov": (B, N, M, 4, 4), ...}; other
+    fields keep the receiver's own. Returns the receivers' new tuples, "gamma" the
+    confidence of the fused covariance. A receiver that heard nobody keeps its own.
+    """
+    from .estimation import confidence
+
+    out = dict(own)
+    if delivered.edges:  # one segment per receiver, its self-link included
+        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        if not t.size:
+            return out
+        is_own = delivered.own[:, None]
+        mean = np.where(is_own[..., None], own["mean"][t, i], offered["mean"][t, q])
+        cov = np.where(is_own[..., None, None], own["cov"][t, i], offered["cov"][t, q])
+        weight = 1.0 / np.trace(cov, axis1=-2, axis2=-1)  # (E, M)
+        info = np.linalg.inv(cov) * weight[..., None, None]
+        vector = np.einsum("emij,emj->emi", info, mean)
+        total = np.add.reduceat(weight, delivered.starts, axis=0)
+        fused_info = np.add.reduceat(info, delivered.starts, axis=0) / total[..., None, None]
+        fused_vector = np.add.reduceat(vector, delivered.starts, axis=0) / total[..., None]
+        fused = np.linalg.inv(fused_info)
+        fused = 0.5 * (fused + np.swapaxes(fused, -1, -2))
+        heads = delivered.heads
+        out["mean"], out["cov"] = own["mean"].copy(), own["cov"].copy()
+        out["mean"][heads] = np.einsum("smij,smj->smi", fused, fused_vector)
+        out["cov"][heads] = fused
+    else:
+        B, n = own["mean"].shape[:2]
+        idx = np.arange(n)
+        # candidates [trial, receiver, sender, target]: what each sender offered, and
+        # on the diagonal the receiver's own current estimate
+        mean = np.repeat(offered["mean"][:, None], n, axis=1)
+        cov = np.repeat(offered["cov"][:, None], n, axis=1)
+        mean[:, idx, idx], cov[:, idx, idx] = own["mean"], own["cov"]
+        present = np.broadcast_to(delivered.dense[..., None], mean.shape[:-1])
+        mean, cov, present = (np.moveaxis(x, 2, 3) for x in (mean, cov, present))
+        out["mean"], out["cov"] = intersect(mean, cov, fast_weights(cov, present))
+    out["gamma"] = confidence(out["cov"])
+    return out
+
+
 def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) -> dict:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
     offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
@@ -239,6 +286,7 @@ def consensus(
     rounds: np.ndarray,
     score=None,
     receive=None,
+    rule: str = "max_consensus",
 ) -> Outcome:
     """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
 
@@ -249,10 +297,14 @@ def consensus(
     tuples: {"gamma": (B, N, M) confidence, ...}: any fields travel with the tuple
     (an index of the UAV whose estimate it is, or the estimate itself). score(tuples)
     gives the confidences compared (default tuples["gamma"]); receive(tuples) turns
-    what arrives into what is compared and adopted (default: as it is).
+    what arrives into what is compared and adopted (default: as it is). rule
+    "covariance_intersection" fuses instead (`intersect_round`; the tuples then carry
+    "mean" and "cov").
     """
     score = score or (lambda t: t["gamma"])
     B, n = rounds.shape
+    if rule not in ("max_consensus", "covariance_intersection"):
+        raise ValueError(f"unknown fusion rule {rule!r}")
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
     for r in range(1, int(rounds.max(initial=0)) + 1):
         radio.send("consensus", tuples)
@@ -263,6 +315,18 @@ def consensus(
         offered = inbox.content if receive is None else receive(inbox.content)
         sent, delivered = count(inbox, active, sent, delivered)
         links = inbox.delivered.into(active)
+        if rule == "covariance_intersection":  # tuples by value: mean and cov
+            if links.edges:
+                tuples = intersect_round(tuples, offered, links)
+            else:
+                fused = intersect_round(tuples, offered, links)
+                tuples = {
+                    name: np.where(
+                        active.reshape(active.shape + (1,) * (value.ndim - 2)), fused[name], value
+                    )
+                    for name, value in tuples.items()
+                }
+            continue
         best = adopt(score(tuples), score(offered), links)
         if links.edges:  # only the active receivers have links: only their rows change
             tuples = pick(tuples, offered, best, links.heads)

@@ -49,6 +49,7 @@ class Setting:
     scenario (top: how many best bids each UAV needs, None: all). prune: whether a
     method may ask for fewer than all bids (``planner.prune``, and a radio that neither
     loses nor delays, so that every UAV knows the neighbourhoods its bids serve).
+    rule: the fusion rule of each consensus round (``fusion.rule``).
     """
 
     faulty: bool
@@ -59,6 +60,7 @@ class Setting:
     forward: Callable
     plan: Callable
     prune: bool = False
+    rule: str = "max_consensus"
 
 
 @dataclass(frozen=True)
@@ -160,7 +162,7 @@ def consensus(inputs: Inputs) -> Fused:
     rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
     if s.budget is not None:
         rounds = np.minimum(rounds, s.budget)
-    if s.delay == 0:
+    if s.delay == 0 and s.rule == "max_consensus":
         tuples = {"gamma": inputs.gamma, "source": fusion.identity(inputs.gamma.shape)}
         out = fusion.consensus(radio, tuples, rounds)
         source = out.tuples["source"]
@@ -170,7 +172,7 @@ def consensus(inputs: Inputs) -> Fused:
         stamp = np.full(inputs.gamma.shape, inputs.k)
         tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
-        out = fusion.consensus(radio, tuples, rounds, receive=receive)
+        out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
         gamma = None
     if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet

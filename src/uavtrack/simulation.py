@@ -65,13 +65,16 @@ class Constants:
     A: np.ndarray
     Q: np.ndarray
     actions: np.ndarray
+    tracker: estimation.Tracker
 
     @classmethod
     def of(cls, scenario: Scenario) -> Constants:
+        tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
         return cls(
-            A=estimation.transition(scenario.dt),
-            Q=estimation.process_noise(scenario.dt, *scenario.acceleration_std()),
+            A=tracker.A,
+            Q=tracker.Q,
             actions=planning.action_set(np.radians(scenario.uav.bank_angle_deg)),
+            tracker=tracker,
         )
 
 
@@ -106,6 +109,7 @@ class Context:
             and f.loss == 0
             and f.delay == 0
             and (f.round_budget is None or f.round_budget >= 2),
+            rule=scenario.fusion.rule,
         )
         return cls(scenario, method, const, faults, setting)
 
@@ -169,6 +173,8 @@ class State:
     states; held: the bids each UAV holds of the others (only when messages get lost);
     flight: the autopilot that flies the UAVs (`flight`; None: the paper's unicycle). An
     aircraft has more state than `uavs` and flying it moves it on: a State is stepped once.
+    modes: the IMM's mode-conditioned beliefs (`estimation.Modes`; None: the paper's
+    filter), of which mean and cov are the combined estimate.
     """
 
     k: int
@@ -180,6 +186,7 @@ class State:
     radio: RadioState = RadioState()
     held: Held | None = None
     flight: flight.Autopilot | None = None
+    modes: estimation.Modes | None = None
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -278,6 +285,7 @@ class Pending:
     assigned: Any
     own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
     plan_seconds: np.ndarray  # (2,): CPU, wall (`timing`)
+    belief: tuple  # each UAV's own (mean, cov, modes) after its update, before fusion
 
 
 def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -> Pending:
@@ -293,7 +301,8 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
     links = network.radio_links(uavs, alive, scenario.comm_range)
     radio = Radio(k, links, alive, faults, state.radio)
     observed, z, R = sense(uavs, believed, targets, noise, alive, scenario)
-    mean, cov = estimation.filter_step(state.mean, state.cov, observed, z, R, None, None)
+    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, observed, z, R)
+    mean, cov = belief[:2]
     inputs = Inputs(
         k,
         radio,
@@ -314,7 +323,7 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
     chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
     own = np.where(alive, chosen, STRAIGHT)
     return Pending(
-        k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds
+        k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds, belief
     )
 
 
@@ -371,7 +380,7 @@ def finish(
         decision_wall_ms=np.where(alive, ms[..., timing.WALL], np.nan),
         confidence=fused.gamma,
     )
-    mean, cov = estimation.predict(fused.mean, fused.cov, const.A, const.Q)
+    mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov)
     new = State(
         pending.k + 1,
         new_uavs,
@@ -382,6 +391,7 @@ def finish(
         pending.radio.close(),
         assigned.held,
         state.flight,
+        modes,
     )
     return new, cycle
 
@@ -478,6 +488,8 @@ def initial_state(
     if scenario.faults.loss > 0:
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
     pilot, uavs = flight.start(scenario, seeds, uavs)
+    tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
+    mean, cov, modes = tracker.start(mean, cov)
     state = State(
         0,
         uavs,
@@ -488,6 +500,7 @@ def initial_state(
         RadioState(),
         held,
         pilot,
+        modes,
     )
     return state, trajectory, list(sensor_rngs)
 

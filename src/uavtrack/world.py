@@ -173,5 +173,61 @@ def initial_conditions(
     prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
     P0 = np.diag([est.initial_position_std**2] * 2 + [est.initial_velocity_std**2] * 2)
     accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * scenario.acceleration_std()
-    trajectory = target_trajectories(targets, accel, scenario.dt, L)
+    if tgt.motion == "manoeuvring":  # its draws come after the paper's: those stay the same
+        trajectory = manoeuvring_trajectories(targets, accel, scenario.dt, L, tgt.manoeuvre, rng)
+    else:
+        trajectory = target_trajectories(targets, accel, scenario.dt, L)
     return uavs, trajectory, prior, P0
+
+
+def manoeuvring_trajectories(
+    initial: np.ndarray,
+    accel: np.ndarray,
+    dt: float,
+    field_size: float,
+    manoeuvre,
+    rng: np.random.Generator,
+) -> np.ndarray:
+    """Targets that manoeuvre (`config.ManoeuvreModel`), reflected at the walls.
+
+    Each target flies segments of exponential length (mean `interval`): a stop with
+    `stop_probability`, else a turn at a rate uniform in +-`turn_rate_max_deg` with
+    `turn_probability` or a straight leg, at a speed uniform in [speed_max / 4,
+    speed_max]. The speed moves towards the segment's at most `acceleration_max` per
+    second; the heading turns at the segment's rate; the white acceleration `accel` of
+    eq. (15) acts on top, as in `move_targets`. The first segment goes straight at the
+    initial velocity.
+
+    initial (Nt, 4); accel (T-1, Nt, 2). Returns (T, Nt, 4).
+    """
+    T, nt = accel.shape[0] + 1, initial.shape[0]
+    m = manoeuvre
+    length = rng.exponential(m.interval, (T, nt))  # the draws of every possible switch
+    kind = rng.random((T, nt, 2))
+    rate = rng.uniform(-1.0, 1.0, (T, nt)) * np.radians(m.turn_rate_max_deg)
+    speed = rng.uniform(m.speed_max / 4, m.speed_max, (T, nt))
+    out = np.empty((T, nt, 4))
+    out[0] = initial
+    state = initial.copy()
+    left = length[0].copy()  # time left in the current segment
+    omega = np.zeros(nt)
+    wanted = np.hypot(initial[:, 2], initial[:, 3])
+    for k in range(T - 1):
+        switch = left <= 0
+        if switch.any():
+            stop = kind[k, :, 0] < m.stop_probability
+            turn = ~stop & (kind[k, :, 1] < m.turn_probability)
+            omega = np.where(switch, np.where(turn, rate[k], 0.0), omega)
+            wanted = np.where(switch, np.where(stop, 0.0, speed[k]), wanted)
+            left = np.where(switch, length[k], left)
+        v = state[:, 2:]
+        now = np.hypot(v[:, 0], v[:, 1])
+        heading = np.arctan2(v[:, 1], v[:, 0]) + omega * dt
+        now = now + np.clip(wanted - now, -m.acceleration_max * dt, m.acceleration_max * dt)
+        steered = now[:, None] * np.stack([np.cos(heading), np.sin(heading)], axis=-1)
+        state = move_targets(
+            np.concatenate([state[:, :2], steered], axis=-1), accel[k], dt, field_size
+        )
+        out[k + 1] = state
+        left = left - dt
+    return out

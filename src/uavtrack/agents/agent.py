@@ -166,7 +166,9 @@ class UavAgent:
         self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline)
         self.ctx = simulation.Context.of(scenario, self.method, [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
-        self.mean, self.cov = prior  # (Nt, 4), (Nt, 4, 4): the belief predicted to k
+        tracker = self.ctx.const.tracker
+        # (Nt, 4), (Nt, 4, 4) and the IMM's modes: the belief predicted to k
+        self.mean, self.cov, self.modes = tracker.start(*prior)
         self.target = -1
         self.held = None
         if scenario.faults.loss > 0:
@@ -190,10 +192,9 @@ class UavAgent:
         observed = sense["observed"]
         z = sense["z"]
         zc, R = simulation.convert(np.repeat(believed[None], len(z), axis=0), z, s)
-        mean, cov = estimation.filter_step(
-            self.mean[None], self.cov[None], observed[None], zc, R, None, None
-        )
-        mean, cov = mean[0], cov[0]
+        tracker = self.ctx.const.tracker
+        belief = tracker.update(self.mean, self.cov, self.modes, observed, zc, R)
+        mean, cov = belief[:2]
         if self.central:
             fused_mean, fused_cov, rounds, sent, delivered, target = self.upload(
                 k, mean, cov, believed
@@ -230,9 +231,7 @@ class UavAgent:
             int(delivered + more[1]),
             *(1e3 * (plan_seconds + solve_seconds)).tolist(),  # CPU, wall
         )
-        self.mean, self.cov = estimation.predict(
-            fused_mean, fused_cov, self.ctx.const.A, self.ctx.const.Q
-        )
+        self.mean, self.cov, self.modes = tracker.close(*belief, fused_mean, fused_cov)
         return report
 
     # ------------------------------------------------------------ fusion
@@ -327,7 +326,8 @@ class UavAgent:
 
     def _adopt(self, state: dict, offered: dict[int, dict]) -> dict:
         """eq. (27) for this UAV: `fusion.adopt` over its closed neighbourhood in index
-        order (itself with its current tuple), then `fusion.pick`."""
+        order (itself with its current tuple), then `fusion.pick`; or, with
+        ``fusion.rule`` = covariance_intersection, `fusion.intersect_round` over it."""
         ids = sorted({self.me, *offered})
         where = ids.index(self.me)
         candidates = {
@@ -337,9 +337,11 @@ class UavAgent:
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, where, :] = True
         links = network.Links(1, len(ids), dense)
-        gamma = candidates["gamma"]
-        best = fusion.adopt(gamma, gamma, links)
-        picked = fusion.pick(candidates, candidates, best)
+        if self.setting.rule == "covariance_intersection":
+            picked = fusion.intersect_round(candidates, candidates, links)
+        else:
+            gamma = candidates["gamma"]
+            picked = fusion.pick(candidates, candidates, fusion.adopt(gamma, gamma, links))
         return {name: value[0, where] for name, value in picked.items()}
 
     # ------------------------------------------------------------ assignment
