@@ -122,3 +122,73 @@ def test_the_combined_covariance_holds_the_spread_of_the_modes():
     assert np.allclose(mean, [[1.0, 0, 0, 0]])
     assert cov[0, 0, 0] == pytest.approx(1.0 + 1.0)  # P plus the squared distance to the mean
     assert np.allclose(cov[0, 1:, 1:], np.eye(3))
+
+
+# ---------------------------------------------------------------- in the cycle
+
+
+import uavtrack  # noqa: E402
+from uavtrack import Scenario  # noqa: E402
+from uavtrack.equivalence import assert_same_trace  # noqa: E402
+
+IMM = {"tracker.model": "imm"}
+
+
+def test_the_tracker_restarts_the_modes_only_where_fusion_changed_the_estimate(rng):
+    tracker = estimation.Tracker.of(DT, (0.16, 0.16), Scenario().with_overrides(IMM).tracker)
+    mean = rng.normal(size=(1, 2, 3, 4))
+    cov = np.broadcast_to(np.diag([4.0, 4, 1, 1]), (1, 2, 3, 4, 4)).copy()
+    mean, cov, modes = tracker.start(mean, cov)
+    modes = estimation.Modes(modes.mean + rng.normal(size=modes.mean.shape), modes.cov, modes.prob)
+    own = estimation.combine(modes)
+    fused_mean, fused_cov = own[0].copy(), own[1].copy()
+    fused_mean[0, 1, 2] += 3.0  # one pair adopted another estimate
+    fused_cov[0, 1, 2] *= 2.0
+    _, _, closed = tracker.close(*own, modes, fused_mean, fused_cov)
+    kept = estimation.imm_predict(modes, tracker.transition_matrix, tracker.A, tracker.mode_Q)
+    reset = estimation.Modes(
+        np.broadcast_to(fused_mean[0, 1, 2], modes.mean[0, 1, 2].shape)[None, None, None],
+        np.broadcast_to(fused_cov[0, 1, 2], modes.cov[0, 1, 2].shape)[None, None, None],
+        modes.prob[0, 1, 2][None, None, None],
+    )
+    alone = estimation.imm_predict(reset, tracker.transition_matrix, tracker.A, tracker.mode_Q)
+    changed = np.zeros((1, 2, 3), dtype=bool)
+    changed[0, 1, 2] = True
+    assert np.array_equal(closed.mean[~changed], kept.mean[~changed])
+    assert np.allclose(closed.mean[0, 1, 2], alone.mean[0, 0, 0])
+    assert np.array_equal(closed.prob[0, 1, 2], kept.prob[0, 1, 2])  # probabilities kept
+
+
+def test_the_stationary_distribution_is_the_chains():
+    p = estimation._stationary(np.array(Scenario().tracker.transition))
+    assert np.allclose(p @ np.array(Scenario().tracker.transition), p) and p.sum() == 1
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        IMM,
+        {"fusion.rule": "covariance_intersection"},
+        {**IMM, "fusion.rule": "covariance_intersection"},
+    ],
+    ids=["imm", "ci", "imm+ci"],
+)
+def test_the_agent_form_runs_the_same_tracker(overrides):
+    pytest.importorskip("msgspec")
+    from uavtrack.agents import run_swarm
+
+    for faults in ({}, {"faults.loss": 0.3, "faults.delay": 1}):
+        scenario = Scenario(steps=10).with_overrides({**overrides, **faults})
+        swarm = run_swarm(scenario, "distributed", seed=3, transport="memory")
+        assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, seed=3).trace)
+
+
+def test_the_defaults_are_the_papers_tracker():
+    # the tracker of the defaults is the Kalman filter: no modes anywhere
+    state, _, _ = uavtrack.simulation.initial_state(Scenario(), [np.random.SeedSequence(0)])
+    assert state.modes is None
+    imm, _, _ = uavtrack.simulation.initial_state(
+        Scenario().with_overrides(IMM), [np.random.SeedSequence(0)]
+    )
+    assert imm.modes.mean.shape == (1, 5, 4, 3, 4)
+    assert np.array_equal(imm.mean, state.mean) and np.allclose(imm.cov, state.cov)

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+import uavtrack
 from uavtrack import estimation, world
 from uavtrack.config import G
 
@@ -138,3 +139,54 @@ def test_trajectories_are_the_fold_of_the_free_path(rng):
     assert np.allclose(folded[..., :2], np.where(fold > 200.0, 400.0 - fold, fold))
     assert np.allclose(np.abs(folded[..., 2:]), np.abs(free[..., 2:]))
     assert (folded[..., :2] >= 0).all() and (folded[..., :2] <= 200.0).all()
+
+
+# ---------------------------------------------------------------- manoeuvring targets
+
+
+def manoeuvring(rng, T=400, **fields):
+    from uavtrack.config import ManoeuvreModel
+
+    m = ManoeuvreModel(**fields)
+    initial = np.array([[100.0, 100.0, 1.0, 0.5], [50.0, 150.0, -0.5, 1.0]])
+    accel = np.zeros((T - 1, 2, 2))  # no white noise: the manoeuvres alone
+    return world.manoeuvring_trajectories(initial, accel, 0.5, 200.0, m, rng), m
+
+
+def test_manoeuvring_targets_stay_in_the_field_within_their_limits(rng):
+    path, m = manoeuvring(rng)
+    assert (path[..., :2] >= 0).all() and (path[..., :2] <= 200).all()
+    speed = np.hypot(path[..., 2], path[..., 3])
+    assert speed.max() <= m.speed_max + 1e-9
+    # the speed changes by at most acceleration_max per second
+    assert np.abs(np.diff(speed, axis=0)).max() <= m.acceleration_max * 0.5 + 1e-9
+
+
+def test_turns_are_coordinated_at_most_at_the_largest_rate(rng):
+    path, m = manoeuvring(rng, turn_probability=1.0, stop_probability=0.0, speed_max=1.0)
+    v = path[..., 2:]
+    heading = np.arctan2(v[..., 1], v[..., 0])
+    turn = np.angle(np.exp(1j * np.diff(heading, axis=0)))  # wrapped
+    # away from the walls (a reflection flips a component), |rate| <= the bound
+    inside = (np.abs(path[1:, :, :2] - 100) < 90).all(axis=-1) & (
+        np.abs(path[:-1, :, :2] - 100) < 90
+    ).all(axis=-1)
+    assert np.abs(turn[inside]).max() <= np.radians(m.turn_rate_max_deg) * 0.5 + 1e-9
+    assert np.abs(turn[inside]).max() > np.radians(m.turn_rate_max_deg) * 0.5 * 0.5  # it turns
+
+
+def test_targets_that_always_stop_come_to_rest(rng):
+    path, _ = manoeuvring(rng, stop_probability=1.0, interval=2.0)
+    assert np.hypot(path[-1, :, 2], path[-1, :, 3]).max() < 1e-9
+
+
+def test_manoeuvring_leaves_the_papers_draws_alone():
+    s = uavtrack.Scenario()
+    m = s.with_overrides({"target.motion": "manoeuvring"})
+    a = world.initial_conditions(s, world.streams(0)[0])
+    b = world.initial_conditions(m, world.streams(0)[0])
+    assert np.array_equal(a[0], b[0]) and np.array_equal(a[2], b[2])  # UAVs, prior
+    assert np.array_equal(a[1][0], b[1][0])  # the same start
+    assert not np.array_equal(a[1], b[1])
+    c = world.initial_conditions(m, world.streams(0)[0])
+    assert np.array_equal(b[1], c[1])  # deterministic
