@@ -192,3 +192,44 @@ def test_the_defaults_are_the_papers_tracker():
     )
     assert imm.modes.mean.shape == (1, 5, 4, 3, 4)
     assert np.array_equal(imm.mean, state.mean) and np.allclose(imm.cov, state.cov)
+
+
+def test_uavtrack_trackers_writes_its_table_and_figure(tmp_path, capsys):
+    import json
+
+    from PIL import Image
+
+    from uavtrack import cli, trackers
+
+    out = tmp_path / "t"
+    code = cli.main(["trackers", "--quick", "--out", str(out), "--no-progress"])
+    _, err = capsys.readouterr()
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["motions"]) == ["ncv", "manoeuvring"]
+    for rows in summary["motions"].values():
+        assert list(rows) == list(trackers.TRACKERS)
+        paper = rows["cv + max_consensus"]
+        for name, row in rows.items():
+            low, high = row["nees_band"]
+            assert low < 4 < high  # the band of a consistent estimator's mean NEES
+            if name != "cv + max_consensus":  # paired on the same trials
+                diff = row["against_paper"]["rmse_best"]["mean"]
+                assert diff == pytest.approx(row["rmse_best"]["mean"] - paper["rmse_best"]["mean"])
+    assert "| imm + covariance_intersection |" in (out / "report.md").read_text()
+    with Image.open(out / "trackers.png") as im:
+        assert im.size[0] > 1000
+    code = cli.main(
+        ["trackers", "--quick", "--set", "tracker.model=imm", "--out", str(tmp_path / "x")]
+    )
+    _, err = capsys.readouterr()
+    assert code == 2 and "trackers sets target.motion" in err and not (tmp_path / "x").exists()
+
+
+def test_the_nees_band_is_chi_square():
+    from uavtrack.trackers import nees_band
+
+    low, high = nees_band(1)  # one 4-D error: the chi-square(4) quantiles
+    assert (low, high) == pytest.approx((0.4844, 11.1433), abs=1e-4)
+    low, high = nees_band(10_000)
+    assert 3.9 < low < 4 < high < 4.1

@@ -680,4 +680,4 @@ def interrupted(kept: str) -> int:
 
 
 # the other commands register themselves on `app`
-from . import benchmark, experiments, flight, robustness, swarm  # noqa: E402, F401
+from . import benchmark, experiments, flight, robustness, swarm, trackers  # noqa: E402, F401

@@ -1,0 +1,106 @@
+"""`uavtrack trackers`: the paper's tracker against the IMM and covariance intersection."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..files import write_json, write_text
+from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
+from .experiments import (
+    AddressOpt,
+    EngineName,
+    EngineOpt,
+    ProgressOpt,
+    SeedOpt,
+    StepsOpt,
+    WorkersOpt,
+    explicit_steps,
+    manifest_of,
+    refuse_set,
+    run_jobs,
+    sized,
+)
+
+
+@app.command()
+def trackers(
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            metavar="DIR",
+            help="results folder [results/trackers; results/trackers-quick with --quick]",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="trials per tracker and motion [50]")
+    ] = None,
+    steps: StepsOpt = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 60 steps")
+    ] = False,
+    workers: WorkersOpt = None,
+    engine: EngineOpt = EngineName.local,
+    address: AddressOpt = None,
+    seed: SeedOpt = 0,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    team: TeamOpt = None,
+    progress: ProgressOpt = None,
+) -> None:
+    """The distributed method with the paper's tracker (cv + max_consensus), the IMM,
+    covariance intersection and both, on the paper's and on manoeuvring targets:
+    observation rate, RMSE, NEES against its band, OSPA; into a folder."""
+    from .. import trackers as experiment
+
+    scenario = load_scenario(config, set_, team)
+    refuse_set(
+        scenario,
+        ("target.motion", "tracker.model", "fusion.rule"),
+        "trackers",
+        "target.motion, tracker.model and fusion.rule",
+    )
+    steps = explicit_steps(config, set_, steps)
+    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
+    out = out or Path("results") / ("trackers-quick" if quick else "trackers")
+    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
+    jobs = experiment.plan(scenario, profile, seed)
+    manifest = manifest_of("trackers", seed, profile, scenario)
+    with run_jobs(jobs, out, manifest, engine, workers, address, progress, ["trackers.png"]) as (
+        results,
+        info,
+    ):
+        info["seed"] = seed
+        summary = experiment.summarize(jobs, results, profile, scenario)
+        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
+        write_json(out / "summary.json", summary)
+        experiment.figure(summary, out / "trackers.png")
+        write_text(out / "report.md", experiment.report(summary, scenario, info))
+    _print(summary, out, info)
+
+
+def _print(summary: dict, out: Path, info: dict) -> None:
+    from rich.table import Table
+
+    table = Table(title="trackers (distributed, mean over trials)")
+    for col in ("motion", "tracker", "rate", "RMSE best", "NEES", "NEES best", "OSPA"):
+        table.add_column(col, justify="left" if col in ("motion", "tracker") else "right")
+    for motion, rows in summary["motions"].items():
+        for k, (tracker, r) in enumerate(rows.items()):
+            table.add_row(
+                motion if k == 0 else "",
+                tracker,
+                f"{r['mean']:.3f}",
+                f"{r['rmse_best']['mean']:.2f}",
+                f"{r['nees']['mean']:.2f}",
+                f"{r['nees_best']['mean']:.2f}",
+                f"{r['ospa']['mean']:.2f}",
+            )
+    console().print(table)
+    typer.echo(
+        f"wrote {out}/summary.json, report.md, trackers.png ({info['jobs_run']} jobs run, "
+        f"{info['jobs_skipped']} reused, {info['seconds']:.1f} s)"
+    )
