@@ -233,3 +233,78 @@ def test_the_nees_band_is_chi_square():
     assert (low, high) == pytest.approx((0.4844, 11.1433), abs=1e-4)
     low, high = nees_band(10_000)
     assert 3.9 < low < 4 < high < 4.1
+
+
+def test_the_environment_runs_the_same_tracker():
+    pytest.importorskip("pettingzoo")
+    from uavtrack.env import parallel_env
+
+    scenario = Scenario(steps=8).with_overrides(
+        {**IMM, "fusion.rule": "covariance_intersection", "target.motion": "manoeuvring"}
+    )
+    env = parallel_env(scenario=scenario)
+    env.reset(seed=4)
+    while env.agents:
+        env.step({})
+    assert_same_trace(env.result().trace, uavtrack.simulate(scenario, seed=4).trace)
+
+
+def test_a_turn_mode_predicts_a_coordinated_turn_exactly():
+    omega, x = np.radians(12.0), np.array([3.0, -2.0, 2.0, 1.0])
+    F = estimation.turn_transition(DT, omega)
+    speed, heading = np.hypot(2.0, 1.0), np.arctan2(1.0, 2.0)
+    # the exact arc: the centre is at distance v / omega to the left of the velocity
+    centre = x[:2] + speed / omega * np.array([-np.sin(heading), np.cos(heading)])
+    after = F @ x
+    assert np.hypot(*(after[:2] - centre)) == pytest.approx(speed / omega)
+    assert np.arctan2(after[3], after[2]) == pytest.approx(heading + omega * DT)
+    assert np.array_equal(estimation.turn_transition(DT, 0.0), A)
+
+
+def test_the_imm_with_turn_modes_equals_filterpys(rng):
+    omega = np.radians(10.0)
+    motions = [A, estimation.turn_transition(DT, omega), estimation.turn_transition(DT, -omega)]
+    noises = np.stack([QS[0]] * 3)
+    T3 = np.array([[0.9, 0.05, 0.05], [0.1, 0.85, 0.05], [0.1, 0.05, 0.85]])
+    mean0, cov0, prob0 = np.zeros(4), np.diag([25.0, 25, 1, 1]), np.array([0.8, 0.1, 0.1])
+    filters = []
+    for F, Q in zip(motions, noises, strict=True):
+        f = filterpy.KalmanFilter(dim_x=4, dim_z=2)
+        f.x, f.P, f.F, f.Q = mean0.copy(), cov0.copy(), F.copy(), Q.copy()
+        f.H = np.hstack([np.eye(2), np.zeros((2, 2))])
+        filters.append(f)
+    oracle = filterpy.IMMEstimator(filters, prob0.copy(), T3.copy())
+    ours = estimation.imm_start(mean0[None], cov0[None], prob0)
+    for z, R, _ in measurements(rng, 30):
+        oracle.predict()
+        ours = estimation.imm_predict(ours, T3, np.stack(motions), noises)
+        for f in oracle.filters:
+            f.R = R.copy()
+        oracle.update(z)
+        ours = estimation.imm_update(ours, np.array([True]), z[None], R[None])
+        mean, cov = estimation.combine(ours)
+        assert np.allclose(ours.prob[0], oracle.mu, rtol=1e-9, atol=1e-12)
+        assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
+        assert np.allclose(cov[0], oracle.P, rtol=1e-9, atol=1e-9)
+
+
+def test_turn_rates_add_two_modes_each():
+    s = Scenario().with_overrides(
+        {
+            **IMM,
+            "tracker.manoeuvre_std": [2.0],
+            "tracker.turn_rates_deg": [10.0],
+            "tracker.transition": [
+                [0.9, 0.04, 0.03, 0.03],
+                [0.2, 0.7, 0.05, 0.05],
+                [0.1, 0.05, 0.85, 0.0],
+                [0.1, 0.05, 0.0, 0.85],
+            ],
+        }
+    )
+    tracker = estimation.Tracker.of(s.dt, s.acceleration_std(), s.tracker)
+    assert tracker.mode_A.shape == (4, 4, 4)
+    assert np.allclose(tracker.mode_A[2], estimation.turn_transition(s.dt, np.radians(10.0)))
+    assert np.allclose(tracker.mode_A[3], estimation.turn_transition(s.dt, np.radians(-10.0)))
+    with pytest.raises(uavtrack.ScenarioError, match="transition must be 5 x 5"):
+        Scenario().with_overrides({**IMM, "tracker.turn_rates_deg": [10.0]})

@@ -347,6 +347,16 @@ class TrackerModel(_Part):
             "a mean NEES near 4 (README, Trackers)"
         ),
     )
+    turn_rates_deg: tuple[Annotated[Float, Field(gt=0, le=90)], ...] = Field(
+        (),
+        max_length=3,
+        description=(
+            "turn rates of further IMM modes [deg/s], each in (0, 90], at most 3: each adds "
+            "two coordinated-turn modes (left and right at that known rate, the paper's "
+            "noise), after the manoeuvre modes; none by default (README, Trackers, measures "
+            "them against the noise-only modes)"
+        ),
+    )
     transition: tuple[tuple[Annotated[Float, Field(ge=0, le=1)], ...], ...] = Field(
         ((0.95, 0.04, 0.01), (0.10, 0.85, 0.05), (0.30, 0.30, 0.40)),
         description=(
@@ -358,11 +368,12 @@ class TrackerModel(_Part):
 
     @model_validator(mode="after")
     def _square(self) -> TrackerModel:
-        m = 1 + len(self.manoeuvre_std)
+        m = 1 + len(self.manoeuvre_std) + 2 * len(self.turn_rates_deg)
         if len(self.transition) != m or any(len(row) != m for row in self.transition):
             raise ValueError(
                 f"transition must be {m} x {m} (one row and column per mode: the cv "
-                f"mode and {len(self.manoeuvre_std)} of tracker.manoeuvre_std)"
+                f"mode, {len(self.manoeuvre_std)} of tracker.manoeuvre_std and "
+                f"{2 * len(self.turn_rates_deg)} of tracker.turn_rates_deg)"
             )
         for i, row in enumerate(self.transition):
             if abs(sum(row) - 1.0) > 1e-9:

@@ -20,6 +20,22 @@ def transition(dt: float) -> np.ndarray:
     return A
 
 
+def turn_transition(dt: float, omega: float) -> np.ndarray:
+    """State transition of a coordinated turn at the known rate `omega` [rad/s] (the
+    velocity rotates by omega dT; position integrates it exactly); the CV matrix at 0."""
+    if omega == 0:
+        return transition(dt)
+    s, c = np.sin(omega * dt), np.cos(omega * dt)
+    return np.array(
+        [
+            [1, 0, s / omega, -(1 - c) / omega],
+            [0, 1, (1 - c) / omega, s / omega],
+            [0, 0, c, -s],
+            [0, 0, s, c],
+        ]
+    )
+
+
 def process_noise(dt: float, sigma_1: float, sigma_2: float) -> np.ndarray:
     """Process noise Q for white acceleration noise, eq. (15), in the state order x, y, vx, vy.
 
@@ -221,17 +237,26 @@ def imm_predict(modes: Modes, transition_matrix: np.ndarray, A: np.ndarray, Q: n
     With p_ij = P(mode j at k+1 | mode i at k) (`transition_matrix`, rows sum to 1):
     c_j = sum_i p_ij mu_i, w_ij = p_ij mu_i / c_j; each mode j restarts from the mix
     x0_j = sum_i w_ij x_i, P0_j = sum_i w_ij (P_i + (x_i - x0_j)(x_i - x0_j)^T) and is
-    predicted with A and its own Q_j (Q: (M, 4, 4)). Returns the predicted modes with
-    prob = c (the predicted mode probabilities).
+    predicted with A (4, 4), or its own A_j (A: (M, 4, 4)), and its own Q_j (Q: (M, 4,
+    4)). Returns the predicted modes with prob = c (the predicted mode probabilities).
     """
     T = np.asarray(transition_matrix, dtype=float)
+    A = np.asarray(A)
     c = modes.prob @ T  # (..., M)
     w = T * modes.prob[..., :, None] / np.maximum(c, np.finfo(float).tiny)[..., None, :]
     mean0 = np.einsum("...ij,...ik->...jk", w, modes.mean)  # (..., M, 4)
     d = modes.mean[..., None, :, :] - mean0[..., :, None, :]  # (..., j, i, 4)
     spread = modes.cov[..., None, :, :, :] + d[..., :, None] * d[..., None, :]
     cov0 = np.einsum("...ij,...jikl->...jkl", w, spread)
-    mean, cov = predict(mean0, cov0, A, np.zeros((4, 4)))
+    if A.ndim == 2:  # one model's motion for every mode, its own noise each
+        mean, cov = predict(mean0, cov0, A, np.zeros((4, 4)))
+    else:  # each mode its own motion (A: (M, 4, 4))
+        parts = [
+            predict(mean0[..., j, :], cov0[..., j, :, :], A[j], np.zeros((4, 4)))
+            for j in range(len(A))
+        ]
+        mean = np.stack([p[0] for p in parts], axis=-2)
+        cov = np.stack([p[1] for p in parts], axis=-3)
     return Modes(mean, cov + np.asarray(Q), c)
 
 
@@ -285,6 +310,7 @@ class Tracker:
     Q: np.ndarray
     transition_matrix: np.ndarray | None = None
     mode_Q: np.ndarray | None = None
+    mode_A: np.ndarray | None = None
 
     @classmethod
     def of(cls, dt: float, sigma: tuple[float, float], tracker) -> Tracker:
@@ -294,7 +320,12 @@ class Tracker:
         if tracker.model == "cv":
             return cls(A, Q)
         extra = [process_noise(dt, s, s) for s in tracker.manoeuvre_std]
-        return cls(A, Q, np.array(tracker.transition, dtype=float), np.stack([Q, *extra]))
+        rates = [r for rate in tracker.turn_rates_deg for r in (rate, -rate)]
+        motions = [A] * (1 + len(extra)) + [turn_transition(dt, np.radians(r)) for r in rates]
+        noises = [Q, *extra] + [Q] * len(rates)
+        return cls(
+            A, Q, np.array(tracker.transition, dtype=float), np.stack(noises), np.stack(motions)
+        )
 
     def start(self, mean: np.ndarray, cov: np.ndarray) -> tuple:
         if self.transition_matrix is None:
@@ -318,7 +349,7 @@ class Tracker:
                 np.where(reset[..., None, None], fused_cov[..., None, :, :], modes.cov),
                 modes.prob,
             )
-        modes = imm_predict(modes, self.transition_matrix, self.A, self.mode_Q)
+        modes = imm_predict(modes, self.transition_matrix, self.mode_A, self.mode_Q)
         return (*combine(modes), modes)
 
 
