@@ -198,3 +198,15 @@ def test_every_rejection_of_a_job_file_is_kept(tmp_path):
     assert sorted(json.loads(p.read_text())["content"] for p in rejected) == [
         json.dumps({"edited": a}) for a in range(3)
     ]
+
+
+def test_a_long_label_makes_a_short_unique_file_name():
+    from uavtrack import Scenario
+    from uavtrack.experiments import Job
+
+    long = ",".join(f"tracker.transition=[{i}]" * 3 for i in range(20))
+    a = Job("trials", long, "distributed", Scenario(), 0, 25, 0)
+    b = Job("trials", long + "x", "distributed", Scenario(), 0, 25, 0)
+    assert len(a.key) < 200 and a.key != b.key
+    short = Job("trials", "comm_range=10", "greedy", Scenario(), 25, 25, 0)
+    assert short.key == "trials__comm_range=10__greedy__t025-049"  # as it always was

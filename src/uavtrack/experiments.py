@@ -14,6 +14,7 @@ Fig. 8 is Fig. 5's distributed run, computed once.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -116,9 +117,18 @@ class Job:
 
     @property
     def key(self) -> str:
-        """File-name stem, unique within an experiment folder."""
+        """File-name stem, unique within an experiment folder. A label too long for a
+        file name (many fields set) keeps its start and a digest of the whole."""
         span = f"t{self.first:03d}-{self.first + self.count - 1:03d}"
-        return f"{self.kind}__{self.label}__{self.method}__{span}"
+        label = self.label
+        if len(label) > LABEL_CHARS:
+            digest = hashlib.sha256(label.encode()).hexdigest()[:16]
+            label = f"{label[: LABEL_CHARS - 17]}~{digest}"
+        return f"{self.kind}__{label}__{self.method}__{span}"
+
+
+LABEL_CHARS = 120
+"""Longest label kept whole in a job's file name (file names stop at 255 bytes)."""
 
 
 def run_job(job: Job) -> dict[str, Any]:

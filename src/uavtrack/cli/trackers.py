@@ -59,9 +59,9 @@ def trackers(
     scenario = load_scenario(config, set_, team)
     refuse_set(
         scenario,
-        ("target.motion", "tracker.model", "fusion.rule"),
+        ("target.motion", "tracker.", "fusion.rule"),
         "trackers",
-        "target.motion, tracker.model and fusion.rule",
+        "target.motion, the tracker and fusion.rule",
     )
     steps = explicit_steps(config, set_, steps)
     profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
