@@ -190,3 +190,34 @@ def test_none_unsets_an_optional_field():
     assert (
         s.with_overrides({"faults.round_budget": parse_value("none")}).faults.round_budget is None
     )
+
+
+def test_a_nested_section_round_trips_through_toml(tmp_path):
+    s = Scenario().with_overrides(
+        {"target.motion": "manoeuvring", "target.manoeuvre.interval": 2.0, "tracker.model": "imm"}
+    )
+    for comments in (False, True):
+        path = tmp_path / f"s{comments}.toml"
+        path.write_text(s.to_toml(comments=comments))
+        assert "[target.manoeuvre]" in path.read_text()
+        assert Scenario.from_toml(path) == s
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"target.manoeuvre.interval": 2.0}, "target.manoeuvre.interval needs target.motion"),
+        ({"tracker.manoeuvre_std": [1.0, 2.0]}, "tracker.manoeuvre_std needs tracker.model = imm"),
+        (
+            {
+                "tracker.turn_rates_deg": [5.0],
+                "tracker.transition": [[0.6, 0.1, 0.1, 0.1, 0.1]] * 5,
+            },
+            "needs tracker.model = imm",
+        ),
+    ],
+)
+def test_a_setting_of_a_model_that_is_off_is_refused(overrides, message):
+    with pytest.raises(ScenarioError, match=message) as info:
+        Scenario().with_overrides(overrides)
+    assert "\n" not in str(info.value)

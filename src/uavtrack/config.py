@@ -391,7 +391,8 @@ class FusionModel(_Part):
             "covariance_intersection); max_consensus: the paper's eq. (27), adopt the most "
             "confident tuple; covariance_intersection: beyond the paper, fuse the received "
             "estimates by covariance intersection with weights 1 / trace(P) (fast CI), "
-            "consistent whatever their correlation"
+            "consistent whatever their correlation; the consensus of distributed and greedy "
+            "(centralized has no consensus: its node takes each target's best upload)"
         ),
     )
 
@@ -734,6 +735,31 @@ class Scenario(_Part):
         return self
 
     @model_validator(mode="after")
+    def _models(self) -> Scenario:
+        """A setting of a model that is not on would do nothing: refuse it."""
+        for group, value, wanted, on in (
+            (
+                self.target.manoeuvre,
+                self.target.motion,
+                "target.motion = manoeuvring",
+                "manoeuvring",
+            ),
+            (self.tracker, self.tracker.model, "tracker.model = imm", "imm"),
+        ):
+            if value == on:
+                continue
+            for name, info in type(group).model_fields.items():
+                if name != "model" and getattr(group, name) != info.get_default(
+                    call_default_factory=True
+                ):
+                    prefix = "target.manoeuvre" if group is self.target.manoeuvre else "tracker"
+                    raise ValueError(
+                        f"{prefix}.{name} needs {wanted} (it does nothing otherwise); set "
+                        f"{wanted.replace(' = ', '=')} or leave {prefix}.{name} unset"
+                    )
+        return self
+
+    @model_validator(mode="after")
     def _flight(self) -> Scenario:
         calm = self.wind.speed == 0 and self.wind.turbulence == "none"
         if self.uav.dynamics == "unicycle" and not calm:
@@ -1003,10 +1029,14 @@ def dump_toml(
                 out += entry(prefix, key, value)
         return out
 
-    lines: list[str] = keys(data, "")
-    for key, table in ((k, v) for k, v in data.items() if isinstance(v, dict)):
-        lines += ["", f"[{key}]", *keys(table, f"{key}.")]
-    return "\n".join(lines) + "\n"
+    def tables(table: dict[str, Any], prefix: str) -> list[str]:
+        out = []
+        for key, value in ((k, v) for k, v in table.items() if isinstance(v, dict)):
+            name = prefix + key
+            out += ["", f"[{name}]", *keys(value, f"{name}."), *tables(value, f"{name}.")]
+        return out
+
+    return "\n".join(keys(data, "") + tables(data, "")) + "\n"
 
 
 _UNSET = object()

@@ -193,7 +193,7 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
             f"## {motion} targets",
             "",
             "| tracker | observation rate | RMSE best [m] | NEES (band) | NEES best (band) | "
-            "OSPA [m] | rate − paper's | RMSE best − paper's |",
+            "OSPA every UAV [m] | rate − paper's | RMSE best − paper's |",
             "|---|---|---|---|---|---|---|---|",
         ]
         for tracker, r in rows.items():

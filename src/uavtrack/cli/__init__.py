@@ -263,8 +263,9 @@ def number(fmt: str, value) -> str:
 
 CAPTION = (
     "Team's best estimate: per target, the estimate of the UAV most confident in it. "
-    "Every UAV's estimate includes the stale ones of UAVs cut off from the team. NEES above "
-    "4 comes mostly from targets turning at the walls, which the filter cannot predict. "
+    "Every UAV's estimate includes the stale ones of UAVs cut off from the team. NEES is 4 "
+    "for a consistent estimate; with the paper's filter it is higher, mostly from targets "
+    "turning at the walls, which that filter cannot predict (tracker.model=imm models them). "
     "OSPA and GOSPA compare the true targets with a set of estimates as point sets "
     "(cut-off evaluation.ospa_cutoff, order evaluation.ospa_order; per UAV up to "
     "{per_uav} targets): OSPA is a mean over the targets, GOSPA a sum, so it grows with "

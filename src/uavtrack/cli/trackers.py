@@ -86,7 +86,7 @@ def _print(summary: dict, out: Path, info: dict) -> None:
     from rich.table import Table
 
     table = Table(title="trackers (distributed, mean over trials)")
-    for col in ("motion", "tracker", "rate", "RMSE best", "NEES", "NEES best", "OSPA"):
+    for col in ("motion", "tracker", "rate", "RMSE best", "NEES", "NEES best", "OSPA all"):
         table.add_column(col, justify="left" if col in ("motion", "tracker") else "right")
     for motion, rows in summary["motions"].items():
         for k, (tracker, r) in enumerate(rows.items()):
