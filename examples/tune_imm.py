@@ -14,6 +14,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 import uavtrack
+from uavtrack.trackers import TRACKERS
 
 STICKY = [[0.95, 0.04, 0.01], [0.10, 0.85, 0.05], [0.30, 0.30, 0.40]]
 CANDIDATES = {
@@ -25,14 +26,9 @@ CANDIDATES = {
     "0.5 and 2.3 m/s^2 (the default)": {},
     "0.5 and 2.6 m/s^2": {"tracker.manoeuvre_std": [0.5, 2.6], "tracker.transition": STICKY},
     "turns at +-8 deg/s and 2.3 m/s^2": {
-        "tracker.manoeuvre_std": [2.3],
-        "tracker.turn_rates_deg": [8.0],
-        "tracker.transition": [
-            [0.95, 0.01, 0.02, 0.02],
-            [0.30, 0.40, 0.15, 0.15],
-            [0.10, 0.05, 0.85, 0.00],
-            [0.10, 0.05, 0.00, 0.85],
-        ],
+        k: v
+        for k, v in TRACKERS["imm with turn modes + covariance_intersection"].items()
+        if k.startswith("tracker.") and k != "tracker.model"
     },
 }
 TRIALS = 16

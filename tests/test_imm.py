@@ -31,14 +31,15 @@ def measurements(rng, steps=40):
     return out
 
 
-def filterpy_imm(mean0, cov0, prob0):
+def filterpy_imm(mean0, cov0, prob0, motions=(A, A), noises=QS, transition=T):
+    """filterpy's IMM of Kalman filters with these motions and noises."""
     filters = []
-    for Q in QS:
+    for F, Q in zip(motions, noises, strict=True):
         f = filterpy.KalmanFilter(dim_x=4, dim_z=2)
-        f.x, f.P, f.F, f.Q = mean0.copy(), cov0.copy(), A.copy(), Q.copy()
+        f.x, f.P, f.F, f.Q = mean0.copy(), cov0.copy(), F.copy(), Q.copy()
         f.H = np.hstack([np.eye(2), np.zeros((2, 2))])
         filters.append(f)
-    return filterpy.IMMEstimator(filters, prob0.copy(), T.copy())
+    return filterpy.IMMEstimator(filters, prob0.copy(), transition.copy())
 
 
 def test_the_imm_equals_filterpys_on_the_same_measurements(rng):
@@ -267,13 +268,7 @@ def test_the_imm_with_turn_modes_equals_filterpys(rng):
     noises = np.stack([QS[0]] * 3)
     T3 = np.array([[0.9, 0.05, 0.05], [0.1, 0.85, 0.05], [0.1, 0.05, 0.85]])
     mean0, cov0, prob0 = np.zeros(4), np.diag([25.0, 25, 1, 1]), np.array([0.8, 0.1, 0.1])
-    filters = []
-    for F, Q in zip(motions, noises, strict=True):
-        f = filterpy.KalmanFilter(dim_x=4, dim_z=2)
-        f.x, f.P, f.F, f.Q = mean0.copy(), cov0.copy(), F.copy(), Q.copy()
-        f.H = np.hstack([np.eye(2), np.zeros((2, 2))])
-        filters.append(f)
-    oracle = filterpy.IMMEstimator(filters, prob0.copy(), T3.copy())
+    oracle = filterpy_imm(mean0, cov0, prob0, motions, noises, T3)
     ours = estimation.imm_start(mean0[None], cov0[None], prob0)
     for z, R, _ in measurements(rng, 30):
         oracle.predict()
