@@ -310,7 +310,7 @@ class Tracker:
     Q: np.ndarray
     transition_matrix: np.ndarray | None = None
     mode_Q: np.ndarray | None = None
-    mode_A: np.ndarray | None = None
+    mode_A: np.ndarray | None = None  # each mode's motion, when they differ (turn modes)
 
     @classmethod
     def of(cls, dt: float, sigma: tuple[float, float], tracker) -> Tracker:
@@ -324,7 +324,11 @@ class Tracker:
         motions = [A] * (1 + len(extra)) + [turn_transition(dt, np.radians(r)) for r in rates]
         noises = [Q, *extra] + [Q] * len(rates)
         return cls(
-            A, Q, np.array(tracker.transition, dtype=float), np.stack(noises), np.stack(motions)
+            A,
+            Q,
+            np.array(tracker.transition, dtype=float),
+            np.stack(noises),
+            np.stack(motions) if rates else None,  # None: every mode moves with A
         )
 
     def start(self, mean: np.ndarray, cov: np.ndarray) -> tuple:
@@ -349,7 +353,8 @@ class Tracker:
                 np.where(reset[..., None, None], fused_cov[..., None, :, :], modes.cov),
                 modes.prob,
             )
-        modes = imm_predict(modes, self.transition_matrix, self.mode_A, self.mode_Q)
+        motion = self.A if self.mode_A is None else self.mode_A
+        modes = imm_predict(modes, self.transition_matrix, motion, self.mode_Q)
         return (*combine(modes), modes)
 
 
