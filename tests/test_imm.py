@@ -42,6 +42,20 @@ def filterpy_imm(mean0, cov0, prob0, motions=(A, A), noises=QS, transition=T):
     return filterpy.IMMEstimator(filters, prob0.copy(), transition.copy())
 
 
+def update_both(oracle, ours, z, R):
+    """Update filterpy's IMM and ours with one measurement; the posteriors (mode
+    probabilities, combined mean and covariance) must agree to 1e-9."""
+    for f in oracle.filters:
+        f.R = R.copy()
+    oracle.update(z)
+    ours = estimation.imm_update(ours, np.array([True]), z[None], R[None])
+    mean, cov = estimation.combine(ours)
+    assert np.allclose(ours.prob[0], oracle.mu, rtol=1e-9, atol=1e-12)
+    assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
+    assert np.allclose(cov[0], oracle.P, rtol=1e-9, atol=1e-9)
+    return ours
+
+
 def test_the_imm_equals_filterpys_on_the_same_measurements(rng):
     mean0, cov0, prob0 = (
         np.array([1.0, -1.0, 0.0, 0.0]),
@@ -64,14 +78,7 @@ def test_the_imm_equals_filterpys_on_the_same_measurements(rng):
             oracle._compute_state_estimate()
             assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
             continue
-        for f in oracle.filters:
-            f.R = R.copy()
-        oracle.update(z)
-        ours = estimation.imm_update(ours, np.array([True]), z[None], R[None])
-        mean, cov = estimation.combine(ours)
-        assert np.allclose(ours.prob[0], oracle.mu, rtol=1e-9, atol=1e-12)
-        assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
-        assert np.allclose(cov[0], oracle.P, rtol=1e-9, atol=1e-9)
+        ours = update_both(oracle, ours, z, R)
     assert ours.prob[0, 1] > 0.3  # the stop made the manoeuvre mode likely at the end
 
 
@@ -273,14 +280,7 @@ def test_the_imm_with_turn_modes_equals_filterpys(rng):
     for z, R, _ in measurements(rng, 30):
         oracle.predict()
         ours = estimation.imm_predict(ours, T3, np.stack(motions), noises)
-        for f in oracle.filters:
-            f.R = R.copy()
-        oracle.update(z)
-        ours = estimation.imm_update(ours, np.array([True]), z[None], R[None])
-        mean, cov = estimation.combine(ours)
-        assert np.allclose(ours.prob[0], oracle.mu, rtol=1e-9, atol=1e-12)
-        assert np.allclose(mean[0], oracle.x, rtol=1e-9, atol=1e-9)
-        assert np.allclose(cov[0], oracle.P, rtol=1e-9, atol=1e-9)
+        ours = update_both(oracle, ours, z, R)
 
 
 def test_turn_rates_add_two_modes_each():
