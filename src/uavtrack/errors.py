@@ -32,6 +32,7 @@ EXTRAS = {
     "dask": '"dask[distributed]"',
     "env": "pettingzoo gymnasium",
     "flight": "jsbsim pymavlink",
+    "learn": "torch stable-baselines3 supersuit torchrl",
     "viz": "rerun-sdk",
 }
 """The packages of each optional extra (as pyproject.toml lists them)."""

@@ -26,7 +26,7 @@ from . import estimation, flight, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import Faults, trial_key
 from .flight.unicycle import Unicycle
-from .methods import Held, Inputs, Method, Setting, get
+from .methods import Assigned, Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
 from .world import initial_conditions, streams, trial_seed  # noqa: F401 (public here too)
@@ -288,11 +288,16 @@ class Pending:
     belief: tuple  # each UAV's own (mean, cov, modes) after its update, before fusion
 
 
-def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -> Pending:
+def decide(
+    state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context, plan: bool = True
+) -> Pending:
     """The first part of the cycle at step k = state.k for every trial: faults, sensing,
     local filters, fusion, planning and assignment.
 
     targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals.
+    plan=False stops after fusion, for agents that choose every action themselves: no
+    bids (NaN), no auction (no messages; every UAV keeps its last target) and the
+    method's own actions fly straight. What the UAVs sense and know is unchanged.
     """
     scenario, method, faults = ctx.scenario, ctx.method, ctx.faults
     k, uavs = state.k, state.uavs
@@ -316,6 +321,8 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
         ctx.setting,
     )
     fused = method.fuse(inputs)
+    if not plan:
+        return _unplanned(state, believed, alive, observed, radio, fused, belief)
     start = timing.start()
     bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
     plan_seconds = timing.since(start)
@@ -325,6 +332,19 @@ def decide(state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context) -
     return Pending(
         k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds, belief
     )
+
+
+def _unplanned(state, believed, alive, observed, radio, fused, belief) -> Pending:
+    B, Nu = alive.shape
+    nothing = np.zeros(B, dtype=np.int64)
+    keep = np.where(alive, state.target, -1)
+    assigned = Assigned(keep, np.zeros((B, Nu)), nothing, nothing, state.held)
+    bids = np.full(keep.shape + (state.mean.shape[2],), np.nan)
+    own = np.full((B, Nu), STRAIGHT)
+    return Pending(
+        state.k, state.uavs, believed, alive, observed, radio, fused, bids, assigned, own,
+        np.zeros(2), belief,
+    )  # fmt: skip
 
 
 def finish(

@@ -1,0 +1,127 @@
+"""B trials of a scenario stepped together: the simulator's own stages, the agents'
+actions. The parallel environment (B = 1) and the vector environment (B trials) are
+views of this one loop, so they cannot differ."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..config import Scenario
+from ..methods import Method
+from ..metrics import Tally
+from ..simulation import (
+    BatchResult,
+    Context,
+    Pending,
+    Recorder,
+    check_memory,
+    decide,
+    finish,
+    graph,
+    initial_state,
+    sensor_noise,
+)
+from .spaces import Spaces, View, rewards
+
+
+class Episodes:
+    """The trials of `seeds` from step 0: `step` flies the agents' actions through one
+    cycle and returns what they earn. `record` keeps `simulate`'s metrics and trace
+    (the parallel environment's `result()`); without it only the observation rate is
+    counted. plan=False skips the method's planning and assignment (`decide`): for
+    agents that choose every action, nothing to fly for them."""
+
+    def __init__(
+        self,
+        scenario: Scenario,
+        method: Method,
+        spaces: Spaces,
+        reward: str,
+        seeds: Sequence[np.random.SeedSequence],
+        record: bool = False,
+        plan: bool = True,
+    ) -> None:
+        check_memory(scenario, len(seeds), trace=record)
+        s = self.scenario = scenario
+        self.method, self.spaces, self.reward, self.seeds = method, spaces, reward, list(seeds)
+        self.plan = plan
+        self.ctx = Context.of(s, method, self.seeds)
+        self.state, self.trajectory, rngs = initial_state(s, self.seeds)
+        self.noises = sensor_noise(rngs, s.n_uavs, s.n_targets, s.steps)
+        B = len(self.seeds)
+        self.seen = np.zeros((B, s.n_targets))  # steps each target was in some UAV's view
+        self.tally = self.recorder = None
+        if record:
+            e = s.evaluation
+            self.tally = Tally(
+                B, s.n_uavs, s.n_targets, timed=B == 1, cutoff=e.ospa_cutoff, order=e.ospa_order
+            )
+            self.recorder = Recorder(s.steps, timed=B == 1)
+        self.pending: Pending | None = self._decide()
+
+    @property
+    def k(self) -> int:
+        """The step about to be flown (the steps flown so far)."""
+        return self.state.k
+
+    @property
+    def done(self) -> bool:
+        return self.pending is None
+
+    @property
+    def alive(self) -> np.ndarray:
+        """(B, Nu) the UAVs alive at the pending cycle (none once done)."""
+        if self.pending is None:
+            return np.zeros(self.state.alive.shape, dtype=bool)
+        return self.pending.alive
+
+    def step(self, actions: np.ndarray | None) -> np.ndarray:
+        """Fly `actions` (B, Nu) indices into the action set (None: the method's) and
+        return what they earn (B, Nu), read off the next cycle (0 after the last)."""
+        if self.pending is None:
+            raise RuntimeError("the episode is over: call reset()")
+        k, pending = self.state.k, self.pending
+        self.state, cycle = finish(self.state, pending, self.ctx, actions)
+        self.seen += pending.observed.any(axis=1)
+        if self.tally is not None:
+            self.tally.add(cycle, self.trajectory[:, k])
+            self.recorder.record(k, cycle)
+        self.pending = self._decide()
+        if self.pending is None:
+            return np.zeros(pending.alive.shape)
+        p = self.pending
+        return rewards(self.reward, p.observed, self.state.cov, p.belief[1])
+
+    def view(self) -> View:
+        """What the pending cycle shows; once done, the state flown to with its
+        predicted estimates (nothing in view)."""
+        p = self.pending
+        if p is not None:
+            links = graph(p.uavs, p.alive, self.scenario)
+            return View(p.k, p.believed, p.uavs, p.fused.mean, p.fused.cov, links, p.alive,
+                        p.observed)  # fmt: skip
+        s = self.state
+        links = graph(s.uavs, s.alive, self.scenario)
+        observed = np.zeros(s.mean.shape[:3], dtype=bool)
+        return View(s.k, s.uavs, s.uavs, s.mean, s.cov, links, s.alive, observed)
+
+    def observation_rate(self) -> np.ndarray:
+        """(B,) the observation rate of each trial over the steps flown."""
+        if self.k == 0:
+            raise RuntimeError("no step flown yet")
+        return (self.seen / self.k).mean(axis=-1)  # as metrics.Tally computes it
+
+    def batch_result(self) -> BatchResult:
+        """The steps flown as `simulation.run` reports them (record=True only)."""
+        if self.tally is None:
+            raise RuntimeError("these episodes keep no record (record=False)")
+        traces = self.recorder.traces(self.trajectory[:, : self.k])
+        return BatchResult(self.method.name, self.scenario, self.tally.summary(), traces)
+
+    def _decide(self) -> Pending | None:
+        k = self.state.k
+        if k >= self.scenario.steps:
+            return None
+        return decide(self.state, self.trajectory[:, k], next(self.noises), self.ctx, self.plan)
