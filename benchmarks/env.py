@@ -1,7 +1,7 @@
 """Throughput of the multi-agent environment: agent-steps per second of the single
 PettingZoo environment and of the vector environment at several batch sizes.
 
-    python benchmarks/env.py [--steps 60] [--repeats 3] [--out benchmarks/env-2core.json]
+    python benchmarks/env.py [--steps 60] [--repeats 3] [--out FILE]
 
 The paper's scenario (5 UAVs, 4 targets), Box observations, team reward, actions drawn
 at random (the same cost as any policy's). The vector environment is timed with the
@@ -67,13 +67,22 @@ def rate(runs: list[tuple[float, float]], agent_steps: int) -> dict[str, float]:
 
 
 def main() -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--steps", type=int, default=60)
-    parser.add_argument("--repeats", type=int, default=3)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/env-2core.json"))
+    parser = argparse.ArgumentParser(
+        description="Agent-steps per second of the single and the vector environment."
+    )
+    parser.add_argument("--steps", type=int, default=60, help="steps timed per run")
+    parser.add_argument("--repeats", type=int, default=3, help="runs per figure (median)")
+    parser.add_argument(
+        "--out",
+        type=Path,
+        default=Path(__file__).with_name("env-2core.json"),
+        help="the JSON to write (default: env-2core.json beside this script)",
+    )
     args = parser.parse_args()
     if args.steps < 1 or args.repeats < 1:
         parser.error("--steps and --repeats must be at least 1")
+    if not args.out.parent.is_dir():
+        parser.error(f"--out: no folder {args.out.parent}")
     single_runs, rows = [], []
     for trials in BATCHES:
         single_runs.append(single(args.steps))

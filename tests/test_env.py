@@ -319,6 +319,15 @@ def test_bad_input_is_named():
         env.step({"uav_0": 3})
     with pytest.raises(ValueError, match="unknown agent"):
         env.step({"uav_9": 1})
+    with pytest.raises(ValueError, match="unknown agent"):
+        env.observation_space("uav_9")
+    with pytest.raises(ValueError, match="seed must be a non-negative integer"):
+        env.reset(seed=-1)
+    failing = parallel_env(steps=5, faults={"failures": [[1, 1]]})
+    failing.reset(seed=0)
+    failing.step({})
+    with pytest.raises(ValueError, match="uav_1 is not acting"):
+        failing.step({"uav_1": 0})
     with pytest.raises(uavtrack.ScenarioError, match="steps"):
         parallel_env(steps=0)
     with pytest.raises(uavtrack.ScenarioError, match="steps"):

@@ -26,6 +26,13 @@ def single(seed, actions, **settings):
     return np.array(seen), np.array(earned), env.result().observation_rate
 
 
+def test_a_failed_uav_earns_nothing_in_the_batch():
+    v = vector_env(2, steps=12, faults={"failures": [[1, 5]]})
+    v.reset(seed=0)
+    earned = np.array([v.step(v.paper_actions())[1] for _ in range(12)])
+    assert not earned[5:, :, 1].any() and earned[5:-1, :, 0].any()
+
+
 def _dense(observations, agents, size):
     return np.stack([observations.get(a, np.zeros(size, np.float32)) for a in agents])
 
@@ -34,10 +41,15 @@ def _dense(observations, agents, size):
     "settings",
     [
         {},
-        {"faults": {"failures": [[1, 8]], "loss": 0.2}, "reward": "difference"},
-        {"tracker": {"model": "imm"}, "fusion": {"rule": "covariance_intersection"}},
+        {"faults": {"failures": [[1, 8]], "loss": 0.2}},
+        {"faults": {"failures": [[3, 5]]}, "reward": "information"},
+        {
+            "tracker": {"model": "imm"},
+            "fusion": {"rule": "covariance_intersection"},
+            "reward": "difference",
+        },
     ],
-    ids=["paper", "faults", "imm"],
+    ids=["paper", "faults", "failure-information", "imm-difference"],
 )
 def test_every_trial_is_the_single_environments(settings):
     B, T = 4, 20
@@ -53,7 +65,7 @@ def test_every_trial_is_the_single_environments(settings):
     for b in range(B):
         seen, reward, rate = single(11 + b, actions[:, b], steps=T, **settings)
         assert np.array_equal(got[:, b], seen), b
-        assert np.array_equal(earned[:, b], reward.astype(np.float32)), b
+        assert np.array_equal(earned[:, b], reward), b  # a failed UAV earns 0
         assert info["observation_rate"][b] == rate
 
 

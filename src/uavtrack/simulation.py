@@ -672,9 +672,10 @@ def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> Non
         "n_targets": "n_targets (or n_uavs)",
     }[field_]
     trials = f" for {batch} trials at once" if batch > 1 else ""
+    fewer = " or the trials run at once" if batch > 1 else ""
     raise ScenarioError(
         f"this run needs about {_size(need)} of memory{trials} and {_size(have)} are "
-        f"available; reduce {hint}"
+        f"available; reduce {hint}{fewer}"
     )
 
 

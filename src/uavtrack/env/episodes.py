@@ -92,7 +92,8 @@ class Episodes:
         if self.pending is None:
             return np.zeros(pending.alive.shape)
         p = self.pending
-        return rewards(self.reward, p.observed, self.state.cov, p.belief[1])
+        earned = rewards(self.reward, p.observed, self.state.cov, p.belief[1])
+        return np.where(pending.alive, earned, 0.0)  # a UAV already down did not act
 
     def view(self) -> View:
         """What the pending cycle shows; once done, the state flown to with its

@@ -71,7 +71,7 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
                         "TimeLimit.truncated": False,
                         "observation_rate": float(rate[i]),
                     }
-            return observations.reshape(n, -1), rewards.reshape(n), dones, infos
+            return observations.reshape(n, -1), rewards.reshape(n).astype(np.float32), dones, infos
 
         def close(self) -> None:
             vector.close()
@@ -158,7 +158,8 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
             self._fresh = done
             flags = torch.full((B, 1), done, dtype=torch.bool)
             out = self._out(flags, flags, observations, state)
-            out.set(("agents", "reward"), torch.from_numpy(rewards).reshape(B, N, 1))
+            reward = torch.from_numpy(rewards.astype(np.float32)).reshape(B, N, 1)
+            out.set(("agents", "reward"), reward)
             return out
 
         def _out(self, terminated, truncated, observations=None, state=None):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from typing import Any
 
+import gymnasium
 import numpy as np
 from gymnasium import spaces
 from pettingzoo import ParallelEnv
@@ -61,6 +62,14 @@ def scenario_of(
     return scenario
 
 
+def check_seed(seed: Any) -> None:
+    """Refuse a seed that is not a non-negative integer or None, in one line."""
+    if seed is None:
+        return
+    if isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
+        raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
+
+
 class UAVTrackingEnv(ParallelEnv):
     """See `uavtrack.env`."""
 
@@ -101,14 +110,15 @@ class UAVTrackingEnv(ParallelEnv):
         self._figure = None
 
     def observation_space(self, agent: str) -> spaces.Space:
-        return self.observation_spaces[agent]
+        return self.observation_spaces[self.possible_agents[self._agent(agent)]]
 
     def action_space(self, agent: str) -> spaces.Discrete:
-        return self.action_spaces[agent]
+        return self.action_spaces[self.possible_agents[self._agent(agent)]]
 
     # ------------------------------------------------------------------ episode
 
     def reset(self, seed: int | None = None, options: dict | None = None):
+        check_seed(seed)
         self._seed = seed
         seeds = [np.random.SeedSequence(seed)]
         self._run = Episodes(self.scenario, self.method, self.spaces, self.reward, seeds, True)
@@ -129,6 +139,8 @@ class UAVTrackingEnv(ParallelEnv):
         flown = self._run.pending.own.copy()
         for agent, action in actions.items():
             i = self._agent(agent)
+            if agent not in self.agents:
+                raise ValueError(f"{agent} is not acting: it has failed")
             if not self.action_spaces[agent].contains(action):
                 raise ValueError(f"{agent}: action {action!r} is not in Discrete(3)")
             flown[0, i] = int(action)
@@ -163,6 +175,7 @@ class UAVTrackingEnv(ParallelEnv):
         """The current step: drawn as `uavtrack animate` draws it ("rgb_array", and shown
         in a matplotlib window for "human"), or as a line of text ("ansi")."""
         if self.render_mode is None:
+            gymnasium.logger.warn("render() without a render_mode draws nothing: pass one")
             return None
         if self._run is None:
             raise RuntimeError("call reset() before render()")

@@ -20,7 +20,7 @@ from ..config import Scenario
 from ..methods import get
 from ..simulation import check_memory
 from .episodes import Episodes
-from .parallel import scenario_of
+from .parallel import check_seed, scenario_of
 from .spaces import Spaces, check_reward
 
 
@@ -101,10 +101,9 @@ class VectorEnv:
     def reset(self, seed: int | None = None) -> tuple[Any, dict[str, np.ndarray]]:
         """Start trials seed, seed + 1, ... seed + n_trials - 1 (None: from fresh
         entropy). Returns the observations (n_trials, Nu, ...) and the info."""
+        check_seed(seed)
         if seed is None:
             seed = int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
-        elif isinstance(seed, bool) or not isinstance(seed, int | np.integer) or seed < 0:
-            raise ValueError(f"seed must be a non-negative integer or None, got {seed!r}")
         self._start(int(seed))
         return self.observations(), self._info()
 
@@ -126,7 +125,7 @@ class VectorEnv:
             )
         if chosen.min() < 0 or chosen.max() > 2:
             raise ValueError("actions must be 0, 1 or 2 (indices into {-phi, 0, +phi})")
-        earned = self._run.step(chosen).astype(np.float32)
+        earned = self._run.step(chosen)
         done = self._run.done
         flags = np.full(shape, done)
         if not done:
