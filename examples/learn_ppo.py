@@ -2,7 +2,7 @@
 trained on the vector environment, then scored on held-out seeds against random bank
 angles, circling (always bank +phi) and the paper's method.
 
-    pip install torch==2.13.0 -e ".[learn]"      # torch first: the CPU build
+    pip install ".[learn]"                       # install your torch build first
     python examples/learn_ppo.py                 # about 20 minutes on 2 cores
     python examples/learn_ppo.py --via supersuit # the same through SuperSuit's wrappers
 

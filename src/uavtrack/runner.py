@@ -83,6 +83,24 @@ def checksum(body: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
+def read_jobs(root: str | Path) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
+    """The intact job files of a results folder, read only: (job, metrics) each, in the
+    order of their names. A file whose checksum fails is skipped (a later run of the
+    experiment computes it again); a folder without a manifest is refused in one line."""
+    root = Path(root).expanduser()
+    if not (root / "manifest.json").is_file():
+        raise UsageError(f"{root}: not a uavtrack results folder (no manifest.json)")
+    for path in sorted((root / "raw").glob("*.json")):
+        try:
+            record = json.loads(path.read_text(encoding="utf-8"))
+            body = {k: record[k] for k in ("job", "seconds", "metrics")}
+            intact = checksum(body) == record["sha256"]
+        except (OSError, ValueError, KeyError, TypeError):
+            intact = False
+        if intact:
+            yield body["job"], body["metrics"]
+
+
 class Store:
     """An experiment folder: manifest, finished jobs in raw/, failures in failed/.
 

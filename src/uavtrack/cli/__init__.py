@@ -23,7 +23,7 @@ from typer.exceptions import TyperException
 from .. import registry, threads
 from .._version import __version__
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
-from ..files import check_distinct, check_output, dumps, write_npz
+from ..files import check_distinct, check_output, dumps
 from ..progress import bar
 
 if TYPE_CHECKING:
@@ -351,7 +351,9 @@ def show(
     """Write the trace if asked, then print a run's metrics as a table (with more `rows`)
     or one JSON object (with `extra`, such as a swarm's traffic)."""
     if trace is not None:
-        write_npz(trace, result.trace.arrays())
+        from ..io import trace as trace_file
+
+        trace_file.write(trace, result)
     summary = result.summary()
     if as_json:
         summary["scenario"] = scenario.to_dict()
@@ -681,4 +683,4 @@ def interrupted(kept: str) -> int:
 
 
 # the other commands register themselves on `app`
-from . import benchmark, experiments, flight, robustness, swarm, trackers  # noqa: E402, F401
+from . import benchmark, experiments, export, flight, robustness, swarm, trackers  # noqa: E402, F401

@@ -1,0 +1,112 @@
+"""`uavtrack export`: a trace or a results folder as tidy tables (the io extra)."""
+
+from __future__ import annotations
+
+import enum
+import os
+import shutil
+import tempfile
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from ..errors import UsageError
+from ..files import check_output, replacing
+from . import app
+
+
+class Format(enum.StrEnum):
+    parquet = "parquet"
+    csv = "csv"
+    netcdf = "netcdf"
+
+
+@app.command()
+def export(
+    source: Annotated[
+        Path,
+        typer.Argument(
+            metavar="SOURCE",
+            help="a trace file (run --trace FILE.npz) or a results folder (reproduce, "
+            "sweep, robustness, trackers, flight)",
+        ),
+    ],
+    out: Annotated[
+        Path,
+        typer.Option(
+            "--out",
+            metavar="PATH",
+            help="a trace's parquet or csv tables: a new folder (steps, uavs, targets, pairs); "
+            "its netcdf: a file; a results folder's table: a file",
+        ),
+    ],
+    format_: Annotated[
+        Format, typer.Option("--format", help="parquet, csv, or netcdf (traces only)")
+    ] = Format.parquet,
+) -> None:
+    """Write a trace or a results folder as tidy tables for pandas, xarray or a spreadsheet."""
+    source = source.expanduser()
+    out = out.expanduser()
+    if not source.exists():
+        raise UsageError(f"SOURCE: {source} does not exist")
+    try:
+        from ..io import tables
+    except ImportError as exc:
+        raise UsageError(f"export: {exc}") from None
+    if source.is_dir():
+        if format_ is Format.netcdf:
+            raise UsageError("--format netcdf: a results folder exports as parquet or csv")
+        check_output(out, "--out")
+        frame = tables.results_frame(source)
+        if frame.empty:
+            raise UsageError(f"SOURCE: {source} holds no finished job yet")
+        with replacing(out) as tmp:
+            _write(frame, tmp, format_)
+        typer.echo(f"{len(frame)} trials written to {out}")
+        return
+    from ..io import trace as trace_file
+
+    saved = trace_file.read(source)
+    if format_ is Format.netcdf:
+        check_output(out, "--out")
+        dataset = tables.to_xarray(saved.trace, saved.scenario, saved.method, saved.seed)
+        with replacing(out) as tmp:
+            dataset.to_netcdf(tmp, engine="h5netcdf")
+        typer.echo(f"{source} written to {out} (netCDF 4)")
+        return
+    _check_new_folder(out)
+    frames = tables.to_frames(saved.trace, saved.dt)
+    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
+    try:
+        for name, frame in frames.items():
+            _write(frame, tmp / f"{name}.{format_.value}", format_)
+        os.chmod(tmp, 0o777 & ~_umask())
+        os.rename(tmp, out)
+    except BaseException:
+        shutil.rmtree(tmp, ignore_errors=True)
+        raise
+    rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
+    typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
+
+
+def _write(frame, path: Path, format_: Format) -> None:
+    if format_ is Format.parquet:
+        frame.to_parquet(path, index=False)
+    else:
+        frame.to_csv(path, index=False)
+
+
+def _check_new_folder(out: Path) -> None:
+    if out.exists():
+        raise UsageError(f"--out: {out} exists; give a new folder for the tables")
+    if not out.parent.is_dir():
+        raise UsageError(f"--out: directory {out.parent} does not exist")
+    if not os.access(out.parent, os.W_OK):
+        raise UsageError(f"--out: cannot write in directory {out.parent}")
+
+
+def _umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
