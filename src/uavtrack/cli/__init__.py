@@ -110,6 +110,31 @@ MethodOpt = Annotated[
     typer.Option(metavar="METHOD", help=", ".join(registry.names())),
 ]
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
+BagOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--bag",
+        metavar="DIR",
+        help="write the run as a ROS 2 bag (MCAP) in the new folder DIR (the io extra)",
+    ),
+]
+
+
+def check_bag(bag: Path | None) -> None:
+    """Refuse early a bag folder that cannot be made, and a missing io extra."""
+    if bag is None:
+        return
+    bag = bag.expanduser()
+    if bag.exists():
+        raise UsageError(f"--bag: {bag} exists; give a new folder for the bag")
+    if not bag.parent.is_dir():
+        raise UsageError(f"--bag: directory {bag.parent} does not exist")
+    try:
+        from ..io import bag as _  # noqa: F401
+    except ImportError as exc:
+        raise UsageError(f"--bag: {exc}") from None
+
+
 TrialStepsOpt = Annotated[
     int | None,
     typer.Option("--steps", min=1, metavar="N", help="steps of the trial [the scenario's]"),
@@ -286,6 +311,7 @@ def run(
         Path | None,
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
+    bag: BagOpt = None,
     rerun: Annotated[
         str | None,
         typer.Option(
@@ -302,9 +328,10 @@ def run(
     from ..simulation import simulate
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
-    check_distinct({"--trace": trace, "--rerun": rerun or None})
+    check_distinct({"--trace": trace, "--rerun": rerun or None, "--bag": bag})
     if trace is not None:
         check_output(trace, "--trace")
+    check_bag(bag)
     viewer = None
     if rerun is not None:
         if rerun and Path(rerun).suffix != ".rrd":
@@ -325,12 +352,12 @@ def run(
             scenario,
             method.value,
             seed=seed,
-            trace=trace is not None or viewer is not None,
+            trace=trace is not None or viewer is not None or bag is not None,
             progress=lambda _: advance(1),
         )
     if viewer is not None and rerun:
         viewer.save(result.trace, scenario, Path(rerun).expanduser(), f"{method.value}-{seed}")
-    show(result, scenario, seed, as_json, trace, source=source_of(config, set_, team))
+    show(result, scenario, seed, as_json, trace, source=source_of(config, set_, team), bag=bag)
     if viewer is not None and rerun:
         typer.echo(f"Rerun recording written to {rerun}", err=as_json)
     elif viewer is not None:
@@ -347,13 +374,18 @@ def show(
     title: str = "uavtrack run",
     rows: list[tuple[str, str]] | None = None,
     source: str = "",
+    bag: Path | None = None,
 ) -> None:
-    """Write the trace if asked, then print a run's metrics as a table (with more `rows`)
-    or one JSON object (with `extra`, such as a swarm's traffic)."""
+    """Write the trace and the bag if asked, then print a run's metrics as a table (with
+    more `rows`) or one JSON object (with `extra`, such as a swarm's traffic)."""
     if trace is not None:
         from ..io import trace as trace_file
 
         trace_file.write(trace, result)
+    if bag is not None:
+        from ..io.bag import write_bag
+
+        write_bag(bag, result.trace, scenario)
     summary = result.summary()
     if as_json:
         summary["scenario"] = scenario.to_dict()
@@ -391,6 +423,8 @@ def show(
     console().print(table)
     if trace is not None:
         typer.echo(f"trace written to {trace}")
+    if bag is not None:
+        typer.echo(f"ROS 2 bag written to {bag}")
 
 
 COMPARE_ROWS = (

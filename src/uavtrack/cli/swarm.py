@@ -13,8 +13,9 @@ from typing import Annotated
 import typer
 
 from ..errors import Interrupted, RunError, UsageError, install_hint
-from ..files import check_output
+from ..files import check_distinct, check_output
 from . import (
+    BagOpt,
     ConfigOpt,
     MethodName,
     MethodOpt,
@@ -23,6 +24,7 @@ from . import (
     TeamOpt,
     TrialStepsOpt,
     app,
+    check_bag,
     load_scenario,
     show,
     source_of,
@@ -151,6 +153,7 @@ def swarm(
         Path | None,
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
+    bag: BagOpt = None,
     listen: Annotated[
         str | None,
         typer.Option(
@@ -200,6 +203,8 @@ def swarm(
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     if trace is not None:
         check_output(trace, "--trace")
+    check_distinct({"--trace": trace, "--bag": bag})
+    check_bag(bag)
     zenoh_given = [zenoh_config, tls_ca, tls_cert, tls_key, keys]
     if transport == TransportName.memory and (
         listen is not None or connect or not spawn or any(x is not None for x in zenoh_given)
@@ -246,7 +251,7 @@ def swarm(
             connect=tuple(connect or ()),
             spawn=spawn,
             realtime=realtime,
-            trace=trace is not None,
+            trace=trace is not None or bag is not None,
             progress=lambda _: advance(1),
             announce=None if spawn else _announcer(n + central, sign, options.tls),
             sign=sign,
@@ -314,6 +319,7 @@ def swarm(
         title="uavtrack swarm",
         rows=rows,
         source=source_of(config, set_, team),
+        bag=bag,
     )
 
 

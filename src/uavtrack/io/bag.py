@@ -1,0 +1,246 @@
+"""A run as a ROS 2 bag (rosbag2 format 9, MCAP storage, ROS 2 Jazzy message types),
+written with rosbags (the io extra): what ``ros2 bag play``, Foxglove, RViz and
+PlotJuggler open.
+
+Time: the simulated clock, step k at k dt seconds (also on ``/clock``, for
+``use_sim_time``). Frame ``map``: x east, y north, z up [m] from the scenario's origin;
+GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
+`flight.mavlink.LocalFrame`). Topics:
+
+* ``/clock`` rosgraph_msgs/msg/Clock, each step;
+* ``/tf`` tf2_msgs/msg/TFMessage: ``map`` -> ``uav_i`` (position, heading as yaw, the
+  flown bank angle as roll) and ``map`` -> ``target_j`` (true position, course as yaw);
+* ``/uav_i/pose`` geometry_msgs/msg/PoseStamped and ``/uav_i/fix``
+  sensor_msgs/msg/NavSatFix, each UAV's true state, while it is alive;
+* ``/targets/truth`` visualization_msgs/msg/MarkerArray: a sphere per target;
+* ``/team/target_j/estimate`` geometry_msgs/msg/PoseWithCovarianceStamped: the team's
+  best estimate of target j (the most confident living UAV's, as the metrics take it),
+  its x-y covariance in the 6 x 6 (z known: 0; rotations unknown: 1e9);
+* ``/team/estimates`` MarkerArray: those estimates as 2-sigma ellipses (flat cylinders);
+* ``/team/assignments`` MarkerArray: a line from each UAV to its target's estimate;
+* ``/team/links`` MarkerArray: the radio links (3-D distance within r_C).
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import RunError, UsageError, install_hint
+
+try:
+    from rosbags.rosbag2 import StoragePlugin, Writer
+    from rosbags.typesys import Stores, get_typestore
+except ImportError as exc:  # an optional extra
+    raise ImportError(f"uavtrack.io.bag needs rosbags: {install_hint('io')} ({exc})") from None
+
+from ..flight.mavlink import LocalFrame
+from ..network import radio_links
+from .tables import team_best
+
+STORE = Stores.ROS2_JAZZY
+FRAME = "map"
+UNKNOWN = 1e9  # [rad^2] the variance of a rotation nobody estimates
+
+
+class _Messages:
+    """Builders of the messages the bag holds, from one typestore."""
+
+    def __init__(self) -> None:
+        self.store = get_typestore(STORE)
+        t = self.store.types
+        self.T = t
+        self.Time = t["builtin_interfaces/msg/Time"]
+        self.Duration = t["builtin_interfaces/msg/Duration"]
+        self.Header = t["std_msgs/msg/Header"]
+        self.Point = t["geometry_msgs/msg/Point"]
+        self.Quaternion = t["geometry_msgs/msg/Quaternion"]
+        self.Pose = t["geometry_msgs/msg/Pose"]
+        self.Vector3 = t["geometry_msgs/msg/Vector3"]
+        self.Color = t["std_msgs/msg/ColorRGBA"]
+
+    def header(self, ns: int, frame: str = FRAME):
+        return self.Header(stamp=self.Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame)
+
+    def quaternion(self, yaw: float, roll: float = 0.0):
+        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
+        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
+        # roll about x, then yaw about z (pitch 0): q = q_yaw q_roll
+        return self.Quaternion(x=sr * cy, y=sr * sy, z=cr * sy, w=cr * cy)
+
+    def pose(self, x: float, y: float, z: float, yaw: float, roll: float = 0.0):
+        return self.Pose(position=self.Point(x=x, y=y, z=z), orientation=self.quaternion(yaw, roll))
+
+    def marker(self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=()):
+        T = self.T
+        return T["visualization_msgs/msg/Marker"](
+            header=self.header(ns_time),
+            ns=ns,
+            id=ident,
+            type=kind,
+            action=0,
+            pose=pose,
+            scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]),
+            color=self.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+            lifetime=self.Duration(sec=0, nanosec=0),
+            frame_locked=False,
+            points=[self.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points],
+            colors=[],
+            texture_resource="",
+            texture=T["sensor_msgs/msg/CompressedImage"](
+                header=self.header(ns_time), format="", data=np.zeros(0, np.uint8)
+            ),
+            uv_coordinates=[],
+            text="",
+            mesh_resource="",
+            mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
+            mesh_use_embedded_materials=False,
+        )
+
+    def serialize(self, message) -> bytes:
+        return self.store.serialize_cdr(message, message.__msgtype__)
+
+
+def write_bag(
+    path: str | Path,
+    trace,
+    scenario,
+    origin: tuple[float, float] = (0.0, 0.0),
+) -> dict[str, int]:
+    """Write `trace` (of `scenario`) as a ROS 2 bag folder at `path`, which must not
+    exist; it appears only once complete. Returns the messages written per topic."""
+    path = Path(path).expanduser()
+    if path.exists():
+        raise UsageError(f"--bag: {path} exists; give a new folder for the bag")
+    if not path.parent.is_dir():
+        raise UsageError(f"--bag: directory {path.parent} does not exist")
+    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    try:
+        counts = _write(work / path.name, trace, scenario, origin)  # path.name.mcap inside
+        os.rename(work / path.name, path)
+    except OSError as exc:
+        raise RunError(f"cannot write the bag {path}: {exc.strerror or exc}") from None
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
+    return counts
+
+
+def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
+    m = _Messages()
+    T, Nu = trace.uavs.shape[:2]
+    Nt = trace.targets.shape[1]
+    dt_ns = int(round(scenario.dt * 1e9))
+    frame = LocalFrame(*origin)
+    east, north = frame.radii
+    best, best_mean = team_best(trace.mean, trace.cov, trace.alive)
+    links = radio_links(trace.uavs, trace.alive, scenario.comm_range, "dense").adjacency()
+    counts: dict[str, int] = {}
+    with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
+        connections = {}
+
+        def topic(name: str, msgtype: str):
+            if name not in connections:
+                connections[name] = writer.add_connection(name, msgtype, typestore=m.store)
+            return connections[name]
+
+        def write(name: str, message, ns: int) -> None:
+            writer.write(topic(name, message.__msgtype__), ns, m.serialize(message))
+            counts[name] = counts.get(name, 0) + 1
+
+        T_ = m.T
+        for k in range(T):
+            ns = k * dt_ns
+            stamp = m.header(ns).stamp
+            write("/clock", T_["rosgraph_msgs/msg/Clock"](clock=stamp), ns)
+            uavs, targets, alive = trace.uavs[k], trace.targets[k], trace.alive[k]
+            transforms = []
+            for i in np.flatnonzero(alive):
+                x, y, h, _, heading = (float(v) for v in uavs[i])
+                bank = float(trace.action[k, i])
+                pose = m.pose(x, y, h, heading, bank)
+                write(f"/uav_{i}/pose", T_["geometry_msgs/msg/PoseStamped"](
+                    header=m.header(ns), pose=pose), ns)  # fmt: skip
+                lat = origin[0] + math.degrees(y / north)
+                lon = origin[1] + math.degrees(x / east)
+                fix = T_["sensor_msgs/msg/NavSatFix"](
+                    header=m.header(ns, f"uav_{i}"),
+                    status=T_["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
+                    latitude=lat,
+                    longitude=lon,
+                    altitude=h,
+                    position_covariance=np.zeros(9),
+                    position_covariance_type=0,
+                )
+                write(f"/uav_{i}/fix", fix, ns)
+                transforms.append(_transform(m, ns, f"uav_{i}", x, y, h, heading, bank))
+            truth = []
+            for j in range(Nt):
+                x, y, vx, vy = (float(v) for v in targets[j])
+                course = math.atan2(vy, vx)
+                transforms.append(_transform(m, ns, f"target_{j}", x, y, 0.0, course))
+                truth.append(m.marker(ns, "truth", j, 2, m.pose(x, y, 0.0, course),
+                                      (4.0, 4.0, 4.0), (1.0, 0.2, 0.2, 1.0)))  # fmt: skip
+            write("/tf", T_["tf2_msgs/msg/TFMessage"](transforms=transforms), ns)
+            write("/targets/truth", T_["visualization_msgs/msg/MarkerArray"](markers=truth), ns)
+            ellipses = []
+            for j in np.flatnonzero(best[k] >= 0):
+                i = int(best[k, j])
+                P = trace.cov[k, i, j]
+                x, y = (float(v) for v in best_mean[k, j, :2])
+                covariance = np.zeros(36)
+                covariance[[0, 1, 6, 7]] = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
+                covariance[[21, 28, 35]] = UNKNOWN
+                estimate = T_["geometry_msgs/msg/PoseWithCovarianceStamped"](
+                    header=m.header(ns),
+                    pose=T_["geometry_msgs/msg/PoseWithCovariance"](
+                        pose=m.pose(x, y, 0.0, 0.0), covariance=covariance
+                    ),
+                )
+                write(f"/team/target_{j}/estimate", estimate, ns)
+                major, minor, angle = _ellipse(P[:2, :2])
+                ellipse = m.pose(x, y, 0.0, angle)
+                size = (4 * major, 4 * minor, 0.1)  # 2-sigma diameters
+                ellipses.append(m.marker(ns, "estimate", int(j), 3, ellipse, size,
+                                         (0.2, 0.6, 1.0, 0.5)))  # fmt: skip
+            write("/team/estimates", T_["visualization_msgs/msg/MarkerArray"](markers=ellipses), ns)
+            lines = []
+            for i in np.flatnonzero(alive & (trace.assignment[k] >= 0)):
+                j = int(trace.assignment[k, i])
+                if best[k, j] >= 0:
+                    lines += [uavs[i, :3], (*best_mean[k, j, :2], 0.0)]
+            write("/team/assignments", T_["visualization_msgs/msg/MarkerArray"](markers=[
+                m.marker(ns, "assignment", 0, 5, m.pose(0, 0, 0, 0), (0.5, 0, 0),
+                         (0.2, 0.9, 0.2, 0.8), lines)]), ns)  # fmt: skip
+            a, b = np.nonzero(np.triu(links[k], 1))
+            ends = [p for pair in zip(uavs[a, :3], uavs[b, :3], strict=True) for p in pair]
+            write("/team/links", T_["visualization_msgs/msg/MarkerArray"](markers=[
+                m.marker(ns, "link", 0, 5, m.pose(0, 0, 0, 0), (0.3, 0, 0),
+                         (0.9, 0.9, 0.9, 0.6), ends)]), ns)  # fmt: skip
+    return counts
+
+
+def _transform(m: _Messages, ns: int, child: str, x, y, z, yaw, roll=0.0):
+    T_ = m.T
+    return T_["geometry_msgs/msg/TransformStamped"](
+        header=m.header(ns),
+        child_frame_id=child,
+        transform=T_["geometry_msgs/msg/Transform"](
+            translation=m.Vector3(x=x, y=y, z=z), rotation=m.quaternion(yaw, roll)
+        ),
+    )
+
+
+def _ellipse(P: np.ndarray) -> tuple[float, float, float]:
+    """1-sigma semi-axes and the major axis's angle of a 2 x 2 covariance."""
+    values, vectors = np.linalg.eigh(P)
+    values = np.maximum(values, 0.0)
+    return (
+        float(math.sqrt(values[1])),
+        float(math.sqrt(values[0])),
+        float(math.atan2(vectors[1, 1], vectors[0, 1])),
+    )
