@@ -47,13 +47,44 @@ def test_a_saved_recording_holds_every_entity_for_every_step(tmp_path):
     for entity, steps in dynamic.items():
         assert sorted(steps) == list(range(25)), entity
     assert [dynamic["world/targets"][k] for k in range(25)] == [4] * 25
-    # UAV 3 fails at step 10: it leaves the picture
-    assert [dynamic["world/uavs"][k] for k in range(25)] == [5] * 10 + [4] * 15
+    # UAV 3 fails at step 10: every UAV keeps its instance, UAV 3 stays where it fell
+    assert [dynamic["world/uavs"][k] for k in range(25)] == [5] * 25
+    uavs = column(path, "world/uavs", "positions")
+    labels = column(path, "world/uavs", "labels")
+    for k in (5, 15, 24):
+        assert np.allclose(uavs[k], result.trace.uavs[k, :, :3], atol=1e-4)  # float32
+        assert labels[k][3] == ("U3" if k < 10 else "U3 (failed)") and labels[k][4] == "U4"
     tracking = (result.trace.assignment >= 0) & result.trace.alive
-    assert [dynamic["world/estimates/ellipses"][k] for k in range(25)] == list(tracking.sum(1))
+    centers = column(path, "world/estimates/ellipses", "centers")
+    drawn = [
+        int(np.isfinite(np.array(centers[k], dtype=float)).all(axis=1).sum()) for k in range(25)
+    ]
+    assert drawn == list(tracking.sum(1))  # what a UAV no longer has is NaN: not drawn
     links = np.triu(uavtrack.network.adjacency(result.trace.uavs, scenario.comm_range))
     links &= result.trace.alive[:, :, None] & result.trace.alive[:, None, :]
     assert [dynamic["world/links"].get(k, 0) for k in range(25)] == list(links.sum(axis=(1, 2)))
+
+
+def column(path, entity, name):
+    """step -> the rows of one component column of an entity."""
+    for chunk in RrdReader(path).store().stream():
+        if chunk.entity_path.lstrip("/") == entity and not chunk.is_static:
+            batch = chunk.to_record_batch()
+            wanted = next(n for n in batch.schema.names if n.split(":")[-1] == name)
+            steps = batch.column("step").to_pylist()
+            return dict(zip(steps, batch.column(wanted).to_pylist(), strict=True))
+    raise KeyError(entity)
+
+
+def test_recordings_of_different_runs_have_different_ids_and_a_top_view(tmp_path):
+    a, b = uavtrack.Scenario(steps=3), uavtrack.Scenario(steps=3, comm_range=80)
+    assert viewer.recording_id("distributed-0", a) != viewer.recording_id("distributed-0", b)
+    viewer.save(uavtrack.simulate(a, seed=0).trace, a, tmp_path / "a.rrd", "distributed-0")
+    reader = RrdReader(tmp_path / "a.rrd")
+    assert [r.recording_id for r in reader.recordings()] == [f"distributed-0-{a.digest()}"]
+    assert len(reader.blueprints()) == 1  # the default layout travels with the file
+    above = viewer.blueprint(a).root_container.contents[0]
+    assert above.name == "field from above" and "EyeControls3D" in above.properties
 
 
 def test_one_entity_per_kind_whatever_the_team(tmp_path):

@@ -8,7 +8,12 @@ series (observation rate so far, consensus rounds D_i, messages per step).
 
 Everything is logged in columns, one `send_columns` call per kind of thing over all the
 steps, and one entity per kind rather than one per UAV: the viewer stays usable with
-thousands of UAVs. Needs the viz extra (rerun-sdk).
+thousands of UAVs. Instance i of every UAV entity is UAV i at every step (a failed UAV
+stays, grey, where it fell; what it no longer has is NaN, which the viewer does not
+draw), and instance j of the targets is target j. The recording id names the method,
+the seed and the scenario's digest, so recordings of different runs open side by side.
+The default layout shows the field from above beside a 3-D view, and the time series.
+Needs the viz extra (rerun-sdk).
 """
 
 from __future__ import annotations
@@ -63,8 +68,8 @@ def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
     failed = None
     with replacing(path) as tmp:
         with _quiet_stderr():  # Rerun's writer logs its own failure: ours says it once
-            rec = rr.RecordingStream("uavtrack", recording_id=name)
-            rec.save(tmp)
+            rec = rr.RecordingStream("uavtrack", recording_id=recording_id(name, scenario))
+            rec.save(tmp, default_blueprint=blueprint(scenario))
             log(rec, trace, scenario)
             try:
                 rec.flush()
@@ -75,6 +80,36 @@ def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
         if failed is not None:
             why = "; the disk is full" if shutil.disk_usage(path.parent).free < 1 << 20 else ""
             raise RunError(f"cannot write {path}: Rerun's file writer stopped ({failed}){why}")
+
+
+def recording_id(name: str, scenario) -> str:
+    """A recording's id: its name (method-seed) and the scenario's digest."""
+    return f"{name}-{scenario.digest()}"
+
+
+def blueprint(scenario):
+    """The default layout: the field seen from straight above, a 3-D view and the time
+    series of the metrics."""
+    import rerun.blueprint as rrb
+
+    L = scenario.field_size
+    top = max(scenario.altitudes()) + 1.5 * L  # above every UAV, the field in view
+    above = rrb.EyeControls3D(
+        kind=rrb.Eye3DKind.FirstPerson,
+        position=(L / 2, L / 2, top),
+        look_target=(L / 2, L / 2, 0.0),
+        eye_up=(0.0, 1.0, 0.0),
+    )
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(name="field from above", origin="world", eye_controls=above),
+            rrb.Vertical(
+                rrb.Spatial3DView(name="3-D", origin="world"),
+                rrb.TimeSeriesView(name="metrics", origin="metrics"),
+            ),
+        ),
+        collapse_panels=True,
+    )
 
 
 @contextmanager
@@ -160,16 +195,17 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
     )
     where = uavs[..., :3]
     color = np.broadcast_to(colors, (T, nu, 3))
-    _send(
+    names = np.array([f"U{i}" for i in range(nu)])
+    _send(  # a failed UAV stays where it fell, grey
         rec,
         "world/uavs",
         steps,
-        alive,
+        np.ones((T, nu), dtype=bool),
         rr.Points3D,
         positions=where,
-        labels=np.broadcast_to(np.array([f"U{i}" for i in range(nu)]), (T, nu)),
-        colors=color,
-        radii=np.full((T, nu), 2.0),
+        labels=np.where(alive, names, np.char.add(names, " (failed)")),
+        colors=np.where(alive[..., None], color, np.uint8(150)),
+        radii=np.where(alive, 2.0, 1.0),
     )
     heading = uavs[..., 4]
     arrows = 15 * np.stack([np.cos(heading), np.sin(heading), np.zeros_like(heading)], axis=-1)
@@ -244,14 +280,25 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
         )
 
 
-def _send(rec, entity: str, steps, mask: np.ndarray, archetype, **fields) -> None:
-    """Per-step batches of the instances where `mask` (T, n) holds, as one column call."""
-    counts = mask.sum(axis=1)
-    picked = {name: np.asarray(value)[mask] for name, value in fields.items()}
+GEOMETRY = ("positions", "origins", "vectors", "centers", "half_sizes", "strips")
+"""The fields that place an instance: NaN where it is not drawn."""
+
+
+def _send(rec, entity: str, steps, shown: np.ndarray, archetype, **fields) -> None:
+    """Every instance (T, n) at every step, as one column call: instance i is always the
+    same UAV or target; where `shown` is False its geometry is NaN (not drawn)."""
+    T, n = shown.shape
+    picked = {}
+    for name, value in fields.items():
+        value = np.asarray(value)
+        if name in GEOMETRY and not shown.all():
+            hide = shown.reshape(shown.shape + (1,) * (value.ndim - 2))
+            value = np.where(hide, value, np.nan)
+        picked[name] = value.reshape((T * n,) + value.shape[2:])
     rec.send_columns(
         entity,
         indexes=[steps],
-        columns=archetype.columns(**picked).partition(counts),
+        columns=archetype.columns(**picked).partition(np.full(T, n)),
     )
 
 
