@@ -32,7 +32,13 @@ def main() -> int:
         print(f"program {spec['program']}: cannot join: {zenoh_reason(exc)}", file=sys.stderr)
         return 1
     try:
-        served = serve(transport, spec["run"], int(spec["program"]), credential=credential)
+        served = serve(
+            transport,
+            spec["run"],
+            int(spec["program"]),
+            credential=credential,
+            ros2=spec.get("ros2"),
+        )
     except KeyboardInterrupt:
         return 130
     finally:

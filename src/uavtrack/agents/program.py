@@ -62,11 +62,14 @@ def serve(
     wait: float = STARTUP,
     first: float | None = None,
     credential: Credential | None = None,
+    ros2: int | None = None,
 ) -> Served:
     """Run program `me` of swarm `run` to its end. wait: seconds to wait for the other
     programs and for each message of the run; first: for the world's first message
     (default `wait`); credential: this program's key (`security.Credential`), needed
-    when the run authenticates its members."""
+    when the run authenticates its members; ros2: a ROS 2 domain id, to publish a UAV's
+    pose and estimates as ROS 2 topics in rmw_zenoh's conventions (`io.ros2`; Zenoh
+    transport only)."""
     k_ = keys(run)
     gate = Gate(run, me, 0, credential)
     mailbox = Mailbox(gate, None, transport)
@@ -104,6 +107,23 @@ def serve(
         prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
         prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
         program = UavAgent(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
+    node = None
+    if ros2 is not None and me < n:
+        from ..io.ros2 import Node
+
+        node = Node(transport.session, ros2, me, scenario.n_targets, scenario.dt)
+    try:
+        return _cycles(transport, link, mailbox, program, node, run, me, n, programs,
+                       central, scenario, wait)  # fmt: skip
+    finally:
+        if node is not None:
+            node.close()
+
+
+def _cycles(transport, link, mailbox, program, node, run, me, n, programs, central, scenario,
+            wait) -> Served:  # fmt: skip
+    """The program's cycles, from meeting the others to the world's end."""
+    k_ = keys(run)
     transport.announce(f"{k_['alive']}{me}")
     if not meet(link, mailbox, me, programs, wait):
         return Served(0, scenario.steps, "world gone", 0, programs, central)
@@ -138,6 +158,9 @@ def serve(
         )
         counted = now
         link.send(WORLD, report)
+        if node is not None:
+            bank = program.ctx.const.actions[report.action]
+            node.publish(k, program.believed, bank, report.mean.array(), report.cov.array())
         ran += 1
     # stay until the world is done: closing at once could lose the last report in flight
     mailbox.wait(lambda: mailbox.world_gone, time.monotonic() + LINGER)

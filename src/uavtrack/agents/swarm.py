@@ -93,6 +93,7 @@ class Options:
     sign: bool = True
     keys: Path | None = None
     zenoh: ZenohOptions = field(default_factory=ZenohOptions)
+    ros2: int | None = None
 
 
 def run_swarm(
@@ -112,6 +113,7 @@ def run_swarm(
     sign: bool = True,
     keys: Path | None = None,
     zenoh: ZenohOptions | None = None,
+    ros2: int | None = None,
 ) -> SwarmResult:
     """Run one trial as a swarm of programs; its result equals `simulate`'s for the same
     scenario, method and seed (the same faults included).
@@ -122,7 +124,8 @@ def run_swarm(
     started with `uavtrack agent`; `announce` is told the run id, the endpoint and the
     key files written in `keys`); realtime: pace cycles at dt; startup: seconds to wait
     for the programs; sign: authenticate every message (`security`); zenoh: a Zenoh
-    configuration file and TLS files.
+    configuration file and TLS files; ros2: a ROS 2 domain id (0-232): every UAV program
+    also publishes its pose and estimates as ROS 2 topics (`io.ros2`, zenoh only).
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
@@ -132,6 +135,15 @@ def run_swarm(
             "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "
             "key files (or --no-sign)"
         )
+    if ros2 is not None:
+        if transport != "zenoh":
+            raise UsageError("--ros2 publishes over Zenoh: it needs --transport zenoh")
+        if isinstance(ros2, bool) or not isinstance(ros2, int) or not 0 <= ros2 <= 232:
+            raise UsageError(f"--ros2: a ROS 2 domain id is 0 to 232, got {ros2!r}")
+        try:
+            from ..io import ros2 as _  # noqa: F401
+        except ImportError as exc:
+            raise UsageError(f"--ros2: {exc}") from None
     run = secrets.token_hex(6)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
@@ -148,6 +160,7 @@ def run_swarm(
         sign,
         keys,
         zenoh or ZenohOptions(),
+        ros2,
     )
     keyring = Keyring(run, len(programs)) if sign else None
     go = _in_memory if transport == "memory" else _over_zenoh
@@ -221,6 +234,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
                     "zenoh": asdict(o.zenoh),
                     "credential": keyring.credential(me).to_json() if keyring else None,
                     "parent": os.getpid(),
+                    "ros2": o.ros2,
                 }
                 children.append(Child.start(me, spec))
 

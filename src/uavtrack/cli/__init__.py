@@ -120,6 +120,19 @@ BagOpt = Annotated[
 ]
 
 
+Ros2Opt = Annotated[
+    int | None,
+    typer.Option(
+        "--ros2",
+        min=0,
+        max=232,
+        metavar="DOMAIN",
+        help="zenoh: each UAV program also publishes its pose and estimates as ROS 2 topics "
+        "in rmw_zenoh's conventions, in this ROS 2 domain (0-232; the io extra)",
+    ),
+]
+
+
 def check_bag(bag: Path | None) -> None:
     """Refuse early a bag folder that cannot be made, and a missing io extra."""
     if bag is None:

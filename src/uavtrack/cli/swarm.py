@@ -19,6 +19,7 @@ from . import (
     ConfigOpt,
     MethodName,
     MethodOpt,
+    Ros2Opt,
     SeedOpt,
     SetOpt,
     TeamOpt,
@@ -154,6 +155,7 @@ def swarm(
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
     bag: BagOpt = None,
+    ros2: Ros2Opt = None,
     listen: Annotated[
         str | None,
         typer.Option(
@@ -257,6 +259,7 @@ def swarm(
             sign=sign,
             keys=keys,
             zenoh=options,
+            ros2=ros2,
         )
     import numpy as np  # not at import: `uavtrack bench` pins BLAS threads first
 
@@ -405,6 +408,7 @@ def agent(
     tls_ca: TlsCaOpt = None,
     tls_cert: TlsCertOpt = None,
     tls_key: TlsKeyOpt = None,
+    ros2: Ros2Opt = None,
 ) -> None:
     """Run one UAV's program and join a swarm started with `uavtrack swarm --no-spawn`
     (on this machine or another: give the world's reachable endpoint)."""
@@ -431,10 +435,15 @@ def agent(
     if not connect.strip():
         raise UsageError("--connect is empty; give the world's endpoint, such as tcp/HOST:7447")
     options = zenoh_options(zenoh_config, tls_ca, tls_cert, tls_key, [connect])
+    if ros2 is not None:
+        try:
+            from ..io import ros2 as _  # noqa: F401
+        except ImportError as exc:
+            raise UsageError(f"--ros2: {exc}") from None
     with results_only_on_stdout():
         transport = _join(connect, options)
         try:
-            served = serve(transport, run, uav, first=AGENT_WAIT, credential=credential)
+            served = serve(transport, run, uav, first=AGENT_WAIT, credential=credential, ros2=ros2)
         except KeyboardInterrupt:
             raise Interrupted("the program left the swarm") from None
         finally:

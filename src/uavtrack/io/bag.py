@@ -35,24 +35,22 @@ from ..errors import RunError, UsageError, install_hint
 
 try:
     from rosbags.rosbag2 import StoragePlugin, Writer
-    from rosbags.typesys import Stores, get_typestore
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.bag needs rosbags: {install_hint('io')} ({exc})") from None
 
 from ..flight.mavlink import LocalFrame
 from ..network import radio_links
+from .ros2 import estimate_of, pose_of, store
 from .tables import team_best
 
-STORE = Stores.ROS2_JAZZY
 FRAME = "map"
-UNKNOWN = 1e9  # [rad^2] the variance of a rotation nobody estimates
 
 
 class _Messages:
     """Builders of the messages the bag holds, from one typestore."""
 
     def __init__(self) -> None:
-        self.store = get_typestore(STORE)
+        self.store = store()
         t = self.store.types
         self.T = t
         self.Time = t["builtin_interfaces/msg/Time"]
@@ -67,14 +65,8 @@ class _Messages:
     def header(self, ns: int, frame: str = FRAME):
         return self.Header(stamp=self.Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame)
 
-    def quaternion(self, yaw: float, roll: float = 0.0):
-        cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
-        cr, sr = math.cos(roll / 2), math.sin(roll / 2)
-        # roll about x, then yaw about z (pitch 0): q = q_yaw q_roll
-        return self.Quaternion(x=sr * cy, y=sr * sy, z=cr * sy, w=cr * cy)
-
     def pose(self, x: float, y: float, z: float, yaw: float, roll: float = 0.0):
-        return self.Pose(position=self.Point(x=x, y=y, z=z), orientation=self.quaternion(yaw, roll))
+        return pose_of(x, y, z, yaw, roll)
 
     def marker(self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=()):
         T = self.T
@@ -189,18 +181,9 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             write("/targets/truth", T_["visualization_msgs/msg/MarkerArray"](markers=truth), ns)
             ellipses = []
             for j in np.flatnonzero(best[k] >= 0):
-                i = int(best[k, j])
-                P = trace.cov[k, i, j]
+                P = trace.cov[k, int(best[k, j]), j]
                 x, y = (float(v) for v in best_mean[k, j, :2])
-                covariance = np.zeros(36)
-                covariance[[0, 1, 6, 7]] = P[0, 0], P[0, 1], P[1, 0], P[1, 1]
-                covariance[[21, 28, 35]] = UNKNOWN
-                estimate = T_["geometry_msgs/msg/PoseWithCovarianceStamped"](
-                    header=m.header(ns),
-                    pose=T_["geometry_msgs/msg/PoseWithCovariance"](
-                        pose=m.pose(x, y, 0.0, 0.0), covariance=covariance
-                    ),
-                )
+                estimate = estimate_of(m.header(ns), best_mean[k, j], P)
                 write(f"/team/target_{j}/estimate", estimate, ns)
                 major, minor, angle = _ellipse(P[:2, :2])
                 ellipse = m.pose(x, y, 0.0, angle)
@@ -230,7 +213,7 @@ def _transform(m: _Messages, ns: int, child: str, x, y, z, yaw, roll=0.0):
         header=m.header(ns),
         child_frame_id=child,
         transform=T_["geometry_msgs/msg/Transform"](
-            translation=m.Vector3(x=x, y=y, z=z), rotation=m.quaternion(yaw, roll)
+            translation=m.Vector3(x=x, y=y, z=z), rotation=pose_of(x, y, z, yaw, roll).orientation
         ),
     )
 
