@@ -413,3 +413,16 @@ def test_a_swarm_killed_while_starting_takes_its_programs_with_it():
     proc.wait()
     # the kernel's parent-death signal ends them at once; the watch within a second
     assert wait_until(lambda: not any(alive(p) for p in programs), limit=30)
+
+
+def test_the_message_schema_page_is_what_the_code_says():
+    from pathlib import Path
+
+    from uavtrack.agents import messages
+    from uavtrack.agents.schema import document
+
+    page = Path(__file__).parent.parent / "docs" / "agents-messages.md"
+    assert page.read_text() == document(), "run: python -m uavtrack.agents.schema > " + str(page)
+    assert f"schema version {messages.VERSION}" in page.read_text()
+    for cls in messages.Message.__args__:  # every message and every field is on the page
+        assert f"### `{cls.__struct_config__.tag}`" in page.read_text()
