@@ -32,7 +32,7 @@ EXTRAS = {
     "dask": '"dask[distributed]"',
     "env": "pettingzoo gymnasium",
     "flight": "jsbsim pymavlink",
-    "io": "xarray pandas pyarrow h5netcdf h5py",
+    "io": "xarray pandas pyarrow h5netcdf h5py rosbags",
     "learn": "torch stable-baselines3 supersuit torchrl",
     "viz": "rerun-sdk",
 }

@@ -130,7 +130,6 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
     frame = LocalFrame(*origin)
     east, north = frame.radii
     best, best_mean = team_best(trace.mean, trace.cov, trace.alive)
-    links = radio_links(trace.uavs, trace.alive, scenario.comm_range, "dense").adjacency()
     counts: dict[str, int] = {}
     with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {}
@@ -199,7 +198,9 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             write("/team/assignments", T_["visualization_msgs/msg/MarkerArray"](markers=[
                 m.marker(ns, "assignment", 0, 5, m.pose(0, 0, 0, 0), (0.5, 0, 0),
                          (0.2, 0.9, 0.2, 0.8), lines)]), ns)  # fmt: skip
-            a, b = np.nonzero(np.triu(links[k], 1))
+            step = slice(k, k + 1)  # one step at a time: memory of one graph
+            links = radio_links(trace.uavs[step], trace.alive[step], scenario.comm_range, "dense")
+            a, b = np.nonzero(np.triu(links.adjacency()[0], 1))
             ends = [p for pair in zip(uavs[a, :3], uavs[b, :3], strict=True) for p in pair]
             write("/team/links", T_["visualization_msgs/msg/MarkerArray"](markers=[
                 m.marker(ns, "link", 0, 5, m.pose(0, 0, 0, 0), (0.3, 0, 0),
