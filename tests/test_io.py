@@ -60,7 +60,7 @@ def test_a_file_that_is_no_trace_is_named(tmp_path):
     with pytest.raises(UsageError, match="not a uavtrack trace file, missing"):
         trace_file.read(tmp_path / "old.npz")
     (tmp_path / "text.npz").write_text("hello")
-    with pytest.raises(UsageError, match="not a uavtrack trace file"):
+    with pytest.raises(UsageError, match="not a NumPy .npz archive"):
         trace_file.read(tmp_path / "text.npz")
 
 
@@ -98,7 +98,7 @@ def test_tidy_tables_read_back_by_pandas(tmp_path, saved, capsys, result):
     assert pair.P_x_vy == result.trace.cov[7, 0, 2, 0, 3]
     assert pair.est_vx == result.trace.mean[7, 0, 2, 2]
     # the paper's metric and the team's best estimate, recomputed from the tables alone
-    rate = targets.groupby("step")["observed"].mean().mean()
+    rate = targets.groupby("step").in_view.mean().mean()
     assert rate == pytest.approx(result.observation_rate, abs=1e-12)
     err2 = (targets.best_x - targets.x) ** 2 + (targets.best_y - targets.y) ** 2
     assert np.sqrt(err2.mean()) == pytest.approx(result.rmse_best, rel=1e-9)
@@ -117,7 +117,7 @@ def test_a_results_folder_becomes_one_row_per_trial(tmp_path, capsys):
     )  # fmt: skip
     assert code == 0, err
     out = tmp_path / "trials.csv"
-    assert run_cli(capsys, "export", folder, "--format", "csv", "--out", out)[0] == 0
+    assert run_cli(capsys, "export", folder, "--out", out)[0] == 0  # csv, by its suffix
     rows = pd.read_csv(out)
     assert len(rows) == 2 * 2 * 3  # values x methods x trials
     assert set(rows["planner.horizon"]) == {2.0, 3.0}
@@ -126,6 +126,14 @@ def test_a_results_folder_becomes_one_row_per_trial(tmp_path, capsys):
     for method, per_value in summary["methods"].items():
         for value, described in zip(summary["values"], per_value, strict=True):
             assert means[(method, value)] == pytest.approx(described["mean"], abs=1e-12)
+    # a job file changed by hand is left out, and said so
+    victim = sorted((folder / "raw").glob("*greedy*.json"))[0]
+    record = json.loads(victim.read_text())
+    record["metrics"]["observation_rate"][0] = 1.0  # without a new checksum
+    victim.write_text(json.dumps(record))
+    code, _, err = run_cli(capsys, "export", folder, "--out", tmp_path / "again.parquet")
+    assert code == 0 and "left out 1 job file(s) that fail their checksum" in err
+    assert len(pd.read_parquet(tmp_path / "again.parquet")) == 2 * 2 * 3 - 3
 
 
 def test_export_refuses_bad_input_and_leaves_nothing(tmp_path, saved, capsys):
@@ -136,6 +144,9 @@ def test_export_refuses_bad_input_and_leaves_nothing(tmp_path, saved, capsys):
         ((saved, "--out", tmp_path / "no" / "b"), "does not exist"),
         ((saved, "--format", "xlsx", "--out", tmp_path / "c"), "xlsx"),
         ((tmp_path, "--format", "netcdf", "--out", tmp_path / "d.nc"), "parquet or csv"),
+        ((saved, "--format", "csv", "--out", tmp_path / "e.csv"), "go in a folder"),
+        ((saved, "--format", "csv", "--out", tmp_path / "f.parquet"), "names parquet"),
+        ((tmp_path / "taken", "--out", tmp_path / "g.csv"), "no manifest.json"),
     ]
     before = sorted(p.name for p in tmp_path.iterdir())
     for args, message in cases:

@@ -83,10 +83,13 @@ def checksum(body: dict[str, Any]) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def read_jobs(root: str | Path) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
+def read_jobs(
+    root: str | Path, left_out: list[str] | None = None
+) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
     """The intact job files of a results folder, read only: (job, metrics) each, in the
-    order of their names. A file whose checksum fails is skipped (a later run of the
-    experiment computes it again); a folder without a manifest is refused in one line."""
+    order of their names. A file whose checksum fails is skipped and its name appended to
+    `left_out` (a later run of the experiment computes it again); a folder without a
+    manifest is refused in one line."""
     root = Path(root).expanduser()
     if not (root / "manifest.json").is_file():
         raise UsageError(f"{root}: not a uavtrack results folder (no manifest.json)")
@@ -99,6 +102,8 @@ def read_jobs(root: str | Path) -> Iterator[tuple[dict[str, Any], dict[str, Any]
             intact = False
         if intact:
             yield body["job"], body["metrics"]
+        elif left_out is not None:
+            left_out.append(path.name)
 
 
 class Store:

@@ -42,14 +42,20 @@ def export(
         ),
     ],
     format_: Annotated[
-        Format, typer.Option("--format", help="parquet, csv, or netcdf (traces only)")
-    ] = Format.parquet,
+        Format | None,
+        typer.Option(
+            "--format",
+            help="parquet, csv, or netcdf (traces only) [default: from --out's suffix "
+            "(.parquet, .csv, .nc), else parquet]",
+        ),
+    ] = None,
 ) -> None:
     """Write a trace or a results folder as tidy tables for pandas, xarray or a spreadsheet."""
     source = source.expanduser()
     out = out.expanduser()
     if not source.exists():
         raise UsageError(f"SOURCE: {source} does not exist")
+    format_ = _format(out, format_)
     try:
         from ..io import tables
     except ImportError as exc:
@@ -59,8 +65,16 @@ def export(
             raise UsageError("--format netcdf: a results folder exports as parquet or csv")
         check_output(out, "--out")
         frame = tables.results_frame(source)
+        left_out = frame.attrs.get("left_out", [])
+        if left_out:
+            typer.echo(
+                f"uavtrack: left out {len(left_out)} job file(s) that fail their checksum "
+                f"({', '.join(left_out[:3])}{', ...' if len(left_out) > 3 else ''}); run the "
+                "experiment's command again to compute them anew",
+                err=True,
+            )
         if frame.empty:
-            raise UsageError(f"SOURCE: {source} holds no finished job yet")
+            raise UsageError(f"SOURCE: {source} holds no intact finished job")
         with replacing(out) as tmp:
             _write(frame, tmp, format_)
         typer.echo(f"{len(frame)} trials written to {out}")
@@ -75,6 +89,11 @@ def export(
             dataset.to_netcdf(tmp, engine="h5netcdf")
         typer.echo(f"{source} written to {out} (netCDF 4)")
         return
+    if out.suffix in SUFFIXES:
+        raise UsageError(
+            f"--out: a trace's {format_.value} tables go in a folder; give a name without "
+            f"{out.suffix}"
+        )
     _check_new_folder(out)
     frames = tables.to_frames(saved.trace, saved.dt)
     tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
@@ -88,6 +107,20 @@ def export(
         raise
     rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
     typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
+
+
+SUFFIXES = {".parquet": Format.parquet, ".pq": Format.parquet, ".csv": Format.csv,
+            ".nc": Format.netcdf}  # fmt: skip
+
+
+def _format(out: Path, given: Format | None) -> Format:
+    """The format asked for, or the one --out's suffix names; refused if they differ."""
+    named = SUFFIXES.get(out.suffix.lower())
+    if given is None:
+        return named or Format.parquet
+    if named is not None and named is not given:
+        raise UsageError(f"--out {out} names {named.value}, but --format is {given.value}")
+    return given
 
 
 def _write(frame, path: Path, format_: Format) -> None:

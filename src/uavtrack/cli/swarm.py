@@ -255,7 +255,9 @@ def swarm(
             realtime=realtime,
             trace=trace is not None or bag is not None,
             progress=lambda _: advance(1),
-            announce=None if spawn else _announcer(n + central, sign, options.tls),
+            announce=_ros2_announcer(ros2, n, scenario.n_targets)
+            if spawn
+            else _announcer(n + central, sign, options.tls, ros2),
             sign=sign,
             keys=keys,
             zenoh=options,
@@ -348,12 +350,29 @@ def reachable(endpoint: str) -> list[str]:
     return [a for a in addresses if a not in loopback] + loopback or [endpoint]
 
 
-def _announcer(programs: int, sign: bool, tls: bool):
+def _ros2_announcer(domain: int | None, n_uavs: int, n_targets: int):
+    """What a ROS 2 user needs to hear a swarm with --ros2: the domain, the endpoint."""
+    if domain is None:
+        return None
+
+    def announce(run: str, endpoint: str, written: list[Path]) -> None:
+        typer.echo(
+            f"ROS 2 (rmw_zenoh): domain {domain}, Zenoh endpoint {endpoint}; topics "
+            f"/uav_I/pose and /uav_I/target_J/estimate (I < {n_uavs}, J < {n_targets})",
+            err=True,
+        )
+
+    return announce
+
+
+def _announcer(programs: int, sign: bool, tls: bool, ros2: int | None = None):
     tail = " --tls-ca CA --tls-cert CERT --tls-key KEY" if tls else ""
+    ros2_tail = f" --ros2 {ros2}" if ros2 is not None else ""
 
     def announce(run: str, endpoint: str, written: list[Path]) -> None:
         where = reachable(endpoint)
         typer.echo(f"run {run}; world at {', '.join(where)}", err=True)
+        tail_ = tail + ros2_tail
         if sign:
             folder = written[0].parent if written else Path(".")
             typer.echo(
@@ -362,13 +381,13 @@ def _announcer(programs: int, sign: bool, tls: bool):
                 err=True,
             )
             typer.echo(
-                f"  uavtrack agent --key {run}-I.key --connect {where[0]}{tail}   (I = 0 .. "
+                f"  uavtrack agent --key {run}-I.key --connect {where[0]}{tail_}   (I = 0 .. "
                 f"{programs - 1})",
                 err=True,
             )
         else:
             typer.echo(
-                f"  uavtrack agent --run {run} --uav I --connect {where[0]}{tail}   (I = 0 .. "
+                f"  uavtrack agent --run {run} --uav I --connect {where[0]}{tail_}   (I = 0 .. "
                 f"{programs - 1})",
                 err=True,
             )

@@ -4,13 +4,13 @@ results folder as one row per trial. Needs the io extra (xarray, pandas, pyarrow
 Tables (one row per ...):
 
 * ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of targets in
-  some UAV's disk), alive (UAVs alive);
+  some UAV's disk), alive_uavs (how many);
 * ``uavs``: step and UAV: its true state (x, y, altitude [m], speed [m/s], heading
   [rad]), alive, assignment (-1: failed), bank_angle [rad], rounds, decision times [ms];
-* ``targets``: step and target: its true state (x, y [m], vx, vy [m/s]), observed (by
+* ``targets``: step and target: its true state (x, y [m], vx, vy [m/s]), in_view (of
   some UAV), the team's best estimate (best_x ... best_vy, from best_uav, the most
   confident living UAV, 1/trace P; -1 and NaN when every UAV has failed);
-* ``pairs``: step, UAV and target: observed, bid, the UAV's fused estimate (est_x ...
+* ``pairs``: step, UAV and target: in_view (of this UAV), bid, the UAV's fused estimate (est_x ...
   est_vy) and the 10 entries of its covariance's upper triangle (P_x_x, P_x_y, ...).
 
 A failed UAV's estimate, covariance and bid are NaN from the step it fails (its state
@@ -73,12 +73,21 @@ def to_xarray(
     for i, name in enumerate(UAV_STATE):
         variables[f"uav_{name}"] = (su, trace.uavs[..., i], _attrs(f"true UAV {name}", name))
     variables["observed"] = (sut, trace.observed, {"description": docs["observed"]})
-    variables["estimate"] = (sut + ("state",), trace.mean, {"description": docs["mean"]})
-    variables["covariance"] = (sut + ("state", "state_"), trace.cov, {"description": docs["cov"]})
+    mixed = "m and m/s by state (x, y: m; vx, vy: m/s)"
+    variables["estimate"] = (
+        sut + ("state",),
+        trace.mean,
+        {"description": docs["mean"], "units": mixed},
+    )
+    variables["covariance"] = (
+        sut + ("state", "state_"), trace.cov,
+        {"description": docs["cov"], "units": "products of the states' units"},
+    )  # fmt: skip
     variables["bid"] = (sut, trace.bids, {"description": docs["bids"]})
     for name, dims in (("assignment", su), ("rounds", su), ("alive", su),
                        ("decision_time_ms", su), ("decision_wall_ms", su)):  # fmt: skip
-        variables[name] = (dims, getattr(trace, name), {"description": docs[name]})
+        units = {"units": "ms"} if name.startswith("decision") else {}
+        variables[name] = (dims, getattr(trace, name), {"description": docs[name], **units})
     variables["bank_angle"] = (su, trace.action, {"description": docs["action"], "units": "rad"})
     for name in ("messages", "delivered", "conflicts"):
         variables[name] = (step, getattr(trace, name), {"description": docs[name]})
@@ -120,7 +129,7 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
             "delivered": trace.delivered,
             "conflicts": trace.conflicts,
             "in_view": trace.observed.any(axis=1).mean(axis=1),
-            "alive": trace.alive.sum(axis=1),
+            "alive_uavs": trace.alive.sum(axis=1),
         }
     )
     k, i = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nu), indexing="ij"))
@@ -140,7 +149,7 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
     targets = {"step": k, "time": time[k], "target": j}
     for c, name in enumerate(TARGET_STATE):
         targets[name] = trace.targets[..., c].ravel()
-    targets["observed"] = trace.observed.any(axis=1).ravel()
+    targets["in_view"] = trace.observed.any(axis=1).ravel()
     targets["best_uav"] = best.ravel()
     for c, name in enumerate(TARGET_STATE):
         targets[f"best_{name}"] = best_mean[..., c].ravel()
@@ -148,7 +157,7 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
         a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nu), np.arange(Nt), indexing="ij")
     )
     pairs = {"step": k, "time": time[k], "uav": i, "target": j}
-    pairs["observed"] = trace.observed.ravel()
+    pairs["in_view"] = trace.observed.ravel()
     pairs["bid"] = trace.bids.ravel()
     for c, name in enumerate(TARGET_STATE):
         pairs[f"est_{name}"] = trace.mean[..., c].ravel()
@@ -180,13 +189,15 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
     """A results folder (``reproduce``, ``sweep``, ``robustness``, ``trackers``,
     ``flight``) as one row per trial: kind, label (the scenario's difference from the
     experiment's base, ``default`` for none), one column per field the label sets (its
-    value, the base scenario's where the label leaves it), method, trial, seed of the
-    plan, then every scalar metric (NaN where the metric was not computed)."""
+    value, the base scenario's where the label leaves it), method, trial, plan_seed (the
+    experiment's seed: trial t ran with ``uavtrack.trial_seed(plan_seed, t)``), then every
+    scalar metric (NaN where the metric was not computed). Job files whose checksum fails
+    are left out and named in ``frame.attrs["left_out"]``."""
     from ..runner import read_jobs
 
     base = _base_scenario(Path(folder))
-    rows = []
-    for job, metrics in read_jobs(Path(folder)):
+    rows, left_out = [], []
+    for job, metrics in read_jobs(Path(folder), left_out):
         count = int(job["count"])
         scalars = {
             name: np.array([np.nan if v is None else v for v in values], dtype=float)
@@ -196,17 +207,21 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
         settings = parse_label(job["label"])
         for t in range(count):
             row = {"kind": job["kind"], "label": job["label"], **settings}
-            row.update(method=job["method"], trial=int(job["first"]) + t, seed=job["seed"])
+            row.update(method=job["method"], trial=int(job["first"]) + t, plan_seed=job["seed"])
             row.update({name: values[t] for name, values in scalars.items()})
             rows.append(row)
     if not rows:
-        return pd.DataFrame()
+        frame = pd.DataFrame()
+        frame.attrs["left_out"] = left_out
+        return frame
     frame = pd.DataFrame(rows)
     set_fields = [c for c in frame.columns if "." in c or c in Scenario.model_fields]
     for name in set_fields:  # the value the base scenario gives where a label leaves it
         default = _plain(base.value(name)) if base is not None else None
         frame[name] = [default if v is None or v != v else v for v in frame[name]]
-    return frame.sort_values(["kind", "label", "method", "trial"], ignore_index=True)
+    frame = frame.sort_values(["kind", "label", "method", "trial"], ignore_index=True)
+    frame.attrs["left_out"] = left_out
+    return frame
 
 
 def _base_scenario(folder: Path) -> Scenario | None:

@@ -60,6 +60,8 @@ def read(path: str | Path) -> TraceFile:
     path = Path(path).expanduser()
     if not path.is_file():
         raise UsageError(f"{path}: no such trace file")
+    if not zipfile.is_zipfile(path):
+        raise UsageError(f"{path}: not a uavtrack trace file (not a NumPy .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as data:
             arrays = {name: data[name] for name in data.files}
