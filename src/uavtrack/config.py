@@ -4,7 +4,7 @@ Each field states its unit and its source: a paper equation or section, or
 "assumed" with the reason. The paper (Sec. 7) gives V, k_d, k_r, k_theta,
 sigma_1, sigma_2, the team sizes, r_C, the FOV, trials and steps, and the shape of
 the action set; everything else is an assumption, chosen for physical consistency
-(see the README's parameter table).
+(see the documentation's Parameters page).
 """
 
 from __future__ import annotations
@@ -116,7 +116,8 @@ class UAVModel(_Part):
         description=(
             "mean flight altitude [m], (0, 20000]; assumed: the observation radius h tan(alpha) "
             "must exceed the turn radius for a UAV to orbit a target in view (37 m against "
-            "23 m at 425 m); calibrated with dt against the paper's Fig. 5 (see README)"
+            "23 m at 425 m); calibrated with dt against the paper's Fig. 5 (see the docs, "
+            "Calibration)"
         ),
     )
     altitude_spacing: Float = Field(
@@ -163,7 +164,7 @@ class UAVModel(_Part):
         description=(
             "the JSBSim model flown with uav.dynamics = jsbsim; beyond the paper: trackwing "
             "(uavtrack's 2.5 kg UAV, trimmed at 15 m/s), a model shipped with JSBSim, or the "
-            "folder of another model; its autopilot must answer uavtrack's (README, Real flight)"
+            "folder of another model; its autopilot must answer uavtrack's (docs, Real flight)"
         ),
     )
     jsbsim_rate_hz: Float = Field(
@@ -344,7 +345,7 @@ class TrackerModel(_Part):
             "white-acceleration std of each further IMM mode [m/s^2], each in (0, 100], 1 to "
             "5 modes; assumed: 0.5 m/s^2 covers the manoeuvring targets' turns and stops, "
             "2.3 m/s^2 a reflection at a wall; tuned on 16 trials of each target motion for "
-            "a mean NEES near 4 (README, Trackers)"
+            "a mean NEES near 4 (docs, Trackers)"
         ),
     )
     turn_rates_deg: tuple[Annotated[Float, Field(gt=0, le=90)], ...] = Field(
@@ -353,7 +354,7 @@ class TrackerModel(_Part):
         description=(
             "turn rates of further IMM modes [deg/s], each in (0, 90], at most 3: each adds "
             "two coordinated-turn modes (left and right at that known rate, the paper's "
-            "noise), after the manoeuvre modes; none by default (README, Trackers, measures "
+            "noise), after the manoeuvre modes; none by default (docs, Trackers, measures "
             "them against the noise-only modes)"
         ),
     )
@@ -652,7 +653,7 @@ class Scenario(_Part):
         description=(
             "time step Delta T [s], (0, 10]; assumed: 2 Hz decisions, a common rate for small "
             "fixed-wing UAVs; the paper does not give it; calibrated with uav.altitude against "
-            "the paper's Fig. 5 (see README)"
+            "the paper's Fig. 5 (see the docs, Calibration)"
         ),
     )
     comm_range: Float = Field(
@@ -806,7 +807,7 @@ class Scenario(_Part):
           start with every UAV in radio range of a hundred others at 1000 UAVs.
 
         Everything else is unchanged. Assumed (the paper runs one team size); the
-        README's Performance section measures with it.
+        documentation's Performance page measures with it.
         """
         for name, value in (("n_uavs", n_uavs), ("n_targets", n_targets)):
             if not isinstance(value, Integral) or isinstance(value, bool) or value < 1:

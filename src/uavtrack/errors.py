@@ -30,6 +30,7 @@ EXTRAS = {
     "agents": "eclipse-zenoh",
     "bench": "filterpy pyinstrument",
     "dask": '"dask[distributed]"',
+    "docs": "mkdocs mkdocs-material mkdocstrings[python]",
     "env": "pettingzoo gymnasium",
     "flight": "jsbsim pymavlink",
     "io": "xarray pandas pyarrow h5netcdf h5py rosbags",

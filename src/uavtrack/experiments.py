@@ -42,7 +42,7 @@ PAPER_FIG5 = {
 
 FIRST_GUESS = {"dt": 1.0, "uav.altitude": 500.0}
 """The two calibrated parameters at their first guess, before the calibration against
-Fig. 5 (README, "Calibration"); the reproduction runs it beside the defaults."""
+Fig. 5 (docs, "Calibration"); the reproduction runs it beside the defaults."""
 
 SENSITIVITY: dict[str, tuple[Any, ...]] = {
     "dt": (0.25, 1.0),

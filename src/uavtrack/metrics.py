@@ -31,7 +31,8 @@ METRICS: dict[str, tuple[str, str]] = {
     "in_view_std": (
         "",
         "standard deviation over the steps of the fraction of targets in view, whose mean "
-        "over the steps is the observation rate (one reading of the paper's σ, see README)",
+        "over the steps is the observation rate (one reading of the paper's σ, see the docs, "
+        "Spread)",
     ),
     "rmse": (
         "m",

@@ -228,7 +228,9 @@ class Cycle:
         "(Nu,)", "consensus rounds the UAV ran (D_i, plus robust.extra_rounds)", np.int64
     )
     messages: np.ndarray = _record(
-        "()", "radio messages sent, all protocols (see README, Messages)", np.int64
+        "()",
+        "radio messages sent, all protocols (see the documentation, Performance: messages)",
+        np.int64,
     )
     delivered: np.ndarray = _record("()", "radio messages that arrived", np.int64)
     conflicts: np.ndarray = _record(

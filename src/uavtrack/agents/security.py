@@ -22,7 +22,8 @@ grows; a receiver keeps a window of the last `WINDOW` numbers per sender and dro
 number seen before (a replay) or older than the window. Messages to different receivers
 are separate messages (the radio delivers to each receiver what it can hear), so pairwise
 keys cost one keyed hash per message instead of a public-key signature (about 2 us
-against 130 us to verify Ed25519 on the 2-core machine; see README, Trust).
+against 130 us to verify Ed25519 on the 2-core machine; see the docs, the agent form,
+Trust).
 
 What this does not do: hide the messages from the network (use TLS, `--tls-*`: mutual
 TLS lets only holders of a certificate of the swarm's CA connect at all), or keep a

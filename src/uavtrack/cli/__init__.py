@@ -72,7 +72,7 @@ def _root(
         ),
     ] = False,
 ) -> None:
-    """Distributed multi-UAV cooperative multi-target tracking (see README.md)."""
+    """Distributed multi-UAV cooperative multi-target tracking (docs: the docs/ folder)."""
 
 
 MethodName = StrEnum("MethodName", {name: name for name in registry.names()})

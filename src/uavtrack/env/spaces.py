@@ -36,7 +36,7 @@ REWARDS = {
     "targets' positions, 1/2 log det(P-) / det(P+) summed over its targets [nats] (the "
     "det G of the Fisher information the planner scores, as a gain over the prior)",
 }
-"""Reward options, by name: what an action at cycle k earns (see README, Learning)."""
+"""Reward options, by name: what an action at cycle k earns (see the docs, The environment)."""
 
 UAV_STATE = ("alive", "x", "y", "cos_heading", "sin_heading", "speed", "altitude")
 OWN = UAV_STATE + ("progress",)

@@ -1,0 +1,65 @@
+"""MkDocs hooks: pages generated from the code at build time, so that they cannot drift.
+
+* ``<!-- scenario-fields -->``: every scenario field with its default, unit, range and
+  source (`uavtrack.Scenario.describe`);
+* ``<!-- cli-help -->``: the help of every command (`uavtrack <command> --help`);
+* ``<!-- metrics -->``: every metric with its unit and meaning (`uavtrack.metrics.METRICS`).
+"""
+
+from __future__ import annotations
+
+import io
+import json
+from contextlib import redirect_stdout
+
+
+def on_page_markdown(markdown: str, page, config, files) -> str:
+    if "<!-- scenario-fields -->" in markdown:
+        markdown = markdown.replace("<!-- scenario-fields -->", scenario_fields())
+    if "<!-- cli-help -->" in markdown:
+        markdown = markdown.replace("<!-- cli-help -->", cli_help())
+    if "<!-- metrics -->" in markdown:
+        markdown = markdown.replace("<!-- metrics -->", metrics())
+    return markdown
+
+
+def _cell(text: str) -> str:
+    return str(text).replace("|", "\\|").replace("\n", " ")
+
+
+def scenario_fields() -> str:
+    import uavtrack
+
+    rows = ["| field | default | unit, range and source |", "|---|---|---|"]
+    for name, value, doc in uavtrack.Scenario().describe():
+        shown = json.dumps(value) if not isinstance(value, str) else value
+        rows.append(f"| `{name}` | `{_cell(shown)}` | {_cell(doc)} |")
+    return "\n".join(rows)
+
+
+def metrics() -> str:
+    from uavtrack.metrics import METRICS
+
+    rows = ["| metric | unit | meaning |", "|---|---|---|"]
+    rows += [f"| `{n}` | {_cell(u) or '-'} | {_cell(d)} |" for n, (u, d) in METRICS.items()]
+    return "\n".join(rows)
+
+
+def cli_help() -> str:
+    import os
+
+    from uavtrack import cli
+
+    os.environ.setdefault("COLUMNS", "100")
+    os.environ["NO_COLOR"] = "1"
+    names = sorted(c.name or c.callback.__name__ for c in cli.app.registered_commands)
+    out = []
+    for name in names:
+        buffer = io.StringIO()
+        with redirect_stdout(buffer):
+            try:
+                cli.main([name, "--help"])
+            except SystemExit:
+                pass
+        out += [f"### `uavtrack {name}`", "", "```text", buffer.getvalue().rstrip(), "```", ""]
+    return "\n".join(out)
