@@ -152,6 +152,49 @@ def manifest_of(kind: str, seed: int, profile, scenario) -> dict:
     return {"kind": kind, "seed": seed, "plan": profile.to_dict(), "scenario": scenario.to_dict()}
 
 
+def run_experiment(
+    kind: str,
+    experiment,
+    scenario,
+    options: dict,
+    figures,
+    draw,
+    write_report,
+    before=None,
+):
+    """The body every experiment command shares: size the profile from --quick,
+    --trials and --steps, plan the jobs, run them into the folder, and write
+    summary.json, the figures (`draw(summary, out)`) and report.md
+    (`write_report(summary, scenario, info)`). `experiment` is the experiment's module
+    (Profile, plan, summarize); `figures(jobs)` names the figures the folder will hold;
+    `before(scenario)` adds to the summary what is measured before the jobs (a dict).
+    `options`: the command's quick, trials, steps, config, set_, seed, out, engine,
+    workers, address and progress. Returns the summary, the folder and the run's info."""
+    o = options
+    steps = explicit_steps(o["config"], o["set_"], o["steps"])
+    quick = o["quick"]
+    profile = sized(
+        experiment.Profile.quick() if quick else experiment.Profile(), o["trials"], steps
+    )
+    out = o["out"] or Path("results") / (f"{kind}-quick" if quick else kind)
+    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
+    seed = o["seed"]
+    jobs = experiment.plan(scenario, profile, seed)
+    manifest = manifest_of(kind, seed, profile, scenario)
+    measured = before(scenario) if before is not None else {}
+    run = run_jobs(jobs, out, manifest, o["engine"], o["workers"], o["address"], o["progress"],
+                   figures(jobs))  # fmt: skip
+    with run as (results, info):
+        info["seed"] = seed
+        summary = experiment.summarize(jobs, results, profile, scenario)
+        summary.update(measured)
+        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
+        write_json(out / "summary.json", summary)
+        draw(summary, out)
+        write_text(out / "report.md", write_report(summary, scenario, info))
+    return summary, out, info
+
+
 def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | None) -> int | None:
     """Steps asked for by ``--steps``, ``--set steps=`` or the config file, in that order;
     two of them that disagree are refused."""

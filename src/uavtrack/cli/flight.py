@@ -8,7 +8,6 @@ from typing import Annotated
 import typer
 
 from ..errors import UsageError
-from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
@@ -18,11 +17,8 @@ from .experiments import (
     SeedOpt,
     StepsOpt,
     WorkersOpt,
-    explicit_steps,
-    manifest_of,
     refuse_set,
-    run_jobs,
-    sized,
+    run_experiment,
 )
 
 
@@ -74,24 +70,16 @@ def flight(
     Scenario().with_overrides(experiment.JSBSIM, origin="uavtrack flight")  # JSBSim there?
     scenario = load_scenario(config, set_, team)
     refuse_set(scenario, own, "flight", "uav.dynamics, planner.wind and the wind")
-    steps = explicit_steps(config, set_, steps)
-    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
-    out = out or Path("results") / ("flight-quick" if quick else "flight")
-    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
-    jobs = experiment.plan(scenario, profile, seed)
-    manifest = manifest_of("flight", seed, profile, scenario)
-    autopilot = experiment.characterise(scenario, 10.0 if quick else 60.0, seed)
-    with run_jobs(jobs, out, manifest, engine, workers, address, progress, ["flight.png"]) as (
-        results,
-        info,
-    ):
-        info["seed"] = seed
-        summary = experiment.summarize(jobs, results, profile, scenario)
-        summary["autopilot"] = autopilot
-        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
-        write_json(out / "summary.json", summary)
-        experiment.figure(summary, out / "flight.png")
-        write_text(out / "report.md", experiment.report(summary, scenario, info))
+    summary, out, info = run_experiment(
+        "flight",
+        experiment,
+        scenario,
+        dict(locals()),  # the command's options, by name
+        lambda jobs: ["flight.png"],
+        lambda summary, out: experiment.figure(summary, out / "flight.png"),
+        experiment.report,
+        before=lambda s: {"autopilot": experiment.characterise(s, 10.0 if quick else 60.0, seed)},
+    )
     _print(summary, out, info)
 
 

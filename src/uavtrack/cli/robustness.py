@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
@@ -17,11 +16,8 @@ from .experiments import (
     SeedOpt,
     StepsOpt,
     WorkersOpt,
-    explicit_steps,
-    manifest_of,
     refuse_set,
-    run_jobs,
-    sized,
+    run_experiment,
 )
 
 
@@ -58,23 +54,15 @@ def robustness(
 
     scenario = load_scenario(config, set_, team)
     refuse_set(scenario, ("faults.", "robust."), "robustness", "the faults and the robust options")
-    steps = explicit_steps(config, set_, steps)
-    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
-    out = out or Path("results") / ("robustness-quick" if quick else "robustness")
-    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
-    jobs = experiment.plan(scenario, profile, seed)
-    manifest = manifest_of("robustness", seed, profile, scenario)
-    figures = [f"fault_{name}.png" for name in jobs if name != "ablation"]
-    with run_jobs(jobs, out, manifest, engine, workers, address, progress, figures) as (
-        results,
-        info,
-    ):
-        info["seed"] = seed
-        summary = experiment.summarize(jobs, results, profile, scenario)
-        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
-        write_json(out / "summary.json", summary)
-        plots.robustness_figures(summary, out)
-        write_text(out / "report.md", report.robustness(summary, scenario, info))
+    summary, out, info = run_experiment(
+        "robustness",
+        experiment,
+        scenario,
+        dict(locals()),  # the command's options, by name
+        lambda jobs: [f"fault_{name}.png" for name in jobs if name != "ablation"],
+        plots.robustness_figures,
+        report.robustness,
+    )
     _print(summary, out, info)
 
 

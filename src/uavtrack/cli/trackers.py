@@ -7,7 +7,6 @@ from typing import Annotated
 
 import typer
 
-from ..files import write_json, write_text
 from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
@@ -17,11 +16,8 @@ from .experiments import (
     SeedOpt,
     StepsOpt,
     WorkersOpt,
-    explicit_steps,
-    manifest_of,
     refuse_set,
-    run_jobs,
-    sized,
+    run_experiment,
 )
 
 
@@ -63,22 +59,15 @@ def trackers(
         "trackers",
         "target.motion, the tracker and fusion.rule",
     )
-    steps = explicit_steps(config, set_, steps)
-    profile = sized(experiment.Profile.quick() if quick else experiment.Profile(), trials, steps)
-    out = out or Path("results") / ("trackers-quick" if quick else "trackers")
-    scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
-    jobs = experiment.plan(scenario, profile, seed)
-    manifest = manifest_of("trackers", seed, profile, scenario)
-    with run_jobs(jobs, out, manifest, engine, workers, address, progress, ["trackers.png"]) as (
-        results,
-        info,
-    ):
-        info["seed"] = seed
-        summary = experiment.summarize(jobs, results, profile, scenario)
-        summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
-        write_json(out / "summary.json", summary)
-        experiment.figure(summary, out / "trackers.png")
-        write_text(out / "report.md", experiment.report(summary, scenario, info))
+    summary, out, info = run_experiment(
+        "trackers",
+        experiment,
+        scenario,
+        dict(locals()),  # the command's options, by name
+        lambda jobs: ["trackers.png"],
+        lambda summary, out: experiment.figure(summary, out / "trackers.png"),
+        experiment.report,
+    )
     _print(summary, out, info)
 
 
