@@ -1,7 +1,9 @@
 """MkDocs hooks: pages generated from the code at build time, so that they cannot drift.
 
-* ``<!-- scenario-fields -->``: every scenario field with its default, unit, range and
-  source (`uavtrack.Scenario.describe`);
+* the table between ``<!-- scenario-fields: begin -->`` and ``<!-- scenario-fields: end -->``
+  in reference/scenario.md: every scenario field with its default, unit, range and source
+  (`uavtrack.Scenario.describe`), kept in the file so that it reads in the repository too
+  (``python docs/hooks.py`` writes it; a test checks that it is current);
 * ``<!-- cli-help -->``: the help of every command (`uavtrack <command> --help`);
 * ``<!-- metrics -->``: every metric with its unit and meaning (`uavtrack.metrics.METRICS`).
 """
@@ -14,8 +16,6 @@ from contextlib import redirect_stdout
 
 
 def on_page_markdown(markdown: str, page, config, files) -> str:
-    if "<!-- scenario-fields -->" in markdown:
-        markdown = markdown.replace("<!-- scenario-fields -->", scenario_fields())
     if "<!-- cli-help -->" in markdown:
         markdown = markdown.replace("<!-- cli-help -->", cli_help())
     if "<!-- metrics -->" in markdown:
@@ -63,3 +63,22 @@ def cli_help() -> str:
                 pass
         out += [f"### `uavtrack {name}`", "", "```text", buffer.getvalue().rstrip(), "```", ""]
     return "\n".join(out)
+
+
+BEGIN, END = "<!-- scenario-fields: begin -->", "<!-- scenario-fields: end -->"
+
+
+def write_scenario_fields(path) -> None:
+    """Put the current table between the markers of `path` (reference/scenario.md)."""
+    from pathlib import Path
+
+    text = Path(path).read_text()
+    head, rest = text.split(BEGIN)
+    _, tail = rest.split(END)
+    Path(path).write_text(f"{head}{BEGIN}\n{scenario_fields()}\n{END}{tail}")
+
+
+if __name__ == "__main__":
+    from pathlib import Path
+
+    write_scenario_fields(Path(__file__).parent / "reference" / "scenario.md")

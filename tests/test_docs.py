@@ -21,6 +21,17 @@ def test_the_readme_is_short_and_starts_with_the_two_commands():
     assert lines[4].startswith('pip install -e ".[test]" && pytest')
 
 
+def test_the_scenario_fields_page_is_current():
+    sys.path.insert(0, str(DOCS))
+    try:
+        import hooks
+    finally:
+        sys.path.remove(str(DOCS))
+    page = (DOCS / "reference" / "scenario.md").read_text()
+    table = page.split(hooks.BEGIN)[1].split(hooks.END)[0].strip()
+    assert table == hooks.scenario_fields(), "run: python docs/hooks.py"
+
+
 def test_every_link_of_the_readme_resolves():
     text = (ROOT / "README.md").read_text()
     links = re.findall(r"\]\(([^)#]+)(?:#[^)]*)?\)", text)
