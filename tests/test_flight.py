@@ -77,7 +77,7 @@ def test_a_steady_coordinated_turn_turns_at_g_tan_phi_over_v(bank_deg):
 
 def test_the_bank_is_reached_within_half_a_cycle_or_so():
     # the roll response from level to 45 deg: 63% of the step within 0.35 s, 95% within
-    # 0.8 s (the README's roll times come from `uavtrack flight`, which measures them)
+    # 0.8 s (the documented roll times come from `uavtrack flight`, which measures them)
     scenario, aircraft = fleet({"dt": 0.05})
     alive = np.ones((1, 1), dtype=bool)
     uavs, bank = aircraft.states(), []

@@ -203,7 +203,7 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         PAPER_NOTE,
         "",
         "Every parameter of the scenario; those marked *assumed* are not in the paper "
-        "(see the README for the reasons and the calibration).",
+        "(see the documentation, Parameters, for the reasons and the calibration).",
         "",
     ]
     out += parameter_table(scenario)
@@ -220,7 +220,7 @@ def _spreads(c: dict[str, Any], paper: dict[str, Any]) -> list[str]:
         "The paper does not say what its σ is taken over. Our standard deviation three ways: "
         "over trials of a trial's rate (the table above), over (trial, target) pairs of a "
         "target's rate, and over (trial, step) pairs of the fraction of targets in view "
-        '(README, "Spread"):',
+        '(documentation, "Spread"):',
         "",
         "| method | σ over trials | σ over (trial, target) | σ over (trial, step) | paper σ |",
         "|---|---|---|---|---|",
@@ -243,7 +243,7 @@ def _first_guess(summary: dict[str, Any], paper: dict[str, Any]) -> list[str]:
     lines = [
         "**The agreement above is conditional on two calibrated values.** The paper does not "
         "give the time step or the altitude; both were chosen by comparing the three rates "
-        f'with Fig. 5 (README, "Calibration"). The first guess before that ({changed}), on '
+        f'with Fig. 5 (documentation, "Parameters"). The first guess before that ({changed}), on '
         "the same trials:",
         "",
         "| method | calibrated (this run) | first guess | paper |",
