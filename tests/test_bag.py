@@ -59,9 +59,9 @@ def test_poses_and_fixes_are_the_trace(run):
 
 def test_estimates_carry_the_teams_best_and_its_covariance(run):
     trace, path, _ = run
-    from uavtrack.io.tables import team_best
+    from uavtrack.metrics import team_best
 
-    best, mean = team_best(trace.mean, trace.cov, trace.alive)
+    best, mean, _ = team_best(trace.mean, trace.cov, trace.alive)
     estimates = messages(path, "/team/target_2/estimate")
     assert len(estimates) == 24
     t, msg = estimates[15]

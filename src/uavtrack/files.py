@@ -12,6 +12,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import shutil
 import tempfile
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -73,6 +74,33 @@ def check_distinct(outputs: dict[str, str | Path | None]) -> None:
         if where in seen:
             raise UsageError(f"{seen[where]} and {option} name the same file {path}; give two")
         seen[where] = option
+
+
+def check_new_folder(path: str | Path, option: str, what: str) -> Path:
+    """Refuse early an output folder that exists or cannot be made: one line naming
+    `option` (``--bag``) and `what` goes in it (``the bag``)."""
+    path = Path(path).expanduser()
+    if path.exists():
+        raise UsageError(f"{option}: {path} exists; give a new folder for {what}")
+    if not path.parent.is_dir():
+        raise UsageError(f"{option}: directory {path.parent} does not exist")
+    if not os.access(path.parent, os.W_OK):
+        raise UsageError(f"{option}: cannot write in directory {path.parent}")
+    return path
+
+
+@contextmanager
+def new_folder(path: str | Path) -> Iterator[Path]:
+    """Yield a path, not yet made, in a temporary folder beside `path`: the caller makes
+    the folder there and fills it; on success it is renamed to `path`, which appears
+    only complete. On any exception nothing is left."""
+    path = Path(path)
+    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    try:
+        yield work / path.name
+        os.rename(work / path.name, path)
+    finally:
+        shutil.rmtree(work, ignore_errors=True)
 
 
 @contextmanager

@@ -97,6 +97,24 @@ METRICS: dict[str, tuple[str, str]] = {
 """Per-trial metrics: name -> (unit, meaning)."""
 
 
+def team_best(mean: np.ndarray, cov: np.ndarray, alive: np.ndarray):
+    """The team's best estimate of each target, as `Tally` takes it: the most confident
+    living UAV's (1/trace P, the lowest index on ties). mean (..., Nu, Nt, 4), cov (...,
+    Nu, Nt, 4, 4), alive (..., Nu). Returns the UAV (..., Nt) (-1 when none is alive),
+    its estimate (..., Nt, 4) and covariance (..., Nt, 4, 4) (NaN then)."""
+    gamma = np.where(alive[..., None], confidence(cov), -np.inf)
+    gamma = np.where(np.isnan(gamma), -np.inf, gamma)
+    best = np.argmax(gamma, axis=-2)  # (..., Nt)
+    chosen = np.take_along_axis(mean, best[..., None, :, None], axis=-3)[..., 0, :, :]
+    P = np.take_along_axis(cov, best[..., None, :, None, None], axis=-4)[..., 0, :, :, :]
+    anyone = alive.any(axis=-1)[..., None]
+    return (
+        np.where(anyone, best, -1),
+        np.where(anyone[..., None], chosen, np.nan),
+        np.where(anyone[..., None, None], P, np.nan),
+    )
+
+
 @dataclass
 class Tally:
     """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets), fed

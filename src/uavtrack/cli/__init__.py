@@ -23,7 +23,7 @@ from typer.exceptions import TyperException
 from .. import registry, threads
 from .._version import __version__
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
-from ..files import check_distinct, check_output, dumps
+from ..files import check_distinct, check_new_folder, check_output, dumps
 from ..progress import bar
 
 if TYPE_CHECKING:
@@ -137,11 +137,7 @@ def check_bag(bag: Path | None) -> None:
     """Refuse early a bag folder that cannot be made, and a missing io extra."""
     if bag is None:
         return
-    bag = bag.expanduser()
-    if bag.exists():
-        raise UsageError(f"--bag: {bag} exists; give a new folder for the bag")
-    if not bag.parent.is_dir():
-        raise UsageError(f"--bag: directory {bag.parent} does not exist")
+    check_new_folder(bag, "--bag", "the bag")
     try:
         from ..io import bag as _  # noqa: F401
     except ImportError as exc:

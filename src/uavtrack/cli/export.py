@@ -3,16 +3,13 @@
 from __future__ import annotations
 
 import enum
-import os
-import shutil
-import tempfile
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
 from ..errors import UsageError
-from ..files import check_output, replacing
+from ..files import check_new_folder, check_output, new_folder, replacing
 from . import app
 
 
@@ -94,17 +91,12 @@ def export(
             f"--out: a trace's {format_.value} tables go in a folder; give a name without "
             f"{out.suffix}"
         )
-    _check_new_folder(out)
+    check_new_folder(out, "--out", "the tables")
     frames = tables.to_frames(saved.trace, saved.dt)
-    tmp = Path(tempfile.mkdtemp(dir=out.parent, prefix=f".{out.name}."))
-    try:
+    with new_folder(out) as folder:
+        folder.mkdir()
         for name, frame in frames.items():
-            _write(frame, tmp / f"{name}.{format_.value}", format_)
-        os.chmod(tmp, 0o777 & ~_umask())
-        os.rename(tmp, out)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
+            _write(frame, folder / f"{name}.{format_.value}", format_)
     rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
     typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
 
@@ -128,18 +120,3 @@ def _write(frame, path: Path, format_: Format) -> None:
         frame.to_parquet(path, index=False)
     else:
         frame.to_csv(path, index=False)
-
-
-def _check_new_folder(out: Path) -> None:
-    if out.exists():
-        raise UsageError(f"--out: {out} exists; give a new folder for the tables")
-    if not out.parent.is_dir():
-        raise UsageError(f"--out: directory {out.parent} does not exist")
-    if not os.access(out.parent, os.W_OK):
-        raise UsageError(f"--out: cannot write in directory {out.parent}")
-
-
-def _umask() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return mask

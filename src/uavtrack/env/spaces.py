@@ -20,6 +20,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import Scenario
+from ..metrics import team_best
 
 BOUND = 10.0
 """Every entry of a Box observation or state lies in [-BOUND, BOUND] (clipped)."""
@@ -213,14 +214,9 @@ class Spaces:
         in it, 1/trace P) and whether any UAV sees it."""
         B, Nu = view.alive.shape
         uav_rows = self._uav_rows(view.uavs, view.alive)
-        trace = np.trace(view.cov, axis1=-2, axis2=-1)
-        usable = view.alive[..., None] & np.isfinite(trace) & np.isfinite(view.mean).all(axis=-1)
-        best = np.argmin(np.where(usable, trace, np.inf), axis=1)  # (B, Nt)
-        pick = lambda x: np.take_along_axis(x, best[:, None, :, None], axis=1)[:, 0]  # noqa: E731
-        m = pick(view.mean)
-        P = pick(view.cov.reshape(view.cov.shape[:3] + (16,)))
-        present = usable.any(axis=1)
-        sigma2 = (P[..., 0] + P[..., 5]) / 2
+        best, m, P = team_best(view.mean, view.cov, view.alive)
+        present = best >= 0
+        sigma2 = (P[..., 0, 0] + P[..., 1, 1]) / 2
         target_rows = np.stack(
             [
                 present.astype(np.float64),
@@ -253,6 +249,7 @@ def rewards(
     Nt) the targets in each UAV's disk; prior and posterior (B, Nu, Nt, 4, 4) each UAV's
     covariances before and after its own measurements (only "information" reads them).
     See `REWARDS`."""
+    check_reward(kind)
     nt = observed.shape[-1]
     if kind == "team":
         team = observed.any(axis=1).sum(axis=-1) / nt
@@ -260,10 +257,8 @@ def rewards(
     if kind == "difference":
         alone = observed & (observed.sum(axis=1, keepdims=True) == 1)
         return alone.sum(axis=-1) / nt
-    if kind == "information":
-        gain = 0.5 * (_logdet2(prior) - _logdet2(posterior))
-        return np.where(observed, gain, 0.0).sum(axis=-1)
-    raise ValueError(f"reward must be one of {sorted(REWARDS)}, got {kind!r}")
+    gain = 0.5 * (_logdet2(prior) - _logdet2(posterior))  # "information"
+    return np.where(observed, gain, 0.0).sum(axis=-1)
 
 
 def check_reward(kind: str) -> str:

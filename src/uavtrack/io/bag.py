@@ -24,24 +24,22 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
 from __future__ import annotations
 
 import math
-import os
-import shutil
-import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from ..errors import RunError, UsageError, install_hint
+from ..errors import RunError, install_hint
 
 try:
     from rosbags.rosbag2 import StoragePlugin, Writer
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.bag needs rosbags: {install_hint('io')} ({exc})") from None
 
+from ..files import check_new_folder, new_folder
 from ..flight.mavlink import LocalFrame
+from ..metrics import team_best
 from ..network import radio_links
-from .ros2 import estimate_of, pose_of, store
-from .tables import team_best
+from .ros2 import estimate_of, header_of, pose_of, store
 
 FRAME = "map"
 
@@ -53,17 +51,13 @@ class _Messages:
         self.store = store()
         t = self.store.types
         self.T = t
-        self.Time = t["builtin_interfaces/msg/Time"]
         self.Duration = t["builtin_interfaces/msg/Duration"]
-        self.Header = t["std_msgs/msg/Header"]
         self.Point = t["geometry_msgs/msg/Point"]
-        self.Quaternion = t["geometry_msgs/msg/Quaternion"]
-        self.Pose = t["geometry_msgs/msg/Pose"]
         self.Vector3 = t["geometry_msgs/msg/Vector3"]
         self.Color = t["std_msgs/msg/ColorRGBA"]
 
     def header(self, ns: int, frame: str = FRAME):
-        return self.Header(stamp=self.Time(sec=ns // 10**9, nanosec=ns % 10**9), frame_id=frame)
+        return header_of(ns, frame)
 
     def pose(self, x: float, y: float, z: float, yaw: float, roll: float = 0.0):
         return pose_of(x, y, z, yaw, roll)
@@ -106,20 +100,12 @@ def write_bag(
 ) -> dict[str, int]:
     """Write `trace` (of `scenario`) as a ROS 2 bag folder at `path`, which must not
     exist; it appears only once complete. Returns the messages written per topic."""
-    path = Path(path).expanduser()
-    if path.exists():
-        raise UsageError(f"--bag: {path} exists; give a new folder for the bag")
-    if not path.parent.is_dir():
-        raise UsageError(f"--bag: directory {path.parent} does not exist")
-    work = Path(tempfile.mkdtemp(dir=path.parent, prefix=f".{path.name}."))
+    path = check_new_folder(path, "--bag", "the bag")
     try:
-        counts = _write(work / path.name, trace, scenario, origin)  # path.name.mcap inside
-        os.rename(work / path.name, path)
+        with new_folder(path) as folder:  # rosbags makes it: path.name.mcap inside
+            return _write(folder, trace, scenario, origin)
     except OSError as exc:
         raise RunError(f"cannot write the bag {path}: {exc.strerror or exc}") from None
-    finally:
-        shutil.rmtree(work, ignore_errors=True)
-    return counts
 
 
 def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
@@ -129,7 +115,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
     dt_ns = int(round(scenario.dt * 1e9))
     frame = LocalFrame(*origin)
     east, north = frame.radii
-    best, best_mean = team_best(trace.mean, trace.cov, trace.alive)
+    best, best_mean, best_cov = team_best(trace.mean, trace.cov, trace.alive)
     counts: dict[str, int] = {}
     with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {}
@@ -180,7 +166,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             write("/targets/truth", T_["visualization_msgs/msg/MarkerArray"](markers=truth), ns)
             ellipses = []
             for j in np.flatnonzero(best[k] >= 0):
-                P = trace.cov[k, int(best[k, j]), j]
+                P = best_cov[k, j]
                 x, y = (float(v) for v in best_mean[k, j, :2])
                 estimate = estimate_of(m.header(ns), best_mean[k, j], P)
                 write(f"/team/target_{j}/estimate", estimate, ns)

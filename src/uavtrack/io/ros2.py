@@ -191,10 +191,7 @@ class Node:
         covariances (Nt, 4, 4)."""
         T = store().types
         ns = int(round(k * self.dt * 1e9))
-        header = T["std_msgs/msg/Header"](
-            stamp=T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9),
-            frame_id="map",
-        )
+        header = header_of(ns)
         x, y, h, _, heading = (float(v) for v in pose)
         message = T[POSE](header=header, pose=pose_of(x, y, h, heading, bank))
         self._put(f"/uav_{self.uav}/pose", message, ns)
@@ -219,6 +216,13 @@ class Node:
                 token.undeclare()
             except Exception:
                 pass
+
+
+def header_of(ns: int, frame: str = "map"):
+    """A std_msgs/Header stamped `ns` nanoseconds of the simulated clock, in `frame`."""
+    T = store().types
+    stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
+    return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)
 
 
 def pose_of(x: float, y: float, z: float, yaw: float, roll: float = 0.0):

@@ -13,6 +13,7 @@ import datetime as _dt
 import numpy as np
 
 from ..errors import UsageError
+from ..metrics import team_best
 
 ORDER = [0, 2, 1, 3]
 """uavtrack's (x, y, vx, vy) read in Stone Soup's order (x, vx, y, vy)."""
@@ -35,7 +36,6 @@ def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = E
         from stonesoup.types.track import Track
     except ImportError as exc:
         raise ImportError(f"to_stonesoup needs stonesoup: pip install stonesoup ({exc})") from None
-    from .tables import team_best
 
     if tracks not in ("best", "uavs"):
         raise UsageError(f"tracks must be 'best' or 'uavs', got {tracks!r}")
@@ -53,7 +53,7 @@ def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = E
 
     out = set()
     if tracks == "best":
-        best, _ = team_best(trace.mean, trace.cov, trace.alive)
+        best = team_best(trace.mean, trace.cov, trace.alive)[0]
         for j in range(Nt):
             states = [
                 gaussian(trace.mean[k, best[k, j], j], trace.cov[k, best[k, j], j], k)

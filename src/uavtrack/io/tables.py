@@ -38,7 +38,7 @@ except ImportError as exc:  # an optional extra
 
 from .._version import __version__
 from ..config import Scenario, ScenarioError
-from ..estimation import confidence
+from ..metrics import team_best
 from ..simulation import Cycle
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -144,7 +144,7 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
         decision_time_ms=trace.decision_time_ms.ravel(),
         decision_wall_ms=trace.decision_wall_ms.ravel(),
     )
-    best, best_mean = team_best(trace.mean, trace.cov, trace.alive)
+    best, best_mean, _ = team_best(trace.mean, trace.cov, trace.alive)
     k, j = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nt), indexing="ij"))
     targets = {"step": k, "time": time[k], "target": j}
     for c, name in enumerate(TARGET_STATE):
@@ -170,19 +170,6 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
         "targets": pd.DataFrame(targets),
         "pairs": pd.DataFrame(pairs),
     }
-
-
-def team_best(mean: np.ndarray, cov: np.ndarray, alive: np.ndarray):
-    """The team's best estimate of each target at each step, as the metrics take it: the
-    most confident living UAV's (1/trace P, the lowest index on ties). mean (..., Nu, Nt,
-    4), cov (..., Nu, Nt, 4, 4), alive (..., Nu). Returns the UAV (..., Nt) (-1 when none
-    is alive) and its estimate (..., Nt, 4) (NaN then)."""
-    gamma = np.where(alive[..., None], confidence(cov), -np.inf)
-    gamma = np.where(np.isnan(gamma), -np.inf, gamma)
-    best = np.argmax(gamma, axis=-2)  # (..., Nt)
-    chosen = np.take_along_axis(mean, best[..., None, :, None], axis=-3)[..., 0, :, :]
-    anyone = alive.any(axis=-1)[..., None]
-    return np.where(anyone, best, -1), np.where(anyone[..., None], chosen, np.nan)
 
 
 def results_frame(folder: str | Path) -> pd.DataFrame:
