@@ -268,6 +268,43 @@ def test_json_names_the_decision_time_unit_and_is_strict(capsys):
         assert r["observation_rate"]["std"] is None
 
 
+def test_compare_gives_paired_differences_from_the_first_method(capsys):
+    from scipy import stats
+
+    args = ("compare", "--trials", "4", "--steps", "40", "--method", "greedy")
+    code, out, err = run_cli(capsys, *args, "--method", "distributed", "--json")
+    assert code == 0, err
+    data = json.loads(out, parse_constant=refuse_constant)
+    assert list(data["paired"]) == ["distributed - greedy"]
+    pair = data["paired"]["distributed - greedy"]
+    # the same trials, run again: the difference per trial, its mean and its t interval
+    scenario = uavtrack.Scenario(steps=40)
+    seeds = [uavtrack.trial_seed(0, t) for t in range(4)]
+    rate = {m: uavtrack.run(scenario, m, seeds).metrics for m in ("distributed", "greedy")}
+    for key in ("observation_rate", "rmse_best", "messages"):
+        diff = rate["distributed"][key] - rate["greedy"][key]
+        half = stats.t.ppf(0.975, 3) * diff.std(ddof=1) / 2
+        assert pair[key]["mean"] == pytest.approx(diff.mean(), rel=1e-9, abs=1e-12)
+        assert pair[key]["ci_low"] == pytest.approx(diff.mean() - half, rel=1e-9, abs=1e-12)
+        assert pair[key]["ci_high"] == pytest.approx(diff.mean() + half, rel=1e-9, abs=1e-12)
+        assert pair[key]["trials"] == 4
+    assert "decision_time_ms" not in pair  # measured on one trial: no interval
+    code, out, _ = run_cli(capsys, *args, "--method", "distributed", "--method", "centralized")
+    assert code == 0
+    assert "paired differences from greedy" in out
+    assert "distributed − greedy" in out and "centralized − greedy" in out
+    low, high = pair["observation_rate"]["ci_low"], pair["observation_rate"]["ci_high"]
+    assert f"[{low:+.4f}, {high:+.4f}]" in out
+
+
+def test_paired_differences_leave_out_undefined_trials():
+    from uavtrack.experiments import paired
+
+    p = paired(np.array([1.0, np.nan, 3.0, 6.0]), np.array([0.0, 1.0, np.nan, 2.0]))
+    assert p["trials"] == 2 and p["mean"] == pytest.approx(2.5)
+    assert np.isnan(paired(np.array([np.nan]), np.array([1.0]))["mean"])
+
+
 def refuse_constant(name):
     raise ValueError(f"not valid JSON: {name}")
 

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from PIL import Image
 
+import uavtrack
 from uavtrack import cli
 
 from .processes import alive, children_of
@@ -154,6 +155,77 @@ def test_sweep(tmp_path, capsys):
     assert (out / "sweep.png").stat().st_size > 10_000 and "| 3 |" in (
         out / "report.md"
     ).read_text()
+
+
+def test_a_sweep_of_two_fields_is_a_grid_of_every_combination(tmp_path, capsys):
+    out = tmp_path / "grid"
+    args = ["sweep", "comm_range", "0", "80", "faults.loss", "0", "0.3", "--trials", "2",
+            "--steps", "20", "--method", "distributed", "--method", "greedy", "--out", str(out),
+            "--no-progress", "--workers", "1"]  # fmt: skip
+    code, stdout, err = run_cli(capsys, *args)
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert summary["fields"] == ["comm_range", "faults.loss"]
+    assert summary["cells"] == [[0.0, 0.0], [0.0, 0.3], [80.0, 0.0], [80.0, 0.3]]
+    assert "field" not in summary and summary["units"] == {"comm_range": "m", "faults.loss": ""}
+    seeds = [uavtrack.trial_seed(0, t) for t in range(2)]
+    for k, (comm_range, loss) in enumerate(summary["cells"]):
+        scenario = uavtrack.Scenario(steps=20, comm_range=comm_range, faults={"loss": loss})
+        rates = {
+            m: uavtrack.run(scenario, m, seeds).metrics["observation_rate"]
+            for m in ("distributed", "greedy")
+        }
+        for m, rate in rates.items():  # each cell is that scenario, on the same trials
+            assert summary["methods"][m][k]["mean"] == pytest.approx(rate.mean(), rel=1e-12)
+        pair = summary["paired"]["distributed - greedy"][k]
+        assert pair["mean"] == pytest.approx((rates["distributed"] - rates["greedy"]).mean())
+    # no radio: distributed decides exactly as greedy, whatever the loss
+    assert summary["paired"]["distributed - greedy"][0]["mean"] == 0
+    assert summary["paired"]["distributed - greedy"][1]["mean"] == 0
+    report = (out / "report.md").read_text()
+    assert "# Sweep of `comm_range` × `faults.loss`" in report
+    assert "| comm_range [m] | faults.loss | distributed | greedy |" in report
+    assert "| 80 | 0.3 |" in report and report.count("| 0 | 0 |") == 2  # rates and pairs
+    with Image.open(out / "sweep.png") as im:
+        assert im.size[0] > im.size[1]  # a panel per loss, side by side
+    assert "8 jobs run, 0 reused" in stdout
+    capsys.readouterr()
+    code, stdout, _ = run_cli(capsys, *args)
+    assert code == 0 and "0 jobs run, 8 reused" in stdout
+    assert json.loads((out / "summary.json").read_text())["methods"] == summary["methods"]
+
+
+@pytest.mark.parametrize(
+    "tokens,message",
+    [
+        (["comm_range", "25", "faults.los", "0"],
+         "sweep: 'faults.los' is neither a value of comm_range nor a scenario field; "
+         "did you mean faults.loss?"),
+        (["comm_range", "25", "comm_range", "30"], "sweep: comm_range is given twice"),
+        (["comm_range", "25", "faults.loss"], "sweep faults.loss: give at least one value"),
+        (["n_uavs", "2", "uav.altitudes", "[400.0, 410.0, 420.0]"],
+         "sweep cell n_uavs=2, uav.altitudes=[400.0, 410.0, 420.0]: uav.altitudes has 3 "
+         "entries but n_uavs is 2"),
+    ],
+)  # fmt: skip
+def test_a_grid_is_refused_before_any_work(tmp_path, capsys, tokens, message):
+    out = tmp_path / "s"
+    code, _, err = run_cli(capsys, "sweep", *tokens, "--out", str(out))
+    assert code == 2 and message in err and err.count("\n") == 1 and not out.exists()
+
+
+def test_a_wrong_sweep_is_refused_before_the_experiment_modules_load():
+    code = (
+        "import sys\n"
+        "from uavtrack import cli\n"
+        "assert cli.main(['sweep', 'comm_rang', '1', '2']) == 2\n"
+        "assert cli.main(['sweep', 'comm_range', 'abc']) == 2\n"
+        "heavy = [m for m in ('scipy.stats', 'matplotlib', 'uavtrack.plots') if m in sys.modules]\n"
+        "print(heavy)\n"
+    )
+    proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert proc.stdout == "[]\n" and "did you mean comm_range?" in proc.stderr
 
 
 @pytest.mark.parametrize(

@@ -184,6 +184,28 @@ def test_constructor_errors_are_one_line_scenario_errors():
         assert str(info.value).startswith(message) and "\n" not in str(info.value)
 
 
+def test_an_unknown_field_names_the_closest_one_wherever_it_is_given(tmp_path, capsys):
+    with pytest.raises(ScenarioError) as info:
+        Scenario(comm_rang=80)
+    assert str(info.value) == "unknown field 'comm_rang' (did you mean comm_range?)"
+    with pytest.raises(ScenarioError) as info:
+        Scenario(sensor={"half_fov": 3})
+    assert str(info.value) == "unknown field 'sensor.half_fov' (did you mean sensor.half_fov_deg?)"
+    with pytest.raises(ScenarioError) as info:
+        Scenario(zzzzzz=1)  # nothing close: no guess
+    assert str(info.value) == "unknown field 'zzzzzz'"
+    path = tmp_path / "typo.toml"
+    path.write_text("comm_rang = 80\n[faults]\nlos = 0.2\n")
+    from uavtrack import cli
+
+    assert cli.main(["run", "--config", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert err == (
+        f"uavtrack: error: {path}: unknown field 'faults.los' (did you mean faults.loss?); "
+        "unknown field 'comm_rang' (did you mean comm_range?)\n"
+    )
+
+
 def test_none_unsets_an_optional_field():
     assert parse_value("none") is None
     s = Scenario().with_overrides({"faults.round_budget": 3})

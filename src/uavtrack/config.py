@@ -955,7 +955,14 @@ def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
 
 
 def _did_you_mean(dotted: str, data: dict[str, Any]) -> str:
-    """'; did you mean X?' for the field names of `data` closest to `dotted`, or ''."""
+    """'; did you mean X?' for the field name of `data` closest to `dotted`, and where
+    every field is listed."""
+    close = closest(dotted, data)
+    return f"; did you mean {close}?{_PARAMS_HINT}" if close else _PARAMS_HINT
+
+
+def closest(dotted: str, data: dict[str, Any]) -> str | None:
+    """The dotted field name of the nested dict `data` closest to `dotted`, or None."""
     import difflib
 
     names = list(flatten(data))
@@ -964,11 +971,10 @@ def _did_you_mean(dotted: str, data: dict[str, Any]) -> str:
     if not close:  # a leaf name without its group, or a typo in it
         found = difflib.get_close_matches(dotted.rsplit(".", 1)[-1], leaves, n=1, cutoff=0.7)
         close = [leaves[found[0]]] if found else []
-    return (
-        f"; did you mean {close[0]}? (uavtrack params lists every field)"
-        if close
-        else (" (uavtrack params lists every field)")
-    )
+    return close[0] if close else None
+
+
+_PARAMS_HINT = " (uavtrack params lists every field)"
 
 
 def describe_errors(exc: ValidationError) -> str:
@@ -977,7 +983,8 @@ def describe_errors(exc: ValidationError) -> str:
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"])
         if err["type"] == "extra_forbidden":
-            parts.append(f"unknown field '{loc}'")
+            close = closest(loc, Scenario().model_dump())
+            parts.append(f"unknown field '{loc}'" + (f" (did you mean {close}?)" if close else ""))
             continue
         msg = err["msg"].removeprefix("Value error, ")
         got = err.get("input")

@@ -15,6 +15,7 @@ Fig. 8 is Fig. 5's distributed run, computed once.
 from __future__ import annotations
 
 import hashlib
+import itertools
 import json
 import math
 from collections.abc import Callable, Iterable, Sequence
@@ -22,7 +23,6 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from . import registry
 from .config import Scenario, ScenarioError, flatten
@@ -215,25 +215,41 @@ def sweep_values(base: Scenario, field: str, values: Sequence[Any]) -> list[Any]
     Each value is validated, its error naming the sweep; two values that are equal once
     validated (``10`` and ``10.0``) are refused, as they would be one configuration.
     """
-    if not values:
-        raise ScenarioError(f"sweep {field}: give at least one value")
-    out: list[Any] = []
-    for raw in values:
-        scenario = base.with_overrides({field: raw}, origin=f"sweep value {field}={raw!r}")
-        value = scenario.value(field)
-        value = list(value) if isinstance(value, tuple) else value
-        if value in out:
-            first = values[out.index(value)]
-            same = (
-                f"{raw!r} is given twice,"
-                if repr(first) == repr(raw)
-                else f"{first!r} and {raw!r} are"
-            )
-            raise ScenarioError(
-                f"sweep {field}: {same} the same value once read ({value!r}); give each value once"
-            )
-        out.append(value)
-    return out
+    return sweep_axes(base, {field: values})[field]
+
+
+def sweep_axes(base: Scenario, axes: dict[str, Sequence[Any]]) -> dict[str, list[Any]]:
+    """The values of each swept field as the scenario holds them (10 -> 10.0 for a float
+    field), validated: one field's values one by one, a grid's cell by cell (a value may
+    need another field's: ``n_uavs 3 uav.altitudes "[400, 410, 420]"``), each error naming
+    the value or the cell. Two values of a field that are equal once validated (``10`` and
+    ``10.0``) are refused, as they would be one configuration."""
+    for field, values in axes.items():
+        if not values:
+            raise ScenarioError(f"sweep {field}: give at least one value")
+    held: dict[str, list[Any]] = {field: [None] * len(values) for field, values in axes.items()}
+    places = itertools.product(*(range(len(v)) for v in axes.values()))
+    for cell, place in zip(sweep_cells(axes), places, strict=True):
+        where = "value" if len(axes) == 1 else "cell"
+        scenario = base.with_overrides(cell, origin=f"sweep {where} {cell_text(cell, repr)}")
+        for field, k in zip(axes, place, strict=True):
+            value = scenario.value(field)
+            held[field][k] = list(value) if isinstance(value, tuple) else value
+    for field, values in axes.items():
+        out = held[field]
+        for k, value in enumerate(out):
+            if value in out[:k]:
+                first, raw = values[out.index(value)], values[k]
+                same = (
+                    f"{raw!r} is given twice,"
+                    if repr(first) == repr(raw)
+                    else f"{first!r} and {raw!r} are"
+                )
+                raise ScenarioError(
+                    f"sweep {field}: {same} the same value once read ({value!r}); "
+                    "give each value once"
+                )
+    return held
 
 
 def reproduce_plan(
@@ -295,27 +311,44 @@ def resized(base: Scenario, n_uavs: int, n_targets: int) -> Scenario:
     )
 
 
+def sweep_cells(axes: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
+    """Every combination of the swept values, the last field varying fastest:
+    ``{"a": [1, 2], "b": [0, 5]}`` -> ``[{a: 1, b: 0}, {a: 1, b: 5}, {a: 2, b: 0}, ...]``."""
+    return [dict(zip(axes, combo, strict=True)) for combo in itertools.product(*axes.values())]
+
+
+def cell_text(cell: dict[str, Any], shown: Callable[[Any], str] | None = None) -> str:
+    """``comm_range=50, faults.loss=0.2``: a cell, its values shown by `shown` (as in
+    labels by default; `repr` for values as given)."""
+    return ", ".join(f"{k}={(shown or _fmt)(v)}" for k, v in cell.items())
+
+
 def sweep_plan(
     base: Scenario,
-    field: str,
-    values: Sequence[Any],
+    axes: dict[str, Sequence[Any]],
     methods: Sequence[str],
     trials: int,
     chunk: int = 10,
     seed: int = 0,
 ) -> dict[str, list[Job]]:
-    """One field over several values, each method on the same trials."""
-    values = sweep_values(base, field, values)
-    return {
-        "sweep": [
-            j
-            for v in values
-            for m in methods
-            for j in trial_jobs(
-                base, {field: v}, m, trials, chunk, seed, origin=f"sweep value {field}={v!r}"
+    """One field over several values, or a grid of several fields (every combination):
+    each method on the same trials in every cell. A cell the scenario refuses (values
+    that cannot go together) is refused here, before any work."""
+    axes = sweep_axes(base, axes)
+    jobs, seen = [], {}
+    for cell in sweep_cells(axes):
+        for m in methods:
+            jobs += trial_jobs(
+                base, cell, m, trials, chunk, seed, origin=f"sweep cell {cell_text(cell)}"
             )
-        ]
-    }
+        label = jobs[-1].label
+        if label in seen:
+            raise ScenarioError(
+                f"sweep: the cells {seen[label]} and {cell_text(cell)} are the same scenario; "
+                "drop one of the values"
+            )
+        seen[label] = cell_text(cell)
+    return {"sweep": jobs}
 
 
 def unique(jobs: Iterable[Job]) -> list[Job]:
@@ -374,14 +407,44 @@ def describe(metrics: dict[str, np.ndarray]) -> dict[str, Any]:
 
 
 def paired(a: np.ndarray, b: np.ndarray, level: float = 0.95) -> dict[str, float]:
-    """Mean of the per-trial differences a - b with a t confidence interval."""
+    """Mean of the per-trial differences a - b with a t confidence interval at `level`.
+
+    Trials where either value is undefined (NaN: an RMSE with every UAV failed) are left
+    out; `trials` says how many were paired."""
+    from scipy import stats  # loaded here: a command refuses bad input before this import
+
     diff = np.asarray(a, dtype=float) - np.asarray(b, dtype=float)
+    diff = diff[~np.isnan(diff)]
     n = len(diff)
+    if n == 0:
+        return {"mean": math.nan, "ci_low": math.nan, "ci_high": math.nan, "trials": 0}
     mean = float(diff.mean())
     if n < 2:
         return {"mean": mean, "ci_low": math.nan, "ci_high": math.nan, "trials": n}
     half = float(stats.t.ppf(0.5 + level / 2, n - 1) * diff.std(ddof=1) / math.sqrt(n))
     return {"mean": mean, "ci_low": mean - half, "ci_high": mean + half, "trials": n}
+
+
+PAIRED_METRICS = (
+    "observation_rate", "rmse_best", "rmse", "nees_best", "ospa_best", "gospa_best",
+    "rounds", "messages",
+)  # fmt: skip
+"""The metrics whose paired differences `compare` reports (decision times are measured on
+one trial only, so they have no interval)."""
+
+
+def against_first(
+    raw: dict[str, dict[str, np.ndarray]], metrics: Sequence[str] = PAIRED_METRICS
+) -> dict[str, dict[str, dict[str, float]]]:
+    """Paired differences of every method against the first one, on the same trials:
+    ``{"greedy - distributed": {"observation_rate": paired(...), ...}, ...}``.
+
+    `raw`: per-trial metrics by method, as `compare` returns them (common random numbers,
+    so trial t of every method saw the same targets and noise)."""
+    first, *others = raw
+    return {
+        f"{m} - {first}": {k: paired(raw[m][k], raw[first][k]) for k in metrics} for m in others
+    }
 
 
 def summarize_reproduction(
@@ -497,13 +560,16 @@ def conclusions(per_method: Iterable[dict[str, np.ndarray]]) -> dict[str, Any]:
 def summarize_sweep(
     plan: dict[str, list[Job]],
     results: dict[str, dict],
-    field: str,
-    values: Sequence[Any],
+    axes: dict[str, Sequence[Any]],
     methods: Sequence[str],
 ) -> dict[str, Any]:
-    """summary.json of a sweep: per value and method, and paired differences."""
+    """summary.json of a sweep: per cell (a combination of the swept values, in
+    `sweep_cells` order) and method, and the paired differences of every two methods.
+
+    ``fields`` and ``axes`` name the swept fields and their values, ``cells`` each cell's
+    values in field order; a sweep of one field also keeps ``field`` and ``values``."""
     data = collect(plan["sweep"], results)
-    labels = list(dict.fromkeys(job.label for job in plan["sweep"]))
+    labels = list(dict.fromkeys(job.label for job in plan["sweep"]))  # one per cell
     per_method = {m: [describe(data[(lab, m)]) for lab in labels] for m in methods}
     pairs = {}
     for k, a in enumerate(methods):
@@ -512,7 +578,13 @@ def summarize_sweep(
                 paired(data[(lab, a)]["observation_rate"], data[(lab, b)]["observation_rate"])
                 for lab in labels
             ]
-    return {"field": field, "values": list(values), "methods": per_method, "paired": pairs}
+    cells = sweep_cells(axes)
+    out: dict[str, Any] = {"fields": list(axes), "axes": {f: list(v) for f, v in axes.items()}}
+    if len(axes) == 1:
+        ((field, values),) = axes.items()
+        out.update(field=field, values=list(values))
+    out.update(cells=[list(c.values()) for c in cells], methods=per_method, paired=pairs)
+    return out
 
 
 # ------------------------------------------------------------------ in-process helpers

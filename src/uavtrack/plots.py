@@ -7,6 +7,7 @@ Pillow writer (no ffmpeg). Every figure is written to a temporary file and renam
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -329,32 +330,54 @@ def sensitivity_figure(sens: dict[str, Any], path: Path) -> None:
 
 
 def sweep_figure(summary: dict[str, Any], path: Path) -> None:
-    """Observation rate (mean ± std) of each method against the swept field."""
-    values = summary["values"]
+    """Observation rate (mean ± std) of each method against the (first) swept field; a
+    grid of several fields gets a panel per combination of the other fields' values."""
+    axes_values = summary.get("axes") or {summary["field"]: summary["values"]}
+    fields = list(axes_values)
+    first, values = fields[0], axes_values[fields[0]]
     numeric = all(isinstance(v, int | float) and not isinstance(v, bool) for v in values)
     x = np.asarray(values, dtype=float) if numeric else np.arange(len(values))
     span = (x.max() - x.min()) if len(x) > 1 and x.max() > x.min() else 1.0
+    shape = [len(v) for v in axes_values.values()]
+    panels = list(itertools.product(*(range(n) for n in shape[1:])))
+    ncols = min(3, len(panels))
+    nrows = -(-len(panels) // ncols)
+    size = (8, 4.5) if len(panels) == 1 else (4.6 * ncols, 3.6 * nrows + 0.6)
+    fig, grid = plt.subplots(nrows, ncols, figsize=size, squeeze=False, sharey=True)
     n = len(summary["methods"])
-    fig, ax = plt.subplots(figsize=(8, 4.5))
-    for k, (m, rows) in enumerate(summary["methods"].items()):
-        ax.errorbar(
-            x + (k - (n - 1) / 2) * 0.01 * span,  # side by side, so the bars show
-            _num([r["mean"] for r in rows]),
-            yerr=_num([r["std"] for r in rows]),
-            marker="o",
-            capsize=3,
-            label=m,
-            color=COLORS.get(m),
-        )
-    if not numeric:
-        ax.set_xticks(x, [level_text(v) for v in values])
-    unit = summary.get("unit")
-    ax.set_xlabel(f"{summary['field']} [{unit}]" if unit else summary["field"])
-    ax.set_ylabel("observation rate (mean ± std over trials)")
-    ax.set_ylim(0, 1.05)
-    ax.grid(alpha=0.3)
-    ax.legend()
-    ax.set_title(f"Sweep of {summary['field']}")
+    units = summary.get("units") or {first: summary.get("unit")}
+    for ax, rest in zip(grid.flat, panels, strict=False):
+        cells = [int(np.ravel_multi_index((i, *rest), shape)) for i in range(len(values))]
+        for k, (m, rows) in enumerate(summary["methods"].items()):
+            ax.errorbar(
+                x + (k - (n - 1) / 2) * 0.01 * span,  # side by side, so the bars show
+                _num([rows[c]["mean"] for c in cells]),
+                yerr=_num([rows[c]["std"] for c in cells]),
+                marker="o",
+                capsize=3,
+                label=m,
+                color=COLORS.get(m),
+            )
+        if not numeric:
+            ax.set_xticks(x, [level_text(v) for v in values])
+        unit = units.get(first)
+        ax.set_xlabel(f"{first} [{unit}]" if unit else first)
+        ax.set_ylim(0, 1.05)
+        ax.grid(alpha=0.3)
+        if rest:
+            ax.set_title(
+                ", ".join(
+                    f"{f}={level_text(axes_values[f][r])}"
+                    for f, r in zip(fields[1:], rest, strict=True)
+                ),
+                fontsize=9,
+            )
+    for ax in grid.flat[len(panels) :]:
+        ax.set_visible(False)
+    for ax in grid[:, 0]:
+        ax.set_ylabel("observation rate (mean ± std)")
+    grid.flat[0].legend()
+    fig.suptitle(f"Sweep of {' × '.join(fields)}")
     save(fig, path)
 
 

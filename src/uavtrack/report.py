@@ -31,14 +31,16 @@ def pm(mean: float | None, std: float | None, digits: int = 4) -> str:
     return f"{mean:.{digits}f} ± {spread}"
 
 
-def ci(p: dict[str, float], negate: bool = False) -> str:
+def ci(p: dict[str, float], negate: bool = False, digits: int = 4) -> str:
     """``mean [low, high]`` of a paired difference (of its negation if `negate`)."""
     mean, low, high = p["mean"], p["ci_low"], p["ci_high"]
     if negate:
         mean, low, high = -mean, -high, -low
+    if _missing(mean):
+        return "n/a"
     if _missing(low) or _missing(high):
-        return f"{signed(mean)} [n/a]"
-    return f"{signed(mean)} [{signed(low)}, {signed(high)}]"
+        return f"{signed(mean, digits)} [n/a]"
+    return f"{signed(mean, digits)} [{signed(low, digits)}, {signed(high, digits)}]"
 
 
 def signed(x: float, digits: int = 4) -> str:
@@ -53,14 +55,6 @@ def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[s
     for m, r in results.items():
         cells = (pm(a, b, 3) for a, b in zip(r[f"{key}_mean"], r[f"{key}_std"], strict=True))
         lines.append(f"| {m} | " + " | ".join(cells) + " |")
-    return lines
-
-
-def _by_value(field: str, values: list, columns: list[str], cell) -> list[str]:
-    """A table with one row per value of `field` and `cell(row, column)` in each column."""
-    lines = [f"| {field} | " + " | ".join(columns) + " |", "|---|" + "---|" * len(columns)]
-    for k, v in enumerate(values):
-        lines.append(f"| {level_text(v)} | " + " | ".join(cell(k, c) for c in columns) + " |")
     return lines
 
 
@@ -352,33 +346,51 @@ def _sensitivity(sens: dict[str, Any]) -> list[str]:
 
 
 def sweep(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> str:
-    """The report of `uavtrack sweep`."""
+    """The report of `uavtrack sweep`: one field, or a grid of several (a row per cell)."""
     methods = list(summary["methods"])
-    field = summary["field"]
+    fields = summary["fields"]
     trials = summary["methods"][methods[0]][0]["trials"]
+    what = f"`{fields[0]}`" if len(fields) == 1 else " × ".join(f"`{f}`" for f in fields)
+    cells = len(summary["cells"])
     out = [
-        f"# Sweep of `{field}`",
+        f"# Sweep of {what}",
         "",
         f"Command: `{info['command']}`  ",
-        f"{trials} trials per point, {scenario.steps} steps, seed {info['seed']}; "
-        f"{info['seconds']:.0f} s ({info['compute_seconds']:.0f} s of compute for all jobs).",
+        f"{trials} trials per {'point' if len(fields) == 1 else 'cell'}"
+        + ("" if len(fields) == 1 else f" ({cells} cells: every combination of the values)")
+        + f", {scenario.steps} steps, seed {info['seed']}; "
+        f"{info['seconds']:.0f} s ({info['compute_seconds']:.0f} s of compute for all jobs; "
+        f"{info['jobs_run']} jobs run, {info['jobs_skipped']} reused).",
         "",
         *([NA_NOTE, ""] if trials < 2 else []),
         "Observation rate, mean ± std over trials:",
         "",
     ]
     rows = summary["methods"]
-    unit = summary.get("unit")
-    header = f"{field} [{unit}]" if unit else field
-    out += _by_value(
-        header, summary["values"], methods, lambda k, m: pm(rows[m][k]["mean"], rows[m][k]["std"])
+    units = summary.get("units", {})
+    header = [f"{f} [{units[f]}]" if units.get(f) else f for f in fields]
+    out += _by_cell(
+        header, summary["cells"], methods, lambda k, m: pm(rows[m][k]["mean"], rows[m][k]["std"])
     )
     if summary["paired"]:
         pairs = summary["paired"]
         out += ["", "Paired differences (same trials), mean [95% CI]:", ""]
-        out += _by_value(header, summary["values"], list(pairs), lambda k, n: ci(pairs[n][k]))
+        out += _by_cell(header, summary["cells"], list(pairs), lambda k, n: ci(pairs[n][k]))
     out += ["", "![sweep](sweep.png)", "", "## Base scenario", ""] + parameter_table(scenario)
     return "\n".join(out) + "\n"
+
+
+def _by_cell(fields: list[str], cells: list[list], columns: list[str], cell) -> list[str]:
+    """A table with one row per cell (the values of `fields`) and `cell(row, column)` in
+    each column."""
+    lines = [
+        "| " + " | ".join(fields + columns) + " |",
+        "|" + "---|" * (len(fields) + len(columns)),
+    ]
+    for k, values in enumerate(cells):
+        shown = [level_text(v) for v in values] + [cell(k, c) for c in columns]
+        lines.append("| " + " | ".join(shown) + " |")
+    return lines
 
 
 FAULT_MODEL = (

@@ -470,15 +470,17 @@ def compare(
     team: TeamOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
 ) -> None:
-    """Run the methods on the same trials, in this process; mean and std of each metric."""
+    """Run the methods on the same trials, in this process: mean and std of each metric,
+    and each method's paired differences from the first one with 95% intervals."""
+    from ..experiments import against_first, summarize
     from ..experiments import compare as run_compare
-    from ..experiments import summarize
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
     with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
         raw = run_compare(scenario, names, trials, seed, progress=advance)
     results = {m: summarize(v) for m, v in raw.items()}
+    pairs = against_first(raw)
     if as_json:
         typer.echo(
             dumps(
@@ -486,6 +488,7 @@ def compare(
                     "trials": trials,
                     "seed": seed,
                     "methods": results,
+                    "paired": pairs,
                     "scenario": scenario.to_dict(),
                 }
             )
@@ -518,6 +521,37 @@ def compare(
     for key, label, fmt in COMPARE_ROWS:
         table.add_row(escape(label), *(number(fmt, r[key]["mean"]) for r in results.values()))
     console().print(table)
+    if pairs:
+        console().print(paired_table(pairs, names[0], trials))
+
+
+PAIRED_ROWS = {
+    "observation_rate": ("observation rate", 4),
+    **{key: (label, int(fmt[3])) for key, label, fmt in COMPARE_ROWS},  # "{:.2f}" -> 2
+}
+"""Labels and digits of the rows of the paired-differences table (those of the means)."""
+
+
+def paired_table(pairs: dict, first: str, trials: int):
+    """Each method minus `first` on the same trials: mean difference [95% interval]."""
+    from rich.markup import escape
+    from rich.table import Table
+
+    from ..report import ci
+
+    table = Table(
+        title=f"paired differences from {first} on the same {trials} trials: mean [95% interval]",
+        caption="An interval that excludes 0: the methods differ on this scenario "
+        "(t interval over the trials; n/a with fewer than 2).",
+        caption_justify="left",
+    )
+    table.add_column("metric", no_wrap=True)
+    for name in pairs:
+        table.add_column(escape(name.replace(" - ", " − ")), justify="right", no_wrap=True)
+    for key in next(iter(pairs.values())):
+        label, digits = PAIRED_ROWS[key]
+        table.add_row(escape(label), *(ci(p[key], digits=digits) for p in pairs.values()))
+    return table
 
 
 def with_steps(scenario: Scenario, steps: int | None, set_: list[str] | None) -> Scenario:

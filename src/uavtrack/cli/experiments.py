@@ -320,7 +320,9 @@ def sweep(
     values: Annotated[
         list[str],
         typer.Argument(
-            metavar="VALUE...", help="values to try, read as TOML; negative ones after --"
+            metavar="VALUE... [FIELD VALUE...]...",
+            help="values to try, read as TOML; negative ones after --. Another field and "
+            "its values make a grid: every combination of the values",
         ),
     ],
     methods: Annotated[
@@ -328,12 +330,14 @@ def sweep(
         typer.Option("--method", metavar="METHOD", help="a method to run (repeatable) [all three]"),
     ] = None,
     trials: Annotated[
-        int, typer.Option(min=1, metavar="N", help="trials per value and method")
+        int, typer.Option(min=1, metavar="N", help="trials per value (or cell) and method")
     ] = 20,
     steps: StepsOpt = None,
     out: Annotated[
         Path | None,
-        typer.Option("--out", metavar="DIR", help="results folder [results/sweep-FIELD]"),
+        typer.Option(
+            "--out", metavar="DIR", help="results folder [results/sweep-FIELD[-FIELD...]]"
+        ),
     ] = None,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
@@ -344,43 +348,49 @@ def sweep(
     team: TeamOpt = None,
     progress: ProgressOpt = None,
 ) -> None:
-    """Vary one scenario field; every method on the same trials at every value."""
-    from .. import plots, report
+    """Vary one scenario field, or several as a grid (comm_range 25 50 faults.loss 0 0.2:
+    four cells); every method on the same trials in every cell."""
     from ..config import parse_value
-    from ..experiments import summarize_sweep, sweep_plan, sweep_values
+    from ..experiments import sweep_axes, sweep_plan
 
-    if team is not None and field in ("n_uavs", "n_targets"):
-        raise UsageError(f"--team sets n_uavs and n_targets; do not sweep {field} too")
     scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
     if steps is not None:
         scenario = scenario.with_overrides({"steps": steps}, origin="--steps")
-    if field == "steps" and steps is not None:
-        raise UsageError("sweep steps: --steps and --set steps do not apply; sweep one of them")
-    for text in values:
-        if text.startswith("--"):
-            raise UsageError(
-                f"sweep: {text!r} came after '--', where only values go; put options before '--'"
-            )
-    parsed = sweep_values(
-        scenario, field, [parse_value(v, where=f"sweep value {field}") for v in values]
-    )
+    texts = parse_sweep(scenario, [field, *values])
+    for name in texts:
+        if team is not None and name in ("n_uavs", "n_targets"):
+            raise UsageError(f"--team sets n_uavs and n_targets; do not sweep {name} too")
+        if name == "steps" and steps is not None:
+            raise UsageError("sweep steps: --steps and --set steps do not apply; sweep one of them")
+    raw = {
+        name: [parse_value(v, where=f"sweep value {name}") for v in given]
+        for name, given in texts.items()
+    }
+    axes = sweep_axes(scenario, raw)
     names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
-    plan = sweep_plan(scenario, field, parsed, names, trials, chunk=10, seed=seed)
-    out = out or Path("results") / f"sweep-{field}"
+    plan = sweep_plan(scenario, axes, names, trials, chunk=10, seed=seed)  # every cell checked
+    out = out or Path("results") / ("sweep-" + "-".join(axes))
+    one = len(axes) == 1
     manifest = {
         "kind": "sweep",
         "seed": seed,
         "scenario": scenario.to_dict(),
-        "plan": {"field": field, "values": parsed, "methods": names, "trials": trials},
+        "plan": ({"field": field, "values": axes[field]} if one else {"fields": axes})
+        | {"methods": names, "trials": trials},
     }
+    from .. import plots, report
+    from ..experiments import summarize_sweep
+
     with run_jobs(plan, out, manifest, engine, workers, address, progress, ["sweep.png"]) as (
         results,
         info,
     ):
         info["seed"] = seed
-        summary = summarize_sweep(plan, results, field, parsed, names)
-        summary["unit"] = scenario.unit(field)
+        summary = summarize_sweep(plan, results, axes, names)
+        summary["units"] = {name: scenario.unit(name) for name in axes}
+        if one:
+            summary["unit"] = summary["units"][field]
         summary["settings"] = info
         write_json(out / "summary.json", summary)
         plots.sweep_figure(summary, out / "sweep.png")
@@ -391,18 +401,60 @@ def sweep(
 
     from ..report import level_text, pm
 
-    unit = f" [{summary['unit']}]" if summary["unit"] else ""
-    table = Table(title=f"observation rate against {field} (mean ± std, {trials} trials)")
-    table.add_column(escape(f"{field}{unit}"))
+    what = field if one else " x ".join(axes)
+    table = Table(title=f"observation rate against {what} (mean ± std, {trials} trials)")
+    for name in axes:
+        unit = summary["units"][name]
+        table.add_column(escape(f"{name} [{unit}]" if unit else name))
     for m in names:
         table.add_column(m)
-    for k, v in enumerate(parsed):
-        table.add_row(
-            level_text(v),
-            *(pm(summary["methods"][m][k]["mean"], summary["methods"][m][k]["std"]) for m in names),
-        )
+    for k, cell in enumerate(summary["cells"]):
+        rows = (summary["methods"][m][k] for m in names)
+        table.add_row(*map(level_text, cell), *(pm(r["mean"], r["std"]) for r in rows))
     console().print(table)
-    typer.echo(f"wrote {out}/summary.json, report.md, sweep.png ({info['seconds']:.1f} s)")
+    typer.echo(
+        f"wrote {out}/summary.json, report.md, sweep.png ({info['jobs_run']} jobs run, "
+        f"{info['jobs_skipped']} reused, {info['seconds']:.1f} s)"
+    )
+
+
+def parse_sweep(scenario, tokens: list[str]) -> dict[str, list[str]]:
+    """``FIELD VALUE... [FIELD VALUE...]...`` -> ``{FIELD: [VALUE, ...], ...}``: a token that
+    names a scenario field starts the next field's values. A word that is neither a field
+    nor a value of the field before it is refused, with the field it was likely meant as."""
+    from ..config import closest, flatten, parse_value, set_dotted
+
+    data = scenario.model_dump()
+    fields = flatten(data)
+    set_dotted(data, tokens[0], None)  # the first must be a field: refused by name if not
+    axes: dict[str, list[str]] = {}
+    current = tokens[0]
+    for token in tokens:
+        if token.startswith("--"):
+            raise UsageError(
+                f"sweep: {token!r} came after '--', where only values go; put options before '--'"
+            )
+        if token in fields:
+            if token in axes:
+                raise UsageError(
+                    f"sweep: {token} is given twice; give each field once, with all its values"
+                )
+            axes[current := token] = []
+            continue
+        meant = closest(token, data) if isinstance(parse_value(token), str) else None
+        if meant is not None:
+            try:
+                scenario.with_overrides({current: parse_value(token)})
+            except ScenarioError:
+                raise UsageError(
+                    f"sweep: {token!r} is neither a value of {current} nor a scenario field; "
+                    f"did you mean {meant}?"
+                ) from None
+        axes[current].append(token)
+    for name, given in axes.items():
+        if not given:
+            raise ScenarioError(f"sweep {name}: give at least one value")
+    return axes
 
 
 @app.command()
