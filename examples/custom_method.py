@@ -5,7 +5,12 @@ the Hungarian assignment each UAV solves over its neighbourhood by a sequential 
 auction. Only the neighbourhood problem changes: beacons, bids, lost and late messages,
 failures (`[faults]` of the scenario) reach it as they reach the paper's method.
 
-    python examples/custom_method.py
+    python examples/custom_method.py      # compare it with the paper's method
+
+Importing this module defines the method and runs nothing, so it can be the module of a
+plugin package: with ``sequential = "custom_method:SequentialAuction"`` in the package's
+``[project.entry-points."uavtrack.methods"]``, every command takes ``--method sequential``
+(docs: how-to guides, "Your own method").
 """
 
 import numpy as np
@@ -38,13 +43,18 @@ class SequentialAuction(Distributed):
     solve = staticmethod(sequential)
 
 
-register(SequentialAuction())  # now usable by name: uavtrack.run(scenario, "sequential", ...)
+def main() -> None:
+    # registered for this process only: uavtrack.run(scenario, "sequential", ...)
+    register(SequentialAuction())
+    seeds = [uavtrack.trial_seed(0, t) for t in range(8)]
+    for label, scenario in (
+        ("no faults", uavtrack.Scenario(steps=200)),
+        ("20% loss", uavtrack.Scenario(steps=200).with_overrides({"faults.loss": 0.2})),
+    ):
+        for method in ("distributed", "sequential", "greedy"):
+            rates = uavtrack.run(scenario, method, seeds).metrics["observation_rate"]
+            print(f"{label:10s} {method:12s} {rates.mean():.3f}")
 
-seeds = [uavtrack.trial_seed(0, t) for t in range(8)]
-for label, scenario in (
-    ("no faults", uavtrack.Scenario(steps=200)),
-    ("20% loss", uavtrack.Scenario(steps=200).with_overrides({"faults.loss": 0.2})),
-):
-    for method in ("distributed", "sequential", "greedy"):
-        rates = uavtrack.run(scenario, method, seeds).metrics["observation_rate"]
-        print(f"{label:10s} {method:12s} {rates.mean():.3f}")
+
+if __name__ == "__main__":
+    main()

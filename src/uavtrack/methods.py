@@ -35,6 +35,7 @@ from typing import ClassVar
 import numpy as np
 
 from . import assignment, fusion, registry, timing
+from .errors import UsageError
 from .radio import Radio
 
 
@@ -464,4 +465,9 @@ def get(method: str | Method) -> Method:
         return method
     if not isinstance(method, str):
         raise ValueError(f"unknown method {method!r}; choose one of: {', '.join(registry.names())}")
-    return registry.load(method)
+    found = registry.load(method)
+    if not isinstance(found, Method):
+        raise UsageError(
+            f"method {method!r} is a {type(found).__name__}, not a uavtrack.methods.Method"
+        )
+    return found

@@ -17,6 +17,8 @@ import importlib
 from importlib.metadata import entry_points
 from typing import Any
 
+from .errors import UsageError
+
 BUILT_IN = {
     "distributed": "uavtrack.methods:Distributed",
     "centralized": "uavtrack.methods:Centralized",
@@ -56,7 +58,12 @@ def load(name: str) -> Any:
     if where is None:
         raise ValueError(f"unknown method {name!r}; choose one of: {', '.join(names())}")
     module, _, attribute = where.partition(":")
-    method = getattr(importlib.import_module(module), attribute)
-    method = method() if isinstance(method, type) else method
+    try:
+        method = getattr(importlib.import_module(module), attribute)
+        method = method() if isinstance(method, type) else method
+    except Exception as exc:  # a plugin's own failure, named in one line
+        raise UsageError(
+            f"method {name!r} cannot be loaded from {where}: {type(exc).__name__}: {exc}"
+        ) from None
     _REGISTERED[name] = method
     return method
