@@ -1,6 +1,7 @@
 """The documentation: a short README whose links resolve, a site that builds strictly,
 tutorials whose code runs, and pages that a browser draws."""
 
+import importlib
 import re
 import subprocess
 import sys
@@ -22,11 +23,7 @@ def test_the_readme_is_short_and_starts_with_the_two_commands():
 
 
 def test_the_scenario_fields_page_is_current():
-    sys.path.insert(0, str(DOCS))
-    try:
-        import hooks
-    finally:
-        sys.path.remove(str(DOCS))
+    hooks = docs_module("hooks")
     page = (DOCS / "reference" / "scenario.md").read_text()
     table = page.split(hooks.BEGIN)[1].split(hooks.END)[0].strip()
     assert table == hooks.scenario_fields(), "run: python docs/hooks.py"
@@ -97,12 +94,37 @@ def test_the_tutorials_code_runs(page, tmp_path, monkeypatch):
         exec(compile(block, f"{page}", "exec"), {"__name__": "__tutorial__"})
 
 
-def test_a_browser_draws_the_main_pages(site, tmp_path):
+@pytest.mark.parametrize("page", TUTORIALS)
+def test_the_tutorials_import_only_what_pip_install_brings(page):
+    # the tutorials follow `pip install .`: no test tool, no extra
+    import ast
+    import tomllib
+
+    project = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]
+    installed = {re.split(r"[<>=\[ ;]", d)[0].lower() for d in project["dependencies"]}
+    allowed = installed | set(sys.stdlib_module_names) | {"uavtrack"}
+    for block in python_blocks(page):
+        for node in ast.walk(ast.parse(block)):
+            names = (
+                [a.name for a in node.names] if isinstance(node, ast.Import)
+                else [node.module] if isinstance(node, ast.ImportFrom) and node.module
+                else []
+            )  # fmt: skip
+            for name in names:
+                assert name.split(".")[0] in allowed, f"{page} imports {name}"
+
+
+def docs_module(name: str):
+    """A module of the docs folder (hooks, screenshot)."""
     sys.path.insert(0, str(DOCS))
     try:
-        import screenshot
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(DOCS))
+
+
+def test_a_browser_draws_the_main_pages(site, tmp_path):
+    screenshot = docs_module("screenshot")
     if screenshot.chromium() is None:
         pytest.skip("no Chromium here (python docs/screenshot.py documents the check)")
     from PIL import Image
@@ -113,3 +135,17 @@ def test_a_browser_draws_the_main_pages(site, tmp_path):
         assert image.size == (1280, 1600)
         colours = image.getcolors(1 << 20)
         assert colours is not None and len(colours) > 50, shot  # text, figure, navigation
+
+
+@pytest.mark.parametrize(
+    "page",
+    ["getting-started/index.html", "tutorials/sweep/index.html", "reference/cli/index.html",
+     "reference/scenario/index.html", "reference/api/index.html"],
+)  # fmt: skip
+def test_no_command_runs_past_its_block_and_no_field_name_breaks(site, page):
+    # at 1280 pixels, as the browser lays the page out: the comment at the end of a long
+    # command stays in view, and a dotted name in a table stays whole
+    screenshot = docs_module("screenshot")
+    if screenshot.chromium() is None:
+        pytest.skip("no Chromium here (python docs/screenshot.py documents the check)")
+    assert screenshot.hidden(site, page) == {"cut": [], "broken": []}
