@@ -38,12 +38,11 @@ def test_poses_and_fixes_are_the_trace(run):
     for t, msg in poses:
         k = t // 500_000_000
         assert msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec == t == k * 500_000_000
-        p, q = msg.pose.position, msg.pose.orientation
+        p = msg.pose.position
         assert (p.x, p.y, p.z) == tuple(trace.uavs[k, 3, :3])
-        heading = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
-        roll = math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x**2 + q.y**2))
-        assert heading == pytest.approx(math.remainder(trace.uavs[k, 3, 4], math.tau), abs=1e-9)
-        assert roll == pytest.approx(trace.action[k, 3], abs=1e-9)
+        roll, yaw = roll_yaw(msg.pose.orientation)
+        assert yaw == pytest.approx(math.remainder(trace.uavs[k, 3, 4], math.tau), abs=1e-9)
+        assert roll == pytest.approx(-trace.action[k, 3], abs=1e-9)  # REP-103: right positive
     fixes = messages(path, "/uav_3/fix")
     t, fix = fixes[7]
     x, y, h = trace.uavs[7, 3, :3]
@@ -55,6 +54,42 @@ def test_poses_and_fixes_are_the_trace(run):
     assert fix.latitude == pytest.approx(47.0 + math.degrees(y / north), abs=1e-12)
     assert fix.longitude > 8.0 if x > 0 else fix.longitude <= 8.0
     assert fix.altitude == h
+
+
+def roll_yaw(q) -> tuple[float, float]:
+    """Roll and yaw of a quaternion without pitch (the ZYX Euler angles)."""
+    roll = math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x**2 + q.y**2))
+    yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
+    return roll, yaw
+
+
+def test_the_roll_banks_the_way_the_uav_turns_in_rep103(run):
+    """REP-103: body x forward, y left, z up in an east-north-up map; a positive roll
+    lowers the right wing and turns the aircraft right, so the yaw (counter-clockwise
+    from east) decreases. Every turning step's roll has the sign opposite to the yaw's
+    change over the step, and /tf holds the same orientation as the pose."""
+    trace, path, _ = run
+    tf = {t: msg for t, msg in messages(path, "/tf")}
+    turning = 0
+    for i in range(trace.uavs.shape[1]):
+        for t, msg in messages(path, f"/uav_{i}/pose"):
+            k = t // 500_000_000
+            q = msg.pose.orientation
+            frame = next(f for f in tf[t].transforms if f.child_frame_id == f"uav_{i}")
+            r = frame.transform.rotation
+            assert (r.x, r.y, r.z, r.w) == (q.x, q.y, q.z, q.w)
+            roll, yaw = roll_yaw(q)
+            assert yaw == pytest.approx(math.remainder(trace.uavs[k, i, 4], math.tau), abs=1e-9)
+            if k + 1 == len(trace.uavs) or not trace.alive[k + 1, i]:
+                continue
+            turn = math.remainder(trace.uavs[k + 1, i, 4] - trace.uavs[k, i, 4], math.tau)
+            if abs(turn) > 1e-9:
+                turning += 1
+                assert math.copysign(1, roll) == -math.copysign(1, turn)
+            else:
+                assert roll == pytest.approx(0.0, abs=1e-12)
+    assert turning > 20  # the test sees turns both ways
+    assert {np.sign(a) for a in trace.action[trace.alive].ravel()} >= {-1.0, 1.0}
 
 
 def test_estimates_carry_the_teams_best_and_its_covariance(run):

@@ -2,8 +2,10 @@
 rmw_zenoh's conventions: keys and type hashes computed here with rosbags, payloads
 decoded by rosbags' CDR deserialiser, attachments by zenoh's own deserialiser."""
 
+import math
 import socket
 import threading
+import time
 
 import numpy as np
 import pytest
@@ -20,6 +22,8 @@ from uavtrack.errors import UsageError  # noqa: E402
 from uavtrack.io import ros2  # noqa: E402
 
 STORE = get_typestore(Stores.ROS2_JAZZY)
+TF = "tf2_msgs/msg/TFMessage"
+ESTIMATE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_TYPE = "geometry_msgs::msg::dds_::PoseStamped_"
 ESTIMATE_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
 
@@ -46,8 +50,13 @@ def test_the_attachment_is_what_zenohs_own_serialiser_makes():
 def test_keys_and_tokens_follow_rmw_zenoh():
     pose = STORE.hash_rihs01("geometry_msgs/msg/PoseStamped")
     assert pose.startswith("RIHS01_") and len(pose) == 7 + 64
-    assert ros2.topic_key(3, "/uav_1/pose", ros2.POSE) == f"3/uav_1/pose/{POSE_TYPE}/{pose}"
-    token = ros2.publisher_token(0, "abc", 1, 2, "/uavtrack", "uav_1", "/uav_1/pose", ros2.POSE)
+    assert (
+        ros2.topic_key(3, "/uav_1/pose", "geometry_msgs/msg/PoseStamped")
+        == f"3/uav_1/pose/{POSE_TYPE}/{pose}"
+    )
+    token = ros2.publisher_token(
+        0, "abc", 1, 2, "/uavtrack", "uav_1", "/uav_1/pose", "geometry_msgs/msg/PoseStamped"
+    )
     assert token == (
         f"@ros2_lv/0/abc/1/2/MP/%/%uavtrack/uav_1/%uav_1%pose/{POSE_TYPE}/{pose}/::,:,:,:,,"
     )
@@ -57,45 +66,71 @@ def test_keys_and_tokens_follow_rmw_zenoh():
     )
 
 
-def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics():
+STEPS, FAILED, FAILS_AT, DT_NS = 12, 1, 3, 500_000_000
+
+
+@pytest.fixture(scope="module")
+def live():
+    """A swarm with --ros2 7 (UAV 1 failing at step 3, cycles paced at dt) heard by a
+    plain Zenoh session: every data sample and liveliness change, in arrival order, and
+    the wall clock [ns] before and after the run."""
     port = free_port()
     listener = ZenohTransport([f"tcp/127.0.0.1:{port}"], [], mode="peer")
-    samples, tokens, lock = [], set(), threading.Lock()
+    events, lock = [], threading.Lock()
 
     def on_sample(sample):
         attached = sample.attachment.to_bytes() if sample.attachment else None
         with lock:
-            samples.append((str(sample.key_expr), sample.payload.to_bytes(), attached))
+            events.append(("data", str(sample.key_expr), sample.payload.to_bytes(), attached))
 
     def on_token(sample):
-        if sample.kind == zenoh.SampleKind.PUT:
-            with lock:
-                tokens.add(str(sample.key_expr))
+        kind = "put" if sample.kind == zenoh.SampleKind.PUT else "delete"
+        with lock:
+            events.append((kind, str(sample.key_expr), None, None))
 
     session = listener.session
     subscriber = session.declare_subscriber("7/**", on_sample)
     watcher = session.liveliness().declare_subscriber("@ros2_lv/7/**", on_token, history=True)
-    scenario = uavtrack.Scenario(steps=6)
+    scenario = uavtrack.Scenario(steps=STEPS).with_overrides(
+        {"faults.failures": [[FAILED, FAILS_AT]]}
+    )
+    before = time.time_ns()
     try:
         swarm = run_swarm(
-            scenario, "distributed", seed=2, transport="zenoh", ros2=7,
+            scenario, "distributed", seed=2, transport="zenoh", ros2=7, realtime=True,
             connect=(f"tcp/127.0.0.1:{port}",),
         )  # fmt: skip
     finally:
         subscriber.undeclare()
         watcher.undeclare()
         listener.close()
-    trace = swarm.result.trace
-    pose_hash = STORE.hash_rihs01("geometry_msgs/msg/PoseStamped")
-    estimate_hash = STORE.hash_rihs01("geometry_msgs/msg/PoseWithCovarianceStamped")
-    poses = [s for s in samples if s[0] == f"7/uav_2/pose/{POSE_TYPE}/{pose_hash}"]
-    assert len(poses) == 6
+    after = time.time_ns()
+    with lock:
+        return swarm.result.trace, list(events), before, after
+
+
+def on_topic(events, topic: str, msgtype: str):
+    """(position in `events`, payload, attachment) of each sample of a topic, by its key."""
+    package, kind, name = msgtype.split("/")
+    dds = f"{package}::{kind}::dds_::{name}_"
+    key = f"7/{topic.strip('/')}/{dds}/{STORE.hash_rihs01(msgtype)}"
+    return [(n, e[2], e[3]) for n, e in enumerate(events) if e[0] == "data" and e[1] == key]
+
+
+def stamp_of(message) -> int:
+    return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
+
+
+def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics(live):
     import zenoh.ext as ze
 
+    trace, events, before, after = live
+    poses = on_topic(events, "/uav_2/pose", "geometry_msgs/msg/PoseStamped")
+    assert len(poses) == STEPS
     for _, payload, attached in poses:
         message = STORE.deserialize_cdr(payload, "geometry_msgs/msg/PoseStamped")
-        stamp = message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
-        k = stamp // 500_000_000
+        stamp = stamp_of(message)
+        k = stamp // DT_NS
         p = message.pose.position
         assert (p.x, p.y, p.z) == tuple(trace.uavs[k, 2, :3])  # GPS exact here
         fields = ze.z_deserialize(
@@ -103,20 +138,117 @@ def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics():
             zenoh.ZBytes(attached),
         )
         assert fields[0] == "sequence_number" and int(fields[1]) == k + 1
-        assert fields[2] == "source_timestamp" and int(fields[3]) == stamp
+        # rmw_zenoh's source timestamp is the wall clock; the header's the simulated one
+        assert fields[2] == "source_timestamp" and before <= int(fields[3]) <= after
         assert fields[4] == "source_gid"
-    estimates = [
-        s for s in samples if s[0] == f"7/uav_0/target_3/estimate/{ESTIMATE_TYPE}/{estimate_hash}"
-    ]
-    assert len(estimates) == 6
-    last = STORE.deserialize_cdr(estimates[-1][1], "geometry_msgs/msg/PoseWithCovarianceStamped")
+    failed = on_topic(events, f"/uav_{FAILED}/pose", "geometry_msgs/msg/PoseStamped")
+    assert len(failed) == FAILS_AT
+    estimates = on_topic(events, "/uav_0/target_3/estimate", ESTIMATE)
+    assert len(estimates) == STEPS
+    last = STORE.deserialize_cdr(estimates[-1][1], ESTIMATE)
     assert last.pose.pose.position.x == trace.mean[-1, 0, 3, 0]
     assert np.array_equal(last.pose.covariance.reshape(6, 6)[:2, :2], trace.cov[-1, 0, 3, :2, :2])
-    # discovery: a node token per UAV and a publisher token per topic
+    # discovery: a node token per UAV and the world's, a publisher token per topic
+    tokens = {e[1] for e in events if e[0] == "put"}
     nodes = {t for t in tokens if "/NN/" in t}
     publishers = {t for t in tokens if "/MP/" in t}
-    assert len(nodes) == 5 and len(publishers) == 5 * (1 + 4)
+    assert len(nodes) == 5 + 1 and len(publishers) == 5 * (1 + 1 + 4) + 1
+    pose_hash = STORE.hash_rihs01("geometry_msgs/msg/PoseStamped")
     assert any(t.endswith(f"/%uav_2%pose/{POSE_TYPE}/{pose_hash}/::,:,:,:,,") for t in publishers)
+    clock_hash = STORE.hash_rihs01("rosgraph_msgs/msg/Clock")
+    clock_type = "rosgraph_msgs::msg::dds_::Clock_"
+    assert any(
+        t.endswith(f"/world/%clock/{clock_type}/{clock_hash}/::,:,:,:,,") for t in publishers
+    )
+    tf = f"/%tf/tf2_msgs::msg::dds_::TFMessage_/{STORE.hash_rihs01(TF)}/::,:,:,:,,"
+    assert sum(t.endswith(tf) for t in publishers) == 5
+    # a session's entities have distinct ids
+    ids = [tuple(t.split("/")[2:5]) for t in tokens]
+    assert len(set(ids)) == len(ids)
+
+
+def test_the_world_publishes_the_simulated_clock(live):
+    """/clock (use_sim_time's clock) reads k dt at step k, in order, each step once, each
+    before the UAVs' samples stamped with it: the stamps' clock."""
+    _, events, before, after = live
+    clocks = on_topic(events, "/clock", "rosgraph_msgs/msg/Clock")
+    read = [
+        STORE.deserialize_cdr(payload, "rosgraph_msgs/msg/Clock").clock for _, payload, _ in clocks
+    ]
+    assert [c.sec * 10**9 + c.nanosec for c in read] == [k * DT_NS for k in range(STEPS)]
+    assert all(before <= ros2.read_attachment(a)[1] <= after for _, _, a in clocks)
+    poses = on_topic(events, "/uav_0/pose", "geometry_msgs/msg/PoseStamped")
+    for at, payload, _ in poses:
+        k = stamp_of(STORE.deserialize_cdr(payload, "geometry_msgs/msg/PoseStamped")) // DT_NS
+        assert clocks[k][0] < at
+
+
+def test_tf_carries_each_uavs_pose(live):
+    """Each UAV's /tf message is map -> uav_i at its pose, stamped like the pose."""
+    _, events, _, _ = live
+    poses = {}
+    for i in range(5):
+        for _, payload, _ in on_topic(events, f"/uav_{i}/pose", "geometry_msgs/msg/PoseStamped"):
+            message = STORE.deserialize_cdr(payload, "geometry_msgs/msg/PoseStamped")
+            poses[i, stamp_of(message)] = message.pose
+    frames = 0
+    for _, payload, _ in on_topic(events, "/tf", TF):
+        (transform,) = STORE.deserialize_cdr(payload, TF).transforms
+        assert transform.header.frame_id == "map"
+        uav = int(transform.child_frame_id.removeprefix("uav_"))
+        pose = poses.pop((uav, stamp_of(transform)))
+        t, r = transform.transform.translation, transform.transform.rotation
+        p, q = pose.position, pose.orientation
+        assert (t.x, t.y, t.z, r.x, r.y, r.z, r.w) == (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        frames += 1
+    assert not poses and frames == 4 * STEPS + FAILS_AT
+
+
+def test_the_live_roll_banks_the_way_the_uav_turns_in_rep103(live):
+    """A positive roll (REP-103: right wing down) on every step whose heading then
+    decreases (a right turn in east-north-up), a negative one where it increases; yaw
+    is the heading."""
+    trace, events, _, _ = live
+    turning = 0
+    for i in range(5):
+        for _, payload, _ in on_topic(events, f"/uav_{i}/pose", "geometry_msgs/msg/PoseStamped"):
+            message = STORE.deserialize_cdr(payload, "geometry_msgs/msg/PoseStamped")
+            k = stamp_of(message) // DT_NS
+            q = message.pose.orientation
+            roll = math.atan2(2 * (q.w * q.x + q.y * q.z), 1 - 2 * (q.x**2 + q.y**2))
+            yaw = math.atan2(2 * (q.w * q.z + q.x * q.y), 1 - 2 * (q.y**2 + q.z**2))
+            assert yaw == pytest.approx(math.remainder(trace.uavs[k, i, 4], math.tau), abs=1e-9)
+            assert roll == pytest.approx(-trace.action[k, i], abs=1e-9)
+            if k + 1 < STEPS and trace.alive[k + 1, i]:
+                turn = math.remainder(trace.uavs[k + 1, i, 4] - trace.uavs[k, i, 4], math.tau)
+                if abs(turn) > 1e-9:
+                    turning += 1
+                    assert math.copysign(1, roll) == -math.copysign(1, turn)
+    assert turning > 5
+
+
+def test_a_failed_uavs_node_leaves_the_ros2_graph_when_it_fails(live):
+    """UAV 1 fails at step 3: its node and publisher tokens are dropped while the others
+    still fly (before UAV 0's pose of the last step, eight paced cycles later), not when
+    the run ends; the living UAVs' stay until they have published their last step."""
+    _, events, _, _ = live
+    poses = [n for n, _, _ in on_topic(events, "/uav_0/pose", "geometry_msgs/msg/PoseStamped")]
+    assert len(poses) == STEPS
+
+    def tokens(uav):
+        node = f"/%uavtrack/uav_{uav}"
+        mine = [(n, e[0], e[1]) for n, e in enumerate(events) if e[0] != "data" and node in e[1]]
+        put = {key for _, kind, key in mine if kind == "put"}
+        dropped = {key: n for n, kind, key in mine if kind == "delete"}
+        return put, dropped
+
+    put, dropped = tokens(FAILED)
+    assert put and set(dropped) == put
+    assert max(dropped.values()) < poses[-1]
+    assert len(put) == 1 + 1 + 1 + 4  # node, pose, tf, estimates
+    for uav in (0, 2, 3, 4):
+        put, dropped = tokens(uav)
+        assert len(put) == 7 and all(n > poses[-2] for n in dropped.values())
 
 
 def test_ros2_needs_zenoh_and_a_domain():

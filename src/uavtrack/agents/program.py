@@ -68,8 +68,8 @@ def serve(
     programs and for each message of the run; first: for the world's first message
     (default `wait`); credential: this program's key (`security.Credential`), needed
     when the run authenticates its members; ros2: a ROS 2 domain id, to publish a UAV's
-    pose and estimates as ROS 2 topics in rmw_zenoh's conventions (`io.ros2`; Zenoh
-    transport only)."""
+    pose, transform and estimates as ROS 2 topics in rmw_zenoh's conventions
+    (`io.ros2.UavNode`; Zenoh transport only)."""
     k_ = keys(run)
     gate = Gate(run, me, 0, credential)
     mailbox = Mailbox(gate, None, transport)
@@ -109,9 +109,9 @@ def serve(
         program = UavAgent(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
     node = None
     if ros2 is not None and me < n:
-        from ..io.ros2 import Node
+        from ..io.ros2 import UavNode
 
-        node = Node(transport.session, ros2, me, scenario.n_targets, scenario.dt)
+        node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt)
     try:
         return _cycles(transport, link, mailbox, program, node, run, me, n, programs,
                        central, scenario, wait)  # fmt: skip
@@ -162,6 +162,8 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
             bank = program.ctx.const.actions[report.action]
             node.publish(k, program.believed, bank, report.mean.array(), report.cov.array())
         ran += 1
+    if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
+        node.close()  # now, not when the lingering ends
     # stay until the world is done: closing at once could lose the last report in flight
     mailbox.wait(lambda: mailbox.world_gone, time.monotonic() + LINGER)
     return Served(ran, scenario.steps, end, at, programs, central)

@@ -125,7 +125,8 @@ def run_swarm(
     key files written in `keys`); realtime: pace cycles at dt; startup: seconds to wait
     for the programs; sign: authenticate every message (`security`); zenoh: a Zenoh
     configuration file and TLS files; ros2: a ROS 2 domain id (0-232): every UAV program
-    also publishes its pose and estimates as ROS 2 topics (`io.ros2`, zenoh only).
+    also publishes its pose, transform and estimates as ROS 2 topics, the world the
+    simulated clock on /clock (`io.ros2`, zenoh only).
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
@@ -218,9 +219,15 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
     written: list[Path] = []
     quoted: set[int] = set()  # programs whose words the error already quotes
     finished = False
+    clock = None
     try:
         link.announce(f"uavtrack/{run}/alive/world")
         world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup, keyring)
+        if o.ros2 is not None:
+            from ..io.ros2 import ClockNode
+
+            clock = ClockNode(link.session, o.ros2, scenario.dt)
+            world.clock = clock.publish
         if not o.spawn and keyring is not None:
             written = write_keys(keyring, programs, o.keys)
         if o.announce is not None:
@@ -256,6 +263,8 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
             raise RunError(str(exc)) from None
         finished = True
     finally:
+        if clock is not None:
+            clock.close()
         link.close()  # the programs see the world gone and end
         # after the last cycle they finish by themselves; on an error or Ctrl-C, at once
         stop([c.process for c in children], grace=o.deadline + 3.0 if finished else 0.0)

@@ -95,6 +95,8 @@ class WorldProgram:
         transport.watch(self.keys["alive"], self.mailbox.lost)
         self.traffic = Traffic()
         self.check: Callable[[], None] | None = None
+        self.clock: Callable[[int], None] | None = None
+        """Told each step k as it begins, before the step's Sense goes out (the ROS 2 /clock)."""
         self.step = -1
         self.central_alive = self.method.central
         self.prior: tuple[np.ndarray, np.ndarray] | None = None
@@ -178,6 +180,8 @@ class WorldProgram:
         for k, noise in enumerate(noises):
             begin = time.monotonic()
             self.step = k
+            if self.clock is not None:
+                self.clock(k)
             self.mailbox.begin(k, k)
             self._answer_joins()
             was = alive

@@ -358,7 +358,8 @@ def _ros2_announcer(domain: int | None, n_uavs: int, n_targets: int):
     def announce(run: str, endpoint: str, written: list[Path]) -> None:
         typer.echo(
             f"ROS 2 (rmw_zenoh): domain {domain}, Zenoh endpoint {endpoint}; topics "
-            f"/uav_I/pose and /uav_I/target_J/estimate (I < {n_uavs}, J < {n_targets})",
+            f"/clock (simulated time: use_sim_time), /tf, /uav_I/pose and "
+            f"/uav_I/target_J/estimate (I < {n_uavs}, J < {n_targets})",
             err=True,
         )
 

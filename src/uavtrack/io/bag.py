@@ -8,10 +8,11 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
 `flight.mavlink.LocalFrame`). Topics:
 
 * ``/clock`` rosgraph_msgs/msg/Clock, each step;
-* ``/tf`` tf2_msgs/msg/TFMessage: ``map`` -> ``uav_i`` (position, heading as yaw, the
-  flown bank angle as roll) and ``map`` -> ``target_j`` (true position, course as yaw);
+* ``/tf`` tf2_msgs/msg/TFMessage: ``map`` -> ``uav_i`` (its pose) and ``map`` ->
+  ``target_j`` (true position, course as yaw);
 * ``/uav_i/pose`` geometry_msgs/msg/PoseStamped and ``/uav_i/fix``
-  sensor_msgs/msg/NavSatFix, each UAV's true state, while it is alive;
+  sensor_msgs/msg/NavSatFix, each UAV's true state, while it is alive: heading as yaw,
+  the flown bank angle as REP-103's roll (positive: right wing down; `ros2.uav_pose`);
 * ``/targets/truth`` visualization_msgs/msg/MarkerArray: a sphere per target;
 * ``/team/target_j/estimate`` geometry_msgs/msg/PoseWithCovarianceStamped: the team's
   best estimate of target j (the most confident living UAV's, as the metrics take it),
@@ -39,9 +40,7 @@ from ..files import check_new_folder, new_folder
 from ..flight.mavlink import LocalFrame
 from ..metrics import team_best
 from ..network import radio_links
-from .ros2 import estimate_of, header_of, pose_of, store
-
-FRAME = "map"
+from .ros2 import FRAME, estimate_of, header_of, pose_of, store, transform_of, uav_pose
 
 
 class _Messages:
@@ -59,8 +58,8 @@ class _Messages:
     def header(self, ns: int, frame: str = FRAME):
         return header_of(ns, frame)
 
-    def pose(self, x: float, y: float, z: float, yaw: float, roll: float = 0.0):
-        return pose_of(x, y, z, yaw, roll)
+    def pose(self, x: float, y: float, z: float, yaw: float):
+        return pose_of(x, y, z, yaw)
 
     def marker(self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=()):
         T = self.T
@@ -137,9 +136,8 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             uavs, targets, alive = trace.uavs[k], trace.targets[k], trace.alive[k]
             transforms = []
             for i in np.flatnonzero(alive):
-                x, y, h, _, heading = (float(v) for v in uavs[i])
-                bank = float(trace.action[k, i])
-                pose = m.pose(x, y, h, heading, bank)
+                x, y, h = (float(v) for v in uavs[i, :3])
+                pose = uav_pose(uavs[i], trace.action[k, i])
                 write(f"/uav_{i}/pose", T_["geometry_msgs/msg/PoseStamped"](
                     header=m.header(ns), pose=pose), ns)  # fmt: skip
                 lat = origin[0] + math.degrees(y / north)
@@ -154,13 +152,14 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                     position_covariance_type=0,
                 )
                 write(f"/uav_{i}/fix", fix, ns)
-                transforms.append(_transform(m, ns, f"uav_{i}", x, y, h, heading, bank))
+                transforms.append(transform_of(m.header(ns), f"uav_{i}", pose))
             truth = []
             for j in range(Nt):
                 x, y, vx, vy = (float(v) for v in targets[j])
                 course = math.atan2(vy, vx)
-                transforms.append(_transform(m, ns, f"target_{j}", x, y, 0.0, course))
-                truth.append(m.marker(ns, "truth", j, 2, m.pose(x, y, 0.0, course),
+                place = m.pose(x, y, 0.0, course)
+                transforms.append(transform_of(m.header(ns), f"target_{j}", place))
+                truth.append(m.marker(ns, "truth", j, 2, place,
                                       (4.0, 4.0, 4.0), (1.0, 0.2, 0.2, 1.0)))  # fmt: skip
             write("/tf", T_["tf2_msgs/msg/TFMessage"](transforms=transforms), ns)
             write("/targets/truth", T_["visualization_msgs/msg/MarkerArray"](markers=truth), ns)
@@ -192,17 +191,6 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 m.marker(ns, "link", 0, 5, m.pose(0, 0, 0, 0), (0.3, 0, 0),
                          (0.9, 0.9, 0.9, 0.6), ends)]), ns)  # fmt: skip
     return counts
-
-
-def _transform(m: _Messages, ns: int, child: str, x, y, z, yaw, roll=0.0):
-    T_ = m.T
-    return T_["geometry_msgs/msg/TransformStamped"](
-        header=m.header(ns),
-        child_frame_id=child,
-        transform=T_["geometry_msgs/msg/Transform"](
-            translation=m.Vector3(x=x, y=y, z=z), rotation=pose_of(x, y, z, yaw, roll).orientation
-        ),
-    )
 
 
 def _ellipse(P: np.ndarray) -> tuple[float, float, float]:

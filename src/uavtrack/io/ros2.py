@@ -1,6 +1,9 @@
 """ROS 2 topics over Zenoh in rmw_zenoh's conventions, so that a ROS 2 node using
-rmw_zenoh_cpp (Jazzy and later) can discover and read what a UAV program publishes
-(``uavtrack swarm --ros2 DOMAIN``, ``uavtrack agent --ros2 DOMAIN``).
+rmw_zenoh_cpp (Jazzy and later) can discover and read what a swarm publishes
+(``uavtrack swarm --ros2 DOMAIN``, ``uavtrack agent --ros2 DOMAIN``): each UAV program its
+pose, its transform on ``/tf`` and its estimates (`UavNode`), the world program the
+simulated clock on ``/clock`` (`ClockNode`), so a node with ``use_sim_time`` reads the
+header stamps on the clock they were taken by.
 
 What rmw_zenoh expects, and what `Node` does (rmw_zenoh's design document and its
 liveliness and attachment helpers):
@@ -11,17 +14,26 @@ liveliness and attachment helpers):
 * **Payload** the message in CDR (little-endian, with its 4-byte encapsulation header),
   serialised by rosbags.
 * **Attachment** zenoh-ext serialised: the text ``sequence_number`` and an int64 (from
-  1), ``source_timestamp`` and an int64 [ns], ``source_gid`` and 16 bytes (strings as a
-  LEB128 length and UTF-8 bytes, integers as 8 bytes little-endian, the gid as a
-  fixed array).
+  1), ``source_timestamp`` and an int64 [ns] (the wall clock when the sample is put, as
+  rmw_zenoh takes it from the system clock; the simulated time is in the header),
+  ``source_gid`` and 16 bytes (strings as a LEB128 length and UTF-8 bytes, integers as
+  8 bytes little-endian, the gid as a fixed array).
 * **Liveliness tokens** under ``@ros2_lv/<domain>/<session id>/<node id>/<entity id>/``:
   ``NN/<enclave>/<namespace>/<node>`` for the node, and ``MP/<enclave>/<namespace>/<node>/
   <topic>/<type>/<type hash>/<qos>`` for each publisher, names with ``/`` written ``%``
   (empty: ``%``), the QoS the default (reliable, volatile, keep last 10), written
-  ``::,:,:,:,,`` (every field at its default left empty).
+  ``::,:,:,:,,`` (every field at its default left empty). The entity ids of a session
+  are distinct: the node's is its node id, its publishers' the ones after it.
 
 The gid is the first 16 bytes of the SHA-256 of the publisher's token (rmw_zenoh takes
-an XXH3-128 of it; subscribers only compare gids). Needs rosbags (the io extra).
+an XXH3-128 of it; subscribers only compare gids).
+
+Orientation follows REP-103: frame ``map`` east-north-up, a UAV's body frame x forward,
+y left, z up, so yaw is the heading (counter-clockwise from east) and a positive roll
+lowers the right wing, a turn to the right. Eq. (1)'s bank angle turns the heading by
+g dT tan(phi) / V, to the left when positive: the roll published is -phi (`uav_pose`, the
+one builder of a UAV's orientation for the bag and the live topics). Needs rosbags (the
+io extra).
 """
 
 from __future__ import annotations
@@ -29,6 +41,7 @@ from __future__ import annotations
 import hashlib
 import math
 import struct
+import time
 from dataclasses import dataclass
 from typing import Any
 
@@ -47,6 +60,9 @@ DEFAULT_QOS = "::,:,:,:,,"
 keep last 10, no deadline, lifespan or liveliness lease."""
 POSE = "geometry_msgs/msg/PoseStamped"
 ESTIMATE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+CLOCK = "rosgraph_msgs/msg/Clock"
+TF = "tf2_msgs/msg/TFMessage"
+FRAME = "map"
 UNKNOWN = 1e9  # [rad^2] the variance of a rotation nobody estimates
 
 _STORE = None
@@ -161,64 +177,91 @@ class _Publisher:
 
 
 class Node:
-    """One UAV program as a ROS 2 node ``/uavtrack/uav_<i>`` on a Zenoh session:
-    ``/uav_<i>/pose`` (PoseStamped: its position, heading as yaw, the bank angle flown as
-    roll) and ``/uav_<i>/target_<j>/estimate`` (PoseWithCovarianceStamped: its fused
-    estimate of target j, the x-y covariance in the 6 x 6), stamped with the simulated
-    clock (step k at k dt), in frame ``map``."""
+    """A ROS 2 node ``<namespace>/<name>`` on a Zenoh session, in rmw_zenoh's conventions:
+    its node token, and for each of `topics` (topic -> message type) a publisher with its
+    token, key and gid. Closing it (or the session ending) drops the tokens: the node
+    leaves the ROS 2 graph."""
 
-    def __init__(self, session, domain: int, uav: int, n_targets: int, dt: float) -> None:
-        self.session, self.domain, self.dt = session, domain, dt
-        self.node, self.namespace = f"uav_{uav}", "/uavtrack"
+    def __init__(
+        self, session, domain: int, node_id: int, namespace: str, name: str,
+        topics: dict[str, str],
+    ) -> None:  # fmt: skip
+        self.session, self.domain = session, domain
         zid = str(session.zid())
-        self.tokens = [session.liveliness().declare_token(
-            node_token(domain, zid, uav, self.namespace, self.node))]  # fmt: skip
-        topics = {f"/uav_{uav}/pose": POSE}
-        topics.update({f"/uav_{uav}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
+        self.tokens = [
+            session.liveliness().declare_token(node_token(domain, zid, node_id, namespace, name))
+        ]
         self.publishers: dict[str, _Publisher] = {}
-        for entity, (topic, msgtype) in enumerate(topics.items(), start=1):
-            token = publisher_token(
-                domain, zid, uav, entity, self.namespace, self.node, topic, msgtype
-            )
+        for entity, (topic, msgtype) in enumerate(topics.items(), start=node_id + 1):
+            token = publisher_token(domain, zid, node_id, entity, namespace, name, topic, msgtype)
             key = topic_key(domain, topic, msgtype)
             self.tokens.append(session.liveliness().declare_token(token))
             handle = session.declare_publisher(key)
             self.publishers[topic] = _Publisher(key, token, gid(token), handle=handle)
-        self.uav = uav
 
-    def publish(self, k: int, pose: np.ndarray, bank: float, mean, cov) -> None:
-        """Step k: the UAV's pose (x, y, h, V, heading) and its estimates (Nt, 4),
-        covariances (Nt, 4, 4)."""
-        T = store().types
-        ns = int(round(k * self.dt * 1e9))
-        header = header_of(ns)
-        x, y, h, _, heading = (float(v) for v in pose)
-        message = T[POSE](header=header, pose=pose_of(x, y, h, heading, bank))
-        self._put(f"/uav_{self.uav}/pose", message, ns)
-        for j in range(len(mean)):
-            estimate = estimate_of(header, mean[j], cov[j])
-            self._put(f"/uav_{self.uav}/target_{j}/estimate", estimate, ns)
-
-    def _put(self, topic: str, message, ns: int) -> None:
+    def put(self, topic: str, message) -> None:
+        """Put `message` on `topic`, its attachment stamped with the wall clock [ns]."""
         p = self.publishers[topic]
         p.sequence += 1
         payload = bytes(store().serialize_cdr(message, message.__msgtype__))
-        p.handle.put(payload, attachment=attachment(p.sequence, ns, p.gid))
+        p.handle.put(payload, attachment=attachment(p.sequence, time.time_ns(), p.gid))
 
     def close(self) -> None:
-        for p in self.publishers.values():
+        """Undeclare the publishers and the tokens (once; later calls do nothing)."""
+        publishers, tokens = list(self.publishers.values()), self.tokens
+        self.publishers, self.tokens = {}, []
+        for item in [p.handle for p in publishers] + tokens:
             try:
-                p.handle.undeclare()
+                item.undeclare()
             except Exception:  # already gone with its session
                 pass
-        for token in self.tokens:
-            try:
-                token.undeclare()
-            except Exception:
-                pass
 
 
-def header_of(ns: int, frame: str = "map"):
+class UavNode(Node):
+    """One UAV program as the ROS 2 node ``/uavtrack/uav_<i>``: ``/uav_<i>/pose``
+    (PoseStamped, `uav_pose`), its transform ``map`` -> ``uav_<i>`` on ``/tf``
+    (TFMessage, the same pose) and ``/uav_<i>/target_<j>/estimate``
+    (PoseWithCovarianceStamped, `estimate_of`), stamped with the simulated clock (step k
+    at k dt), in frame ``map``."""
+
+    def __init__(self, session, domain: int, uav: int, n_targets: int, dt: float) -> None:
+        topics = {f"/uav_{uav}/pose": POSE, "/tf": TF}
+        topics.update({f"/uav_{uav}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
+        super().__init__(session, domain, uav, "/uavtrack", f"uav_{uav}", topics)
+        self.uav, self.dt = uav, dt
+
+    def publish(self, k: int, uav: np.ndarray, bank: float, mean, cov) -> None:
+        """Step k: the UAV's state (x, y, h, V, heading), the bank angle it flies
+        (eq. 1, positive left) and its estimates (Nt, 4), covariances (Nt, 4, 4)."""
+        T = store().types
+        header = header_of(sim_ns(k, self.dt))
+        pose = uav_pose(uav, bank)
+        self.put(f"/uav_{self.uav}/pose", T[POSE](header=header, pose=pose))
+        self.put("/tf", T[TF](transforms=[transform_of(header, f"uav_{self.uav}", pose)]))
+        for j in range(len(mean)):
+            self.put(f"/uav_{self.uav}/target_{j}/estimate", estimate_of(header, mean[j], cov[j]))
+
+
+class ClockNode(Node):
+    """The world program as the ROS 2 node ``/uavtrack/world``, publishing the simulated
+    clock on ``/clock`` (rosgraph_msgs/Clock, step k at k dt), as a simulator does for the
+    nodes that run with ``use_sim_time``."""
+
+    def __init__(self, session, domain: int, dt: float) -> None:
+        super().__init__(session, domain, 0, "/uavtrack", "world", {"/clock": CLOCK})
+        self.dt = dt
+
+    def publish(self, k: int) -> None:
+        """The clock at the start of step k."""
+        self.put("/clock", store().types[CLOCK](clock=header_of(sim_ns(k, self.dt)).stamp))
+
+
+def sim_ns(k: int, dt: float) -> int:
+    """The simulated clock at step k [ns]: k dt."""
+    return int(round(k * dt * 1e9))
+
+
+def header_of(ns: int, frame: str = FRAME):
     """A std_msgs/Header stamped `ns` nanoseconds of the simulated clock, in `frame`."""
     T = store().types
     stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
@@ -226,13 +269,36 @@ def header_of(ns: int, frame: str = "map"):
 
 
 def pose_of(x: float, y: float, z: float, yaw: float, roll: float = 0.0):
-    """A geometry_msgs/Pose at (x, y, z), turned by roll about x then yaw about z."""
+    """A geometry_msgs/Pose at (x, y, z), turned by roll about the body's x (forward) axis
+    then yaw about z (up): the quaternion q_z(yaw) q_x(roll)."""
     T = store().types
     cy, sy = math.cos(yaw / 2), math.sin(yaw / 2)
     cr, sr = math.cos(roll / 2), math.sin(roll / 2)
     return T["geometry_msgs/msg/Pose"](
         position=T["geometry_msgs/msg/Point"](x=x, y=y, z=z),
         orientation=T["geometry_msgs/msg/Quaternion"](x=sr * cy, y=sr * sy, z=cr * sy, w=cr * cy),
+    )
+
+
+def uav_pose(uav: np.ndarray, bank: float):
+    """The geometry_msgs/Pose of a UAV in REP-103's frames: position (x, y, h), yaw the
+    heading, roll -`bank` (eq. 1's bank turns left when positive; REP-103's roll turns
+    right). uav: (5,) x, y, h, V, heading."""
+    x, y, h, _, heading = (float(v) for v in uav)
+    return pose_of(x, y, h, heading, 0.0 - float(bank))  # level flight: roll +0, not -0
+
+
+def transform_of(header, child: str, pose):
+    """A geometry_msgs/TransformStamped from `header`'s frame to `child`, placed at `pose`."""
+    T = store().types
+    p = pose.position
+    return T["geometry_msgs/msg/TransformStamped"](
+        header=header,
+        child_frame_id=child,
+        transform=T["geometry_msgs/msg/Transform"](
+            translation=T["geometry_msgs/msg/Vector3"](x=p.x, y=p.y, z=p.z),
+            rotation=pose.orientation,
+        ),
     )
 
 
