@@ -322,3 +322,60 @@ def test_the_wind_aware_planner_changes_nothing_without_wind():
     knows = uavtrack.simulate(windy.with_overrides({"planner.wind": True}), seed=2)
     assert np.array_equal(plain.trace.uavs[0], knows.trace.uavs[0])  # the same start
     assert not np.array_equal(plain.trace.bids, knows.trace.bids)  # planned otherwise
+
+
+def entity_folder(tmp_path, where):
+    """trackwing copied as `entitywing`, one of its files declaring an external entity
+    that names a file beside it: referenced in the text of the model (which JSBSim skips)
+    or in an attribute of its autopilot (where JSBSim fails)."""
+    import shutil
+
+    secret = tmp_path / "secret.txt"
+    secret.write_text("not part of any model")
+    folder = tmp_path / "entitywing"
+    shutil.copytree(flight.AIRCRAFT / "trackwing", folder)
+    (folder / "trackwing.xml").rename(folder / "entitywing.xml")
+    if where == "model":
+        path, root = folder / "entitywing.xml", "<fdm_config"
+        before, after = "<fileheader>", "<fileheader><note>&leak;</note>"
+    else:
+        path, root = folder / "Systems" / "autopilot.xml", "<system"
+        before, after = '<system name="uavtrack-autopilot">', '<system name="&leak;">'
+    text = path.read_text().replace('name="trackwing"', 'name="entitywing"')
+    doctype = f'<!DOCTYPE {root[1:]} [ <!ENTITY leak SYSTEM "{secret.as_uri()}"> ]>\n'
+    start = text.index(root)
+    text = text[:start] + doctype + text[start:].replace(before, after, 1)
+    path.write_text(text)
+    return folder, path
+
+
+@pytest.mark.parametrize("where", ["model", "autopilot"])
+def test_an_aircraft_file_declaring_an_entity_is_refused_in_one_line(capsys, tmp_path, where):
+    folder, path = entity_folder(tmp_path, where)
+    args = ("run", "--steps", "2", "--set", "uav.dynamics=jsbsim")
+    code, out, err = run_cli(capsys, *args, "--set", f"uav.aircraft={folder}")
+    assert code == 2 and err.count("\n") == 1, err
+    assert f"{path.resolve()} declares a DTD" in err
+    assert "external entities and DTDs are refused" in err
+    assert "not part of any model" not in out + err
+
+
+def test_a_model_jsbsim_cannot_parse_is_refused_in_one_line(tmp_path, monkeypatch):
+    # past uavtrack's own reading of the XML, JSBSim's parse error is one line too
+    folder, _ = entity_folder(tmp_path, "autopilot")
+    monkeypatch.setattr(flight, "check_xml", lambda folder: None)
+    with pytest.raises(ScenarioError, match="JSBSim could not load the model in") as info:
+        Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)})
+    assert "reference to external entity in attribute" in str(info.value)
+    assert "\n" not in str(info.value)
+
+
+def test_an_aircraft_file_that_is_not_xml_is_refused_in_one_line(tmp_path):
+    import shutil
+
+    folder = tmp_path / "trackwing"
+    shutil.copytree(flight.AIRCRAFT / "trackwing", folder)
+    (folder / "Systems" / "autopilot.xml").write_text("<system><property>&nosuch;</system>")
+    with pytest.raises(ScenarioError, match=r"autopilot.xml is not well-formed XML \(") as info:
+        Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)})
+    assert "\n" not in str(info.value)

@@ -28,6 +28,7 @@ import math
 from collections.abc import Sequence
 from functools import cache
 from pathlib import Path
+from xml.parsers import expat
 
 import numpy as np
 
@@ -81,20 +82,61 @@ def _module():
 
 def model_path(aircraft: str) -> Path:
     """The folder of the model `aircraft` names: one of uavtrack's, one that ships with
-    JSBSim, or a folder `.../<name>` holding `<name>.xml`."""
-    for folder in (
-        AIRCRAFT / aircraft,
-        Path(_module().get_default_root_dir()) / "aircraft" / aircraft,
-    ):
-        if (folder / f"{folder.name}.xml").is_file():
-            return folder
+    JSBSim, or a folder `.../<name>` holding `<name>.xml` (whose XML `check_xml` reads
+    first)."""
+    if Path(aircraft).name == aircraft:  # a bare name (a path would replace the root)
+        for folder in (
+            AIRCRAFT / aircraft,
+            Path(_module().get_default_root_dir()) / "aircraft" / aircraft,
+        ):
+            if (folder / f"{folder.name}.xml").is_file():
+                return folder
     folder = Path(aircraft).expanduser()
     if (folder / f"{folder.name}.xml").is_file():
-        return folder.resolve()
+        folder = folder.resolve()
+        check_xml(folder)
+        return folder
     raise ValueError(
         f"uav.aircraft {aircraft!r} is neither a model of uavtrack's (trackwing) or of "
         "JSBSim's nor a folder <name> holding <name>.xml"
     )
+
+
+class _Declared(Exception):
+    """A DTD met while reading a model's XML."""
+
+
+def check_xml(folder: Path) -> None:
+    """Refuse (ValueError, one line naming the file) a model folder with an XML file that
+    declares a DTD or is not well-formed.
+
+    A DTD is where entities are declared, and an external entity makes an XML parser read
+    another file or URL into the model; JSBSim's parser skips such a reference in text but
+    fails with an exception on one in an attribute. No model needs a DTD, so each ``*.xml``
+    of the folder is read by Python's expat first, which stops at ``<!DOCTYPE`` before any
+    declaration in it is read, and JSBSim only ever sees files without one. (JSBSim's own
+    models and systems, which are not checked, use internal entities as named constants.)
+    """
+
+    def declared(*_) -> None:
+        raise _Declared
+
+    for path in sorted(folder.rglob("*.xml")):
+        parser = expat.ParserCreate()
+        parser.StartDoctypeDeclHandler = declared
+        try:
+            with path.open("rb") as file:
+                parser.ParseFile(file)
+        except _Declared:
+            raise ValueError(
+                f"uav.aircraft: {path} declares a DTD (<!DOCTYPE> at line "
+                f"{parser.CurrentLineNumber}): external entities and DTDs are refused in "
+                "aircraft files; remove the declaration"
+            ) from None
+        except expat.ExpatError as exc:
+            raise ValueError(f"uav.aircraft: {path} is not well-formed XML ({exc})") from None
+        except OSError as exc:
+            raise ValueError(f"uav.aircraft: cannot read {path}: {exc.strerror}") from None
 
 
 def _load(folder: Path, dt: float):
@@ -103,9 +145,15 @@ def _load(folder: Path, dt: float):
     root = jsbsim.get_default_root_dir()
     fdm = jsbsim.FGFDMExec(root)
     fdm.set_debug_level(0)
-    loaded = fdm.load_model_with_paths(
-        folder.name, str(folder.parent), str(Path(root) / "engine"), str(Path(root) / "systems")
-    )
+    try:
+        loaded = fdm.load_model_with_paths(
+            folder.name, str(folder.parent), str(Path(root) / "engine"), str(Path(root) / "systems")
+        )
+    except jsbsim.BaseError as exc:  # e.g. a malformed file it reads outside the folder
+        message = " ".join(str(exc).split())
+        raise ValueError(
+            f"uav.aircraft: JSBSim could not load the model in {folder}: {message}"
+        ) from None
     if not loaded:
         raise ValueError(f"uav.aircraft: JSBSim could not load the model in {folder}")
     fdm.disable_output()  # some models ask for CSV output: none here

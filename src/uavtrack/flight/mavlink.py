@@ -9,19 +9,28 @@ attitude setpoint carries the thrust. The UAV's state comes back from the vehicl
 ``GLOBAL_POSITION_INT`` (position, height, ground velocity), mapped to the scenario's
 frame by `LocalFrame`.
 
-The exchange waits on the vehicle's clock, not the world's: after a setpoint sent at the
-vehicle's time t, `fly` returns with the first position report stamped t + dt or later
-(a simulator in lockstep answers at once, a real vehicle after dt), or fails after
-`deadline` seconds without one. Nothing here has been flown against PX4 or ArduPilot or
-their simulators: the messages are checked by decoding them back and by an exchange with
-a minimal vehicle on loopback (tests/test_mavlink.py).
+Setpoints are streamed, not sent once per cycle: PX4 takes OFFBOARD only from a vehicle
+that has received setpoints more often than 2 Hz for about a second, and leaves it (its
+offboard-loss failsafe) when they stop for COM_OF_LOSS_T, while a cycle is 0.5 s or 1 s.
+So each `Vehicle` has a sender of its own, `SetpointStream`, a thread that resends the
+current setpoint at `STREAM_HZ` (as MAVSDK's offboard plugin does) from before the switch
+of mode until the vehicle is closed; a decision only replaces the setpoint it resends.
+
+The exchange waits on the vehicle's clock, not the world's: after a setpoint decided on
+the vehicle's report of time t, `fly` returns with the first position report stamped
+t + dt or later (a simulator in lockstep answers at once, a real vehicle after dt), or
+fails after `deadline` seconds without one. Nothing here has been flown against PX4 or
+ArduPilot or their simulators: the messages are checked by decoding them back and by an
+exchange with a minimal vehicle on loopback that keeps PX4's offboard rules
+(tests/test_mavlink.py).
 """
 
 from __future__ import annotations
 
 import math
+import threading
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -36,6 +45,15 @@ ARDUPLANE_GUIDED = 15
 """ArduPlane's custom mode number of GUIDED."""
 PX4_OFFBOARD = 6
 """PX4's main mode number of OFFBOARD."""
+DO_SET_MODE = 176
+"""MAV_CMD_DO_SET_MODE, the command PX4 switches modes by (acknowledged)."""
+STREAM_HZ = 20.0
+"""How often a vehicle's current setpoint is resent [Hz]: PX4 needs more than 2 Hz to
+enter and stay in OFFBOARD; 20 Hz is MAVSDK's rate, ten times that."""
+LEAD_S = 1.5
+"""How long setpoints stream before PX4 is asked for OFFBOARD [s]: PX4 enables offboard
+control after about a second of them; half a second more so that the vehicle has seen a
+second even if the link delays the first ones."""
 
 
 def _mavutil():
@@ -97,6 +115,58 @@ class LocalFrame:
         return self.lat0 + math.degrees(y / north), self.lon0 + math.degrees(x / east)
 
 
+class SetpointStream(threading.Thread):
+    """Resends one vehicle's current setpoint every 1/`rate` seconds until stopped.
+
+    `send(setpoint)` puts one on the wire; `set` replaces the setpoint and sends it at once
+    (the period restarts from there). Sends keep to a schedule, so late wake-ups do not
+    lower the rate; after a stall of the machine the schedule restarts, with no burst to
+    catch up. `ready` is set once the stream has run for `lead` seconds; a failed send
+    ends the thread and is kept in `error`.
+    """
+
+    def __init__(self, send: Callable[[tuple], None], rate: float, lead: float) -> None:
+        super().__init__(daemon=True, name="uavtrack-setpoints")
+        self.send, self.period, self.lead = send, 1.0 / rate, lead
+        self.setpoint: tuple | None = None
+        self.sent = 0
+        self.error: BaseException | None = None
+        self.ready = threading.Event()
+        self._wake, self._stopped = threading.Event(), False
+
+    def set(self, setpoint: tuple) -> None:
+        self.setpoint = setpoint  # one reference assigned: the sender reads old or new
+        self._wake.set()
+
+    def stop(self, timeout: float = 5.0) -> None:
+        self._stopped = True
+        self._wake.set()
+        if self.is_alive():
+            self.join(timeout)
+
+    def run(self) -> None:
+        first = due = time.monotonic()
+        while True:
+            woken = self._wake.wait(max(0.0, due - time.monotonic()))
+            self._wake.clear()
+            if self._stopped:
+                return
+            try:
+                self.send(self.setpoint)
+            except Exception as exc:  # noqa: BLE001 (a closed link, a dead interface)
+                self.error = exc
+                return
+            self.sent += 1
+            now = time.monotonic()
+            if now - first >= self.lead:
+                self.ready.set()
+            # on schedule, so a late wake-up shortens the next wait; after a new setpoint
+            # or a stall longer than a period, the schedule restarts from now
+            due += self.period
+            if woken or due <= now:
+                due = now + self.period
+
+
 class Vehicle:
     """One flight controller over a MAVLink connection (`url` as pymavlink takes it,
     e.g. ``udpout:127.0.0.1:14551``); `target` its system id."""
@@ -105,38 +175,92 @@ class Vehicle:
         self.link = _mavutil().mavlink_connection(url, source_system=source)
         self.target = target
         self.clock_ms = 0  # the vehicle's time_boot_ms, from its reports
+        self._sending = threading.Lock()  # the stream and this thread share one link
+        self.stream = SetpointStream(self._send_setpoint, STREAM_HZ, LEAD_S)
 
-    def connect(self, flavour: str, deadline: float) -> None:
+    def connect(
+        self, flavour: str, deadline: float, pitch: float = 0.0, thrust: float = 0.5
+    ) -> None:
         """Wait for the vehicle's heartbeat (sending ours, so a UDP vehicle learns where
-        to answer) and put it in the mode that takes attitude setpoints."""
-        mavlink = self.link.mav
+        to answer), start streaming setpoints (wings level at `pitch` and `thrust` until the
+        first decision), put the vehicle in the mode that takes them and wait for its first
+        position report, whose stamp the first decision carries.
+
+        ArduPlane's GUIDED is asked for at once by SET_MODE (streaming before it is harmless:
+        ArduPlane ignores attitude setpoints outside GUIDED). PX4's OFFBOARD is asked for by
+        MAV_CMD_DO_SET_MODE after `LEAD_S` seconds of setpoints, and its COMMAND_ACK must
+        accept it."""
+        if flavour not in ("ardupilot", "px4"):
+            raise ValueError(f"flavour must be 'ardupilot' or 'px4', not {flavour!r}")
         end = time.monotonic() + deadline
         while True:
-            mavlink.heartbeat_send(6, 8, 0, 0, 0)  # GCS, autopilot invalid
+            self._send("heartbeat_send", 6, 8, 0, 0, 0)  # GCS, autopilot invalid
             if self.link.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2):
                 break
             if time.monotonic() > end:
                 raise RunError(f"no heartbeat from the vehicle within {deadline:g} s")
-        if flavour == "ardupilot":
-            mavlink.set_mode_send(self.target, 1, ARDUPLANE_GUIDED)  # custom mode enabled
-        elif flavour == "px4":
-            mavlink.command_long_send(self.target, 1, 176, 0, 1, PX4_OFFBOARD, 0, 0, 0, 0, 0)
-        else:
-            raise ValueError(f"flavour must be 'ardupilot' or 'px4', not {flavour!r}")
+        self.stream = SetpointStream(self._send_setpoint, STREAM_HZ, LEAD_S)
+        self.command(0.0, pitch, 0.0, thrust)
+        self.stream.start()
+        try:
+            if flavour == "ardupilot":
+                self._send("set_mode_send", self.target, 1, ARDUPLANE_GUIDED)  # custom mode
+            else:
+                if not self.stream.ready.wait(max(0.0, end - time.monotonic())):
+                    raise RunError(
+                        self._stream_failure()
+                        if self.stream.error is not None
+                        else f"no time for {LEAD_S:g} s of setpoints before OFFBOARD within "
+                        f"the deadline of {deadline:g} s"
+                    )
+                self._switch(PX4_OFFBOARD, "OFFBOARD", end, deadline)
+            self.report(0, max(0.0, end - time.monotonic()))
+        except BaseException:
+            self.stream.stop()  # no thread left behind; connecting again starts a new one
+            raise
+
+    def _switch(self, mode: int, name: str, end: float, deadline: float) -> None:
+        """Ask PX4 for main mode `mode` until its COMMAND_ACK accepts (or refuses, or the
+        deadline passes); unanswered, the command is repeated each second with its
+        confirmation counting the repeats (MAVLink's command protocol)."""
+        mavlink = _mavutil().mavlink
+        for confirmation in range(max(1, math.ceil(deadline))):
+            params = (1, mode, 0, 0, 0, 0, 0)  # custom mode enabled, PX4's main mode
+            self._send("command_long_send", self.target, 1, DO_SET_MODE, confirmation, *params)
+            repeat = min(end, time.monotonic() + 1.0)
+            while (left := repeat - time.monotonic()) > 0:
+                ack = self.link.recv_match(type="COMMAND_ACK", blocking=True, timeout=left)
+                if ack is None or ack.command != DO_SET_MODE:
+                    continue
+                if ack.result == mavlink.MAV_RESULT_ACCEPTED:
+                    return
+                if ack.result != mavlink.MAV_RESULT_IN_PROGRESS:
+                    verdict = mavlink.enums["MAV_RESULT"][ack.result].name
+                    raise RunError(f"vehicle {self.target} refused {name}: {verdict}")
+            if time.monotonic() >= end:
+                break
+        raise RunError(f"vehicle {self.target} did not enter {name} within {deadline:g} s")
 
     def command(self, roll: float, pitch: float, yaw: float, thrust: float) -> None:
-        """Send one attitude setpoint (roll positive right wing down, MAVLink's)."""
-        self.link.mav.set_attitude_target_send(
-            self.clock_ms,
-            self.target,
-            1,
-            IGNORE_RATES,
-            quaternion(roll, pitch, yaw),
-            0.0,
-            0.0,
-            0.0,
-            thrust,
+        """Make (roll, pitch, yaw) [rad] and `thrust` the setpoint the stream sends (roll
+        positive right wing down, MAVLink's), stamped with the vehicle's time of the state
+        it was decided on. Before `connect` it is only kept."""
+        if self.stream.error is not None:
+            raise RunError(self._stream_failure())
+        self.stream.set((self.clock_ms, quaternion(roll, pitch, yaw), thrust))
+
+    def _send_setpoint(self, setpoint: tuple) -> None:
+        stamp, q, thrust = setpoint
+        self._send(
+            "set_attitude_target_send", stamp, self.target, 1, IGNORE_RATES, q, 0, 0, 0, thrust
         )
+
+    def _send(self, method: str, *args) -> None:
+        with self._sending:  # pymavlink's packing (sequence numbers) is not thread-safe
+            getattr(self.link.mav, method)(*args)
+
+    def _stream_failure(self) -> str:
+        return f"the setpoint stream to vehicle {self.target} failed: {self.stream.error}"
 
     def report(self, after_ms: int, deadline: float):
         """The first GLOBAL_POSITION_INT stamped `after_ms` or later."""
@@ -150,6 +274,8 @@ class Vehicle:
         raise RunError(f"no position report from vehicle {self.target} within {deadline:g} s")
 
     def close(self) -> None:
+        """Stop the stream (PX4 then leaves OFFBOARD for its failsafe) and the link."""
+        self.stream.stop()
         self.link.close()
 
 
@@ -173,8 +299,9 @@ class MavlinkPilot:
         self.pitch, self.thrust, self.deadline = pitch, thrust, deadline
 
     def fly(self, uavs: np.ndarray, bank: np.ndarray, alive: np.ndarray) -> np.ndarray:
-        """Send each living UAV's bank setpoint (positive left, eq. 1), then wait for
-        its state one cycle later. uavs (1, Nu, 5); bank, alive (1, Nu)."""
+        """Make each living UAV's bank (positive left, eq. 1) the setpoint its stream
+        sends, then wait for its state one cycle later. uavs (1, Nu, 5); bank, alive
+        (1, Nu). A failed UAV's vehicle keeps its last setpoint."""
         out = uavs.copy()
         due = {}
         for i, vehicle in enumerate(self.vehicles):
