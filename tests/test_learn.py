@@ -183,3 +183,14 @@ def test_benchmarl_task_names_a_bad_setting():
         UAVTrackTask.TRACKING.get_task({"reward": "speed"})
     task = UAVTrackTask.TRACKING.get_task()  # the defaults: the paper's scenario
     assert task.max_steps(None) == 500 and task.group_map(None)["agents"][-1] == "uav_4"
+
+
+def test_benchmarl_task_reads_its_settings_from_yaml(tmp_path):
+    path = tmp_path / "task.yaml"
+    path.write_text("reward: difference\noverrides:\n  steps: 7\n  n_uavs: 3\n")
+    task = UAVTrackTask.TRACKING.get_from_yaml(str(path))
+    assert task.config["reward"] == "difference" and task.max_steps(None) == 7
+    assert task.group_map(None) == {"agents": ["uav_0", "uav_1", "uav_2"]}
+    path.write_text("- reward\n")
+    with pytest.raises(ValueError, match="must be a mapping"):
+        UAVTrackTask.TRACKING.get_from_yaml(str(path))

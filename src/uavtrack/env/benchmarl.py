@@ -37,8 +37,8 @@ from typing import Any
 from ..errors import install_hint
 
 try:
+    import yaml  # BenchMARL's own task files are YAML (PyYAML comes with its hydra-core)
     from benchmarl.environments import Task, TaskClass
-    from benchmarl.utils import _read_yaml_config
     from torchrl.data import Composite
     from torchrl.envs import EnvBase
 except ImportError as exc:  # an optional extra
@@ -156,4 +156,10 @@ class UAVTrackTask(Task):
     def get_from_yaml(self, path: str | None = None) -> TaskClass:
         """The task with the settings of the YAML file at `path` (None: the defaults of
         `TaskConfig`; BenchMARL's own folder of task files holds none for uavtrack)."""
-        return self.get_task(config={} if path is None else _read_yaml_config(path))
+        if path is None:
+            return self.get_task(config={})
+        with open(path, encoding="utf-8") as handle:
+            config = yaml.safe_load(handle)
+        if config is not None and not isinstance(config, dict):
+            raise ValueError(f"{path}: the task's settings must be a mapping of setting: value")
+        return self.get_task(config=config or {})
