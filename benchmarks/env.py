@@ -3,6 +3,9 @@ PettingZoo environment and of the vector environment at several batch sizes.
 
     python benchmarks/env.py [--steps 60] [--repeats 3] [--out FILE]
 
+prints the figures and writes no file; ``--out FILE`` keeps them as JSON too, and
+``--out benchmarks/env-2core.json`` is how the published figures are made anew.
+
 The paper's scenario (5 UAVs, 4 targets), Box observations, team reward, actions drawn
 at random (the same cost as any policy's). The vector environment is timed with the
 method's planning (``paper_actions=True``, what the single environment always does,
@@ -27,8 +30,9 @@ from pathlib import Path
 import numpy as np
 
 import uavtrack
-from uavtrack import threads
+from uavtrack import files, threads
 from uavtrack.env import parallel_env, vector_env
+from uavtrack.errors import UsageError
 
 BATCHES = (1, 16, 64, 256)
 
@@ -75,14 +79,17 @@ def main() -> None:
     parser.add_argument(
         "--out",
         type=Path,
-        default=Path(__file__).with_name("env-2core.json"),
-        help="the JSON to write (default: env-2core.json beside this script)",
+        help="also write the figures as JSON here (default: no file; the published "
+        "figures are benchmarks/env-2core.json)",
     )
     args = parser.parse_args()
     if args.steps < 1 or args.repeats < 1:
         parser.error("--steps and --repeats must be at least 1")
-    if not args.out.parent.is_dir():
-        parser.error(f"--out: no folder {args.out.parent}")
+    if args.out is not None:  # refused before the timings, in one line (exit 2)
+        try:
+            files.check_output(args.out, "--out")
+        except UsageError as exc:
+            parser.error(str(exc))
     single_runs, rows = [], []
     for trials in BATCHES:
         single_runs.append(single(args.steps))
@@ -121,8 +128,9 @@ def main() -> None:
         "note": "median wall (and CPU) seconds of `repeats` runs of `steps` steps, random "
         "actions, one process; times_single = vector / single agent-steps per wall second",
     }
-    args.out.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}")
+    if args.out is not None:
+        files.write_text(args.out, json.dumps(out, indent=2) + "\n")
+        print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

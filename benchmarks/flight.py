@@ -1,7 +1,10 @@
 """Speed of real flight: simulated seconds per wall second with every UAV a JSBSim
 aircraft and the distributed method running, for teams of 5, 20 and 50 UAVs.
 
-    python benchmarks/flight.py [--steps 60] [--out benchmarks/flight-2core.json]
+    python benchmarks/flight.py [--steps 60] [--out FILE]
+
+prints the figures and writes no file; ``--out FILE`` keeps them as JSON too, and
+``--out benchmarks/flight-2core.json`` is how the published figures are made anew.
 
 One trial per team (`Scenario.scaled`, dt 0.5 s), in this process, BLAS pinned to one
 thread as `import uavtrack` does. Each run is timed in wall and CPU time, split into the
@@ -22,7 +25,8 @@ import time
 from pathlib import Path
 
 import uavtrack
-from uavtrack import Scenario, threads
+from uavtrack import Scenario, files, threads
+from uavtrack.errors import UsageError
 from uavtrack.flight import jsbsim as flight
 from uavtrack.simulation import run
 
@@ -77,8 +81,18 @@ def measure(scenario: Scenario, seed: int = 0) -> dict[str, float]:
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--steps", type=int, default=60)
-    parser.add_argument("--out", type=Path, default=Path("benchmarks/flight-2core.json"))
+    parser.add_argument(
+        "--out",
+        type=Path,
+        help="also write the figures as JSON here (default: no file; the published "
+        "figures are benchmarks/flight-2core.json)",
+    )
     args = parser.parse_args()
+    if args.out is not None:  # refused before the timings, in one line (exit 2)
+        try:
+            files.check_output(args.out, "--out")
+        except UsageError as exc:
+            parser.error(str(exc))
     warm = Scenario(steps=3)  # one-time imports and set-ups, outside the timings
     measure(warm.with_overrides({"uav.dynamics": "jsbsim"}))
     measure(warm)
@@ -113,8 +127,10 @@ def main() -> None:
         "note": "wall seconds of one trial in one process; realtime_factor = simulated "
         "seconds / wall seconds of the cycles (the start excluded)",
     }
-    args.out.write_text(json.dumps(out, indent=2) + "\n")
-    print(f"wrote {args.out}; peak RSS {peak_mib:.0f} MiB")
+    print(f"peak RSS {peak_mib:.0f} MiB")
+    if args.out is not None:
+        files.write_text(args.out, json.dumps(out, indent=2) + "\n")
+        print(f"wrote {args.out}")
 
 
 if __name__ == "__main__":

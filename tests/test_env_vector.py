@@ -109,6 +109,12 @@ def test_without_paper_actions_the_agents_trial_is_the_same():
         v.paper_actions()
 
 
+def test_the_count_is_num_envs_as_in_gymnasium_and_vmas():
+    v = vector_env(num_envs=3, steps=4)
+    observations, _ = v.reset(seed=0)
+    assert v.num_envs == 3 and observations.shape[:2] == (3, 5) and v.seeds == [0, 1, 2]
+
+
 def test_dict_observations_batch_too():
     v = vector_env(2, steps=5, observation="dict")
     observations, _ = v.reset(seed=0)
@@ -117,9 +123,9 @@ def test_dict_observations_batch_too():
 
 
 def test_bad_input_is_named():
-    with pytest.raises(ValueError, match="n_trials must be at least 1"):
+    with pytest.raises(ValueError, match="num_envs must be at least 1"):
         vector_env(0)
-    with pytest.raises(TypeError, match="n_trials must be an integer"):
+    with pytest.raises(TypeError, match="num_envs must be an integer"):
         vector_env(2.5)
     v = vector_env(2, steps=5)
     with pytest.raises(RuntimeError, match=r"call reset\(\) before step"):

@@ -7,7 +7,7 @@ assignment are exactly those of `simulate`; only the flown actions come from the
 * `parallel_env()`: a PettingZoo ParallelEnv;
 * `env()`: the same as a PettingZoo AEC env (agents act in turn, the cycle runs when
   the last has acted);
-* `vector_env(n_trials)`: n trials as one batch, arrays (trials, agents, ...);
+* `vector_env(num_envs)`: that many trials as one batch, arrays (trials, agents, ...);
   `uavtrack.env.learn` makes it a Stable-Baselines3 VecEnv or a TorchRL EnvBase.
 
 Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
@@ -34,9 +34,13 @@ Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
   fly), ``target`` (its assignment), ``in_view``.
 * **Episodes** last the scenario's steps (``max_cycles``): at the end every agent is
   terminated (the time left is in the observation, so the end is part of the task)
-  and truncated (the steps ran out). A UAV that fails (faults) terminates as an agent;
-  SuperSuit's ``black_death_v3`` keeps it as zeros. An agent left out of the action
-  dict flies the method's action.
+  and truncated (the steps ran out). A UAV that fails (faults) terminates as an agent
+  and leaves ``agents``; the others fly on to the mission's end. As PettingZoo's
+  conversions do, an action given for an agent that has left is ignored (TorchRL's
+  ``PettingZooWrapper`` sends one for every possible agent: give it ``use_mask=True,
+  done_on_any=False`` so that a failure does not end the episode); a name that was
+  never an agent is refused. SuperSuit's ``black_death_v3`` keeps a failed UAV as
+  zeros. An agent left out of the action dict flies the method's action.
 
 ``reset(seed=s)`` draws the trial as ``simulate(scenario, method, seed=s)`` does, so
 flying every ``paper_action`` reproduces ``simulate``'s trial exactly (``result()``).

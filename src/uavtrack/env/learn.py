@@ -1,16 +1,18 @@
 """The vector environment in the shapes two learning libraries take as they are.
 
 * `sb3_vec_env(vector)`: a Stable-Baselines3 ``VecEnv`` whose envs are the agents of
-  all trials (n_trials x Nu of them, trial by trial), for one policy shared by every
-  agent (parameter sharing), as SuperSuit's ``pettingzoo_env_to_vec_env_v1`` and
-  ``concat_vec_envs_v1`` make of a ParallelEnv, without the copies and processes.
-* `torchrl_env(vector)`: a TorchRL ``EnvBase`` of batch size [n_trials] in TorchRL's
-  multi-agent layout: ``("agents", "observation")`` (n_trials, Nu, size),
-  ``("agents", "action")`` (n_trials, Nu), ``("agents", "reward")`` (n_trials, Nu, 1),
-  ``"state"`` (n_trials, state size) for centralised critics, ``done``/``terminated``/
+  all trials (its ``num_envs`` is ``vector.num_envs`` x Nu, trial by trial), for one
+  policy shared by every agent (parameter sharing), as SuperSuit's
+  ``pettingzoo_env_to_vec_env_v1`` and ``concat_vec_envs_v1`` make of a ParallelEnv,
+  without the copies and processes.
+* `torchrl_env(vector)`: a TorchRL ``EnvBase`` of batch size [num_envs] in TorchRL's
+  multi-agent layout: ``("agents", "observation")`` (num_envs, Nu, size),
+  ``("agents", "action")`` (num_envs, Nu), ``("agents", "reward")`` (num_envs, Nu, 1),
+  ``"state"`` (num_envs, state size) for centralised critics, ``done``/``terminated``/
   ``truncated`` per trial.
 
-Needs the learn extra (torch, stable-baselines3, torchrl).
+`uavtrack.env.benchmarl` makes `torchrl_env` a BenchMARL task. Needs the learn extra
+(torch, stable-baselines3, torchrl).
 """
 
 from __future__ import annotations
@@ -41,9 +43,9 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
 
         def __init__(self) -> None:
             self.vector, self.render_mode = vector, None
-            self.shape = (vector.num_trials, vector.num_agents)
+            self.shape = (vector.num_envs, vector.num_agents)
             super().__init__(
-                vector.num_trials * vector.num_agents, vector.observation_space, vector.action_space
+                vector.num_envs * vector.num_agents, vector.observation_space, vector.action_space
             )
             self._base = seed
             self._actions: np.ndarray | None = None
@@ -93,7 +95,7 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
 
 
 def torchrl_env(vector: VectorEnv, seed: int | None = None):
-    """`vector` as a TorchRL EnvBase of batch size [n_trials] (see the module)."""
+    """`vector` as a TorchRL EnvBase of batch size [num_envs] (see the module)."""
     try:
         import torch
         from tensordict import TensorDict
@@ -103,11 +105,11 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
         raise ImportError(f"torchrl_env needs torchrl: {install_hint('learn')} ({exc})") from None
     if vector.spaces.form != "box":
         raise ValueError("torchrl_env needs observation='box'")
-    B, N = vector.num_trials, vector.num_agents
+    B, N = vector.num_envs, vector.num_agents
     D, S = vector.observation_space.shape[0], vector.state_space.shape[0]
 
     class TrialsEnv(EnvBase):
-        """n_trials trials of Nu agents; every trial ends at the same step."""
+        """num_envs trials of Nu agents; every trial ends at the same step."""
 
         def __init__(self) -> None:
             super().__init__(batch_size=torch.Size([B]), device="cpu")

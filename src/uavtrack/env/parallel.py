@@ -138,9 +138,12 @@ class UAVTrackingEnv(ParallelEnv):
             raise RuntimeError("the episode is over: call reset()")
         flown = self._run.pending.own.copy()
         for agent, action in actions.items():
-            i = self._agent(agent)
+            i = self._agent(agent)  # a name that never was an agent is a mistake: refused
             if agent not in self.agents:
-                raise ValueError(f"{agent} is not acting: it has failed")
+                # PettingZoo's convention (its aec_to_parallel steps only env.agents):
+                # wrappers that keep a fixed set of agents, such as TorchRL's, send an
+                # action for every possible agent, a failed one's included
+                continue
             if not self.action_spaces[agent].contains(action):
                 raise ValueError(f"{agent}: action {action!r} is not in Discrete(3)")
             flown[0, i] = int(action)

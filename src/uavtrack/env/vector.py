@@ -1,10 +1,10 @@
 """Many trials stepped as one batch through the simulator's batched stages.
 
-`VectorEnv` holds n_trials trials of Nu agents each and speaks in arrays with leading
+`VectorEnv` holds num_envs trials of Nu agents each and speaks in arrays with leading
 axes (trials, agents), in the conventions of Stable-Baselines3's vector environments
 (the episode that ends is reset in the same step, its last observation in the info).
 `uavtrack.env.learn` turns it into a Stable-Baselines3 `VecEnv` (agents as envs, one
-shared policy) or a TorchRL `EnvBase` with batch size [n_trials]. Trial b of an episode
+shared policy) or a TorchRL `EnvBase` with batch size [num_envs]. Trial b of an episode
 started by ``reset(seed=s)`` is the trial ``parallel_env(...).reset(seed=s + b)`` plays:
 the same numbers, step for step (a test).
 """
@@ -25,7 +25,7 @@ from .spaces import Spaces, check_reward
 
 
 def vector_env(
-    n_trials: int,
+    num_envs: int,
     scenario: Scenario | None = None,
     method_for_others: str | None = None,
     observation: str = "box",
@@ -36,10 +36,10 @@ def vector_env(
     paper_actions: bool = True,
     **overrides: Any,
 ) -> VectorEnv:
-    """n_trials trials of `scenario` with `overrides`, as `parallel_env` takes them."""
+    """num_envs trials of `scenario` with `overrides`, as `parallel_env` takes them."""
     return VectorEnv(
         scenario_of(scenario, max_cycles, overrides, "vector_env"),
-        n_trials,
+        num_envs,
         method_for_others or "distributed",
         observation=observation,
         reward=reward,
@@ -50,7 +50,7 @@ def vector_env(
 
 
 class VectorEnv:
-    """n_trials trials of a scenario, every UAV an agent, stepped as one batch.
+    """num_envs trials of a scenario, every UAV an agent, stepped as one batch.
 
     Every trial lasts the scenario's steps, so all end together; a UAV that fails
     stays in the arrays with zeros for its observation and 0 reward until the episode
@@ -64,7 +64,7 @@ class VectorEnv:
     def __init__(
         self,
         scenario: Scenario,
-        n_trials: int,
+        num_envs: int,
         method: str = "distributed",
         observation: str = "box",
         reward: str = "team",
@@ -72,17 +72,17 @@ class VectorEnv:
         max_neighbours: int | None = None,
         paper_actions: bool = True,
     ) -> None:
-        if isinstance(n_trials, bool) or not isinstance(n_trials, int | np.integer):
-            raise TypeError(f"n_trials must be an integer, not {type(n_trials).__name__}")
-        if n_trials < 1:
-            raise ValueError(f"n_trials must be at least 1, got {n_trials}")
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int | np.integer):
+            raise TypeError(f"num_envs must be an integer, not {type(num_envs).__name__}")
+        if num_envs < 1:
+            raise ValueError(f"num_envs must be at least 1, got {num_envs}")
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
-        check_memory(scenario, int(n_trials))  # refused now, not at the first step
+        check_memory(scenario, int(num_envs))  # refused now, not at the first step
         self.scenario, self.method = scenario, get(method)
         self.reward = check_reward(reward)
         self.spaces = Spaces(scenario, observation, max_targets, max_neighbours)
-        self.num_trials, self.num_agents = int(n_trials), scenario.n_uavs
+        self.num_envs, self.num_agents = int(num_envs), scenario.n_uavs
         self.observation_space = self.spaces.observation_space  # one agent's
         self.state_space = self.spaces.state_space  # one trial's
         self.action_space = spaces.Discrete(3)
@@ -99,8 +99,8 @@ class VectorEnv:
         return list(self._seeds)
 
     def reset(self, seed: int | None = None) -> tuple[Any, dict[str, np.ndarray]]:
-        """Start trials seed, seed + 1, ... seed + n_trials - 1 (None: from fresh
-        entropy). Returns the observations (n_trials, Nu, ...) and the info."""
+        """Start trials seed, seed + 1, ... seed + num_envs - 1 (None: from fresh
+        entropy). Returns the observations (num_envs, Nu, ...) and the info."""
         check_seed(seed)
         if seed is None:
             seed = int(np.random.SeedSequence().generate_state(1, np.uint32)[0])
@@ -108,14 +108,14 @@ class VectorEnv:
         return self.observations(), self._info()
 
     def step(self, actions: Any):
-        """Fly `actions` (n_trials, Nu) indices into {-phi, 0, +phi}; returns
-        observations, rewards (n_trials, Nu), terminated and truncated (n_trials, Nu),
+        """Fly `actions` (num_envs, Nu) indices into {-phi, 0, +phi}; returns
+        observations, rewards (num_envs, Nu), terminated and truncated (num_envs, Nu),
         and the info. When the episode ends (both flags set for every agent) the next
         episode starts at once: the observations are its first, and the info holds the
         ending one's ``final_observation``, ``final_state`` and ``observation_rate``."""
         if self._run is None:
             raise RuntimeError("call reset() before step()")
-        shape = (self.num_trials, self.num_agents)
+        shape = (self.num_envs, self.num_agents)
         if actions is None:
             raise TypeError(f"actions must be an array of shape {shape}, not None")
         chosen = np.asarray(actions)
@@ -140,21 +140,21 @@ class VectorEnv:
         return self.observations(), earned, flags, flags.copy(), {**self._info(), **ending}
 
     def observations(self) -> Any:
-        """Every agent's observation now (n_trials, Nu, ...)."""
+        """Every agent's observation now (num_envs, Nu, ...)."""
         return self.spaces.observe(self._started().view())
 
     def state(self) -> np.ndarray:
-        """Every trial's global state now (n_trials, state size)."""
+        """Every trial's global state now (num_envs, state size)."""
         return self.spaces.state(self._started().view())
 
     def paper_actions(self) -> np.ndarray:
-        """(n_trials, Nu) the actions the method would fly now."""
+        """(num_envs, Nu) the actions the method would fly now."""
         if not self.planned:
             raise RuntimeError("made with paper_actions=False: the method does not plan")
         return self._started().pending.own.copy()
 
     def observation_rate(self) -> np.ndarray:
-        """(n_trials,) each trial's observation rate over the steps flown this episode."""
+        """(num_envs,) each trial's observation rate over the steps flown this episode."""
         return self._started().observation_rate()
 
     def close(self) -> None:
@@ -166,8 +166,8 @@ class VectorEnv:
         return self._run
 
     def _start(self, seed: int) -> None:
-        self._seeds = list(range(seed, seed + self.num_trials))
-        self._next_seed = seed + self.num_trials
+        self._seeds = list(range(seed, seed + self.num_envs))
+        self._next_seed = seed + self.num_envs
         sequences = [np.random.SeedSequence(s) for s in self._seeds]
         self._run = Episodes(
             self.scenario, self.method, self.spaces, self.reward, sequences, plan=self.planned

@@ -1,0 +1,165 @@
+"""The environment as a BenchMARL task: every UAV an agent of one group, trained by any of
+BenchMARL's algorithms (MAPPO, IPPO, MASAC, QMIX, ...) with discrete actions.
+
+    from benchmarl.algorithms import MappoConfig
+    from benchmarl.experiment import Experiment, ExperimentConfig
+    from benchmarl.models import MlpConfig
+    from uavtrack.env.benchmarl import UAVTrackTask
+
+    task = UAVTrackTask.TRACKING.get_task({"overrides": {"steps": 200}})
+    Experiment(task, MappoConfig.get_from_yaml(), MlpConfig.get_from_yaml(),
+               MlpConfig.get_from_yaml(), 0, ExperimentConfig.get_from_yaml()).run()
+
+The task is the vector form (`vector_env`, ``paper_actions=False``) as `torchrl_env`
+gives it to TorchRL: BenchMARL's ``num_envs`` trials as one batch, so no serial copies
+of the single environment. The group ``"agents"`` holds ``uav_0 ... uav_{N-1}``; the
+``"state"`` (the team's global view) goes to centralised critics. A UAV that fails stays
+in its group with a zero observation and zero reward until the mission ends (SuperSuit's
+"black death"), as every MARL algorithm with a fixed group expects; every trial ends at
+the scenario's last step.
+
+The config (`TaskConfig`, or a dict of its fields given to ``get_task``, or a YAML file
+of them given to ``get_from_yaml``): ``scenario`` a scenario TOML file (None: the
+paper's), ``overrides`` its fields by name (nested parts as dicts, as `vector_env` takes
+them), ``reward``, ``max_targets`` and ``max_neighbours`` as `parallel_env` takes them,
+``method_for_others`` the method whose planning the world runs.
+
+Needs the learn extra (torch, torchrl, benchmarl).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from typing import Any
+
+from ..errors import install_hint
+
+try:
+    import yaml  # BenchMARL's own task files are YAML (PyYAML comes with its hydra-core)
+    from benchmarl.environments import Task, TaskClass
+    from torchrl.data import Composite
+    from torchrl.envs import EnvBase
+except ImportError as exc:  # an optional extra
+    raise ImportError(
+        f"uavtrack.env.benchmarl needs benchmarl: {install_hint('learn')} ({exc})"
+    ) from None
+
+from ..config import Scenario
+from .learn import torchrl_env
+from .vector import vector_env
+
+GROUP = "agents"
+
+
+@dataclass
+class TaskConfig:
+    """The settings of the uavtrack task (see the module)."""
+
+    scenario: str | None = None
+    overrides: dict[str, Any] = field(default_factory=dict)
+    reward: str = "team"
+    max_targets: int | None = None
+    max_neighbours: int | None = None
+    method_for_others: str = "distributed"
+
+
+def task_config(config: dict[str, Any] | None) -> dict[str, Any]:
+    """`config` checked against `TaskConfig` and completed with its defaults; a setting
+    it does not know is refused by name, in one line."""
+    config = dict(config or {})
+    known = [f.name for f in dataclasses.fields(TaskConfig)]
+    unknown = sorted(set(config) - set(known))
+    if unknown:
+        raise ValueError(f"unknown uavtrack task settings {unknown}; the settings are {known}")
+    return dataclasses.asdict(TaskConfig(**config))
+
+
+class UAVTrackClass(TaskClass):
+    """BenchMARL's view of the uavtrack task (see the module)."""
+
+    def __init__(self, name: str, config: dict[str, Any] | None) -> None:
+        super().__init__(name, task_config(config))
+        probe = self._vector(1)  # a bad scenario or setting is refused when the task is made
+        self.steps, self.agents = probe.scenario.steps, probe.num_agents
+
+    def _vector(self, num_envs: int):
+        c = self.config
+        scenario = Scenario.from_toml(c["scenario"]) if c["scenario"] is not None else None
+        return vector_env(
+            num_envs,
+            scenario,
+            method_for_others=c["method_for_others"],
+            reward=c["reward"],
+            max_targets=c["max_targets"],
+            max_neighbours=c["max_neighbours"],
+            paper_actions=False,  # the agents fly every action: no planning to pay for
+            **c["overrides"],
+        )
+
+    def get_env_fun(
+        self, num_envs: int, continuous_actions: bool, seed: int | None, device: Any
+    ) -> Callable[[], EnvBase]:
+        if continuous_actions:
+            raise ValueError("the uavtrack task has discrete actions (a bank angle of three)")
+        return lambda: torchrl_env(self._vector(num_envs), seed=seed).to(device)
+
+    def supports_continuous_actions(self) -> bool:
+        return False
+
+    def supports_discrete_actions(self) -> bool:
+        return True
+
+    def has_render(self, env: EnvBase) -> bool:
+        return False  # a batch draws nothing; parallel_env renders one trial
+
+    def max_steps(self, env: EnvBase) -> int:
+        return self.steps
+
+    def group_map(self, env: EnvBase) -> dict[str, list[str]]:
+        return {GROUP: [f"uav_{i}" for i in range(self.agents)]}
+
+    def observation_spec(self, env: EnvBase) -> Composite:
+        spec = env.full_observation_spec_unbatched.clone()
+        del spec["state"]
+        del spec[GROUP, "alive"]  # the observation's first entry says it too
+        return spec
+
+    def state_spec(self, env: EnvBase) -> Composite | None:
+        return Composite(state=env.full_observation_spec_unbatched["state"].clone())
+
+    def info_spec(self, env: EnvBase) -> Composite | None:
+        return None
+
+    def action_spec(self, env: EnvBase) -> Composite:
+        return env.full_action_spec_unbatched
+
+    def action_mask_spec(self, env: EnvBase) -> Composite | None:
+        return None
+
+    @staticmethod
+    def env_name() -> str:
+        return "uavtrack"
+
+
+class UAVTrackTask(Task):
+    """uavtrack's tasks for BenchMARL: ``TRACKING``, the cooperative tracking of the
+    scenario's targets."""
+
+    TRACKING = None
+
+    @staticmethod
+    def associated_class():
+        return UAVTrackClass
+
+    def get_from_yaml(self, path: str | None = None) -> TaskClass:
+        """The task with the settings of the YAML file at `path` (None: the defaults of
+        `TaskConfig`; BenchMARL's own folder of task files holds none for uavtrack)."""
+        if path is None:
+            return self.get_task(config={})
+        with open(path, encoding="utf-8") as handle:
+            config = yaml.safe_load(handle)
+        if config is not None and not isinstance(config, dict):
+            raise ValueError(f"{path}: the task's settings must be a mapping of setting: value")
+        return self.get_task(config=config or {})

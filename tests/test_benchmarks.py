@@ -1,0 +1,65 @@
+"""The benchmark scripts run as the documentation gives them: they print their figures
+and write a file only where ``--out`` names one, so a run never replaces the published
+figures (benchmarks/*-2core.json). Each runs as a copy laid out as in the checkout, so
+that a script that did write its default file would write it there, not here."""
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def run(script: str, checkout: Path, *args: str) -> subprocess.CompletedProcess:
+    """``python benchmarks/<script> args`` from the root of a copy of the checkout."""
+    (checkout / "benchmarks").mkdir(parents=True, exist_ok=True)
+    shutil.copy(ROOT / "benchmarks" / script, checkout / "benchmarks")
+    path = os.pathsep.join(filter(None, [str(ROOT / "src"), os.environ.get("PYTHONPATH")]))
+    return subprocess.run(
+        [sys.executable, f"benchmarks/{script}", *args],
+        cwd=checkout, env={**os.environ, "PYTHONPATH": path, "MPLBACKEND": "Agg"},
+        capture_output=True, text=True, timeout=600,
+    )  # fmt: skip
+
+
+def files_in(folder: Path) -> list[str]:
+    return sorted(str(p.relative_to(folder)) for p in folder.rglob("*") if p.is_file())
+
+
+@pytest.mark.parametrize(
+    "script, args",
+    [("env.py", ["--steps", "1", "--repeats", "1"]), ("flight.py", ["--steps", "1"])],
+)
+def test_the_documented_command_writes_no_file(script, args, tmp_path):
+    if script == "flight.py":
+        pytest.importorskip("jsbsim")
+    done = run(script, tmp_path, *args)
+    assert done.returncode == 0, done.stderr
+    assert "real time" in done.stdout or "agent-steps/s" in done.stdout
+    assert files_in(tmp_path) == [f"benchmarks/{script}"]  # no benchmarks/*-2core.json
+
+
+def test_env_benchmark_writes_its_json_only_where_asked(tmp_path):
+    done = run("env.py", tmp_path, "--steps", "1", "--repeats", "1", "--out", "mine.json")
+    assert done.returncode == 0, done.stderr
+    assert files_in(tmp_path) == ["benchmarks/env.py", "mine.json"]
+    figures = json.loads((tmp_path / "mine.json").read_text())
+    assert [row["trials"] for row in figures["vector"]] == [1, 16, 64, 256]
+    single = figures["single"]["agent_steps_per_wall_s"]
+    for row in figures["vector"]:
+        for form in ("with_paper_actions", "agents_only"):
+            got = row[form]
+            assert got["times_single"] == pytest.approx(got["agent_steps_per_wall_s"] / single)
+
+
+def test_a_bad_out_is_refused_before_the_timings(tmp_path):
+    (tmp_path / "taken").mkdir()
+    done = run("env.py", tmp_path, "--out", "taken")
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "--out: taken is a directory" in done.stderr.strip().splitlines()[-1]
+    assert done.stdout == ""  # nothing was timed
