@@ -373,6 +373,8 @@ def test_misuse_gets_a_clear_error():
 
 
 def test_the_benchmarl_task_without_benchmarl_says_how_to_install_it(monkeypatch):
+    for name in [m for m in sys.modules if m.startswith("benchmarl.")]:
+        monkeypatch.delitem(sys.modules, name)  # loaded by an earlier test
     monkeypatch.setitem(sys.modules, "benchmarl", None)  # as if not installed
     monkeypatch.delitem(sys.modules, "uavtrack.env.benchmarl", raising=False)
     with pytest.raises(ImportError, match=r"needs benchmarl: pip install .*benchmarl"):
