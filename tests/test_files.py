@@ -1,5 +1,7 @@
 import json
 import os
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -57,3 +59,43 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
         tmp.write_text("{}")
     assert [p.name for p in tmp_path.iterdir()] == ["y.json"]
     assert (tmp_path / "y.json").stat().st_mode & 0o777 != 0o600
+
+
+SMALL_DISK = """
+import os, resource, signal, sys
+limit = int(sys.argv[1])
+signal.signal(signal.SIGXFSZ, signal.SIG_IGN)  # a write past the limit fails with EFBIG
+resource.setrlimit(resource.RLIMIT_FSIZE, (limit, limit))
+os.execv(sys.executable, [sys.executable, *sys.argv[2:]])
+"""
+
+
+def on_a_small_disk(folder, limit: int, *args, timeout: float = 300):
+    """Run ``python ARGS`` in `folder` as if the disk had room for `limit` bytes per file:
+    writes beyond them fail (EFBIG, through RLIMIT_FSIZE, no privileges needed) as a
+    full disk makes them fail (ENOSPC). The timeout only stops a command that hangs."""
+    command = [sys.executable, "-c", SMALL_DISK, str(limit), *map(str, args)]
+    return subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=timeout)
+
+
+def test_bytes_on_a_full_disk_fail_naming_the_file_and_leave_nothing(tmp_path):
+    code = "from uavtrack import files; files.write_bytes('out.bin', bytes(100_000))"
+    proc = on_a_small_disk(tmp_path, 40_000, "-c", code)
+    assert proc.returncode == 1 and "OSError" in proc.stderr
+    assert "out.bin" in proc.stderr.splitlines()[-1] and "File too large" in proc.stderr
+    assert list(tmp_path.iterdir()) == []
+    files.write_bytes(tmp_path / "out.bin", memoryview(b"abc"))
+    assert (tmp_path / "out.bin").read_bytes() == b"abc"
+
+
+def test_a_link_to_nothing_is_no_new_output(tmp_path):
+    link = tmp_path / "out"
+    link.symlink_to(tmp_path / "gone")
+    (tmp_path / "taken.nc").write_text("mine")
+    for check in (files.check_new_folder, files.check_new_file):
+        with pytest.raises(UsageError, match=f"{link} is a link to {tmp_path / 'gone'}, which"):
+            check(link, "--out", "the tables")
+    with pytest.raises(UsageError, match="taken.nc exists; give a new name for the netCDF"):
+        files.check_new_file(tmp_path / "taken.nc", "--out", "the netCDF")
+    assert files.check_new_file(tmp_path / "new.nc", "--out", "the netCDF") == tmp_path / "new.nc"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "taken.nc"]

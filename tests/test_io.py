@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 import uavtrack
+import uavtrack.io
 from uavtrack import cli
 from uavtrack.errors import UsageError
 from uavtrack.io import trace as trace_file
+
+from .test_files import on_a_small_disk
 
 pd = pytest.importorskip("pandas")
 xr = pytest.importorskip("xarray")
@@ -47,6 +50,8 @@ def test_the_trace_file_carries_its_scenario(saved, result):
         assert float(data["dt"]) == 0.5 and str(data["method"]) == "distributed"
         assert int(data["seed"]) == 3
         assert uavtrack.Scenario.from_dict(json.loads(str(data["scenario"]))) == FAILING
+        assert int(data["format"]) == trace_file.FORMAT
+        assert str(data["uavtrack"]) == uavtrack.__version__
     back = trace_file.read(saved)
     assert back.scenario == FAILING and back.seed == 3 and back.dt == 0.5
     for name, array in result.trace.arrays().items():
@@ -66,12 +71,11 @@ def test_a_file_that_is_no_trace_is_named(tmp_path):
 
 def test_xarray_dataset_round_trips_through_netcdf(tmp_path, result):
     path = tmp_path / "run.nc"
-    tables.to_xarray(result.trace, FAILING, "distributed", 3).to_netcdf(path, engine="h5netcdf")
+    uavtrack.io.to_xarray(result).to_netcdf(path, engine="h5netcdf")
     with xr.open_dataset(path, engine="h5netcdf") as ds:
         assert dict(ds.sizes) == {"step": 30, "uav": 5, "target": 4, "state": 4, "state_": 4}
         assert ds.attrs["dt"] == 0.5 and ds.attrs["seed"] == 3
         assert uavtrack.Scenario.from_dict(json.loads(ds.attrs["scenario"])) == FAILING
-        assert np.array_equal(ds["time"], np.arange(30) * 0.5)
         assert np.array_equal(ds["uav_heading"], result.trace.uavs[..., 4])
         assert ds["uav_x"].attrs["units"] == "m"
         e = ds["estimate"].sel(state="vy", uav=2, target=1)
@@ -83,6 +87,59 @@ def test_xarray_dataset_round_trips_through_netcdf(tmp_path, result):
         # the observation rate, from the Dataset alone
         rate = ds["observed"].any("uav").mean(("step", "target"))
         assert float(rate) == pytest.approx(result.observation_rate, abs=1e-12)
+
+
+def test_netcdf_time_is_a_cf_time_axis_and_every_variable_is_named(tmp_path, saved, capsys):
+    out = tmp_path / "run.nc"
+    code, _, err = run_cli(capsys, "export", saved, "--out", out)
+    assert code == 0, err
+    with xr.open_dataset(out, engine="h5netcdf", decode_times=False) as raw:
+        assert raw["time"].attrs["units"] == "seconds since 2000-01-01"
+        assert raw["time"].attrs["standard_name"] == "time"
+        assert np.allclose(raw["time"].values, np.arange(30) * 0.5, rtol=0, atol=1e-12)
+        for name, variable in {**raw.data_vars, **raw.coords}.items():
+            assert variable.attrs.get("long_name"), name
+        assert raw["uav_altitude"].attrs["standard_name"] == "height"
+    with xr.open_dataset(out, engine="h5netcdf") as ds:  # decode_times: CF time to dates
+        assert np.issubdtype(ds["time"].dtype, np.datetime64)
+        since = ds["time"].values - np.datetime64("2000-01-01T00:00:00")
+        elapsed = since / np.timedelta64(1, "s")
+        assert np.allclose(elapsed, np.arange(30) * 0.5, rtol=0, atol=1e-9)
+        times = ds["time"].to_index()
+        assert times[0].year == 2000 and (times[3] - times[1]).total_seconds() == 1.0
+        assert ds.attrs["uavtrack"] == uavtrack.__version__
+
+
+def test_one_call_from_a_path_a_result_or_a_trace_read(saved, result):
+    from uavtrack.io.stonesoup import to_stonesoup
+    from uavtrack.simulation import Trace
+
+    stamped = ("decision_time_ms", "decision_wall_ms")  # measured: another run's times
+    from_path = uavtrack.io.to_xarray(saved).drop_vars(stamped)
+    from_result = uavtrack.io.to_xarray(result).drop_vars(stamped)
+    assert from_path.identical(from_result)
+    assert uavtrack.io.to_xarray(trace_file.read(saved)).drop_vars(stamped).identical(from_path)
+    old = tables.to_xarray(result.trace, FAILING, "distributed", 3)  # the explicit form
+    assert old.drop_vars(stamped).identical(from_result)
+    frames, explicit = uavtrack.io.to_frames(str(saved)), tables.to_frames(result.trace, 0.5)
+    for name in tables.TABLES:
+        keep = [c for c in explicit[name].columns if c not in stamped]
+        pd.testing.assert_frame_equal(frames[name][keep], explicit[name][keep])
+    pytest.importorskip("stonesoup")
+    truths, tracks = uavtrack.io.to_stonesoup(saved)
+    truths_, tracks_ = to_stonesoup(result.trace, 0.5)
+    assert {t.id: len(t) for t in tracks} == {t.id: len(t) for t in tracks_}
+    for bad, message in (
+        (lambda: uavtrack.io.to_xarray(result.trace), "a bare Trace needs its scenario"),
+        (lambda: uavtrack.io.to_xarray(3), "expected a trace file's path"),
+        (lambda: uavtrack.io.to_xarray(result, FAILING), "go with a bare Trace"),
+        (lambda: uavtrack.io.to_frames(result.trace), "needs its step dt"),
+        (lambda: uavtrack.io.to_stonesoup(result.trace), "needs its step dt"),
+        (lambda: uavtrack.io.to_stonesoup(saved, 0.5), "dt goes with a bare Trace"),
+    ):
+        with pytest.raises(UsageError, match=message):
+            bad()
+    assert isinstance(result.trace, Trace)
 
 
 def test_tidy_tables_read_back_by_pandas(tmp_path, saved, capsys, result):
@@ -102,6 +159,21 @@ def test_tidy_tables_read_back_by_pandas(tmp_path, saved, capsys, result):
     assert rate == pytest.approx(result.observation_rate, abs=1e-12)
     err2 = (targets.best_x - targets.x) ** 2 + (targets.best_y - targets.y) ** 2
     assert np.sqrt(err2.mean()) == pytest.approx(result.rmse_best, rel=1e-9)
+    # the units travel in the Parquet schema, field by field
+    import pyarrow.parquet as pq
+
+    schema = {n: pq.read_schema(out / f"{n}.parquet") for n in tables.TABLES}
+    units = {
+        ("uavs", "x"): b"m", ("uavs", "speed"): b"m/s", ("uavs", "heading"): b"rad",
+        ("uavs", "bank_angle"): b"rad", ("uavs", "decision_time_ms"): b"ms",
+        ("steps", "time"): b"s", ("targets", "best_vy"): b"m/s", ("pairs", "est_y"): b"m",
+        ("pairs", "P_x_x"): b"m^2", ("pairs", "P_x_vy"): b"m^2/s", ("pairs", "P_vx_vy"): b"m^2/s^2",
+    }  # fmt: skip
+    for (table, column), unit in units.items():
+        assert schema[table].field(column).metadata[b"unit"] == unit, (table, column)
+    for table, column in (("steps", "messages"), ("uavs", "alive"), ("pairs", "in_view")):
+        assert not schema[table].field(column).metadata  # counts and flags have none
+    assert frames["pairs"].attrs["units"]["P_y_vx"] == "m^2/s"  # pandas keeps them too
     csv = tmp_path / "csv"
     assert run_cli(capsys, "export", saved, "--format", "csv", "--out", csv)[0] == 0
     back = pd.read_csv(csv / "pairs.csv")
@@ -120,6 +192,13 @@ def test_a_results_folder_becomes_one_row_per_trial(tmp_path, capsys):
     assert run_cli(capsys, "export", folder, "--out", out)[0] == 0  # csv, by its suffix
     rows = pd.read_csv(out)
     assert len(rows) == 2 * 2 * 3  # values x methods x trials
+    assert run_cli(capsys, "export", folder, "--out", tmp_path / "trials.parquet")[0] == 0
+    import pyarrow.parquet as pq
+
+    schema = pq.read_schema(tmp_path / "trials.parquet")
+    assert schema.field("rmse_best").metadata[b"unit"] == b"m"
+    assert schema.field("decision_time_ms").metadata[b"unit"] == b"ms"
+    assert not schema.field("observation_rate").metadata
     assert set(rows["planner.horizon"]) == {2.0, 3.0}
     summary = json.loads((folder / "summary.json").read_text())
     means = rows.groupby(["method", "planner.horizon"]).observation_rate.mean()
@@ -182,6 +261,118 @@ def test_stone_soup_metrics_on_our_tracks_equal_ours(result):
     assert (
         len(lengths) == 20 and lengths["uav-1-target-0"] == 10 and lengths["uav-0-target-3"] == 30
     )
+    # each UAV's tracks are one set: OSPA per living UAV and step, averaged, is ours
+    o, g = [], []
+    stamps = {track.id: {s.timestamp for s in track} for track in per_uav}
+    for t in times:
+        X = [path[t] for path in truths]
+        for i in range(5):
+            Y = [tr[t] for tr in per_uav if tr.metadata["uav"] == i and t in stamps[tr.id]]
+            if Y:
+                assert len(Y) == 4
+                o.append(ospa.compute_OSPA_distance(Y, X).value)
+                g.append(gospa.compute_gospa_metric(Y, X)[0].value["distance"])
+    assert len(o) == 30 * 5 - 20  # UAV 1 fails at step 10
+    assert np.mean(o) == pytest.approx(result.ospa, abs=1e-12)
+    assert np.mean(g) == pytest.approx(result.gospa, abs=1e-12)
     state = next(t for t in per_uav if t.id == "uav-2-target-1")[0]
     x, y, vx, vy = result.trace.mean[0, 2, 1]
     assert state.state_vector.ravel().tolist() == [x, vx, y, vy]  # Stone Soup's order
+
+
+def test_export_never_replaces_what_exists(tmp_path, saved, capsys):
+    folder = tmp_path / "sweep"
+    assert run_cli(capsys, *SWEEP, "--out", folder)[0] == 0
+    for source, name in ((saved, "mine.nc"), (folder, "mine.csv"), (folder, "mine.parquet")):
+        existing = tmp_path / name
+        existing.write_text("mine")
+        code, out, err = run_cli(capsys, "export", source, "--out", existing)
+        assert code == 2 and out == "" and len(err.strip().splitlines()) == 1, err
+        assert f"--out: {existing} exists" in err
+        assert existing.read_text() == "mine"
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+SWEEP = ("sweep", "planner.horizon", 2, "--trials", 1, "--set", "steps=5", "--no-progress",
+         "--workers", 1)  # fmt: skip
+
+
+@pytest.mark.parametrize("out", ["run.nc", "tables"])
+def test_a_full_disk_during_export_is_one_line_and_leaves_nothing(tmp_path, saved, out):
+    folder = tmp_path / "small"
+    folder.mkdir()
+    proc = on_a_small_disk(folder, 40_000, "-m", "uavtrack.cli", "export", saved, "--out", out)
+    assert proc.returncode == 1 and proc.stdout == "", proc.stderr[-2000:]
+    assert proc.stderr.count("\n") == 1 and "File too large" in proc.stderr
+    assert proc.stderr.startswith(f"uavtrack: error: cannot write {out if out == 'run.nc' else ''}")
+    assert out in proc.stderr
+    assert list(folder.iterdir()) == []
+
+
+def rewrite(path, source, **changes):
+    """A copy of trace file `source` at `path` with some arrays changed (None: removed)."""
+    with np.load(source, allow_pickle=False) as data:
+        arrays = {name: data[name] for name in data.files}
+    for name, value in changes.items():
+        if value is None:
+            arrays.pop(name)
+        else:
+            arrays[name] = np.asarray(value)
+    np.savez_compressed(path, **arrays)
+    return path
+
+
+def test_a_trace_whose_arrays_disagree_is_refused_in_one_line(tmp_path, saved, capsys):
+    with np.load(saved) as data:
+        short, wide = data["uavs"][:12], data["cov"][:, :, :3]
+    cases = [
+        (rewrite(tmp_path / "short.npz", saved, uavs=short), "uavs is (12, 5, 5), where"),
+        (rewrite(tmp_path / "wide.npz", saved, cov=wide), "cov is (30, 5, 3, 4, 4), where"),
+        (rewrite(tmp_path / "text.npz", saved, rounds=np.full((30, 5), "x")), "rounds holds"),
+    ]
+    for path, message in cases:
+        for out in ("t.nc", "t"):
+            code, stdout, err = run_cli(capsys, "export", path, "--out", tmp_path / out)
+            assert code == 2 and stdout == "" and len(err.strip().splitlines()) == 1, err
+            assert f"{path}: " in err and message in err
+    assert not (tmp_path / "t.nc").exists() and not (tmp_path / "t").exists()
+
+
+def test_export_to_a_link_to_nothing_is_refused_naming_it(tmp_path, saved, capsys):
+    for name in ("gone.nc", "gone"):
+        link = tmp_path / f"link-{name}"
+        link.symlink_to(tmp_path / name)
+        code, out, err = run_cli(capsys, "export", saved, "--out", link)
+        assert code == 2 and len(err.strip().splitlines()) == 1, err
+        assert f"--out: {link} is a link to {tmp_path / name}, which does not exist" in err
+        assert link.is_symlink() and not (tmp_path / name).exists()
+    assert not [p for p in tmp_path.iterdir() if p.name.startswith(".")]
+
+
+def test_which_versions_a_trace_is_read_from(tmp_path, saved, capsys):
+    now = uavtrack.__version__
+    # the same format by another version: read, with a note naming both versions
+    other = rewrite(tmp_path / "other.npz", saved, uavtrack="0.0.7")
+    code, out, err = run_cli(capsys, "export", other, "--out", tmp_path / "o.nc")
+    assert code == 0, err
+    assert err == (
+        f"uavtrack: note: {other} was written by uavtrack 0.0.7; uavtrack {now} reads it as "
+        f"trace format {trace_file.FORMAT}\n"
+    )
+    with xr.open_dataset(tmp_path / "o.nc", engine="h5netcdf") as ds:
+        assert ds.attrs["uavtrack"] == "0.0.7"  # the version that ran the trial
+    with pytest.warns(trace_file.TraceVersionWarning, match="written by uavtrack 0.0.7"):
+        assert trace_file.read(other).version == "0.0.7"
+    # a file from before the format number: its layout is format 1
+    unnumbered = rewrite(tmp_path / "unnumbered.npz", saved, format=None)
+    assert run_cli(capsys, "export", unnumbered, "--out", tmp_path / "u.nc")[0:3:2] == (0, "")
+    # a newer format is refused, naming both versions
+    newer = rewrite(tmp_path / "newer.npz", saved, format=trace_file.FORMAT + 1, uavtrack="0.3.0")
+    code, out, err = run_cli(capsys, "export", newer, "--out", tmp_path / "n.nc")
+    assert code == 2 and len(err.strip().splitlines()) == 1
+    assert f"trace format {trace_file.FORMAT + 1}, written by uavtrack 0.3.0, is newer" in err
+    assert f"than uavtrack {now} reads (format {trace_file.FORMAT})" in err
+    odd = rewrite(tmp_path / "odd.npz", saved, format="two")
+    code, out, err = run_cli(capsys, "export", odd, "--out", tmp_path / "d.nc")
+    assert code == 2 and "unknown trace format two" in err
+    assert sorted(p.name for p in tmp_path.glob("*.nc")) == ["o.nc", "u.nc"]

@@ -1,6 +1,8 @@
 """Rerun recordings: what a saved run holds, read back from the file."""
 
+import json
 import os
+import re
 import subprocess
 import sys
 
@@ -13,6 +15,8 @@ pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
 from uavtrack import viewer  # noqa: E402
+
+from .test_files import on_a_small_disk  # noqa: E402
 
 
 def contents(path):
@@ -128,19 +132,81 @@ def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
     assert "needs a display" in out.stderr and "--rerun FILE.rrd" in out.stderr
 
 
-def test_a_recording_that_cannot_be_finished_leaves_no_file_and_says_so(tmp_path, monkeypatch):
-    from uavtrack.errors import RunError
-
-    def stopped(self, *args, **kwargs):
-        raise RuntimeError("File-writer thread shut down prematurely")
-
-    monkeypatch.setattr(viewer.rr.RecordingStream, "flush", stopped)
-    scenario = uavtrack.Scenario(steps=5)
-    trace = uavtrack.simulate(scenario, seed=0).trace
-    path = tmp_path / "x.rrd"
-    with pytest.raises(RunError, match=f"cannot write {path}: Rerun's file writer stopped"):
-        viewer.save(trace, scenario, path)
+@pytest.mark.parametrize("room", [20_000, 40_000])
+def test_a_recording_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, room):
+    proc = on_a_small_disk(
+        tmp_path, room, "-m", "uavtrack.cli", "run", "--steps", 20, "--rerun", "x.rrd"
+    )
+    assert proc.returncode == 1 and proc.stdout == "", proc.stderr[-2000:]
+    assert proc.stderr == "uavtrack: error: cannot write x.rrd: File too large\n"
     assert list(tmp_path.iterdir()) == []
+
+
+def test_a_recording_with_rerun_turned_off_is_refused_in_one_line(tmp_path):
+    out = subprocess.run(
+        [sys.executable, "-m", "uavtrack.cli", "run", "--steps", "3", "--rerun", "x.rrd"],
+        cwd=tmp_path, env={**os.environ, "RERUN": "off"}, capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert out.returncode == 2 and out.stdout == ""
+    assert out.stderr.count("\n") == 1 and "Rerun is turned off here" in out.stderr
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_each_metric_has_a_view_on_its_own_scale(tmp_path):
+    scenario = uavtrack.Scenario(steps=8)
+    viewer.save(uavtrack.simulate(scenario, seed=1).trace, scenario, tmp_path / "m.rrd")
+    reader = RrdReader(tmp_path / "m.rrd")
+    views, ranges = {}, {}
+    for chunk in reader.stream(store=reader.blueprints()[0]):  # the layout, read back
+        batch = chunk.to_record_batch()
+        names = batch.schema.names
+        if "ViewBlueprint:class_identifier" in names:
+            kind = batch.column("ViewBlueprint:class_identifier").to_pylist()[0]
+            origin = batch.column("ViewBlueprint:space_origin").to_pylist()[0][0]
+            views[chunk.entity_path] = (kind, origin)
+        if "ScalarAxis:range" in names:
+            view = chunk.entity_path.rsplit("/", 1)[0]
+            ranges[view] = batch.column("ScalarAxis:range").to_pylist()[0][0]
+    series = {origin: view for view, (kind, origin) in views.items() if "TimeSeries" in kind}
+    metrics = {e for e in viewer.ENTITIES if e.startswith("metrics/")}
+    assert set(series) == metrics  # one view per metric, none shared
+    assert ranges == {series["metrics/observation_rate"]: [0.0, 1.0]}  # a share: [0, 1]
+
+
+def test_the_viz_extra_reads_a_recording_back(tmp_path):
+    import tomllib
+    from pathlib import Path
+
+    project = tomllib.loads((Path(__file__).parents[1] / "pyproject.toml").read_text())
+    extra = project["project"]["optional-dependencies"]["viz"]
+    viz = {re.split("[<>=!~; ]", requirement)[0] for requirement in extra}
+    assert {"rerun-sdk", "pyarrow"} <= viz  # Rerun writes, pyarrow holds what it reads back
+    scenario = uavtrack.Scenario(steps=12)
+    trace = uavtrack.simulate(scenario, seed=4).trace
+    viewer.save(trace, scenario, tmp_path / "r.rrd")
+    # read back with the viz extra alone: no pandas, polars or datafusion
+    code = (
+        "import sys, json\n"
+        "for name in ('pandas', 'polars', 'datafusion'):\n"
+        "    sys.modules[name] = None\n"
+        "from rerun.chunk import RrdReader\n"
+        "for chunk in RrdReader(sys.argv[1]).store().stream():\n"
+        "    if chunk.entity_path == '/metrics/observation_rate':\n"
+        "        batch = chunk.to_record_batch()\n"
+        "        column = next(n for n in batch.schema.names if n.endswith(':scalars'))\n"
+        "        rows = zip(batch.column('step').to_pylist(), batch.column(column).to_pylist())\n"
+        "        print(json.dumps(sorted((k, v[0]) for k, v in rows)))\n"
+    )
+    proc = subprocess.run(
+        [sys.executable, "-c", code, str(tmp_path / "r.rrd")], capture_output=True, text=True,
+        timeout=120,
+    )  # fmt: skip
+    assert proc.returncode == 0, proc.stderr
+    steps, rates = zip(*json.loads(proc.stdout), strict=True)
+    assert list(steps) == list(range(12))
+    running = np.cumsum(trace.observed.any(axis=1).mean(axis=1)) / np.arange(1, 13)
+    assert np.allclose(rates, running, rtol=1e-12, atol=0)
 
 
 def test_a_recording_of_a_team_that_all_failed_warns_of_nothing(tmp_path):

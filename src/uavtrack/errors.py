@@ -35,7 +35,7 @@ EXTRAS = {
     "flight": "jsbsim pymavlink",
     "io": "xarray pandas pyarrow h5netcdf h5py rosbags",
     "learn": "torch stable-baselines3 supersuit torchrl benchmarl",
-    "viz": "rerun-sdk",
+    "viz": "rerun-sdk pyarrow",
 }
 """The packages of each optional extra (as pyproject.toml lists them)."""
 

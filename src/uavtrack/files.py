@@ -76,17 +76,39 @@ def check_distinct(outputs: dict[str, str | Path | None]) -> None:
         seen[where] = option
 
 
+def _taken(path: Path, option: str, what: str) -> None:
+    """Refuse a path that exists, a link included (even one to nothing: a rename would
+    replace the link, not make what it points to)."""
+    if path.is_symlink() and not path.exists():
+        raise UsageError(
+            f"{option}: {path} is a link to {os.readlink(path)}, which does not exist; "
+            f"give a new name for {what}"
+        )
+    if os.path.lexists(path):
+        raise UsageError(f"{option}: {path} exists; give a new name for {what}")
+
+
 def check_new_folder(path: str | Path, option: str, what: str) -> Path:
-    """Refuse early an output folder that exists or cannot be made: one line naming
-    `option` (``--bag``) and `what` goes in it (``the bag``)."""
+    """Refuse early an output folder that exists (or is a link) or cannot be made: one
+    line naming `option` (``--bag``) and `what` goes in it (``the bag``)."""
     path = Path(path).expanduser()
     if path.exists():
         raise UsageError(f"{option}: {path} exists; give a new folder for {what}")
+    _taken(path, option, what)
     if not path.parent.is_dir():
         raise UsageError(f"{option}: directory {path.parent} does not exist")
     if not os.access(path.parent, os.W_OK):
         raise UsageError(f"{option}: cannot write in directory {path.parent}")
     return path
+
+
+def check_new_file(path: str | Path, option: str, what: str) -> Path:
+    """Refuse early an output file that exists (or is a link, even to nothing) or cannot
+    be written: one line naming `option` (``--out``) and `what` goes in it (``the
+    netCDF``). For outputs that are never replaced, as a new folder is not."""
+    path = Path(path).expanduser()
+    _taken(path, option, what)
+    return check_output(path, option)
 
 
 @contextmanager
@@ -157,6 +179,14 @@ def write_text(path: str | Path, text: str) -> None:
     """Text, atomically."""
     with replacing(path) as tmp:
         tmp.write_text(text, encoding="utf-8")
+
+
+def write_bytes(path: str | Path, data: bytes | memoryview) -> None:
+    """Bytes, atomically: a full disk is a plain OSError naming `path`, and leaves no
+    file. Formats whose writers cannot recover from a failed write (HDF5, Rerun's file
+    sink) are built in memory and written through here."""
+    with replacing(path) as tmp:
+        tmp.write_bytes(data)
 
 
 def write_npz(path: str | Path, arrays: dict[str, Any]) -> None:

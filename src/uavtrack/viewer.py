@@ -12,14 +12,14 @@ thousands of UAVs. Instance i of every UAV entity is UAV i at every step (a fail
 stays, grey, where it fell; what it no longer has is NaN, which the viewer does not
 draw), and instance j of the targets is target j. The recording id names the method,
 the seed and the scenario's digest, so recordings of different runs open side by side.
-The default layout shows the field from above beside a 3-D view, and the time series.
-Needs the viz extra (rerun-sdk).
+The default layout shows the field from above beside a 3-D view, and each time series
+in a view on its own scale. A recording is read back with ``rerun.chunk.RrdReader``, as
+pyarrow record batches. Needs the viz extra (rerun-sdk, pyarrow).
 """
 
 from __future__ import annotations
 
 import os
-import shutil
 import subprocess
 import sys
 import tempfile
@@ -35,8 +35,8 @@ try:
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.viewer needs rerun-sdk: {install_hint('viz')} ({exc})") from None
 
-from .errors import RunError
-from .files import replacing
+from .errors import RunError, UsageError
+from .files import write_bytes
 from .network import in_range
 from .sensing import observation_radius
 
@@ -61,25 +61,26 @@ THIN = 0.05  # [m] the vertical half-size of flat ellipsoids (disks, ellipses)
 
 
 def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
-    """Write the recording of a run's trace to `path` (.rrd), atomically: a recording
-    that cannot be finished (a full disk) leaves no file and raises a one-line
-    RunError."""
-    path = Path(path)
-    failed = None
-    with replacing(path) as tmp:
-        with _quiet_stderr():  # Rerun's writer logs its own failure: ours says it once
-            rec = rr.RecordingStream("uavtrack", recording_id=recording_id(name, scenario))
-            rec.save(tmp, default_blueprint=blueprint(scenario))
-            log(rec, trace, scenario)
-            try:
-                rec.flush()
-                rec.disconnect()
-            except RuntimeError as exc:
-                failed = str(exc)
-            del rec  # its writer thread ends here, while its complaints go nowhere
-        if failed is not None:
-            why = "; the disk is full" if shutil.disk_usage(path.parent).free < 1 << 20 else ""
-            raise RunError(f"cannot write {path}: Rerun's file writer stopped ({failed}){why}")
+    """Write the recording of a run's trace to `path` (.rrd), atomically.
+
+    The recording is encoded in memory (Rerun's binary stream), then written as one
+    file: Rerun's own file sink, given a full disk, may stop in silence, hang or leave a
+    truncated file; a plain write fails with an OSError naming `path` and leaves
+    nothing."""
+    rec = rr.RecordingStream("uavtrack", recording_id=recording_id(name, scenario))
+    if not rec.is_enabled():  # Rerun would encode nothing and say so only in a log line
+        with _quiet_stderr():  # as it does again when the disabled stream is dropped
+            del rec
+        setting = os.environ.get("RERUN")
+        why = f" (the environment variable RERUN={setting})" if setting is not None else ""
+        raise UsageError(
+            f"cannot write {path}: Rerun is turned off here{why}; unset RERUN or set "
+            "RERUN=on to record"
+        )
+    stream = rec.binary_stream()
+    rec.send_blueprint(blueprint(scenario), make_active=False, make_default=True)
+    log(rec, trace, scenario)
+    write_bytes(path, stream.read(flush=True))
 
 
 def recording_id(name: str, scenario) -> str:
@@ -87,9 +88,28 @@ def recording_id(name: str, scenario) -> str:
     return f"{name}-{scenario.digest()}"
 
 
+METRIC_VIEWS = {
+    "metrics/observation_rate": ("observation rate so far", (0.0, 1.0)),
+    "metrics/rounds": ("consensus rounds D_i (mean over living UAVs)", None),
+    "metrics/messages": ("messages per step", None),
+}
+"""Each time series in a view of its own, on its own scale (entity: title, y range):
+the observation rate, a share, on [0, 1]; rounds (a few) and messages (tens per step)
+on theirs, so that none is flattened by another's."""
+
+
+def metric_view(entity: str):
+    """The time-series view of one metric of `METRIC_VIEWS`."""
+    import rerun.blueprint as rrb
+
+    title, span = METRIC_VIEWS[entity]
+    axis = rrb.ScalarAxis(range=span) if span is not None else None
+    return rrb.TimeSeriesView(name=title, origin=entity, axis_y=axis)
+
+
 def blueprint(scenario):
     """The default layout: the field seen from straight above, a 3-D view and the time
-    series of the metrics."""
+    series of the metrics, one view each (`METRIC_VIEWS`)."""
     import rerun.blueprint as rrb
 
     L = scenario.field_size
@@ -105,7 +125,7 @@ def blueprint(scenario):
             rrb.Spatial3DView(name="field from above", origin="world", eye_controls=above),
             rrb.Vertical(
                 rrb.Spatial3DView(name="3-D", origin="world"),
-                rrb.TimeSeriesView(name="metrics", origin="metrics"),
+                rrb.Horizontal(*(metric_view(name) for name in METRIC_VIEWS)),
             ),
         ),
         collapse_panels=True,

@@ -3,14 +3,16 @@
 from __future__ import annotations
 
 import enum
+import warnings
 from pathlib import Path
 from typing import Annotated
 
 import typer
 
-from ..errors import UsageError
-from ..files import check_new_folder, check_output, new_folder, replacing
+from ..errors import RunError, UsageError
+from ..files import check_new_file, check_new_folder, new_folder, replacing, write_bytes
 from . import app
+from .experiments import note
 
 
 class Format(enum.StrEnum):
@@ -35,7 +37,7 @@ def export(
             "--out",
             metavar="PATH",
             help="a trace's parquet or csv tables: a new folder (steps, uavs, targets, pairs); "
-            "its netcdf: a file; a results folder's table: a file",
+            "its netcdf: a new file; a results folder's table: a new file",
         ),
     ],
     format_: Annotated[
@@ -60,7 +62,7 @@ def export(
     if source.is_dir():
         if format_ is Format.netcdf:
             raise UsageError("--format netcdf: a results folder exports as parquet or csv")
-        check_output(out, "--out")
+        check_new_file(out, "--out", "the table")
         frame = tables.results_frame(source)
         left_out = frame.attrs.get("left_out", [])
         if left_out:
@@ -73,32 +75,51 @@ def export(
         if frame.empty:
             raise UsageError(f"SOURCE: {source} holds no intact finished job")
         with replacing(out) as tmp:
-            _write(frame, tmp, format_)
+            tables.write_table(frame, tmp, format_.value)
         typer.echo(f"{len(frame)} trials written to {out}")
         return
-    from ..io import trace as trace_file
-
-    saved = trace_file.read(source)
-    if format_ is Format.netcdf:
-        check_output(out, "--out")
-        dataset = tables.to_xarray(saved.trace, saved.scenario, saved.method, saved.seed)
-        with replacing(out) as tmp:
-            dataset.to_netcdf(tmp, engine="h5netcdf")
-        typer.echo(f"{source} written to {out} (netCDF 4)")
-        return
-    if out.suffix in SUFFIXES:
+    if format_ is not Format.netcdf and out.suffix in SUFFIXES:
         raise UsageError(
             f"--out: a trace's {format_.value} tables go in a folder; give a name without "
             f"{out.suffix}"
         )
-    check_new_folder(out, "--out", "the tables")
-    frames = tables.to_frames(saved.trace, saved.dt)
-    with new_folder(out) as folder:
-        folder.mkdir()
-        for name, frame in frames.items():
-            _write(frame, folder / f"{name}.{format_.value}", format_)
+    if format_ is Format.netcdf:
+        check_new_file(out, "--out", "the netCDF file")
+    else:
+        check_new_folder(out, "--out", "the tables")
+    saved = _read(source)
+    if format_ is Format.netcdf:
+        # built in memory: HDF5 cannot recover from a failed write (a full disk crashes
+        # it), a plain write of the bytes fails cleanly and leaves nothing
+        write_bytes(out, tables.to_xarray(saved).to_netcdf(engine="h5netcdf"))
+        typer.echo(f"{source} written to {out} (netCDF 4)")
+        return
+    frames = tables.to_frames(saved)
+    try:
+        with new_folder(out) as folder:
+            folder.mkdir()
+            for name, frame in frames.items():
+                tables.write_table(frame, folder / f"{name}.{format_.value}", format_.value)
+    except OSError as exc:
+        raise RunError(f"cannot write the tables {out}: {exc.strerror or exc}") from None
     rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
     typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
+
+
+def _read(source: Path):
+    """The trace file, its version note (another uavtrack wrote it) on standard error."""
+    from ..io import trace as trace_file
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always", trace_file.TraceVersionWarning)
+        saved = trace_file.read(source)
+    for warning in caught:
+        if issubclass(warning.category, trace_file.TraceVersionWarning):
+            note(str(warning.message))
+        else:
+            warnings.warn_explicit(warning.message, warning.category, warning.filename,
+                                   warning.lineno)  # fmt: skip
+    return saved
 
 
 SUFFIXES = {".parquet": Format.parquet, ".pq": Format.parquet, ".csv": Format.csv,
@@ -113,10 +134,3 @@ def _format(out: Path, given: Format | None) -> Format:
     if named is not None and named is not given:
         raise UsageError(f"--out {out} names {named.value}, but --format is {given.value}")
     return given
-
-
-def _write(frame, path: Path, format_: Format) -> None:
-    if format_ is Format.parquet:
-        frame.to_parquet(path, index=False)
-    else:
-        frame.to_csv(path, index=False)

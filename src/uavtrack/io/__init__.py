@@ -1,8 +1,40 @@
 """Outside formats: the trace file (`trace`), tidy tables and xarray (`tables`, the io
-extra), Stone Soup's types (`stonesoup`).
+extra), Stone Soup's types (`stonesoup`), ROS 2 bags and topics (`bag`, `ros2`).
 
-    from uavtrack.io import trace, tables
-    saved = trace.read("run.npz")                       # uavtrack run --trace run.npz
-    ds = tables.to_xarray(saved.trace, saved.scenario, saved.method, saved.seed)
-    frames = tables.to_frames(saved.trace, saved.dt)     # steps, uavs, targets, pairs
+Each conversion takes a trial in one call, as ``xarray.open_dataset`` takes a file: the
+path of a trace file (``uavtrack run --trace run.npz``), a `Result` with a trace
+(``simulate(..., trace=True)``) or a trace file already read (`trace.read`):
+
+    import uavtrack.io
+    ds = uavtrack.io.to_xarray("run.npz")              # a Dataset: step, uav, target
+    frames = uavtrack.io.to_frames("run.npz")          # steps, uavs, targets, pairs
+    truths, tracks = uavtrack.io.to_stonesoup("run.npz")   # Stone Soup's types
+    saved = uavtrack.io.read("run.npz")                # the arrays, scenario, method, seed
+
+They are imported when first used, so ``import uavtrack.io`` needs no optional extra.
 """
+
+from __future__ import annotations
+
+from importlib import import_module
+
+_WHERE = {
+    "read": "trace",
+    "to_xarray": "tables",
+    "to_frames": "tables",
+    "write_table": "tables",
+    "results_frame": "tables",
+    "to_stonesoup": "stonesoup",
+}
+
+__all__ = sorted(_WHERE)
+
+
+def __getattr__(name: str):
+    if name in _WHERE:
+        return getattr(import_module(f".{_WHERE[name]}", __name__), name)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))

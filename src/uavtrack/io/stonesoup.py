@@ -2,8 +2,8 @@
 dependency; ``pip install stonesoup``).
 
 Stone Soup orders a constant-velocity state (x, vx, y, vy); uavtrack's is (x, y, vx, vy):
-the conversion reorders the states and covariances. Timestamps are `start` plus the
-step times k dt.
+the conversion reorders the states and covariances. Timestamps are `trace.EPOCH` (or
+`start`) plus the step times k dt.
 """
 
 from __future__ import annotations
@@ -14,6 +14,9 @@ import numpy as np
 
 from ..errors import UsageError
 from ..metrics import team_best
+from ..simulation import Trace
+from . import trace as trace_file
+from .trace import EPOCH
 
 ORDER = [0, 2, 1, 3]
 """uavtrack's (x, y, vx, vy) read in Stone Soup's order (x, vx, y, vy)."""
@@ -21,15 +24,33 @@ ORDER = [0, 2, 1, 3]
 POSITION = (0, 2)
 """Where x and y lie in a Stone Soup state: the mapping its metrics measure on."""
 
-EPOCH = _dt.datetime(2000, 1, 1)
+__all__ = ["EPOCH", "ORDER", "POSITION", "to_stonesoup"]
 
 
-def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = EPOCH):
-    """The true targets as `GroundTruthPath`s (id ``target-j``) and the estimates as
-    `Track`s of `GaussianState`s: ``tracks="best"`` one per target from the team's best
-    estimate (id ``best-j``; the metrics' ``*_best``), ``"uavs"`` one per UAV and target
-    from its fused estimate (id ``uav-i-target-j``; steps after the UAV fails left out).
-    Returns (truths, tracks) as sets."""
+def to_stonesoup(
+    source, dt: float | None = None, tracks: str = "best", start: _dt.datetime = EPOCH
+):
+    """A trial's truth and estimates in Stone Soup's types, in one call: `source` is a
+    trace file's path, a `Result` with a trace, a `TraceFile`, or a bare `Trace` with its
+    step `dt` [s].
+
+    Returns (truths, tracks) as sets: the true targets as `GroundTruthPath`s (id
+    ``target-j``) and the estimates as `Track`s of `GaussianState`s (Stone Soup's state
+    order, x, vx, y, vy), with ``metadata`` saying whose they are:
+
+    * ``tracks="best"``: one track per target from the team's best estimate (id
+      ``best-j``, metadata ``{"target": j}``): at each step the estimate of the most
+      confident living UAV (1/trace P), absent at steps where every UAV has failed.
+      Stone Soup's OSPA and GOSPA on these tracks and the truths, per step, averaged over
+      the steps, are uavtrack's ``ospa_best`` and ``gospa_best``.
+    * ``tracks="uavs"``: one track per UAV and target from that UAV's fused estimate
+      (id ``uav-i-target-j``, metadata ``{"uav": i, "target": j}``), with no state at
+      the steps after the UAV fails. A UAV's estimates are one set: uavtrack's per-UAV
+      ``ospa`` and ``gospa`` evaluate each UAV's Nt tracks alone against the truths at
+      each step, and average over the living UAVs and the steps (compare every UAV's
+      tracks at once and the Nu Nt estimates of Nt targets count as false tracks). Split
+      the set by ``track.metadata["uav"]`` to reproduce them.
+    """
     try:
         from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
         from stonesoup.types.state import GaussianState
@@ -39,6 +60,15 @@ def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = E
 
     if tracks not in ("best", "uavs"):
         raise UsageError(f"tracks must be 'best' or 'uavs', got {tracks!r}")
+    if isinstance(source, Trace):
+        if dt is None:
+            raise UsageError("a bare Trace needs its step dt: to_stonesoup(trace, dt)")
+        trace = source
+    else:
+        if dt is not None:
+            raise UsageError("dt goes with a bare Trace; this source has its own")
+        saved = trace_file.load(source)
+        trace, dt = saved.trace, saved.dt
     T, Nt = trace.targets.shape[:2]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
     truths = set()
@@ -60,7 +90,7 @@ def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = E
                 for k in range(T)
                 if best[k, j] >= 0
             ]
-            out.add(Track(states, id=f"best-{j}"))
+            out.add(Track(states, id=f"best-{j}", init_metadata={"target": j}))
     else:
         for i in range(trace.uavs.shape[1]):
             for j in range(Nt):
@@ -69,5 +99,7 @@ def to_stonesoup(trace, dt: float, tracks: str = "best", start: _dt.datetime = E
                     for k in range(T)
                     if trace.alive[k, i]
                 ]
-                out.add(Track(states, id=f"uav-{i}-target-{j}"))
+                out.add(
+                    Track(states, id=f"uav-{i}-target-{j}", init_metadata={"uav": i, "target": j})
+                )
     return truths, out

@@ -14,7 +14,8 @@ Tables (one row per ...):
   est_vy) and the 10 entries of its covariance's upper triangle (P_x_x, P_x_y, ...).
 
 A failed UAV's estimate, covariance and bid are NaN from the step it fails (its state
-stays where it fell).
+stays where it fell). Units travel with the data: a frame's ``attrs["units"]``, a
+Parquet field's metadata (``unit``), a netCDF variable's ``units`` (see `unit`).
 """
 
 from __future__ import annotations
@@ -36,16 +37,32 @@ except ImportError as exc:  # an optional extra
         f"uavtrack.io.tables needs xarray and pandas: {install_hint('io')} ({exc})"
     ) from None
 
-from .._version import __version__
 from ..config import Scenario, ScenarioError
-from ..metrics import team_best
-from ..simulation import Cycle
+from ..errors import UsageError
+from ..metrics import METRICS, team_best
+from ..simulation import Cycle, Trace
+from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
 TARGET_STATE = ("x", "y", "vx", "vy")
 UNITS = {"x": "m", "y": "m", "altitude": "m", "speed": "m/s", "heading": "rad", "vx": "m/s",
-         "vy": "m/s"}  # fmt: skip
+         "vy": "m/s", "time": "s", "bank_angle": "rad", "decision_time_ms": "ms",
+         "decision_wall_ms": "ms"}  # fmt: skip
+"""The unit of every table column that has one (estimates and covariance entries: see
+`unit`); netCDF variables and Parquet fields carry the same strings (UDUNITS syntax)."""
 TABLES = ("steps", "uavs", "targets", "pairs")
+
+
+def unit(column: str) -> str | None:
+    """A table column's unit, or None for counts, flags and indices: ``est_vx`` -> m/s,
+    ``P_x_vy`` -> m^2/s (a covariance entry's unit is the product of its states')."""
+    if column.startswith("P_"):
+        velocities = sum(UNITS[name] == "m/s" for name in column[2:].split("_") if name)
+        return ("m^2", "m^2/s", "m^2/s^2")[velocities]
+    for prefix in ("est_", "best_"):
+        if column.startswith(prefix) and column[len(prefix) :] in TARGET_STATE:
+            return UNITS[column[len(prefix) :]]
+    return UNITS.get(column)
 
 
 def _docs() -> dict[str, str]:
@@ -53,11 +70,21 @@ def _docs() -> dict[str, str]:
 
 
 def to_xarray(
-    trace, scenario: Scenario, method: str | None = None, seed: int | None = None
+    source, scenario: Scenario | None = None, method: str | None = None, seed: int | None = None
 ) -> xr.Dataset:
-    """The trace as a Dataset: dimensions step, uav, target (and state, state_ for the
-    estimates and covariances), coordinates step, time [s], uav, target; attributes dt,
-    method, seed, scenario (JSON) and the uavtrack version."""
+    """A trial as a Dataset, in one call, as ``xarray.open_dataset`` reads a file:
+    `source` is a trace file's path (``uavtrack run --trace``), a `Result` with a trace,
+    a `TraceFile`, or a bare `Trace` with its `scenario` (method and seed optional).
+
+    Dimensions step, uav, target (and state, state_ for the estimates and covariances);
+    coordinates step, time, uav, target. ``time`` is the CF time axis (standard_name
+    time): on disk seconds since `trace.EPOCH` (2000-01-01), so xarray decodes it to
+    datetimes, step k at EPOCH + k dt. Every variable has a long_name and, where it has
+    one, its units (UDUNITS; the estimates' and covariances' units, which differ by
+    state, are in their comment). Attributes: dt [s], method, seed, scenario (JSON) and
+    uavtrack, the version that ran the trial."""
+    saved = trace_file.load(source, scenario, method, seed)
+    trace, scenario = saved.trace, saved.scenario
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     docs = _docs()
@@ -72,52 +99,73 @@ def to_xarray(
         )
     for i, name in enumerate(UAV_STATE):
         variables[f"uav_{name}"] = (su, trace.uavs[..., i], _attrs(f"true UAV {name}", name))
-    variables["observed"] = (sut, trace.observed, {"description": docs["observed"]})
-    mixed = "m and m/s by state (x, y: m; vx, vy: m/s)"
+    variables["uav_altitude"][2]["standard_name"] = "height"  # above the flat ground
+    variables["observed"] = (sut, trace.observed, {"long_name": docs["observed"]})
     variables["estimate"] = (
-        sut + ("state",),
-        trace.mean,
-        {"description": docs["mean"], "units": mixed},
-    )
+        sut + ("state",), trace.mean,
+        {"long_name": docs["mean"], "comment": "units by state: x, y in m; vx, vy in m/s"},
+    )  # fmt: skip
     variables["covariance"] = (
         sut + ("state", "state_"), trace.cov,
-        {"description": docs["cov"], "units": "products of the states' units"},
+        {"long_name": docs["cov"], "comment": "units: the product of its two states' units "
+         "(m^2, m^2/s, m^2/s^2)"},
     )  # fmt: skip
-    variables["bid"] = (sut, trace.bids, {"description": docs["bids"]})
+    variables["bid"] = (sut, trace.bids, {"long_name": docs["bids"]})
     for name, dims in (("assignment", su), ("rounds", su), ("alive", su),
                        ("decision_time_ms", su), ("decision_wall_ms", su)):  # fmt: skip
-        units = {"units": "ms"} if name.startswith("decision") else {}
-        variables[name] = (dims, getattr(trace, name), {"description": docs[name], **units})
-    variables["bank_angle"] = (su, trace.action, {"description": docs["action"], "units": "rad"})
+        units = {"units": UNITS[name]} if name in UNITS else {}
+        variables[name] = (dims, getattr(trace, name), {"long_name": docs[name], **units})
+    variables["bank_angle"] = (
+        su, trace.action, {"long_name": docs["action"], "units": UNITS["bank_angle"]}
+    )  # fmt: skip
     for name in ("messages", "delivered", "conflicts"):
-        variables[name] = (step, getattr(trace, name), {"description": docs[name]})
+        variables[name] = (step, getattr(trace, name), {"long_name": docs[name]})
     attrs = {
         "title": "a uavtrack trial, step by step",
+        "source": f"uavtrack {saved.version}",
         "dt": scenario.dt,
-        "method": method or "",
+        "method": saved.method,
         "scenario": json.dumps(scenario.to_dict(), sort_keys=True),
-        "uavtrack": __version__,
+        "uavtrack": saved.version,
         "missing": "a failed UAV's estimate, covariance and bid are NaN from its failure",
     }
-    if seed is not None:
-        attrs["seed"] = int(seed)
+    if saved.seed is not None:
+        attrs["seed"] = int(saved.seed)
+    elapsed = np.round(np.arange(T) * scenario.dt * 1e9).astype("timedelta64[ns]")
+    time = {"standard_name": "time", "long_name": "simulated time of the step"}
     coords = {
-        "step": np.arange(T),
-        "time": ("step", np.arange(T) * scenario.dt, {"units": "s"}),
-        "uav": np.arange(Nu),
-        "target": np.arange(Nt),
-        "state": list(TARGET_STATE),
-        "state_": list(TARGET_STATE),
+        "step": ("step", np.arange(T), {"long_name": "decision cycle"}),
+        "time": ("step", np.datetime64(trace_file.EPOCH, "ns") + elapsed, time),
+        "uav": ("uav", np.arange(Nu), {"long_name": "UAV index"}),
+        "target": ("target", np.arange(Nt), {"long_name": "target index"}),
+        "state": ("state", list(TARGET_STATE), {"long_name": "component of a target's state"}),
+        "state_": ("state_", list(TARGET_STATE), {"long_name": "the same, second axis"}),
     }
-    return xr.Dataset(variables, coords=coords, attrs=attrs)
+    dataset = xr.Dataset(variables, coords=coords, attrs=attrs)
+    dataset["time"].encoding.update(
+        units=f"seconds since {trace_file.EPOCH:%Y-%m-%d}",  # midnight
+        calendar="proleptic_gregorian",
+        dtype="float64",
+    )
+    return dataset
 
 
-def _attrs(description: str, name: str) -> dict[str, str]:
-    return {"description": description, "units": UNITS[name]}
+def _attrs(long_name: str, name: str) -> dict[str, str]:
+    return {"long_name": long_name, "units": UNITS[name]}
 
 
-def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
-    """The trace as the four tidy tables of the module's documentation."""
+def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
+    """A trial as the four tidy tables of the module's documentation, from a trace
+    file's path, a `Result` with a trace, a `TraceFile`, or a bare `Trace` with its step
+    `dt` [s]. Each frame's ``attrs["units"]`` maps its columns to their units (Parquet
+    keeps them, see `write_table`)."""
+    if isinstance(source, Trace):
+        if dt is None:
+            raise UsageError("a bare Trace needs its step dt: to_frames(trace, dt)")
+        trace = source
+    else:
+        saved = trace_file.load(source)
+        trace, dt = saved.trace, saved.dt
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     time = np.arange(T) * dt
@@ -164,12 +212,34 @@ def to_frames(trace, dt: float) -> dict[str, pd.DataFrame]:
     for a in range(4):
         for b in range(a, 4):
             pairs[f"P_{TARGET_STATE[a]}_{TARGET_STATE[b]}"] = trace.cov[..., a, b].ravel()
-    return {
+    frames = {
         "steps": steps,
         "uavs": pd.DataFrame(uavs),
         "targets": pd.DataFrame(targets),
         "pairs": pd.DataFrame(pairs),
     }
+    for frame in frames.values():
+        frame.attrs["units"] = {c: unit(c) for c in frame.columns if unit(c)}
+    return frames
+
+
+def write_table(frame: pd.DataFrame, path: str | Path, format: str = "parquet") -> None:
+    """`frame` as a Parquet or CSV file at `path` (no index). Parquet carries each
+    column's unit (``frame.attrs["units"]``) in its field's metadata under ``unit``
+    (``pyarrow.parquet.read_schema(path).field("x").metadata[b"unit"] == b"m"``), and
+    the frame's attrs, which ``pandas.read_parquet`` restores; CSV holds the values only."""
+    if format == "csv":
+        frame.to_csv(path, index=False)
+        return
+    import pyarrow as pa
+
+    units = frame.attrs.get("units", {})
+    schema = pa.Schema.from_pandas(frame, preserve_index=False)
+    for name, text in units.items():
+        i = schema.get_field_index(name)
+        if i >= 0:
+            schema = schema.set(i, schema.field(i).with_metadata({"unit": text}))
+    frame.to_parquet(path, index=False, schema=schema)
 
 
 def results_frame(folder: str | Path) -> pd.DataFrame:
@@ -208,6 +278,7 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
         frame[name] = [default if v is None or v != v else v for v in frame[name]]
     frame = frame.sort_values(["kind", "label", "method", "trial"], ignore_index=True)
     frame.attrs["left_out"] = left_out
+    frame.attrs["units"] = {c: METRICS[c][0] for c in frame.columns if METRICS.get(c, ("",))[0]}
     return frame
 
 

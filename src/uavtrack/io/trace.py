@@ -3,13 +3,23 @@
 A compressed NumPy archive (read it with ``numpy.load``; no pickles) holding every array
 of `simulation.Trace` under its field's name, and what made them: ``scenario`` (the
 scenario as JSON text; `Scenario.from_dict(json.loads(...))` reads it back), ``method``,
-``seed`` (absent when the trial had none), ``dt`` [s] and ``uavtrack`` (the version). A
-failed UAV's rows of ``mean``, ``cov`` and ``bids`` are NaN from the step it fails.
+``seed`` (absent when the trial had none), ``dt`` [s], ``uavtrack`` (the version that
+wrote it) and ``format`` (the trace format, `FORMAT`). A failed UAV's rows of ``mean``,
+``cov`` and ``bids`` are NaN from the step it fails.
+
+Which files are read: the format number, not the uavtrack version, decides. A file of
+this format (or one without a ``format`` entry, written before the number was stamped,
+whose layout is format 1) is read whatever uavtrack version wrote it; when that version
+differs from the running one, `read` says so with a `TraceVersionWarning` (the command
+line prints it as a note). A file of a newer format is refused, naming both versions.
 """
 
 from __future__ import annotations
 
+import datetime
 import json
+import os
+import warnings
 import zipfile
 from dataclasses import dataclass
 from pathlib import Path
@@ -22,13 +32,27 @@ from ..errors import UsageError
 from ..files import write_npz
 from ..simulation import RECORDED, Result, Trace
 
-META = ("scenario", "method", "seed", "dt", "uavtrack")
+FORMAT = 1
+"""The trace format this uavtrack writes and reads. It changes only when an array is
+added, removed or changes meaning; uavtrack versions that write the same format read
+each other's traces."""
+
+EPOCH = datetime.datetime(2000, 1, 1)
+"""Where a trace's simulated clock starts when a format wants a date (netCDF's CF time
+axis, Stone Soup's timestamps): step k is at EPOCH + k dt."""
+
+META = ("scenario", "method", "seed", "dt", "uavtrack", "format")
 """The entries of a trace file beside the trace's arrays."""
+
+
+class TraceVersionWarning(UserWarning):
+    """A trace of this format written by another uavtrack version (read as it is)."""
 
 
 @dataclass(frozen=True)
 class TraceFile:
-    """A trace read back with what made it."""
+    """A trace read back with what made it; `version` is the uavtrack version that
+    wrote it ("unknown" for a file that does not say)."""
 
     trace: Trace
     scenario: Scenario
@@ -50,13 +74,15 @@ def write(path: str | Path, result: Result) -> None:
     arrays["method"] = np.array(result.method)
     arrays["dt"] = np.array(result.scenario.dt)
     arrays["uavtrack"] = np.array(__version__)
+    arrays["format"] = np.array(FORMAT)
     if result.seed is not None:
         arrays["seed"] = np.array(int(result.seed))
     write_npz(path, arrays)
 
 
 def read(path: str | Path) -> TraceFile:
-    """A trace file written by `write`; a one-line UsageError for anything else."""
+    """A trace file written by `write`; a one-line UsageError for anything else (see the
+    module's documentation for which versions are read)."""
     path = Path(path).expanduser()
     if not path.is_file():
         raise UsageError(f"{path}: no such trace file")
@@ -67,6 +93,8 @@ def read(path: str | Path) -> TraceFile:
             arrays = {name: data[name] for name in data.files}
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{path}: not a uavtrack trace file ({exc})") from None
+    version = str(arrays["uavtrack"]) if "uavtrack" in arrays else "unknown"
+    _check_format(path, arrays.get("format"), version)
     names = ["targets"] + [f.name for f in RECORDED]
     missing = [n for n in names + ["scenario", "method"] if n not in arrays]
     if missing:
@@ -77,7 +105,88 @@ def read(path: str | Path) -> TraceFile:
         scenario = Scenario.from_dict(json.loads(str(arrays["scenario"])), origin=str(path))
     except (json.JSONDecodeError, ScenarioError) as exc:
         raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
+    _check_shapes(path, arrays, scenario)
+    if version != __version__:
+        writer = "an unknown uavtrack version" if version == "unknown" else f"uavtrack {version}"
+        warnings.warn(
+            f"{path} was written by {writer}; uavtrack {__version__} reads it as trace "
+            f"format {FORMAT}",
+            TraceVersionWarning,
+            stacklevel=2,
+        )
     trace = Trace(**{n: arrays[n] for n in names})
     seed = int(arrays["seed"]) if "seed" in arrays else None
-    version = str(arrays["uavtrack"]) if "uavtrack" in arrays else "unknown"
     return TraceFile(trace, scenario, str(arrays["method"]), seed, version)
+
+
+def _check_format(path: Path, entry: np.ndarray | None, version: str) -> None:
+    """Refuse a format this version cannot read; no entry is format 1."""
+    if entry is None:
+        return
+    try:
+        number = int(entry)
+    except (TypeError, ValueError):
+        number = None
+    if number == FORMAT:
+        return
+    if number is not None and number > FORMAT:
+        raise UsageError(
+            f"{path}: trace format {number}, written by uavtrack {version}, is newer than "
+            f"uavtrack {__version__} reads (format {FORMAT}); read it with uavtrack {version} "
+            "or later"
+        )
+    raise UsageError(
+        f"{path}: unknown trace format {entry!s} (written by uavtrack {version}); uavtrack "
+        f"{__version__} reads format {FORMAT}"
+    )
+
+
+def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario) -> None:
+    """Every array has the shape `Cycle` declares for the scenario's team over the steps
+    `targets` holds, and numbers in it: a file whose arrays disagree is refused."""
+    sizes = {"Nu": scenario.n_uavs, "Nt": scenario.n_targets}
+    targets = arrays["targets"]
+    steps = targets.shape[0] if targets.ndim else 0
+    expected = {"targets": (steps, scenario.n_targets, 4)}
+    for f in RECORDED:
+        dims = [d.strip() for d in f.metadata["shape"].strip("()").split(",") if d.strip()]
+        expected[f.name] = (steps, *(sizes[d] if d in sizes else int(d) for d in dims))
+    for name, shape in expected.items():
+        array = arrays[name]
+        if array.shape != shape:
+            raise UsageError(
+                f"{path}: its arrays disagree: {name} is {array.shape}, where its scenario "
+                f"({scenario.n_uavs} UAVs, {scenario.n_targets} targets) and the {steps} "
+                f"steps of targets give {shape}"
+            )
+        if not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
+            raise UsageError(f"{path}: {name} holds {array.dtype}, not numbers")
+
+
+def load(
+    source: str | os.PathLike | Result | TraceFile | Trace,
+    scenario: Scenario | None = None,
+    method: str | None = None,
+    seed: int | None = None,
+) -> TraceFile:
+    """A trace with what made it, from a trace file's path, a `Result` with a trace
+    (``simulate(..., trace=True)``), a `TraceFile` (returned as it is), or a bare `Trace`
+    with the `scenario` it ran (and its method and seed, if known)."""
+    if isinstance(source, Trace):
+        if scenario is None:
+            raise UsageError("a bare Trace needs its scenario: give the Result, or the scenario")
+        return TraceFile(source, scenario, method or "", seed, __version__)
+    if (scenario, method, seed) != (None, None, None):
+        raise UsageError("scenario, method and seed go with a bare Trace; this source has its own")
+    if isinstance(source, TraceFile):
+        return source
+    if isinstance(source, Result):
+        if source.trace is None:
+            raise UsageError("this result holds no trace: simulate(..., trace=True)")
+        return TraceFile(source.trace, source.scenario, source.method, source.seed, __version__)
+    if isinstance(source, str | os.PathLike):
+        return read(source)
+    raise UsageError(
+        f"expected a trace file's path, a Result, a TraceFile or a Trace, got "
+        f"{type(source).__name__}"
+    )
