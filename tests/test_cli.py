@@ -268,33 +268,36 @@ def test_json_names_the_decision_time_unit_and_is_strict(capsys):
         assert r["observation_rate"]["std"] is None
 
 
-def test_compare_gives_paired_differences_from_the_first_method(capsys):
+def test_compare_gives_paired_differences_of_the_first_method(capsys):
     from scipy import stats
 
     args = ("compare", "--trials", "4", "--steps", "40", "--method", "greedy")
     code, out, err = run_cli(capsys, *args, "--method", "distributed", "--json")
     assert code == 0, err
     data = json.loads(out, parse_constant=refuse_constant)
-    assert list(data["paired"]) == ["distributed - greedy"]
-    pair = data["paired"]["distributed - greedy"]
+    assert list(data["paired"]) == ["greedy - distributed"]
+    pair = data["paired"]["greedy - distributed"]
     # the same trials, run again: the difference per trial, its mean and its t interval
     scenario = uavtrack.Scenario(steps=40)
     seeds = [uavtrack.trial_seed(0, t) for t in range(4)]
     rate = {m: uavtrack.run(scenario, m, seeds).metrics for m in ("distributed", "greedy")}
     for key in ("observation_rate", "rmse_best", "messages"):
-        diff = rate["distributed"][key] - rate["greedy"][key]
+        diff = rate["greedy"][key] - rate["distributed"][key]
         half = stats.t.ppf(0.975, 3) * diff.std(ddof=1) / 2
         assert pair[key]["mean"] == pytest.approx(diff.mean(), rel=1e-9, abs=1e-12)
         assert pair[key]["ci_low"] == pytest.approx(diff.mean() - half, rel=1e-9, abs=1e-12)
         assert pair[key]["ci_high"] == pytest.approx(diff.mean() + half, rel=1e-9, abs=1e-12)
         assert pair[key]["trials"] == 4
+    assert pair["observation_rate"]["mean"] < 0  # greedy tracks less than the paper's method
     assert "decision_time_ms" not in pair  # measured on one trial: no interval
     code, out, _ = run_cli(capsys, *args, "--method", "distributed", "--method", "centralized")
     assert code == 0
-    assert "paired differences from greedy" in out
-    assert "distributed − greedy" in out and "centralized − greedy" in out
+    assert "greedy minus each other method, paired" in " ".join(out.split())  # wrapped
+    assert "greedy − distributed" in out and "greedy − centralized" in out
     low, high = pair["observation_rate"]["ci_low"], pair["observation_rate"]["ci_high"]
     assert f"[{low:+.4f}, {high:+.4f}]" in out
+    code, out, _ = run_cli(capsys, "compare", "--trials", "2", "--steps", "10", "--json")
+    assert list(json.loads(out)["paired"]) == ["distributed - centralized", "distributed - greedy"]
 
 
 def test_paired_differences_leave_out_undefined_trials():

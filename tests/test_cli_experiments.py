@@ -203,6 +203,8 @@ def test_a_sweep_of_two_fields_is_a_grid_of_every_combination(tmp_path, capsys):
          "did you mean faults.loss?"),
         (["comm_range", "25", "comm_range", "30"], "sweep: comm_range is given twice"),
         (["comm_range", "25", "faults.loss"], "sweep faults.loss: give at least one value"),
+        (["comm_range", "25", "--set", "comm_range=30"],
+         "sweep sets comm_range itself; do not --set comm_range too"),
         (["n_uavs", "2", "uav.altitudes", "[400.0, 410.0, 420.0]"],
          "sweep cell n_uavs=2, uav.altitudes=[400.0, 410.0, 420.0]: uav.altitudes has 3 "
          "entries but n_uavs is 2"),

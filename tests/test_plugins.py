@@ -83,7 +83,7 @@ def test_a_plugin_installed_with_pip_is_a_method_of_every_command(plugin_site, t
     assert proc.returncode == 0, proc.stderr
     data = json.loads(proc.stdout)
     assert list(data["methods"]) == ["distributed", "sequential"]
-    assert data["paired"]["sequential - distributed"]["observation_rate"]["trials"] == 3
+    assert data["paired"]["distributed - sequential"]["observation_rate"]["trials"] == 3
     # a sweep runs its jobs in worker processes, which find the plugin too
     proc = uavtrack(plugin_site, "sweep", "comm_range", "0", "80", "--method", "sequential",
                     "--trials", "2", "--steps", "20", "--workers", "2", "--out",
@@ -116,15 +116,25 @@ def test_the_plugin_decides_by_its_own_rule(plugin_site):
     assert int(proc.stdout) > 0  # its own rule: not the Hungarian assignment everywhere
 
 
-def test_a_broken_plugin_is_named_in_one_line(tmp_path):
+def test_a_broken_plugin_is_named_in_one_line_where_it_is_used(tmp_path):
     site = tmp_path / "site"
     info = site / "broken_plugin-0.1.dist-info"
     info.mkdir(parents=True)
     (info / "METADATA").write_text("Metadata-Version: 2.1\nName: broken-plugin\nVersion: 0.1\n")
     (info / "entry_points.txt").write_text("[uavtrack.methods]\nbroken = no_such_module:Method\n")
-    proc = uavtrack(site, "run", "--method", "broken", "--steps", "5", cwd=tmp_path)
-    assert proc.returncode == 2
-    assert proc.stderr.strip() == (
+    message = (
         "uavtrack: error: method 'broken' cannot be loaded from no_such_module:Method: "
         "ModuleNotFoundError: No module named 'no_such_module'"
     )
+    proc = uavtrack(site, "run", "--method", "broken", "--steps", "5", cwd=tmp_path)
+    assert proc.returncode == 2 and proc.stderr.strip() == message
+    out = tmp_path / "sweep"
+    proc = uavtrack(site, "sweep", "comm_range", "25", "--method", "broken", "--trials", "1",
+                    "--steps", "5", "--out", str(out), cwd=tmp_path)  # fmt: skip
+    assert proc.returncode == 2 and proc.stderr.strip() == message and not out.exists()
+    # commands that do not use it are not held up by it
+    proc = uavtrack(site, "run", "--steps", "5", "--json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    proc = uavtrack(site, "compare", "--trials", "1", "--steps", "5", "--json", cwd=tmp_path)
+    assert proc.returncode == 0, proc.stderr
+    assert list(json.loads(proc.stdout)["methods"]) == ["distributed", "centralized", "greedy"]

@@ -436,14 +436,15 @@ one trial only, so they have no interval)."""
 def against_first(
     raw: dict[str, dict[str, np.ndarray]], metrics: Sequence[str] = PAIRED_METRICS
 ) -> dict[str, dict[str, dict[str, float]]]:
-    """Paired differences of every method against the first one, on the same trials:
-    ``{"greedy - distributed": {"observation_rate": paired(...), ...}, ...}``.
+    """Paired differences of the first method against every other, on the same trials:
+    ``{"distributed - greedy": {"observation_rate": paired(...), ...}, ...}``, first minus
+    other, as the reproduction and `summarize_sweep` take them.
 
     `raw`: per-trial metrics by method, as `compare` returns them (common random numbers,
     so trial t of every method saw the same targets and noise)."""
     first, *others = raw
     return {
-        f"{m} - {first}": {k: paired(raw[m][k], raw[first][k]) for k in metrics} for m in others
+        f"{first} - {m}": {k: paired(raw[first][k], raw[m][k]) for k in metrics} for m in others
     }
 
 

@@ -283,11 +283,16 @@ def not_computed(n_targets: int, per_uav: bool = True) -> str:
     return ""
 
 
-def _central_methods() -> set[str]:
-    """The methods whose decisions one node makes for the team."""
+def chosen_methods(methods: list | None) -> list[str]:
+    """The methods a command runs, each loaded now so that a plugin that cannot load is
+    named in one line before any work: those given with --method (once each), else the
+    paper's three (installed plugins run only when named)."""
     from ..methods import get
 
-    return {name for name in registry.names() if get(name).central}
+    names = list(dict.fromkeys(m.value for m in methods)) if methods else list(registry.BUILT_IN)
+    for name in names:
+        get(name)
+    return names
 
 
 def number(fmt: str, value) -> str:
@@ -419,7 +424,9 @@ def show(
     table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
     for label, (value,) in target_rows([summary["per_target"]]):
         table.add_row(label, value)
-    central = summary["method"] in _central_methods()
+    from ..methods import get
+
+    central = get(summary["method"]).central
     for key, label, fmt in RUN_ROWS:
         if key == "decision_time_ms" and central:
             label = "decision time per cycle, the central node's for the whole team [ms of CPU]"
@@ -454,7 +461,10 @@ def compare(
     methods: Annotated[
         list[MethodName] | None,
         typer.Option(
-            "--method", metavar="METHOD", help="a method to compare (repeatable) [all three]"
+            "--method",
+            metavar="METHOD",
+            help="a method to compare (repeatable); the first is the reference of the paired "
+            "differences [the paper's three: distributed, centralized, greedy]",
         ),
     ] = None,
     trials: Annotated[
@@ -471,12 +481,12 @@ def compare(
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,
 ) -> None:
     """Run the methods on the same trials, in this process: mean and std of each metric,
-    and each method's paired differences from the first one with 95% intervals."""
+    and the paired differences of the first method minus each other, with 95% intervals."""
     from ..experiments import against_first, summarize
     from ..experiments import compare as run_compare
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
-    names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
+    names = chosen_methods(methods)
     with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
         raw = run_compare(scenario, names, trials, seed, progress=advance)
     results = {m: summarize(v) for m, v in raw.items()}
@@ -533,14 +543,15 @@ PAIRED_ROWS = {
 
 
 def paired_table(pairs: dict, first: str, trials: int):
-    """Each method minus `first` on the same trials: mean difference [95% interval]."""
+    """`first` minus each other method on the same trials: mean difference [95% interval]."""
     from rich.markup import escape
     from rich.table import Table
 
     from ..report import ci
 
     table = Table(
-        title=f"paired differences from {first} on the same {trials} trials: mean [95% interval]",
+        title=f"{first} minus each other method, paired on the same {trials} trials: "
+        "mean [95% interval]",
         caption="An interval that excludes 0: the methods differ on this scenario "
         "(t interval over the trials; n/a with fewer than 2).",
         caption_justify="left",

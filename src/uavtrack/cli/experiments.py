@@ -20,6 +20,7 @@ from . import (
     TeamOpt,
     TrialStepsOpt,
     app,
+    chosen_methods,
     console,
     load_scenario,
     parse_overrides,
@@ -327,7 +328,9 @@ def sweep(
     ],
     methods: Annotated[
         list[MethodName] | None,
-        typer.Option("--method", metavar="METHOD", help="a method to run (repeatable) [all three]"),
+        typer.Option(
+            "--method", metavar="METHOD", help="a method to run (repeatable) [the paper's three]"
+        ),
     ] = None,
     trials: Annotated[
         int, typer.Option(min=1, metavar="N", help="trials per value (or cell) and method")
@@ -359,6 +362,8 @@ def sweep(
         scenario = scenario.with_overrides({"steps": steps}, origin="--steps")
     texts = parse_sweep(scenario, [field, *values])
     for name in texts:
+        if name in parse_overrides(set_ or []):
+            raise UsageError(f"sweep sets {name} itself; do not --set {name} too")
         if team is not None and name in ("n_uavs", "n_targets"):
             raise UsageError(f"--team sets n_uavs and n_targets; do not sweep {name} too")
         if name == "steps" and steps is not None:
@@ -368,7 +373,7 @@ def sweep(
         for name, given in texts.items()
     }
     axes = sweep_axes(scenario, raw)
-    names = list(dict.fromkeys(m.value for m in (methods or list(MethodName))))
+    names = chosen_methods(methods)
     plan = sweep_plan(scenario, axes, names, trials, chunk=10, seed=seed)  # every cell checked
     out = out or Path("results") / ("sweep-" + "-".join(axes))
     one = len(axes) == 1
