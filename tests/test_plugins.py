@@ -1,6 +1,5 @@
 """Methods from other packages: a plugin installed with pip is a method of every command."""
 
-import importlib.util
 import json
 import os
 import subprocess
@@ -38,13 +37,13 @@ def plugin_site(tmp_path_factory):
     (package / "custom_method.py").write_text(EXAMPLE.read_text())
     (package / "pyproject.toml").write_text(PYPROJECT)
     site = root / "site"
-    # the venv's setuptools builds it offline; without one, pip fetches it from the index
-    local = ["--no-build-isolation", "--no-index"] if importlib.util.find_spec("setuptools") else []
-    subprocess.run(
-        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps", *local,
+    # as a user would: pip builds it in its own environment (setuptools from the index)
+    done = subprocess.run(
+        [sys.executable, "-m", "pip", "install", "--quiet", "--no-deps",
          "--target", str(site), str(package)],
-        check=True, capture_output=True, timeout=600,
+        capture_output=True, text=True, timeout=600,
     )  # fmt: skip
+    assert done.returncode == 0, done.stdout + done.stderr
     return site
 
 
