@@ -301,6 +301,10 @@ class Swarm:
         """Wait until the world has run `k` cycles (False if it ended first)."""
         return self._until(lambda: self.step >= k, limit)
 
+    def finished(self, limit: float = 600.0) -> bool:
+        """Wait until the world has ended (False if it outlives `limit`)."""
+        return self._until(lambda: self.world.poll() is not None, limit)
+
     def finish(
         self, limit: float = 300.0, programs: float = 60.0
     ) -> tuple[int, str, list[tuple[int, str]]]:

@@ -236,7 +236,7 @@ def test_a_link_flapping_every_second_loses_nobody_silently(network, tmp_path):
         assert swarm.reached(8), swarm.said
         seen["from"] = swarm.step
         with network.flapping(host(2), down=0.5, up=0.5) as flaps:
-            swarm.reached(steps)  # until the world's last cycle
+            swarm.finished()
         seen["flaps"] = len(flaps)
 
     result, trace, programs, _ = across(network, tmp_path, steps, act)
@@ -277,3 +277,40 @@ def test_a_uav_cut_past_the_lease_is_lost_from_that_cycle_and_stays_out(network,
     reference = simulated(steps)
     first = first_loss(trace)
     assert differences(head(trace, first), head(reference, first)) == []
+
+
+def partitions(*args: str, cwd=None) -> subprocess.CompletedProcess:
+    """``python benchmarks/partitions.py args`` (from the root of this checkout)."""
+    return subprocess.run(
+        [sys.executable, str(netns.ROOT / "benchmarks" / "partitions.py"), *args],
+        cwd=cwd or netns.ROOT, capture_output=True, text=True, timeout=900,
+    )  # fmt: skip
+
+
+def test_the_partitions_benchmark_refuses_a_bad_out_before_any_run(tmp_path):
+    (tmp_path / "taken").mkdir()
+    done = partitions("--out", str(tmp_path / "taken"))
+    assert done.returncode == 2 and "Traceback" not in done.stderr
+    assert "--out:" in done.stderr.strip().splitlines()[-1] and done.stdout == ""
+
+
+@pytest.mark.slow
+def test_the_partitions_benchmark_measures_every_case(network, tmp_path):
+    out = tmp_path / "partitions.json"
+    done = partitions("--seeds", "1", "--steps", "30", "--out", str(out))
+    assert done.returncode == 0, done.stderr
+    cases = json.loads(out.read_text())["cases"]
+    assert list(cases) == [
+        "clean", "cut 5 s", "world from UAVs 1, 2", "flapping", "cut past the lease"
+    ]  # fmt: skip
+    assert cases["clean"]["mean"]["equal_to_simulator"] == 1
+    for name, case in cases.items():
+        (run,) = case["runs"]
+        assert set(run["lost"]) == ({"1"} if name == "cut past the lease" else set()), name
+        if run["lost"]:
+            assert run["fault"] == {"faults.failures": [[1, run["lost"]["1"]]]}
+        else:
+            assert run["fault"]["faults.loss"] == pytest.approx(
+                run["messages_lost"] / run["messages_sent"], rel=1e-12
+            )
+    assert cases["cut 5 s"]["mean"]["longest_cycle_s"] >= CUT - 1.0
