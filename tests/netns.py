@@ -14,7 +14,8 @@ touches the machine's own network namespace. A cut is a pair of ``blackhole`` po
 rules in the router: what a cut host sends or is sent is dropped without a word (no
 ICMP, no loss of carrier the host could notice), as a radio out of range drops it;
 restoring deletes the rules. A cut between two hosts only drops what passes between
-them.
+them. `Network.carrier` takes a host's link down instead (the host sees its carrier go),
+as `Network.flapping` does over and over.
 
 Names are unique per harness (``uvt-<pid>-<hex>-<host>``), every namespace is deleted
 and every process started here stopped, by pid, when the harness closes (also on an
