@@ -787,6 +787,19 @@ class Scenario(_Part):
             check(self)
         return self
 
+    @property
+    def prunes(self) -> bool:
+        """Whether the planner may leave bids unscored (``planner.prune``): only where
+        every UAV knows the neighbourhoods its bids serve, i.e. bids are neither lost nor
+        late and the D_i flooding has the two rounds that tell a UAV its neighbours'."""
+        f = self.faults
+        return (
+            self.planner.prune
+            and f.loss == 0
+            and f.delay == 0
+            and (f.round_budget is None or f.round_budget >= 2)
+        )
+
     def acceleration_std(self) -> tuple[float, float]:
         """Std of the targets' white acceleration per axis [m/s^2], as eq. (15) is read
         (`target.noise_form`): sigma itself, or sigma / dT for the printed matrix, whose

@@ -105,10 +105,7 @@ class Context:
             stale=robust.stale,
             forward=_forward(scenario.dt, *scenario.acceleration_std()),
             plan=lambda uavs, mean, top=None: _plan(uavs, mean, scenario, top),
-            prune=scenario.planner.prune
-            and f.loss == 0
-            and f.delay == 0
-            and (f.round_budget is None or f.round_budget >= 2),
+            prune=scenario.prunes,
             rule=scenario.fusion.rule,
         )
         return cls(scenario, method, const, faults, setting)

@@ -383,6 +383,10 @@ class UavAgent:
         view[me] = bids
         members = members & alive
         members[me] = True
+        able = assignment.able(view, members, me)
+        if (members & ~able).any():  # a neighbour's bids cannot serve this auction
+            self._drop("bids not scored", int((members & ~able).sum()))
+            members = able
         rows = np.flatnonzero(members)
         start = timing.start()
         if rows.size == 1:
@@ -390,6 +394,11 @@ class UavAgent:
         else:
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
         return target, timing.since(start), (sent, delivered)
+
+    def _drop(self, reason: str, count: int = 1) -> None:
+        """Count what this UAV could not use, with the drops of its mailbox."""
+        with self.mailbox.cond:
+            self.mailbox.drops[reason] = self.mailbox.drops.get(reason, 0) + count
 
     # ------------------------------------------------------------ centralized
 
