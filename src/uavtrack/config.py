@@ -628,6 +628,44 @@ class RobustModel(_Part):
             "converted measurement, which the conversion of eq. (5) otherwise ignores"
         ),
     )
+    gate: Float | None = Field(
+        None,
+        ge=0.9,
+        lt=1,
+        description=(
+            "probability [-], [0.9, 1), with which an honest estimate passes the measurement "
+            "gate; beyond the paper: a UAV adopts (consensus) or takes (centralized download) "
+            "no estimate of a target that contradicts its own measurement of the target this "
+            "cycle (nu^T (H P H^T + R)^-1 nu above the chi-square quantile -2 ln(1 - p); "
+            "0.9999: 18.4), its own estimate included, nor, within robust.gate_memory cycles "
+            "of its last measurement of the target, one that contradicts its own estimate the "
+            "same way; a neighbour caught on one target is believed on none in that round; "
+            "assumed as an option against a member that lies with high confidence; not set: "
+            "the paper's rule, the most confident estimate is adopted"
+        ),
+    )
+    gate_memory: Int = Field(
+        8,
+        ge=0,
+        le=10_000_000,
+        description=(
+            "cycles after a UAV last measured a target (the initial cue counts as a "
+            "measurement at step 0) during which robust.gate checks estimates of the target "
+            "against the UAV's own [cycles], 0 to 10^7; needs robust.gate; assumed: 8 (4 s at "
+            "dT = 0.5 s), long enough to bridge a tracking UAV's gaps in view, short enough "
+            "that an estimate of a target reflected at a wall (which the filter's model does "
+            "not know) is still near its prediction (docs, Faults and robustness)"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _memory(self) -> RobustModel:
+        if self.gate is None and self.gate_memory != 8:
+            raise ValueError(
+                f"robust.gate_memory {self.gate_memory} needs robust.gate (it does nothing "
+                "otherwise); set robust.gate or leave robust.gate_memory unset"
+            )
+        return self
 
 
 class Scenario(_Part):

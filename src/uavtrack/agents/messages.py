@@ -193,9 +193,10 @@ DOMAINS = {
     "confidence": "1 / trace of the target's cov (eq. 22), to 1e-9 relative",
     "confidence or none": "as confidence, or -inf: no estimate (the target's mean, cov and "
     "stamp are then not read; they must be finite)",
-    "estimate": "x and y within the field plus the run's margin, speed at most the run's "
-    "largest estimate speed",
-    "covariance": "symmetric positive definite, eigenvalues within [floor, cap] of the run",
+    "estimate": "finite; one whose x or y is outside the field plus the run's margin, or "
+    "whose speed is above the run's largest, is not used (`Spec.estimates`)",
+    "covariance": "symmetric positive definite, eigenvalues at most the run's cap; one whose "
+    "smallest eigenvalue is below the run's floor (the sensor's best accuracy) is not used",
     "stamp": "a cycle in [k - (rounds + 1) behind, k], k the message's cycle",
     "cycle": "the message's cycle k",
     "uav index": "a UAV, 0 to N - 1",
@@ -341,14 +342,46 @@ class Spec:
             return self._uav(value)
         if b is None:
             return None
-        if domain == "estimate":
-            return _position(value[live], b) or _speed(value[live][..., 2:], b.speed)
         if domain == "position":
             return _position(value[None], b) or _altitude(value[2], b)
         if domain == "bids":
             scored = value[~np.isnan(value)]
             return None if ((scored >= 0) & (scored <= b.bid)).all() else "bid out of bounds"
         return None
+
+    def estimates(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
+        """The estimates of a checked tuple content ("gamma", "mean", "cov", ...) that
+        a receiver may use: one (a target's) whose position is outside the field plus
+        the run's margin, whose speed is above the run's largest or whose covariance is
+        below the sensor's best accuracy is replaced by no estimate (confidence -inf,
+        mean 0, covariance I), as if that sender had none. Returns the content and the
+        estimates replaced by reason.
+
+        These bounds are kept apart from `radio`'s, which refuse whole messages: an
+        honest UAV that adopted a plausible lie may itself come to hold an estimate
+        beyond them (a Kalman update of a confident wrong prior moves its velocity far),
+        and must not be silenced for the targets it knows."""
+        b, gamma = self.bounds, content["gamma"]
+        live = np.isfinite(gamma)
+        if b is None or not live.any():
+            return content, {}
+        mean, cov = content["mean"], content["cov"]
+        reasons = np.full(gamma.shape, "", dtype=object)
+        inside = ((mean[:, :2] >= b.low) & (mean[:, :2] <= b.high)).all(axis=1)
+        slow = np.hypot(mean[:, 2], mean[:, 3]) <= b.speed
+        sharp = np.linalg.eigvalsh(cov)[:, 0] >= b.floor
+        reasons[live & ~sharp] = "covariance below the sensor's accuracy"
+        reasons[live & ~slow] = "speed out of bounds"
+        reasons[live & ~inside] = "position out of bounds"
+        bad = reasons != ""
+        if not bad.any():
+            return content, {}
+        out = dict(content)
+        out["gamma"] = np.where(bad, -np.inf, gamma)
+        out["mean"] = np.where(bad[:, None], 0.0, mean)
+        out["cov"] = np.where(bad[:, None, None], np.eye(4), cov)
+        found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
+        return out, dict(zip(found.tolist(), counts.tolist(), strict=True))
 
     def _uav(self, value) -> str | None:
         b = self.bounds
@@ -464,11 +497,7 @@ def _covariance(P: np.ndarray, bounds: Bounds | None) -> str | None:
     eig = np.linalg.eigvalsh(P)
     if not (eig[..., 0] > 0).all():
         return "covariance not positive definite"
-    if bounds is None:
-        return None
-    if not (eig[..., 0] >= bounds.floor).all():
-        return "covariance below the sensor's accuracy"
-    if not (eig[..., -1] <= bounds.cap).all():
+    if bounds is not None and not (eig[..., -1] <= bounds.cap).all():
         return "covariance beyond the run's largest"
     return None
 
@@ -481,8 +510,3 @@ def _position(xy: np.ndarray, bounds: Bounds) -> str | None:
 def _altitude(h: float, bounds: Bounds) -> str | None:
     low, high = bounds.altitude
     return None if low < h <= high else "position out of bounds"
-
-
-def _speed(velocity: np.ndarray, largest: float) -> str | None:
-    fast = np.hypot(velocity[..., 0], velocity[..., 1]) > largest
-    return "speed out of bounds" if fast.any() else None

@@ -1,0 +1,248 @@
+"""A member with valid keys that sends what no honest program would: every message kind
+with every field at every bad value (the fuzz set). Honest programs finish every cycle,
+and what they refuse is counted by reason."""
+
+from __future__ import annotations
+
+import math
+import threading
+
+import msgspec
+import numpy as np
+import pytest
+
+import uavtrack
+from uavtrack.agents import messages, run_swarm
+from uavtrack.agents.messages import (
+    VERSION,
+    Array,
+    Hello,
+    Radio,
+    Ready,
+    Report,
+    Sense,
+    Tick,
+    encode,
+)
+from uavtrack.agents.security import WORLD
+from uavtrack.agents.transport import Link
+
+pytest.importorskip("cryptography")
+
+BAD = ("nan", "+inf", "-inf", "zero", "negative", "1e300", "wrong shape", "wrong dtype")
+"""The bad values every field takes in turn."""
+
+FLOATS = {"nan": math.nan, "+inf": math.inf, "-inf": -math.inf, "1e300": 1e300}
+OTHER_DTYPE = {"f": "<i8", "i": "<f8", "u": "<f8", "b": "<i8"}
+WORLDS = ("sense", "tick", "hello", "ready")
+"""Kinds only the world sends (and Ready, only about oneself): a member forges them."""
+
+
+def bad_array(wire: Array, how: str) -> Array:
+    """`wire`'s array at a bad value: its shape filled with the value (a float array
+    whatever the field's type), zero, negated, one element too many, another dtype."""
+    value = wire.array()
+    if how in FLOATS:
+        return Array.of(np.full(value.shape, FLOATS[how]))
+    if how == "zero":
+        return Array.of(np.zeros_like(value))
+    if how == "negative":
+        return Array.of(~value if value.dtype.kind == "b" else -np.abs(value) - 1)
+    if how == "wrong shape":
+        return Array.of(np.resize(value, value.size + 1))
+    return Array.of(value.astype(OTHER_DTYPE[value.dtype.kind]))
+
+
+def bad_value(value, how: str):
+    """Any field at a bad value; where the field's type cannot hold it (an int field
+    at NaN), a value of another type, which decoding refuses."""
+    if isinstance(value, Array):
+        return bad_array(value, how)
+    if how == "wrong shape":
+        return [value, value]
+    if how == "wrong dtype":
+        return b"x" if isinstance(value, str) else "x"
+    if isinstance(value, dict):  # a report's drops by reason
+        many = {f"reason {i}": 1 for i in range(100)}
+        chosen = {"zero": {}, "negative": {"lost": -1}, "1e300": many}
+        return chosen[how] if how in chosen else {"x": FLOATS[how]}
+    if isinstance(value, list):  # parts, keys
+        return {"zero": [], "negative": value[:-1], "1e300": value * 8}.get(how, FLOATS.get(how))
+    if isinstance(value, bool | str | bytes) or value is None:
+        return FLOATS.get(how, {"zero": 0, "negative": -1}.get(how))
+    if how in FLOATS:  # an int field holds no NaN: the largest int for 1e300
+        return 2**62 if how == "1e300" and isinstance(value, int) else FLOATS[how]
+    return 0 if how == "zero" else -abs(value) - 1
+
+
+def _replace(struct, **change):
+    return msgspec.structs.replace(struct, **change)
+
+
+def variants(message):
+    """(field, bad value, message changed) for every field of `message` at every bad
+    value; for a radio message also each part's header and each array of its content
+    (named protocol.field), and bids scored once and NaN elsewhere."""
+    for name in message.__struct_fields__:
+        for how in BAD:
+            yield name, how, _replace(message, **{name: bad_value(getattr(message, name), how)})
+    if not isinstance(message, Radio):
+        return
+    for i, part in enumerate(message.parts):
+
+        def with_part(changed, i=i):
+            return _replace(message, parts=message.parts[:i] + [changed] + message.parts[i + 1 :])
+
+        for name in ("protocol", "round", "final"):
+            for how in BAD:
+                changed = _replace(part, **{name: bad_value(getattr(part, name), how)})
+                yield f"{part.protocol}.{name}", how, with_part(changed)
+        for name, wire in (part.content or {}).items():
+            for how in BAD:
+                content = dict(part.content, **{name: bad_array(wire, how)})
+                yield f"{part.protocol}.{name}", how, with_part(_replace(part, content=content))
+        if part.protocol == "bids" and part.content is not None:
+            bids = part.content["bids"].array().copy()
+            bids[1:] = np.nan
+            content = dict(part.content, bids=Array.of(bids))
+            yield "bids.bids", "nan but one", with_part(_replace(part, content=content))
+
+
+def forged(run: str, k: int, me: int, n: int, m: int) -> list:
+    """The world's messages and a Ready as a member could make them: well formed,
+    refused for who sent them."""
+    believed = Array.of(np.array([100.0, 100.0, 425.0, 15.0, 0.0]))
+    flags = Array.of(np.ones(n, dtype=bool))
+    nothing = Array.of(np.zeros((0, 2)))
+    return [
+        Sense(VERSION, run, k, 0, believed, Array.of(np.zeros(m, bool)), nothing, flags, flags),
+        Tick(VERSION, run, k, flags),
+        Hello(
+            VERSION,
+            run,
+            "{}",
+            "distributed",
+            Array.of(np.zeros(2, np.uint32)),
+            Array.of(np.zeros((m, 4))),
+            Array.of(np.eye(4)),
+            1.0,
+            True,
+            [b"k" * 32] * (n + 1),
+        ),  # fmt: skip
+        Ready(VERSION, run, me),
+    ]
+
+
+class Member:
+    """Program `me`, a member with valid keys, that sends before each of its messages
+    variants of it, one (kind, field, bad value) at a time, and with its first report the
+    world's messages forged, to every other program and the world.
+
+    A variant that cannot be decoded is refused whatever it holds: each is sent once,
+    with the first message of its kind; so is each variant of a presence message (a
+    presence is kept until the next one replaces it). One that decodes is sent alone before a message
+    of its kind, so that each is checked, and used if admitted, in a slot (cycle,
+    round, receiver) of its own; the message follows (and is refused as a duplicate when
+    the variant was admitted). `sent` holds (kind, field, bad value) of what went out."""
+
+    def __init__(self, me: int, programs: int, scenario) -> None:
+        self.me, self.programs = me, programs
+        self.n, self.m = scenario.n_uavs, scenario.n_targets
+        self.sent: set[tuple[str, str, str]] = set()
+        self.all: set[tuple[str, str, str]] = set()
+        self.forged = False
+        self.lock = threading.Lock()
+
+    def wrap(self, original):
+        def send_body(link: Link, receiver: int, body: bytes) -> None:
+            if link.gate.me == self.me:
+                self.attack(original, link, receiver, body)
+            original(link, receiver, body)
+
+        return send_body
+
+    def attack(self, send, link: Link, receiver: int, body: bytes) -> None:
+        message = msgspec.msgpack.Decoder(messages.Message).decode(body)
+        kind = self.kind(message)
+        out, slot = [], None
+        with self.lock:
+            for name, how, variant in variants(message):
+                key = (kind, name, how)
+                self.all.add(key)
+                if key in self.sent:
+                    continue
+                encoded = encode(variant)
+                if messages.decode(encoded, link.run) is None or kind == "radio:presence":
+                    out.append((receiver, encoded))
+                    self.sent.add(key)
+                elif slot is None:
+                    slot = (receiver, encoded)
+                    self.sent.add(key)
+            if isinstance(message, Report) and not self.forged:
+                self.forged = True
+                others = [WORLD] + [q for q in range(self.programs) if q != self.me]
+                for one in forged(link.run, message.k, self.me, self.n, self.m):
+                    for name, how, variant in variants(one):
+                        key = (type(one).__name__.lower(), name, how)
+                        self.sent.add(key)
+                        self.all.add(key)
+                        out += [(q, encode(variant)) for q in others]
+        for to, encoded in out + ([slot] if slot else []):
+            send(link, to, encoded)
+
+    @staticmethod
+    def kind(message) -> str:
+        if isinstance(message, Radio):
+            return "radio:" + "+".join(p.protocol for p in message.parts)
+        return type(message).__name__.lower()
+
+
+def attacked(monkeypatch, scenario, method: str, me: int):
+    """A memory swarm in which program `me` is a `Member`; returns (swarm, member)."""
+    programs = scenario.n_uavs + int(method == "centralized")
+    member = Member(me, programs, scenario)
+    monkeypatch.setattr(Link, "send_body", member.wrap(Link.send_body))
+    swarm = run_swarm(scenario, method, seed=1, transport="memory", deadline=1.0)
+    return swarm, member
+
+
+def fields_of(keys) -> dict[tuple[str, str], set[str]]:
+    out: dict[tuple[str, str], set[str]] = {}
+    for kind, name, how in keys:
+        out.setdefault((kind, name), set()).add(how)
+    return out
+
+
+def assert_honest_programs_finished(swarm, member: Member, steps: int) -> None:
+    trace = swarm.result.trace
+    honest = [q for q in range(trace.alive.shape[1]) if q != member.me]
+    assert set(swarm.traffic.lost) <= {member.me}, swarm.traffic.lost
+    assert trace.alive[:, honest].all() and trace.alive.shape[0] == steps
+    assert np.isfinite(trace.mean[:, honest]).all() and np.isfinite(trace.cov[:, honest]).all()
+
+
+STEPS = 80
+"""Cycles of each run: enough for every decodable variant of a report (one a cycle)."""
+RUNS = {
+    # (method, the member): the kinds it sends
+    ("distributed", 1): {"radio:presence", "radio:flood+consensus", "radio:beacon+bids", "report"},
+    ("centralized", 1): {"radio:presence", "radio:upload", "report"},
+    ("centralized", 5): {"radio:presence", "radio:download", "report"},
+}
+
+
+@pytest.mark.parametrize("method,me", list(RUNS), ids=lambda x: str(x))
+def test_every_kind_field_and_bad_value_from_a_member_stops_no_honest_program(
+    monkeypatch, method, me
+):
+    scenario = uavtrack.Scenario(steps=STEPS)
+    swarm, member = attacked(monkeypatch, scenario, method, me)
+    assert_honest_programs_finished(swarm, member, scenario.steps)
+    sent = fields_of(member.sent)
+    kinds = {kind for kind, _ in sent}
+    assert RUNS[(method, me)] | set(WORLDS) <= kinds
+    assert member.sent == member.all, sorted(member.all - member.sent)[:5]  # every variant
+    for (kind, name), values in sent.items():  # every field at every bad value
+        assert set(BAD) <= values, (kind, name, set(BAD) - values)
+    assert swarm.traffic.drops.get("malformed", 0) > 0
+    assert swarm.traffic.drops.get("not from its sender", 0) > 0
