@@ -10,8 +10,11 @@ import threading
 import msgspec
 import numpy as np
 import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
 
 import uavtrack
+from uavtrack import estimation, gate
 from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.messages import (
     VERSION,
@@ -140,10 +143,11 @@ class Member:
 
     A variant that cannot be decoded is refused whatever it holds: each is sent once,
     with the first message of its kind; so is each variant of a presence message (a
-    presence is kept until the next one replaces it). One that decodes is sent alone before a message
-    of its kind, so that each is checked, and used if admitted, in a slot (cycle,
-    round, receiver) of its own; the message follows (and is refused as a duplicate when
-    the variant was admitted). `sent` holds (kind, field, bad value) of what went out."""
+    presence is kept until the next one replaces it). One that decodes is sent alone
+    before a message of its kind, so that each is checked, and used if admitted, in a
+    slot (cycle, round, receiver) of its own; the message follows (and is refused as a
+    duplicate when the variant was admitted). `sent` holds (kind, field, bad value) of
+    what went out."""
 
     def __init__(self, me: int, programs: int, scenario) -> None:
         self.me, self.programs = me, programs
@@ -246,3 +250,241 @@ def test_every_kind_field_and_bad_value_from_a_member_stops_no_honest_program(
         assert set(BAD) <= values, (kind, name, set(BAD) - values)
     assert swarm.traffic.drops.get("malformed", 0) > 0
     assert swarm.traffic.drops.get("not from its sender", 0) > 0
+
+
+# ------------------------------------------------------------------ the attacks of the issue
+
+
+def altered(content: dict, how: str) -> dict:
+    """A member's consensus tuple (or bids) altered as in the attacks that took swarms
+    down before the rule: each still finite, so the old check admitted it."""
+    if how == "nan bids":
+        return dict(content, bids=Array.of(np.full(content["bids"].shape, np.nan)))
+    gamma, mean, cov = (content[n].array().copy() for n in ("gamma", "mean", "cov"))
+    if how == "covariance x 1e300":
+        cov = cov * 1e300
+    elif how == "confidence 1e300, means moved 500 m":
+        gamma, mean = np.full(gamma.shape, 1e300), mean + [500.0, 500.0, 0.0, 0.0]
+    elif how == "means 1e300":
+        gamma, mean = np.full(gamma.shape, 1e300), np.full(mean.shape, 1e300)
+    elif how == "zero covariance":
+        cov = np.zeros(cov.shape)
+    elif how == "negative covariance":
+        cov = -cov
+    elif how == "covariance 1e-9":  # consistent, but beyond any sensor
+        cov = np.broadcast_to(1e-9 * np.eye(4), cov.shape).copy()
+        gamma = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    elif how == "means moved 1 km":  # beyond where anything gets in a 3 s run
+        mean = mean + [1000.0, 1000.0, 0.0, 0.0]
+    return dict(content, gamma=Array.of(gamma), mean=Array.of(mean), cov=Array.of(cov))
+
+
+ATTACKS = {
+    "nan bids": "bids not scored",
+    "covariance x 1e300": "covariance beyond the run's largest",
+    "confidence 1e300, means moved 500 m": "confidence disagrees with covariance",
+    "means 1e300": "confidence disagrees with covariance",
+    "zero covariance": "covariance not positive definite",
+    "negative covariance": "covariance not positive definite",
+    "covariance 1e-9": "covariance below the sensor's accuracy",
+    "means moved 1 km": "position out of bounds",
+}
+
+
+@pytest.mark.parametrize("how", list(ATTACKS))
+def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, how):
+    from uavtrack.agents import agent
+
+    send = agent.AgentRadio.send
+
+    def faulty(self, k, parts, to=None):
+        if self.me == 1:
+            protocol = "bids" if how == "nan bids" else "consensus"
+            parts = [
+                msgspec.structs.replace(p, content=altered(p.content, how))
+                if p.protocol == protocol and p.content is not None
+                else p
+                for p in parts
+            ]
+        send(self, k, parts, to)
+
+    monkeypatch.setattr(agent.AgentRadio, "send", faulty)
+    scenario = uavtrack.Scenario(steps=6)
+    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.3)
+    assert swarm.traffic.lost == {}
+    assert swarm.traffic.drops.get(ATTACKS[how], 0) > 0, swarm.traffic.drops
+    result = swarm.result
+    assert np.isfinite([result.observation_rate, result.rmse, result.nees, result.ospa]).all()
+    assert result.rmse < 100  # the honest UAVs kept their estimates
+
+
+# ------------------------------------------------------------------ a member that lies well
+
+
+def lying_member():
+    import runpy
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "lying_member.py"
+    return runpy.run_path(str(path), run_name="lying_member")
+
+
+def test_a_member_lying_within_the_bounds_takes_the_team_over_unless_the_gate_is_on():
+    example = lying_member()
+    base = uavtrack.Scenario(steps=60)
+    gated = base.with_overrides({"robust.gate": 0.9999})
+    honest = example["honest_rates"](base, 2)
+    liar = example["swarm_rates"](base, 2, example["LIAR"])
+    guarded = example["swarm_rates"](gated, 2, example["LIAR"])
+    assert liar.mean() < honest.mean() - 0.3  # the lie is plausible and it works
+    assert guarded.mean() >= example["honest_rates"](gated, 2).mean() - 0.05
+
+
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {"robust.gate": 0.9},
+        {"robust.gate": 0.9, "fusion.rule": "covariance_intersection"},
+        {
+            "robust.gate": 0.9,
+            "robust.gate_memory": 2,
+            "faults.loss": 0.3,
+            "faults.delay": 2,
+            "robust.stale": True,
+        },  # fmt: skip
+    ],
+    ids=["gate", "gate-ci", "gate-faults"],
+)
+def test_memory_swarm_with_the_gate_equals_the_simulator(method, overrides):
+    from uavtrack.equivalence import assert_same_trace
+
+    scenario = uavtrack.Scenario(steps=40).with_overrides(overrides)
+    swarm = run_swarm(scenario, method, seed=3, transport="memory")
+    reference = uavtrack.simulate(scenario, method, seed=3)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.dropped == 0
+
+
+# ------------------------------------------------------------------ what passes is usable
+
+
+def receiver(scenario, me=0, method="distributed"):
+    """A UAV program's agent on a bus of its own (nothing is sent anywhere)."""
+    from uavtrack.agents.agent import UavAgent
+    from uavtrack.agents.messages import Spec
+    from uavtrack.agents.security import Gate
+    from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
+    from uavtrack.faults import Faults
+
+    n, m = scenario.n_uavs, scenario.n_targets
+    gate_ = Gate("r", me, n, None)
+    link = Link(MemoryTransport(Bus()), gate_)
+    mailbox = Mailbox(gate_, Spec.of(scenario, False))
+    faults = Faults(scenario.faults, np.zeros((1, 2), dtype=np.uint32), n)
+    prior = (np.full((m, 4), 100.0), np.broadcast_to(np.eye(4), (m, 4, 4)).copy())
+    return UavAgent(me, scenario, method, faults, link, mailbox, 1.0, prior)
+
+
+@st.composite
+def admitted_tuples(draw, bounds, m=3, k=4):
+    """Consensus tuples at the edges of what a run admits: covariances of any
+    orientation with eigenvalues from below the floor to the cap, positions anywhere
+    within (and some beyond) the field plus its margin, speeds up to (and beyond) the
+    largest, stamps anywhere in the window."""
+    floats = lambda lo, hi: st.floats(lo, hi, allow_nan=False, allow_infinity=False)  # noqa: E731
+    eig = np.exp(
+        draw(
+            st.lists(
+                floats(np.log(bounds.floor / 2), np.log(bounds.cap)), min_size=4 * m, max_size=4 * m
+            )
+        )
+    )
+    angles = draw(st.lists(floats(0, np.pi), min_size=6 * m, max_size=6 * m))
+    cov = []
+    for j in range(m):
+        Q = np.eye(4)
+        for a, (p, q) in zip(
+            angles[6 * j : 6 * j + 6], [(0, 1), (0, 2), (0, 3), (1, 2), (1, 3), (2, 3)], strict=True
+        ):
+            G = np.eye(4)
+            G[p, p] = G[q, q] = np.cos(a)
+            G[p, q], G[q, p] = -np.sin(a), np.sin(a)
+            Q = Q @ G
+        P = Q @ np.diag(eig[4 * j : 4 * j + 4]) @ Q.T
+        cov.append(0.5 * (P + P.T))
+    cov = np.array(cov)
+    where = draw(
+        st.lists(floats(bounds.low * 1.1, bounds.high * 1.1), min_size=2 * m, max_size=2 * m)
+    )
+    speed = draw(
+        st.lists(floats(-1.2 * bounds.speed, 1.2 * bounds.speed), min_size=2 * m, max_size=2 * m)
+    )
+    mean = np.concatenate(
+        [np.reshape(where, (m, 2)), np.reshape(speed, (m, 2)) / np.sqrt(2)], axis=1
+    )
+    stamp = np.array(draw(st.lists(st.integers(0, k), min_size=m, max_size=m)))
+    gamma = estimation.confidence(cov)
+    return {
+        "gamma": gamma,
+        "mean": mean,
+        "cov": cov,
+        "stamp": stamp,
+        "origin": np.zeros(m, np.int64),
+    }
+
+
+SCENARIO = uavtrack.Scenario(n_targets=3, steps=40)
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {},
+        {"robust.gate": 0.9},
+        {"fusion.rule": "covariance_intersection", "robust.gate": 0.9},
+        {"faults.delay": 1, "robust.stale": True, "robust.gate": 0.9},
+    ],  # fmt: skip
+    ids=["paper", "gate", "ci-gate", "stale-gate"],
+)
+@settings(max_examples=40, deadline=None)
+@given(data=st.data())
+def test_whatever_the_rule_admits_the_receivers_use_without_error(overrides, data):
+    import warnings
+
+    from uavtrack.agents.messages import Spec
+
+    scenario = SCENARIO.with_overrides(overrides)
+    spec = Spec.of(scenario, False)
+    agent = receiver(scenario)
+    m, k = scenario.n_targets, 4
+    offered = {q: data.draw(admitted_tuples(spec.bounds, m, k)) for q in (1, 2)}
+    own = data.draw(admitted_tuples(spec.bounds, m, k))
+    own["stamp"] = np.full(m, k)
+    agent.measured = gate.Measured(
+        np.array(data.draw(st.lists(st.booleans(), min_size=m, max_size=m)))[None, None],
+        data.draw(admitted_tuples(spec.bounds, m, k))["mean"][None, None, :, :2],
+        np.broadcast_to(np.eye(2), (1, 1, m, 2, 2)),
+        np.array(data.draw(st.lists(st.booleans(), min_size=m, max_size=m)))[None, None],
+    )
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # no overflow, no invalid value, nothing
+        checked = {}
+        for q, content in offered.items():
+            parts = spec.radio(consensus_message(content, k, q), k)
+            if isinstance(parts, str):  # only what the rule admits reaches a receiver
+                continue
+            checked[q] = agent._plausible(parts[0][3])
+            if agent.setting.stale:
+                checked[q] = agent.setting.forward(checked[q], k)
+        state = agent._adopt(own, checked)
+        assert np.isfinite(state["mean"]).all() and np.isfinite(state["cov"]).all()
+        bids, _ = agent.setting.plan(
+            np.array([[[100.0, 100.0, 425.0, 15.0, 0.0]]]), state["mean"][None, None]
+        )
+        assert np.isfinite(bids).all() and (bids >= 0).all()
+
+
+def consensus_message(content: dict, k: int, sender: int) -> Radio:
+    wire = {name: Array.of(value) for name, value in content.items()}
+    return Radio(VERSION, "r", k, sender, [messages.Part("consensus", 1, -1, wire)])

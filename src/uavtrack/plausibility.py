@@ -63,7 +63,9 @@ class Bounds:
     a UAV's largest speed [m/s]; speed: an estimate's largest speed [m/s]; floor, cap:
     the smallest and largest eigenvalue of an estimate's covariance [m^2, m^2/s^2];
     bid: the largest bid [m^-4 summed over the horizon]; unscored: whether a bid may
-    be NaN (not scored: ``planner.prune`` in a run where bids are neither lost nor late).
+    be NaN (not scored: ``planner.prune`` in a run where bids are neither lost nor late);
+    adopted: the floor of a filter that took in an estimate at `floor` (the recursion
+    from floor I), which an honest UAV misled by a member may reach.
     """
 
     low: float
@@ -75,6 +77,7 @@ class Bounds:
     cap: float
     bid: float
     unscored: bool
+    adopted: float = 0.0
 
     @classmethod
     def of(cls, scenario: Scenario) -> Bounds:
@@ -91,16 +94,18 @@ class Bounds:
             + SIGMAS * scenario.estimation.initial_position_std
         )
         heights = scenario.altitudes()
+        floor = covariance_floor(scenario)
         return cls(
             low=-margin,
             high=scenario.field_size + margin,
             altitude=(0.0, MAX_ALTITUDE),
             uav_speed=uav_speed,
             speed=speed,
-            floor=covariance_floor(scenario),
+            floor=floor,
             cap=covariance_cap(scenario),
             bid=largest_bid(scenario, heights),
             unscored=scenario.prunes,
+            adopted=covariance_floor(scenario, floor * np.eye(4)),
         )
 
 
@@ -150,14 +155,14 @@ def _prior(scenario: Scenario) -> np.ndarray:
     return np.diag([e.initial_position_std**2] * 2 + [e.initial_velocity_std**2] * 2)
 
 
-def covariance_floor(scenario: Scenario) -> float:
+def covariance_floor(scenario: Scenario, start: np.ndarray | None = None) -> float:
     """The smallest eigenvalue an honest covariance can have in the run, halved (see the
-    module docstring): the Kalman recursion from the prior with a measurement of
-    R = r_best I at every step and the tracker's smallest process noise."""
+    module docstring): the Kalman recursion from the prior (or from `start`) with a
+    measurement of R = r_best I at every step and the tracker's smallest process noise."""
     A = estimation.transition(scenario.dt)
     Q = estimation.process_noise(scenario.dt, *scenario.acceleration_std())
     R = best_accuracy(scenario) * np.eye(2)
-    P = _prior(scenario)
+    P = _prior(scenario) if start is None else start
     low = np.inf
     for _ in range(min(scenario.steps, RICCATI_STEPS)):
         _, updated = estimation.update(np.zeros(4), P, np.zeros(2), R)

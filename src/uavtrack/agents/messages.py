@@ -465,7 +465,9 @@ class Spec:
             "bids": (F, (m,), "bids"),
         }
         arrays = self.arrays({name: getattr(message, name) for name in kinds}, kinds)
-        return arrays
+        if isinstance(arrays, str) or self.bounds is None:
+            return arrays
+        return _recorded(arrays, self.bounds) or arrays
 
 
 COUNT = 2**48
@@ -510,3 +512,19 @@ def _position(xy: np.ndarray, bounds: Bounds) -> str | None:
 def _altitude(h: float, bounds: Bounds) -> str | None:
     low, high = bounds.altitude
     return None if low < h <= high else "position out of bounds"
+
+
+def _recorded(arrays: dict, bounds: Bounds) -> str | None:
+    """Why a report's estimates cannot be recorded (None: they can): the world's
+    metrics read them, so they must stay where arithmetic is safe, yet an honest UAV
+    misled by a member may hold one beyond `Spec.estimates`' bounds. Positions are
+    refused beyond the field plus twice the run's margin (a misled estimate moves at
+    most at a plausible speed from a plausible place), covariances below the floor of a
+    filter that took in an estimate at the floor (`plausibility.Bounds.adopted`)."""
+    margin = -bounds.low
+    xy = arrays["mean"][:, :2]
+    if not ((xy >= bounds.low - margin) & (xy <= bounds.high + margin)).all():
+        return "position out of bounds"
+    if not (np.linalg.eigvalsh(arrays["cov"])[:, 0] >= bounds.adopted).all():
+        return "covariance below the sensor's accuracy"
+    return None
