@@ -89,12 +89,16 @@ def swarm_rates(scenario, n_trials: int, liar: int) -> np.ndarray:
 
 def honest_rates(scenario, n_trials: int) -> np.ndarray:
     """The observation rate of each trial (seed t) of the honest team."""
-    return np.array(
-        [
-            uavtrack.simulate(scenario, "distributed", seed=t).observation_rate
-            for t in range(n_trials)
-        ]
-    )
+    return honest_runs(scenario, n_trials)["observation_rate"]
+
+
+def honest_runs(scenario, n_trials: int) -> dict[str, np.ndarray]:
+    """The observation rate and the RMSE of each trial (seed t) of the honest team."""
+    runs = [uavtrack.simulate(scenario, "distributed", seed=t) for t in range(n_trials)]
+    return {
+        "observation_rate": np.array([r.observation_rate for r in runs]),
+        "rmse": np.array([r.rmse for r in runs]),
+    }
 
 
 def main() -> None:
@@ -106,9 +110,10 @@ def main() -> None:
     args = parser.parse_args()
     base = uavtrack.Scenario(steps=args.steps)
     gated = base.with_overrides({"robust.gate": args.gate, "robust.gate_memory": args.gate_memory})
+    honest = {"off": honest_runs(base, args.trials), "on": honest_runs(gated, args.trials)}
     rates = {
-        "honest": honest_rates(base, args.trials),
-        "honest, robust.gate": honest_rates(gated, args.trials),
+        "honest": honest["off"]["observation_rate"],
+        "honest, robust.gate": honest["on"]["observation_rate"],
         "liar": swarm_rates(base, args.trials, LIAR),
         "liar, robust.gate": swarm_rates(gated, args.trials, LIAR),
     }
@@ -120,6 +125,9 @@ def main() -> None:
         rates["liar, robust.gate"], rates["honest, robust.gate"]
     )
     out["robust.gate minus off, honest"] = paired(rates["honest, robust.gate"], rates["honest"])
+    out["robust.gate minus off, honest, RMSE [m]"] = paired(
+        honest["on"]["rmse"], honest["off"]["rmse"]
+    )
     print(json.dumps(out, indent=1))
 
 
