@@ -6,11 +6,13 @@ target that passes every check of the run (`uavtrack.agents.messages.Spec`): its
 estimate moved by `SHIFT` metres along x and y (folded back into the field, velocity
 kept) with the most confidence the run admits: a covariance at the floor of the
 sensor's accuracy (`uavtrack.plausibility.Bounds.floor`) and gamma = 1 / trace of it.
+With ``--lie bids`` it bids instead the largest bid the run admits for every target.
 The lying swarm runs over the in-process transport, so each trial is the agent form
 itself; the honest runs are the simulator's (the agent form equals it, seed for seed).
 
     python examples/lying_member.py                      # 20 trials of 500 steps
     python examples/lying_member.py --trials 4 --steps 100 --gate-memory 4
+    python examples/lying_member.py --lie bids
 
 prints, as JSON, the mean observation rate of each run and the paired differences (95%
 t intervals) that matter: the liar without and with the gate against the honest team
@@ -52,15 +54,28 @@ def lie(content: dict[str, Array], scenario) -> dict[str, Array]:
     return dict(content, gamma=Array.of(gamma), mean=Array.of(mean), cov=Array.of(cov))
 
 
-def lying(scenario, liar: int = LIAR):
-    """`agent.AgentRadio.send` with program `liar` lying in its consensus tuples."""
+def bid_lie(content: dict[str, Array], scenario) -> dict[str, Array]:
+    """Bids that pass every check of the run: the largest the run admits (the horizon
+    times the bound of det G at the nadir, `uavtrack.plausibility.Bounds.bid`), for
+    every target."""
+    bids = np.full(content["bids"].shape, Bounds.of(scenario).bid)
+    return dict(content, bids=Array.of(bids))
+
+
+LIES = {"estimates": ("consensus", lie), "bids": ("bids", bid_lie)}
+"""What the liar lies about: the protocol and how."""
+
+
+def lying(scenario, liar: int = LIAR, what: str = "estimates"):
+    """`agent.AgentRadio.send` with program `liar` lying (`LIES`), and the honest one."""
     send = agent.AgentRadio.send
+    protocol, how = LIES[what]
 
     def send_lies(self, k, parts, to=None):
         if self.me == liar:
             parts = [
-                Part(p.protocol, p.round, p.final, lie(p.content, scenario))
-                if p.protocol == "consensus" and p.content is not None
+                Part(p.protocol, p.round, p.final, how(p.content, scenario))
+                if p.protocol == protocol and p.content is not None
                 else p
                 for p in parts
             ]
@@ -69,10 +84,10 @@ def lying(scenario, liar: int = LIAR):
     return send, send_lies
 
 
-def swarm_rates(scenario, n_trials: int, liar: int) -> np.ndarray:
+def swarm_rates(scenario, n_trials: int, liar: int, what: str = "estimates") -> np.ndarray:
     """The observation rate of each trial (seed t) of the swarm with program `liar`
-    lying."""
-    honest, lies = lying(scenario, liar)
+    lying about `what`."""
+    honest, lies = lying(scenario, liar, what)
     agent.AgentRadio.send = lies
     try:
         return np.array(
@@ -107,6 +122,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=500)
     parser.add_argument("--gate", type=float, default=GATE, help="robust.gate")
     parser.add_argument("--gate-memory", type=int, default=8, help="robust.gate_memory")
+    parser.add_argument("--lie", choices=sorted(LIES), default="estimates", help="what about")
     args = parser.parse_args()
     base = uavtrack.Scenario(steps=args.steps)
     gated = base.with_overrides({"robust.gate": args.gate, "robust.gate_memory": args.gate_memory})
@@ -114,10 +130,10 @@ def main() -> None:
     rates = {
         "honest": honest["off"]["observation_rate"],
         "honest, robust.gate": honest["on"]["observation_rate"],
-        "liar": swarm_rates(base, args.trials, LIAR),
-        "liar, robust.gate": swarm_rates(gated, args.trials, LIAR),
+        "liar": swarm_rates(base, args.trials, LIAR, args.lie),
+        "liar, robust.gate": swarm_rates(gated, args.trials, LIAR, args.lie),
     }
-    out = {"trials": args.trials, "steps": args.steps, "gate": args.gate}
+    out = {"lie": args.lie, "trials": args.trials, "steps": args.steps, "gate": args.gate}
     out["gate_memory"] = args.gate_memory
     out["rate"] = {name: float(r.mean()) for name, r in rates.items()}
     out["liar minus honest"] = paired(rates["liar"], rates["honest"])

@@ -274,7 +274,7 @@ def altered(content: dict, how: str) -> dict:
     elif how == "covariance 1e-9":  # consistent, but beyond any sensor
         cov = np.broadcast_to(1e-9 * np.eye(4), cov.shape).copy()
         gamma = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
-    elif how == "means moved 1 km":  # beyond where anything gets in a 3 s run
+    elif how == "means moved 1 km":  # beyond where anything gets in a 2 s run
         mean = mean + [1000.0, 1000.0, 0.0, 0.0]
     return dict(content, gamma=Array.of(gamma), mean=Array.of(mean), cov=Array.of(cov))
 
@@ -309,8 +309,8 @@ def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, ho
         send(self, k, parts, to)
 
     monkeypatch.setattr(agent.AgentRadio, "send", faulty)
-    scenario = uavtrack.Scenario(steps=6)
-    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.3)
+    scenario = uavtrack.Scenario(steps=4)  # a refused message costs its receivers a deadline
+    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.2)
     assert swarm.traffic.lost == {}
     assert swarm.traffic.drops.get(ATTACKS[how], 0) > 0, swarm.traffic.drops
     result = swarm.result
@@ -488,3 +488,29 @@ def test_whatever_the_rule_admits_the_receivers_use_without_error(overrides, dat
 def consensus_message(content: dict, k: int, sender: int) -> Radio:
     wire = {name: Array.of(value) for name, value in content.items()}
     return Radio(VERSION, "r", k, sender, [messages.Part("consensus", 1, -1, wire)])
+
+
+def test_what_a_member_sends_beyond_the_rule_is_counted_in_the_swarm_json(monkeypatch, capsys):
+    import json
+
+    from uavtrack import cli
+    from uavtrack.agents import agent
+
+    send = agent.AgentRadio.send
+
+    def zero_covariance(self, k, parts, to=None):
+        if self.me == 2:
+            parts = [
+                msgspec.structs.replace(p, content=altered(p.content, "zero covariance"))
+                if p.protocol == "consensus" and p.content is not None
+                else p
+                for p in parts
+            ]
+        send(self, k, parts, to)
+
+    monkeypatch.setattr(agent.AgentRadio, "send", zero_covariance)
+    args = ["swarm", "--transport", "memory", "--steps", "4", "--deadline", "0.3", "--json"]
+    assert cli.main(args) == 0
+    swarm = json.loads(capsys.readouterr().out)["swarm"]
+    assert swarm["dropped_by_reason"]["covariance not positive definite"] > 0
+    assert swarm["lost"] == {}
