@@ -121,7 +121,8 @@ def main() -> None:
     parser.add_argument("--trials", type=int, default=20)
     parser.add_argument("--steps", type=int, default=500)
     parser.add_argument("--gate", type=float, default=GATE, help="robust.gate")
-    parser.add_argument("--gate-memory", type=int, default=8, help="robust.gate_memory")
+    memory = uavtrack.Scenario().robust.gate_memory
+    parser.add_argument("--gate-memory", type=int, default=memory, help="robust.gate_memory")
     parser.add_argument("--lie", choices=sorted(LIES), default="estimates", help="what about")
     args = parser.parse_args()
     base = uavtrack.Scenario(steps=args.steps)

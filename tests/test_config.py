@@ -263,7 +263,7 @@ def test_the_measurement_gate_is_refused_outside_its_range(overrides, message):
 
 def test_the_measurement_gate_is_off_by_default_and_round_trips(tmp_path):
     assert Scenario().robust.gate is None
-    s = Scenario().with_overrides({"robust.gate": 0.9999, "robust.gate_memory": 12})
+    s = Scenario().with_overrides({"robust.gate": 0.9999, "robust.gate_memory": 5})
     path = tmp_path / "gate.toml"
     path.write_text(s.to_toml())
     assert Scenario.from_toml(path) == s

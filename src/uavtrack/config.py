@@ -645,22 +645,23 @@ class RobustModel(_Part):
         ),
     )
     gate_memory: Int = Field(
-        8,
+        12,
         ge=0,
         le=10_000_000,
         description=(
             "cycles after a UAV last measured a target (the initial cue counts as a "
             "measurement at step 0) during which robust.gate checks estimates of the target "
-            "against the UAV's own [cycles], 0 to 10^7; needs robust.gate; assumed: 8 (4 s at "
-            "dT = 0.5 s), long enough to bridge a tracking UAV's gaps in view, short enough "
+            "against the UAV's own [cycles], 0 to 10^7; needs robust.gate; assumed: 12 (6 s "
+            "at dT = 0.5 s), long enough to bridge a tracking UAV's gaps in view, short enough "
             "that an estimate of a target reflected at a wall (which the filter's model does "
-            "not know) is still near its prediction (docs, Faults and robustness)"
+            "not know) is still near its prediction; 4 to 16 measured in the docs (Faults and "
+            "robustness)"
         ),
     )
 
     @model_validator(mode="after")
     def _memory(self) -> RobustModel:
-        if self.gate is None and self.gate_memory != 8:
+        if self.gate is None and self.gate_memory != 12:
             raise ValueError(
                 f"robust.gate_memory {self.gate_memory} needs robust.gate (it does nothing "
                 "otherwise); set robust.gate or leave robust.gate_memory unset"
