@@ -14,10 +14,15 @@ parts of the protocols that run in that round (the D_i flooding with the consens
 beacons with bids, uploads, downloads).
 
 `decode` returns None for anything malformed, of another version or of another run;
-`Spec.check` says why a well-formed message cannot belong to the run (a sender out of
-range, an array of the wrong shape or type, a value that is not finite, an action or a
-target that does not exist, a cycle outside the window). The receiver drops such a
-message and counts it by that reason: nothing a peer sends stops a program.
+`Spec` is the one rule of what a message of the run may hold, field by field
+(`DOMAINS`): `Spec.radio`, `sense`, `tick` and `report` say why a well-formed message
+cannot belong to the run (a sender out of range, an array of the wrong shape or type, a
+value that is not finite, a covariance that is not positive definite, a confidence that
+is not 1 / trace of it, a bid beyond the Fisher bound, an action or a target that does
+not exist, a cycle outside the window), and `Spec.estimates` which estimates of an
+admitted message lie beyond the run's plausibility bounds (`plausibility.Bounds`). The
+receiver drops such a message, or does not use such an estimate, and counts it by that
+reason: nothing a peer sends stops a program.
 """
 
 from __future__ import annotations
