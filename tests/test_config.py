@@ -243,3 +243,27 @@ def test_a_setting_of_a_model_that_is_off_is_refused(overrides, message):
     with pytest.raises(ScenarioError, match=message) as info:
         Scenario().with_overrides(overrides)
     assert "\n" not in str(info.value)
+
+
+@pytest.mark.parametrize(
+    "overrides, message",
+    [
+        ({"robust.gate": 1.0}, "robust.gate: Input should be less than 1"),
+        ({"robust.gate": 0.5}, "robust.gate: Input should be greater than or equal to 0.9"),
+        ({"robust.gate": "yes"}, "robust.gate: Input should be a valid number"),
+        ({"robust.gate_memory": 3}, "robust.gate_memory 3 needs robust.gate"),
+        ({"robust.gate": 0.99, "robust.gate_memory": -1}, "greater than or equal to 0"),
+    ],
+)
+def test_the_measurement_gate_is_refused_outside_its_range(overrides, message):
+    with pytest.raises(ScenarioError, match=message) as info:
+        Scenario().with_overrides(overrides)
+    assert "\n" not in str(info.value)
+
+
+def test_the_measurement_gate_is_off_by_default_and_round_trips(tmp_path):
+    assert Scenario().robust.gate is None
+    s = Scenario().with_overrides({"robust.gate": 0.9999, "robust.gate_memory": 5})
+    path = tmp_path / "gate.toml"
+    path.write_text(s.to_toml())
+    assert Scenario.from_toml(path) == s

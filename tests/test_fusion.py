@@ -249,3 +249,82 @@ def test_rounds_run_only_on_the_receivers_still_running():
     gamma = np.arange(6.0)[None, :, None]
     best = fusion.adopt(gamma, gamma, into)
     assert best[0, :, 0].tolist() == [1, 2, 3, 3, 4, 5]
+
+
+# ------------------------------------------------------------------ with the measurement gate
+
+
+def spd(rng, shape, scale=1.0):
+    """Random symmetric positive definite 4 x 4 matrices of `shape`."""
+    a = rng.normal(size=shape + (4, 4)) * scale
+    return a @ np.swapaxes(a, -1, -2) + 0.1 * np.eye(4)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_adopt_and_intersect_with_a_mask_agree_in_both_forms(seed):
+    # the same admitted tuples in the dense and the edge layout give the same choice
+    from uavtrack import gate
+
+    rng = np.random.default_rng(seed)
+    B, n, m = 2, 6, 3
+    adj = rng.random((B, n, n)) < 0.5
+    adj = adj | np.swapaxes(adj, 1, 2)
+    dense, edges = network.links(adj, "dense"), network.links(adj, "edges")
+    cov = spd(rng, (B, n, m))
+    tuples = {"mean": rng.normal(size=(B, n, m, 4)) * 3, "cov": cov}
+    tuples["gamma"] = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    observed = rng.random((B, n, m)) < 0.6
+    z = rng.normal(size=(B, n, m, 2)) * 3
+    R = np.broadcast_to(np.eye(2), (B, n, m, 2, 2)).copy()
+    measured = gate.Measured(observed, z, R, rng.random((B, n, m)) < 0.5)
+    estimates = (tuples["mean"], tuples["cov"])
+    masks = [gate.admitted(links, estimates, estimates, measured, 2.0) for links in (dense, edges)]
+    t, i, q = edges.pairs()
+    assert np.array_equal(masks[0][t, i, q], masks[1])
+    assert not masks[0].all() and masks[0].any()  # the gate bites in both directions
+    a = [
+        fusion.adopt(tuples["gamma"], tuples["gamma"], lk, mk)
+        for lk, mk in zip((dense, edges), masks, strict=True)
+    ]
+    assert np.array_equal(a[0], a[1])
+    # what is chosen is admitted, or the receiver's own where nothing is
+    b_, i_, j_ = np.indices(a[0].shape)
+    chosen = masks[0][b_, i_, a[0], j_]
+    assert (chosen | (a[0] == i_)).all()
+    ci = [
+        fusion.intersect_round(tuples, tuples, lk, mk)
+        for lk, mk in zip((dense, edges), masks, strict=True)
+    ]
+    for name in ("mean", "cov"):
+        assert np.allclose(ci[0][name], ci[1][name], rtol=1e-9, atol=1e-12)
+
+
+def test_adopt_without_an_admitted_candidate_keeps_its_own():
+    adj = graph(3, [(0, 1), (1, 2)])[None]
+    gamma = np.array([[[5.0], [1.0], [9.0]]])
+    for form in ("dense", "edges"):
+        links = network.links(adj, form)
+        t, i, q = links.pairs()
+        shape = np.broadcast_shapes(t.shape, i.shape, q.shape) + (1,)
+        nothing = np.zeros(shape, dtype=bool)
+        assert fusion.adopt(gamma, gamma, links, nothing)[0, :, 0].tolist() == [0, 1, 2]
+        everything = np.ones(shape, dtype=bool)
+        assert fusion.adopt(gamma, gamma, links, everything)[0, :, 0].tolist() == [0, 2, 2]
+
+
+def test_an_estimate_of_no_confidence_takes_no_part_in_intersection(rng):
+    # -inf: no estimate (a member's estimate beyond the plausibility bounds); the others'
+    # fusion is what it is without it
+    adj = np.ones((1, 3, 3), dtype=bool)
+    cov = spd(rng, (1, 3, 1))
+    mean = rng.normal(size=(1, 3, 1, 4))
+    gamma = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    tuples = {"mean": mean, "cov": cov, "gamma": gamma}
+    silenced = dict(tuples, gamma=np.where(np.arange(3)[None, :, None] == 2, -np.inf, gamma))
+    links = network.links(adj, "dense")
+    fused = fusion.intersect_round(tuples, silenced, links)
+    pair = network.links(adj[:, :2, :2], "dense")
+    two = {k: v[:, :2] for k, v in tuples.items()}
+    expected = fusion.intersect_round(two, two, pair)
+    assert np.allclose(fused["mean"][:, :2], expected["mean"], rtol=1e-12)
+    assert np.allclose(fused["cov"][:, :2], expected["cov"], rtol=1e-12)

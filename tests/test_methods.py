@@ -139,3 +139,36 @@ def test_a_rule_may_be_an_ordinary_method_with_state():
 
     r = uavtrack.simulate(uavtrack.Scenario(steps=10, comm_range=1e5), FirstTarget(1), seed=0)
     assert (r.trace.assignment == 1).all()
+
+
+def test_a_download_its_measurement_contradicts_is_not_taken():
+    # robust.gate: UAV 0 measured target 0 30 m from the central node's estimate (keeps
+    # its own), target 1 near it (takes it), and target 2 long ago (takes it)
+    from uavtrack import gate
+    from uavtrack.methods import take_download
+
+    scenario = uavtrack.Scenario(steps=40).with_overrides({"robust.gate": 0.9999})
+    setting = uavtrack.simulation.Context.of(
+        scenario, uavtrack.methods.get("distributed"), [np.random.SeedSequence(0)]
+    ).setting
+    own_mean = np.zeros((1, 1, 3, 4))
+    own_cov = np.broadcast_to(np.eye(4), (1, 1, 3, 4, 4)).copy()
+    got = {
+        "gamma": np.full((1, 1, 3), 0.25),
+        "mean": np.zeros((1, 1, 3, 4)) + [[[[30.0, 0, 0, 0], [1.0, 0, 0, 0], [50.0, 0, 0, 0]]]],
+        "cov": own_cov.copy(),
+        "stamp": np.zeros((1, 1, 3), dtype=np.int64),
+    }
+    z = np.array([[0.0, 0.0], [1.5, 0.0]])  # targets 0 and 1, in nonzero order
+    observed = np.array([[[True, True, False]]])
+    recent = gate.recent(np.array([[[0, 0, 0]]]), 20, 8, (1, 1, 3))
+    measured = gate.Measured.of(observed, z, np.broadcast_to(np.eye(2), (2, 2, 2)), recent)
+    arrived = np.ones((1, 1), dtype=bool)
+    mean, _ = take_download(own_mean, own_cov, got, arrived, setting, 20, measured)
+    assert mean[0, 0, :, 0].tolist() == [0.0, 1.0, 50.0]
+    unchecked = take_download(own_mean, own_cov, got, arrived, setting, 20)[0]
+    assert unchecked[0, 0, :, 0].tolist() == [30.0, 1.0, 50.0]
+    recent = gate.recent(np.array([[[0, 0, 19]]]), 20, 8, (1, 1, 3))  # target 2 just seen
+    measured = gate.Measured.of(observed, z, np.broadcast_to(np.eye(2), (2, 2, 2)), recent)
+    mean, _ = take_download(own_mean, own_cov, got, arrived, setting, 20, measured)
+    assert mean[0, 0, 2, 0] == 0.0  # 50 m from its own estimate of 1 m std: kept its own

@@ -132,7 +132,7 @@ def radio(parts, k=0, sender=1):
 
 def test_radio_parts_of_the_wrong_shape_type_value_round_or_cycle_are_refused():
     s = spec()
-    good = {"known": Array.of(np.array([True, False, True]))}
+    good = {"known": Array.of(np.array([True, True, False]))}  # the sender knows itself
     assert isinstance(s.radio(radio([Part("flood", 1, -1, good)]), 0), list)
     cases = {
         "wrong shape or type": [
@@ -165,7 +165,7 @@ def report(**change):
         action=2,
         target=1,
         mean=Array.of(np.zeros((2, 4))),
-        cov=Array.of(np.zeros((2, 4, 4))),
+        cov=Array.of(np.broadcast_to(np.eye(4), (2, 4, 4))),  # positive definite
         bids=Array.of(np.zeros(2)),
         rounds=1,
         sent=1,

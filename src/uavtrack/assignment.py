@@ -81,6 +81,26 @@ def local(bids: np.ndarray, me: int, solve: Callable | None = None) -> int:
     return int((solve or hungarian)(bids)[me])
 
 
+def able(bids: np.ndarray, members: np.ndarray, me: int) -> np.ndarray:
+    """The members of UAV `me`'s auction that can serve it: in an auction of k members
+    `hungarian` reads each member's min(k, m) best bids, so a member with fewer scored
+    (NaN: not scored, `planning.plan` with ``top``) cannot take part. Such members are
+    left out until every one left can (leaving one out lowers k). An honest neighbour
+    always can (it scores as many bids as the largest neighbourhood it belongs to has
+    members), and so can `me`, which stays.
+
+    bids (n, m) with NaN; members (n,) bool. Returns (n,) bool."""
+    m = bids.shape[-1]
+    scored = (~np.isnan(bids)).sum(axis=-1)
+    members = members.copy()
+    while True:
+        short = members & (scored < min(int(members.sum()), m))
+        short[me] = False
+        if not short.any():
+            return members
+        members &= ~short
+
+
 def _check(bids: np.ndarray) -> None:
     if np.isinf(bids).any():
         raise ValueError("bids must be finite (NaN only for a bid not scored)")

@@ -628,6 +628,45 @@ class RobustModel(_Part):
             "converted measurement, which the conversion of eq. (5) otherwise ignores"
         ),
     )
+    gate: Float | None = Field(
+        None,
+        ge=0.9,
+        lt=1,
+        description=(
+            "probability [-], [0.9, 1), with which an honest estimate passes the measurement "
+            "gate; beyond the paper: a UAV adopts (consensus) or takes (centralized download) "
+            "no estimate of a target that contradicts its own measurement of the target this "
+            "cycle (nu^T (H P H^T + R)^-1 nu above the chi-square quantile -2 ln(1 - p); "
+            "0.9999: 18.4), its own estimate included, nor, within robust.gate_memory cycles "
+            "of its last measurement of the target, one that contradicts its own estimate the "
+            "same way; a neighbour caught on one target is believed on none in that round; "
+            "assumed as an option against a member that lies with high confidence; not set: "
+            "the paper's rule, the most confident estimate is adopted"
+        ),
+    )
+    gate_memory: Int = Field(
+        12,
+        ge=0,
+        le=10_000_000,
+        description=(
+            "cycles after a UAV last measured a target (the initial cue counts as a "
+            "measurement at step 0) during which robust.gate checks estimates of the target "
+            "against the UAV's own [cycles], 0 to 10^7; needs robust.gate; assumed: 12 (6 s "
+            "at dT = 0.5 s), long enough to bridge a tracking UAV's gaps in view, short enough "
+            "that an estimate of a target reflected at a wall (which the filter's model does "
+            "not know) is still near its prediction; 4 to 16 measured in the docs (Faults and "
+            "robustness)"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _memory(self) -> RobustModel:
+        if self.gate is None and self.gate_memory != 12:
+            raise ValueError(
+                f"robust.gate_memory {self.gate_memory} needs robust.gate (it does nothing "
+                "otherwise); set robust.gate or leave robust.gate_memory unset"
+            )
+        return self
 
 
 class Scenario(_Part):
@@ -786,6 +825,19 @@ class Scenario(_Part):
 
             check(self)
         return self
+
+    @property
+    def prunes(self) -> bool:
+        """Whether the planner may leave bids unscored (``planner.prune``): only where
+        every UAV knows the neighbourhoods its bids serve, i.e. bids are neither lost nor
+        late and the D_i flooding has the two rounds that tell a UAV its neighbours'."""
+        f = self.faults
+        return (
+            self.planner.prune
+            and f.loss == 0
+            and f.delay == 0
+            and (f.round_budget is None or f.round_budget >= 2)
+        )
 
     def acceleration_std(self) -> tuple[float, float]:
         """Std of the targets' white acceleration per axis [m/s^2], as eq. (15) is read

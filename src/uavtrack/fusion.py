@@ -61,15 +61,22 @@ def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> n
     return known | grown
 
 
-def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.ndarray:
+def adopt(
+    own: np.ndarray,
+    offered: np.ndarray,
+    delivered: network.Links,
+    admitted: np.ndarray | None = None,
+) -> np.ndarray:
     """One round of eq. (27) for every receiver: per target, the sender whose tuple has
     the highest confidence among the receiver itself (its own current tuple) and the
     senders whose message was delivered (their offered tuple); ties go to the lowest
-    sender index.
+    sender index. A tuple of confidence -inf (no estimate) is never adopted.
 
-    own, offered: (B, N, M) confidences. Returns (B, N, M) the chosen sender (the
-    receiver's own index: keep its tuple). In the edge form a receiver without links
-    (`network.Links.into`) keeps its own.
+    own, offered: (B, N, M) confidences; admitted: which tuples each receiver may adopt
+    (`gate.admitted`, in the layout of `delivered`; None: all); a receiver with none
+    keeps its own. Returns (B, N, M) the chosen sender (the receiver's own index: keep
+    its tuple). In the edge form a receiver without links (`network.Links.into`) keeps
+    its own.
     """
     n = own.shape[1]
     if delivered.edges:  # one segment per receiver, its self-link included
@@ -80,15 +87,25 @@ def adopt(own: np.ndarray, offered: np.ndarray, delivered: network.Links) -> np.
                 values = offered[t, q]  # (E, M)
             else:
                 values = np.where(delivered.own[:, None], own[t, i], offered[t, q])
+            if admitted is not None:
+                values = np.where(admitted, values, -np.inf)
             top = np.maximum.reduceat(values, delivered.starts, axis=0)
             lowest = np.where(values == top[delivered.ordinal], q[:, None], n)
-            best[delivered.heads] = np.minimum.reduceat(lowest, delivered.starts, axis=0)
+            chosen = np.minimum.reduceat(lowest, delivered.starts, axis=0)
+            if admitted is not None:  # nothing to adopt: keep its own
+                chosen = np.where(np.isneginf(top), delivered.heads[1][:, None], chosen)
+            best[delivered.heads] = chosen
         return best
     values = offered[:, None, :, :] + delivered.penalty
     if own is not offered:  # what a UAV offered is not its current tuple (delay)
         idx = np.arange(n)
         values[:, idx, idx] = own
-    return np.argmax(values, axis=-2)  # first maximum = lowest index
+    if admitted is None:
+        return np.argmax(values, axis=-2)  # first maximum = lowest index
+    values = np.where(admitted, values, -np.inf)
+    best = np.argmax(values, axis=-2)
+    none = np.isneginf(np.max(values, axis=-2))
+    return np.where(none, np.arange(n)[:, None], best)
 
 
 def intersect(
@@ -119,19 +136,24 @@ def fast_weights(cov: np.ndarray, present: np.ndarray) -> np.ndarray:
     return gamma / gamma.sum(axis=-1, keepdims=True)
 
 
-def intersect_round(own: dict, offered: dict, delivered: network.Links) -> dict:
+def intersect_round(
+    own: dict, offered: dict, delivered: network.Links, admitted: np.ndarray | None = None
+) -> dict:
     """One round of covariance intersection for every receiver (`fusion.rule` =
     covariance_intersection, beside `adopt`): per target, the receiver's own current
     estimate and the estimates delivered to it, fused by `intersect` with the weights of
     `fast_weights` (each proportional to its confidence 1 / trace P).
 
     own, offered: tuples {"mean": (B, N, M, 4), "cov": (B, N, M, 4, 4), ...}; other
-    fields keep the receiver's own. Returns the receivers' new tuples, "gamma" the
-    confidence of the fused covariance. A receiver that heard nobody keeps its own.
+    fields keep the receiver's own. An estimate of confidence -inf (none) or not
+    `admitted` (`gate.admitted`, in the layout of `delivered`; None: all) takes no part.
+    Returns the receivers' new tuples, "gamma" the confidence of the fused covariance.
+    A receiver that heard nobody, or has nothing to fuse, keeps its own.
     """
     from .estimation import confidence
 
     out = dict(own)
+    usable = _usable(offered, own, delivered, admitted)
     if delivered.edges:  # one segment per receiver, its self-link included
         t, i, q = delivered.trial, delivered.receiver, delivered.sender
         if not t.size:
@@ -140,16 +162,26 @@ def intersect_round(own: dict, offered: dict, delivered: network.Links) -> dict:
         mean = np.where(is_own[..., None], own["mean"][t, i], offered["mean"][t, q])
         cov = np.where(is_own[..., None, None], own["cov"][t, i], offered["cov"][t, q])
         weight = 1.0 / np.trace(cov, axis1=-2, axis2=-1)  # (E, M)
+        if usable is not None:
+            weight = np.where(usable, weight, 0.0)
         info = np.linalg.inv(cov) * weight[..., None, None]
         vector = np.einsum("emij,emj->emi", info, mean)
         total = np.add.reduceat(weight, delivered.starts, axis=0)
+        nothing = total == 0  # every estimate left out: the receiver keeps its own
+        total = np.where(nothing, 1.0, total)
         fused_info = np.add.reduceat(info, delivered.starts, axis=0) / total[..., None, None]
         fused_vector = np.add.reduceat(vector, delivered.starts, axis=0) / total[..., None]
+        if nothing.any():  # a placeholder, replaced by its own below
+            fused_info[nothing] = np.eye(4)
         fused = np.linalg.inv(fused_info)
         fused = 0.5 * (fused + np.swapaxes(fused, -1, -2))
         heads = delivered.heads
+        mean_out = np.einsum("smij,smj->smi", fused, fused_vector)
+        if nothing.any():
+            mean_out = np.where(nothing[..., None], own["mean"][heads], mean_out)
+            fused = np.where(nothing[..., None, None], own["cov"][heads], fused)
         out["mean"], out["cov"] = own["mean"].copy(), own["cov"].copy()
-        out["mean"][heads] = np.einsum("smij,smj->smi", fused, fused_vector)
+        out["mean"][heads] = mean_out
         out["cov"][heads] = fused
     else:
         B, n = own["mean"].shape[:2]
@@ -160,10 +192,33 @@ def intersect_round(own: dict, offered: dict, delivered: network.Links) -> dict:
         cov = np.repeat(offered["cov"][:, None], n, axis=1)
         mean[:, idx, idx], cov[:, idx, idx] = own["mean"], own["cov"]
         present = np.broadcast_to(delivered.dense[..., None], mean.shape[:-1])
+        if usable is not None:
+            present = present & usable
+            nothing = ~present.any(axis=2)  # (B, N, M): keeps its own
+            present = present | (nothing[:, :, None] & np.eye(n, dtype=bool)[..., None])
         mean, cov, present = (np.moveaxis(x, 2, 3) for x in (mean, cov, present))
         out["mean"], out["cov"] = intersect(mean, cov, fast_weights(cov, present))
+        if usable is not None and nothing.any():  # exactly its own
+            out["mean"] = np.where(nothing[..., None], own["mean"], out["mean"])
+            out["cov"] = np.where(nothing[..., None, None], own["cov"], out["cov"])
     out["gamma"] = confidence(out["cov"])
     return out
+
+
+def _usable(offered: dict, own: dict, delivered: network.Links, admitted) -> np.ndarray | None:
+    """Which candidate estimates may take part, in the layout of `delivered` (None:
+    all): admitted, and of finite confidence."""
+    gamma, mine = offered.get("gamma"), own.get("gamma")
+    finite = gamma is None or (np.isfinite(gamma).all() and np.isfinite(mine).all())
+    if admitted is None and finite:
+        return None
+    t, i, q = delivered.pairs()
+    if delivered.edges:
+        value = np.where(delivered.own[:, None], mine[t, i], gamma[t, q])
+    else:
+        value = np.where((i == q)[..., None], mine[t, i], gamma[t, q])
+    usable = np.isfinite(value)
+    return usable if admitted is None else usable & admitted
 
 
 def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) -> dict:
@@ -287,6 +342,7 @@ def consensus(
     score=None,
     receive=None,
     rule: str = "max_consensus",
+    admit=None,
 ) -> Outcome:
     """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
 
@@ -299,7 +355,8 @@ def consensus(
     gives the confidences compared (default tuples["gamma"]); receive(tuples) turns
     what arrives into what is compared and adopted (default: as it is). rule
     "covariance_intersection" fuses instead (`intersect_round`; the tuples then carry
-    "mean" and "cov").
+    "mean" and "cov"). admit(own, offered, links): which offered tuples each receiver
+    may adopt (`gate.admitted`; None: all).
     """
     score = score or (lambda t: t["gamma"])
     B, n = rounds.shape
@@ -315,11 +372,12 @@ def consensus(
         offered = inbox.content if receive is None else receive(inbox.content)
         sent, delivered = count(inbox, active, sent, delivered)
         links = inbox.delivered.into(active)
+        admitted = None if admit is None else admit(tuples, offered, links)
         if rule == "covariance_intersection":  # tuples by value: mean and cov
             if links.edges:
-                tuples = intersect_round(tuples, offered, links)
+                tuples = intersect_round(tuples, offered, links, admitted)
             else:
-                fused = intersect_round(tuples, offered, links)
+                fused = intersect_round(tuples, offered, links, admitted)
                 tuples = {
                     name: np.where(
                         active.reshape(active.shape + (1,) * (value.ndim - 2)), fused[name], value
@@ -327,7 +385,7 @@ def consensus(
                     for name, value in tuples.items()
                 }
             continue
-        best = adopt(score(tuples), score(offered), links)
+        best = adopt(score(tuples), score(offered), links, admitted)
         if links.edges:  # only the active receivers have links: only their rows change
             tuples = pick(tuples, offered, best, links.heads)
         else:

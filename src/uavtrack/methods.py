@@ -34,7 +34,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from . import assignment, fusion, registry, timing
+from . import assignment, fusion, gate, registry, timing
 from .errors import UsageError
 from .radio import Radio
 
@@ -50,7 +50,9 @@ class Setting:
     scenario (top: how many best bids each UAV needs, None: all). prune: whether a
     method may ask for fewer than all bids (``planner.prune``, and a radio that neither
     loses nor delays, so that every UAV knows the neighbourhoods its bids serve).
-    rule: the fusion rule of each consensus round (``fusion.rule``).
+    rule: the fusion rule of each consensus round (``fusion.rule``). gate: the
+    measurement gate's threshold on a squared Mahalanobis distance (``robust.gate``,
+    `gate.threshold`; None: off).
     """
 
     faulty: bool
@@ -62,6 +64,7 @@ class Setting:
     plan: Callable
     prune: bool = False
     rule: str = "max_consensus"
+    gate: float | None = None
 
 
 @dataclass(frozen=True)
@@ -78,7 +81,9 @@ class Inputs:
     """What a method sees in one cycle for B trials: the radio, each UAV's local
     estimates after its filter (mean (B, N, M, 4), cov (B, N, M, 4, 4), gamma (B, N, M)),
     the UAV states as the UAVs believe them (B, N, 5), who is alive (B, N), each UAV's
-    previous target (B, N) (-1: none), the bids held (`Held`, when messages get lost)."""
+    previous target (B, N) (-1: none), the bids held (`Held`, when messages get lost),
+    and with the measurement gate (``robust.gate``) what each UAV measured
+    (`gate.Measured`)."""
 
     k: int
     radio: Radio
@@ -90,6 +95,7 @@ class Inputs:
     previous: np.ndarray
     held: Held | None
     setting: Setting
+    measured: gate.Measured | None = None
 
 
 @dataclass(frozen=True)
@@ -163,9 +169,10 @@ def consensus(inputs: Inputs) -> Fused:
     rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
     if s.budget is not None:
         rounds = np.minimum(rounds, s.budget)
+    admit = gated(inputs)
     if s.delay == 0 and s.rule == "max_consensus":
         tuples = {"gamma": inputs.gamma, "source": fusion.identity(inputs.gamma.shape)}
-        out = fusion.consensus(radio, tuples, rounds)
+        out = fusion.consensus(radio, tuples, rounds, admit=admit)
         source = out.tuples["source"]
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
         gamma = out.tuples["gamma"]  # travelled with the source: confidence(cov) exactly
@@ -173,7 +180,7 @@ def consensus(inputs: Inputs) -> Fused:
         stamp = np.full(inputs.gamma.shape, inputs.k)
         tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
-        out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule)
+        out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
         gamma = None
     if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
@@ -185,6 +192,27 @@ def consensus(inputs: Inputs) -> Fused:
     else:
         sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
     return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest, gamma=gamma)
+
+
+def gated(inputs: Inputs):
+    """The consensus's admit(own, offered, links) under the measurement gate
+    (``robust.gate``, `gate.admitted`), or None without it. Tuples that travel as the
+    index of the UAV whose estimate they are ("source") are looked up in the local
+    estimates."""
+    s, measured = inputs.setting, inputs.measured
+    if s.gate is None or measured is None:
+        return None
+
+    def estimates(tuples: dict) -> tuple[np.ndarray, np.ndarray]:
+        if "source" in tuples:
+            source = tuples["source"]
+            return fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+        return tuples["mean"], tuples["cov"]
+
+    def admit(own: dict, offered: dict, links) -> np.ndarray:
+        return gate.admitted(links, estimates(own), estimates(offered), measured, s.gate)
+
+    return admit
 
 
 class Distributed(Method):
@@ -304,6 +332,11 @@ class Centralized(Method):
         # every UAV uploads its table and downloads the fused one
         messages = np.full(b, 2 * n if n > 1 else 0, dtype=np.int64)
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+        s, measured = inputs.setting, inputs.measured
+        if s.gate is not None and measured is not None:  # as `take_download`
+            use = gate.agreeing(mean, cov, measured, s.gate, (inputs.mean, inputs.cov))
+            mean = np.where(use[..., None], mean, inputs.mean)
+            cov = np.where(use[..., None, None], cov, inputs.cov)
         return Fused(mean, cov, rounds, messages, messages.copy())
 
     @staticmethod
@@ -344,7 +377,7 @@ class Centralized(Method):
             if s.delay == 0:
                 sent += download["alive"].sum(axis=1)
                 delivered += down_ok.sum(axis=1)
-            mean, cov = take_download(mean, cov, download, down_ok, s, k)
+            mean, cov = take_download(mean, cov, download, down_ok, s, k, inputs.measured)
             target = np.where(down_ok, download["target"], -1)
         rounds = np.where(inputs.alive, 1, 0)
         return Fused(mean, cov, rounds, sent, delivered, seconds, target)
@@ -410,15 +443,24 @@ def central_node(
 
 
 def take_download(
-    mean: np.ndarray, cov: np.ndarray, got: dict, arrived: np.ndarray, setting: Setting, k: int
+    mean: np.ndarray,
+    cov: np.ndarray,
+    got: dict,
+    arrived: np.ndarray,
+    setting: Setting,
+    k: int,
+    measured: gate.Measured | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """A UAV's estimates after the central node's download: the downloaded tuple of each
-    target where it arrived and carries one (predicted forward with ``robust.stale``),
-    its own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); arrived (B, N)."""
+    target where it arrived and carries one (predicted forward with ``robust.stale``)
+    and, with ``robust.gate``, agrees with the UAV's measurement (`gate.agreeing`), its
+    own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); arrived (B, N)."""
     got = {key: got[key] for key in ("gamma", "mean", "cov", "stamp")}
     if setting.stale:
         got = setting.forward(got, k)
     use = arrived[..., None] & np.isfinite(got["gamma"])  # (B, N, M)
+    if setting.gate is not None and measured is not None:
+        use &= gate.agreeing(got["mean"], got["cov"], measured, setting.gate, (mean, cov))
     return (
         np.where(use[..., None], got["mean"], mean),
         np.where(use[..., None, None], got["cov"], cov),

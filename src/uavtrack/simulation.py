@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, flight, network, planning, sensing, timing, world
+from . import estimation, flight, gate, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import Faults, trial_key
 from .flight.unicycle import Unicycle
@@ -105,11 +105,9 @@ class Context:
             stale=robust.stale,
             forward=_forward(scenario.dt, *scenario.acceleration_std()),
             plan=lambda uavs, mean, top=None: _plan(uavs, mean, scenario, top),
-            prune=scenario.planner.prune
-            and f.loss == 0
-            and f.delay == 0
-            and (f.round_budget is None or f.round_budget >= 2),
+            prune=scenario.prunes,
             rule=scenario.fusion.rule,
+            gate=None if robust.gate is None else gate.threshold(robust.gate),
         )
         return cls(scenario, method, const, faults, setting)
 
@@ -174,7 +172,8 @@ class State:
     flight: the autopilot that flies the UAVs (`flight`; None: the paper's unicycle). An
     aircraft has more state than `uavs` and flying it moves it on: a State is stepped once.
     modes: the IMM's mode-conditioned beliefs (`estimation.Modes`; None: the paper's
-    filter), of which mean and cov are the combined estimate.
+    filter), of which mean and cov are the combined estimate. seen (B, Nu, Nt): the
+    step each UAV last measured each target (-1: never; kept with ``robust.gate``).
     """
 
     k: int
@@ -187,6 +186,7 @@ class State:
     held: Held | None = None
     flight: flight.Autopilot | None = None
     modes: estimation.Modes | None = None
+    seen: np.ndarray | None = None
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -321,6 +321,7 @@ def decide(
         state.target,
         state.held,
         ctx.setting,
+        measured(state, observed, z, R, ctx),
     )
     fused = method.fuse(inputs)
     if not plan:
@@ -334,6 +335,15 @@ def decide(
     return Pending(
         k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds, belief
     )
+
+
+def measured(state: State, observed, z, R, ctx: Context) -> gate.Measured | None:
+    """What the measurement gate reads (``robust.gate``; None without it)."""
+    if ctx.setting.gate is None:
+        return None
+    memory = ctx.scenario.robust.gate_memory
+    recent = gate.recent(state.seen, state.k, memory, observed.shape)
+    return gate.Measured.of(observed, z, R, recent)
 
 
 def _unplanned(state, believed, alive, observed, radio, fused, belief) -> Pending:
@@ -414,6 +424,7 @@ def finish(
         assigned.held,
         state.flight,
         modes,
+        None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
     )
     return new, cycle
 

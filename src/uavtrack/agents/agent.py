@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import assignment, estimation, fusion, network, simulation, timing
+from .. import assignment, estimation, fusion, gate, network, simulation, timing
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -46,7 +46,7 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
-from .messages import VERSION, Part, Radio, Report, encode, packed
+from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
 
 
@@ -142,6 +142,21 @@ class AgentRadio:
         return Inbox(contents, len(senders), len(contents))
 
 
+def dropped(mailbox: Mailbox, reasons: dict[str, int]) -> None:
+    """Count what a program could not use, by reason, with the drops of its mailbox."""
+    with mailbox.cond:
+        for reason, count in reasons.items():
+            mailbox.drops[reason] = mailbox.drops.get(reason, 0) + count
+
+
+def plausible(spec: Spec, mailbox: Mailbox, content: dict) -> dict:
+    """A sender's tuples with those beyond the run's plausibility bounds replaced by no
+    estimate (`messages.Spec.estimates`), counted with the drops."""
+    content, reasons = spec.estimates(content)
+    dropped(mailbox, reasons)
+    return content
+
+
 def part(protocol: str, round_: int, content: dict | None, final: int = -1) -> Part:
     return Part(protocol, round_, final, None if content is None else packed(content))
 
@@ -166,6 +181,9 @@ class UavAgent:
         self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline)
         self.ctx = simulation.Context.of(scenario, self.method, [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
+        self.spec = Spec.of(scenario, isinstance(self.method, Centralized))
+        self.measured: gate.Measured | None = None
+        self.seen: np.ndarray | None = None  # (1, 1, Nt) the step it last measured each
         tracker = self.ctx.const.tracker
         # (Nt, 4), (Nt, 4, 4) and the IMM's modes: the belief predicted to k
         self.mean, self.cov, self.modes = tracker.start(*prior)
@@ -192,6 +210,10 @@ class UavAgent:
         observed = sense["observed"]
         z = sense["z"]
         zc, R = simulation.convert(np.repeat(believed[None], len(z), axis=0), z, s)
+        if self.setting.gate is not None:  # what the gate checks estimates against
+            recent = gate.recent(self.seen, k, s.robust.gate_memory, (1, 1, self.m))
+            self.measured = gate.Measured.of(observed[None, None], zc, R, recent)
+            self.seen = gate.seen(self.seen, observed[None, None], k)
         tracker = self.ctx.const.tracker
         belief = tracker.update(self.mean, self.cov, self.modes, observed, zc, R)
         mean, cov = belief[:2]
@@ -292,7 +314,7 @@ class UavAgent:
                 inbox = self.radio.receive(k, "consensus", r)
                 if inbox is not None:
                     sent, delivered = sent + inbox.sent, delivered + inbox.delivered
-                    offered = inbox.contents
+                    offered = {q: self._plausible(t) for q, t in inbox.contents.items()}
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
@@ -327,7 +349,8 @@ class UavAgent:
     def _adopt(self, state: dict, offered: dict[int, dict]) -> dict:
         """eq. (27) for this UAV: `fusion.adopt` over its closed neighbourhood in index
         order (itself with its current tuple), then `fusion.pick`; or, with
-        ``fusion.rule`` = covariance_intersection, `fusion.intersect_round` over it."""
+        ``fusion.rule`` = covariance_intersection, `fusion.intersect_round` over it.
+        With ``robust.gate`` only what agrees with its measurements (`gate.admitted`)."""
         ids = sorted({self.me, *offered})
         where = ids.index(self.me)
         candidates = {
@@ -337,12 +360,27 @@ class UavAgent:
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, where, :] = True
         links = network.Links(1, len(ids), dense)
+        admitted = None
+        if self.setting.gate is not None:  # every row measured as this UAV (its row is kept)
+            mine, rows = self.measured, (1, len(ids))
+            measured = gate.Measured(
+                *(
+                    np.broadcast_to(x, rows + x.shape[2:])
+                    for x in (mine.observed, mine.z, mine.R, mine.recent)
+                )
+            )
+            estimates = (candidates["mean"], candidates["cov"])
+            admitted = gate.admitted(links, estimates, estimates, measured, self.setting.gate)
         if self.setting.rule == "covariance_intersection":
-            picked = fusion.intersect_round(candidates, candidates, links)
+            picked = fusion.intersect_round(candidates, candidates, links, admitted)
         else:
             gamma = candidates["gamma"]
-            picked = fusion.pick(candidates, candidates, fusion.adopt(gamma, gamma, links))
+            best = fusion.adopt(gamma, gamma, links, admitted)
+            picked = fusion.pick(candidates, candidates, best)
         return {name: value[0, where] for name, value in picked.items()}
+
+    def _plausible(self, content: dict) -> dict:
+        return plausible(self.spec, self.mailbox, content)
 
     # ------------------------------------------------------------ assignment
 
@@ -383,6 +421,10 @@ class UavAgent:
         view[me] = bids
         members = members & alive
         members[me] = True
+        able = assignment.able(view, members, me)
+        if (members & ~able).any():  # a neighbour's bids cannot serve this auction
+            dropped(self.mailbox, {"bids not scored": int((members & ~able).sum())})
+            members = able
         rows = np.flatnonzero(members)
         start = timing.start()
         if rows.size == 1:
@@ -415,7 +457,10 @@ class UavAgent:
         if down is None:  # nothing sent yet
             return mean, cov, 1, *(upload or (0, 0)), -1
         mean, cov = (
-            x[0, 0] for x in take_download(mean[None, None], cov[None, None], down, arrived, s, k)
+            x[0, 0]
+            for x in take_download(
+                mean[None, None], cov[None, None], down, arrived, s, k, self.measured
+            )
         )
         if not s.faulty:
             one = int(self.n > 1)
@@ -448,6 +493,7 @@ class UavAgent:
         content = mailbox.content(sent_at, "download", central, 0) if expect else None
         if content is None:
             return nothing_heard(1, 1, self.m), np.zeros((1, 1), dtype=bool), -1
+        content = self._plausible(content)
         down = {name: content[name][None, None] for name in ("gamma", "mean", "cov", "stamp")}
         return down, np.ones((1, 1), dtype=bool), int(content["target"])
 
@@ -463,6 +509,7 @@ class CentralAgent:
         self.radio = AgentRadio(self.n, self.n, faults, link, mailbox, deadline)
         self.ctx = simulation.Context.of(scenario, get("centralized"), [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
+        self.spec = Spec.of(scenario, True)
 
     def cycle(self, k: int, tick: dict[str, np.ndarray], central: bool = True) -> Report:
         """One cycle: fuse and assign the uploads of `delay` cycles ago, send downloads."""
@@ -495,6 +542,7 @@ class CentralAgent:
                 content = mailbox.content(sent_at, "upload", q, 0)
                 if content is None:
                     continue
+                content = plausible(self.spec, mailbox, content)
                 heard[0, q] = True
                 for name in got:
                     got[name][0, q] = content[name]

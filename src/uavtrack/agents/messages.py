@@ -14,10 +14,15 @@ parts of the protocols that run in that round (the D_i flooding with the consens
 beacons with bids, uploads, downloads).
 
 `decode` returns None for anything malformed, of another version or of another run;
-`Spec.check` says why a well-formed message cannot belong to the run (a sender out of
-range, an array of the wrong shape or type, a value that is not finite, an action or a
-target that does not exist, a cycle outside the window). The receiver drops such a
-message and counts it by that reason: nothing a peer sends stops a program.
+`Spec` is the one rule of what a message of the run may hold, field by field
+(`DOMAINS`): `Spec.radio`, `sense`, `tick` and `report` say why a well-formed message
+cannot belong to the run (a sender out of range, an array of the wrong shape or type, a
+value that is not finite, a covariance that is not positive definite, a confidence that
+is not 1 / trace of it, a bid beyond the Fisher bound, an action or a target that does
+not exist, a cycle outside the window), and `Spec.estimates` which estimates of an
+admitted message lie beyond the run's plausibility bounds (`plausibility.Bounds`). The
+receiver drops such a message, or does not use such an estimate, and counts it by that
+reason: nothing a peer sends stops a program.
 """
 
 from __future__ import annotations
@@ -27,6 +32,9 @@ from typing import Any
 
 import msgspec
 import numpy as np
+
+from .. import estimation
+from ..plausibility import CONSISTENT, Bounds
 
 VERSION = 4
 """Schema version; a message of another version is dropped."""
@@ -179,17 +187,47 @@ def packed(content: dict[str, Any]) -> dict[str, Array]:
 # ---------------------------------------------------------------- what a run admits
 
 F, I, B = "<f8", "<i8", "|b1"
-FINITE, SCORE, BID = "finite", "score", "bid"
-"""Values: finite; finite or -inf (a confidence with nothing behind it); finite or NaN
-(a bid not scored, `planner.prune`)."""
+
+DOMAINS = {
+    "flags": "any booleans",
+    "known": "booleans, the sender's own entry set",
+    "finite": "finite",
+    "position": "x and y within the field plus the run's margin, altitude in (0, 20000] m",
+    "uav state": "x, y and altitude as a position, speed in (0, the UAVs' largest], "
+    "heading in [-2 pi, 2 pi]",
+    "confidence": "1 / trace of the target's cov (eq. 22), to 1e-9 relative",
+    "confidence or none": "as confidence, or -inf: no estimate (the target's mean, cov and "
+    "stamp are then not read; they must be finite)",
+    "estimate": "finite; one whose x or y is outside the field plus the run's margin, or "
+    "whose speed is above the run's largest, is not used (`Spec.estimates`)",
+    "covariance": "symmetric positive definite, eigenvalues at most the run's cap; one whose "
+    "smallest eigenvalue is below the run's floor (the sensor's best accuracy) is not used",
+    "stamp": "a cycle in [k - (rounds + 1) behind, k], k the message's cycle",
+    "cycle": "the message's cycle k",
+    "uav index": "a UAV, 0 to N - 1",
+    "target or none": "a target, 0 to M - 1, or -1: none",
+    "bids": "each in [0, the run's largest bid], or NaN (not scored) where the run prunes "
+    "bids (planner.prune without losses or delays), at least one scored",
+}
+"""What the values of a field may be, beyond its dtype and shape (`Spec.contents`); the
+run's numbers are `plausibility.Bounds`."""
 
 
 @dataclass(frozen=True)
 class Spec:
     """What the messages of one run may hold: n UAVs, m targets, `programs` programs
-    (the central node is number n), `actions` bank angles, rounds up to `rounds`, and
-    the window of cycles a receiver keeps (`behind` before the current one, `ahead`
-    after it)."""
+    (the central node is number n), `actions` bank angles, rounds up to `rounds`, the
+    window of cycles a receiver keeps (`behind` before the current one, `ahead` after
+    it), and the limits of an honest claim (`plausibility.Bounds`; None: shapes, types
+    and the scenario-free rules only).
+
+    It is the one rule between what arrives and what uses it: a receiver (`agent`, the
+    world) reads only what `radio`, `sense`, `tick` and `report` return, and every
+    receiver handles all of it (a test sends every kind with every field at every bad
+    value; another draws admitted contents and runs the receivers on them). NaN bids,
+    admitted where the run prunes, can leave a neighbour unable to serve an auction:
+    `assignment.able` says which, and the receiver drops it from that auction.
+    """
 
     n: int
     m: int
@@ -198,6 +236,7 @@ class Spec:
     rounds: int
     behind: int
     ahead: int = 2
+    bounds: Bounds | None = None
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
@@ -210,33 +249,44 @@ class Spec:
             actions=3,
             rounds=n + scenario.robust.extra_rounds + budget + 3,
             behind=scenario.faults.delay + 1,
+            bounds=Bounds.of(scenario),
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
-        """The arrays of a protocol's content: name -> (dtype, shape, values)."""
+        """The arrays of a protocol's content: name -> (dtype, shape, domain), the
+        domain one of `DOMAINS`."""
         n, m = self.n, self.m
         tuples = {
-            "gamma": (F, (m,), SCORE),
-            "mean": (F, (m, 4), FINITE),
-            "cov": (F, (m, 4, 4), FINITE),
-            "stamp": (I, (m,), FINITE),
+            "gamma": (F, (m,), "confidence"),
+            "mean": (F, (m, 4), "estimate"),
+            "cov": (F, (m, 4, 4), "covariance"),
+            "stamp": (I, (m,), "stamp"),
         }
         return {
-            "presence": {"heard": (B, (self.programs,), FINITE)},
-            "flood": {"known": (B, (n,), FINITE)},
-            "consensus": {**tuples, "origin": (I, (m,), FINITE)},
-            "beacon": {"position": (F, (3,), FINITE)},
-            "bids": {"bids": (F, (m,), BID), "stamp": (I, (), FINITE)},
-            "upload": {**tuples, "uav": (F, (5,), FINITE)},
-            "download": {**tuples, "target": (I, (), FINITE)},
+            "presence": {"heard": (B, (self.programs,), "flags")},
+            "flood": {"known": (B, (n,), "known")},
+            "consensus": {**tuples, "origin": (I, (m,), "uav index")},
+            "beacon": {"position": (F, (3,), "position")},
+            "bids": {"bids": (F, (m,), "bids"), "stamp": (I, (), "cycle")},
+            "upload": {**tuples, "uav": (F, (5,), "uav state")},
+            "download": {
+                **tuples,
+                "gamma": (F, (m,), "confidence or none"),
+                "target": (I, (), "target or none"),
+            },
         }.get(protocol)
 
-    def arrays(self, content: dict[str, Array], kinds: dict) -> dict[str, np.ndarray] | str:
-        """The arrays of `content` if they are exactly `kinds`, else the reason not."""
+    def arrays(
+        self, content: dict[str, Array], kinds: dict, k: int = 0, sender: int = 0
+    ) -> dict[str, np.ndarray] | str:
+        """The arrays of `content` if they are exactly `kinds` and within their
+        domains (of a message of cycle k from `sender`), else the reason not. Every
+        field's shape, type and finiteness is checked before any domain, and
+        covariances before what is computed from them."""
         if content.keys() != kinds.keys():
             return "unexpected fields"
         out = {}
-        for name, (dtype, shape, values) in kinds.items():
+        for name, (dtype, shape, _) in kinds.items():
             wire = content[name]
             if wire.dtype != dtype or tuple(wire.shape) != shape:
                 return "wrong shape or type"
@@ -244,10 +294,109 @@ class Spec:
                 value = wire.array()
             except ValueError:
                 return "wrong shape or type"
-            if dtype == F and not _admits(value, values):
-                return "not finite"
             out[name] = value
+        for name, (_, _, domain) in kinds.items():
+            reason = self._finite(domain, out[name])
+            if reason is not None:
+                return reason
+        order = sorted(kinds, key=lambda name: kinds[name][2] != "covariance")
+        for name in order:
+            reason = self._domain(kinds[name][2], out[name], out, k, sender)
+            if reason is not None:
+                return reason
         return out
+
+    def _finite(self, domain: str, value: np.ndarray) -> str | None:
+        """Why a field's floats are not what its domain admits: finite, NaN only as a
+        bid not scored, -inf only as a confidence of no estimate."""
+        if value.dtype.kind != "f":
+            return None
+        nan = np.isnan(value)
+        if domain == "bids":
+            if nan.all() or nan.any() and not (self.bounds is None or self.bounds.unscored):
+                return "bids not scored"
+        elif nan.any():
+            return "not finite"
+        if np.isposinf(value).any():
+            return "not finite"
+        if np.isneginf(value).any() and domain != "confidence or none":
+            return "not finite"
+        return None
+
+    def _domain(self, domain: str, value, arrays: dict, k: int, sender: int) -> str | None:
+        """Why finite `value` is outside `domain` (None: it is inside)."""
+        b = self.bounds
+        live = np.isfinite(arrays["gamma"]) if "gamma" in arrays else slice(None)
+        if domain == "known":
+            return None if sender < value.size and value[sender] else "sender not in its own set"
+        if domain == "uav index":
+            return None if ((value >= 0) & (value < self.n)).all() else "index out of range"
+        if domain == "target or none":
+            return None if -1 <= value < self.m else "index out of range"
+        if domain == "cycle":
+            return None if value == k else "stamp out of range"
+        if domain == "stamp":
+            oldest = max(0, k - (self.rounds + 1) * self.behind)
+            ok = (value[live] >= oldest) & (value[live] <= k)
+            return None if ok.all() else "stamp out of range"
+        if domain in ("confidence", "confidence or none"):
+            return _confidence(value, arrays["cov"], domain == "confidence")
+        if domain == "covariance":
+            return _covariance(value[live], b)
+        if domain == "uav state":
+            return self._uav(value)
+        if b is None:
+            return None
+        if domain == "position":
+            return _position(value[None], b) or _altitude(value[2], b)
+        if domain == "bids":
+            scored = value[~np.isnan(value)]
+            return None if ((scored >= 0) & (scored <= b.bid)).all() else "bid out of bounds"
+        return None
+
+    def estimates(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
+        """The estimates of a checked tuple content ("gamma", "mean", "cov", ...) that
+        a receiver may use: one (a target's) whose position is outside the field plus
+        the run's margin, whose speed is above the run's largest or whose covariance is
+        below the sensor's best accuracy is replaced by no estimate (confidence -inf,
+        mean 0, covariance I), as if that sender had none. Returns the content and the
+        estimates replaced by reason.
+
+        These bounds are kept apart from `radio`'s, which refuse whole messages: an
+        honest UAV that adopted a plausible lie may itself come to hold an estimate
+        beyond them (a Kalman update of a confident wrong prior moves its velocity far),
+        and must not be silenced for the targets it knows."""
+        b, gamma = self.bounds, content["gamma"]
+        live = np.isfinite(gamma)
+        if b is None or not live.any():
+            return content, {}
+        mean, cov = content["mean"], content["cov"]
+        reasons = np.full(gamma.shape, "", dtype=object)
+        inside = ((mean[:, :2] >= b.low) & (mean[:, :2] <= b.high)).all(axis=1)
+        slow = np.hypot(mean[:, 2], mean[:, 3]) <= b.speed
+        sharp = np.linalg.eigvalsh(cov)[:, 0] >= b.floor
+        reasons[live & ~sharp] = "covariance below the sensor's accuracy"
+        reasons[live & ~slow] = "speed out of bounds"
+        reasons[live & ~inside] = "position out of bounds"
+        bad = reasons != ""
+        if not bad.any():
+            return content, {}
+        out = dict(content)
+        out["gamma"] = np.where(bad, -np.inf, gamma)
+        out["mean"] = np.where(bad[:, None], 0.0, mean)
+        out["cov"] = np.where(bad[:, None, None], np.eye(4), cov)
+        found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
+        return out, dict(zip(found.tolist(), counts.tolist(), strict=True))
+
+    def _uav(self, value) -> str | None:
+        b = self.bounds
+        if not -2 * np.pi <= value[4] <= 2 * np.pi:
+            return "heading out of range"
+        if b is None:
+            return None
+        if not 0 < value[3] <= b.uav_speed:
+            return "speed out of bounds"
+        return _position(value[None], b) or _altitude(value[2], b)
 
     def radio(self, message: Radio, k: int) -> list[tuple[str, int, int, Any]] | str:
         """A radio message's parts as (protocol, round, final, arrays or None) if the
@@ -265,7 +414,7 @@ class Spec:
                 return "round out of range"
             content = None
             if part.content is not None:
-                content = self.arrays(part.content, kinds)
+                content = self.arrays(part.content, kinds, message.k, message.sender)
                 if isinstance(content, str):
                     return content
             elif part.final < 0:
@@ -283,25 +432,30 @@ class Spec:
             return "wrong shape or type"
         n, m = self.n, self.m
         kinds = {
-            "believed": (F, (5,), FINITE),
-            "observed": (B, (m,), FINITE),
-            "z": (F, (K, 2), FINITE),
-            "links": (B, (n,), FINITE),
-            "alive": (B, (n,), FINITE),
+            "believed": (F, (5,), "finite"),
+            "observed": (B, (m,), "flags"),
+            "z": (F, (K, 2), "finite"),
+            "links": (B, (n,), "flags"),
+            "alive": (B, (n,), "flags"),
         }
         wire = {name: getattr(message, name) for name in kinds}
         return self.arrays(wire, kinds)
 
     def tick(self, message: Tick) -> dict[str, np.ndarray] | str:
-        return self.arrays({"alive": message.alive}, {"alive": (B, (self.n,), FINITE)})
+        return self.arrays({"alive": message.alive}, {"alive": (B, (self.n,), "flags")})
 
     def report(self, message: Report) -> dict[str, np.ndarray] | str:
         """A Report's arrays if the run admits it, else the reason not."""
         counts = (message.rounds, message.sent, message.delivered, message.published)
-        if min(counts + (message.bytes, message.received)) < 0 or message.rounds > self.rounds:
+        counts += (message.bytes, message.received)
+        if not all(0 <= c <= COUNT for c in counts) or message.rounds > self.rounds:
+            return "count out of range"
+        if len(message.drops) > 64 or not all(
+            len(reason) <= 80 and 0 <= c <= COUNT for reason, c in message.drops.items()
+        ):
             return "count out of range"
         times = (message.decision_ms, message.decision_wall_ms)
-        if not all(np.isfinite(t) and t >= 0 for t in times):
+        if not all(np.isfinite(t) and 0 <= t <= MILLISECONDS for t in times):
             return "not finite"
         if message.uav == self.n:  # the central node decides nothing of its own
             if (message.action, message.target) != (-1, -1):
@@ -311,16 +465,71 @@ class Spec:
             return "action or target out of range"
         m = self.m
         kinds = {
-            "mean": (F, (m, 4), FINITE),
-            "cov": (F, (m, 4, 4), FINITE),
-            "bids": (F, (m,), BID),
+            "mean": (F, (m, 4), "estimate"),
+            "cov": (F, (m, 4, 4), "covariance"),
+            "bids": (F, (m,), "bids"),
         }
-        return self.arrays({name: getattr(message, name) for name in kinds}, kinds)
+        arrays = self.arrays({name: getattr(message, name) for name in kinds}, kinds)
+        if isinstance(arrays, str) or self.bounds is None:
+            return arrays
+        return _recorded(arrays, self.bounds) or arrays
 
 
-def _admits(value: np.ndarray, values: str) -> bool:
-    if values == FINITE:
-        return bool(np.isfinite(value).all())
-    if values == SCORE:
-        return bool((np.isfinite(value) | (value == -np.inf)).all())
-    return not bool(np.isinf(value).any())  # BID: finite or NaN
+COUNT = 2**48
+"""The largest count a report may carry (messages, bytes, drops of one cycle)."""
+MILLISECONDS = 1e9
+"""The longest decision time a report may carry [ms] (eleven days)."""
+
+
+def _confidence(gamma: np.ndarray, cov: np.ndarray, required: bool) -> str | None:
+    live = np.isfinite(gamma)
+    if required and not live.all():
+        return "not finite"
+    expected = estimation.confidence(cov[live])
+    if not (np.abs(gamma[live] - expected) <= CONSISTENT * np.abs(expected)).all():
+        return "confidence disagrees with covariance"
+    return None
+
+
+def _covariance(P: np.ndarray, bounds: Bounds | None) -> str | None:
+    """Why covariances P (..., 4, 4) are not symmetric positive definite within the
+    run's [floor, cap] (`plausibility.Bounds`), or None."""
+    if not P.size:
+        return None
+    scale = np.abs(P).max(axis=(-2, -1))
+    if bounds is not None and not (scale <= bounds.cap).all():  # |P_ij| <= lambda_max
+        return "covariance beyond the run's largest"
+    if not (np.abs(P - np.swapaxes(P, -1, -2)).max(axis=(-2, -1)) <= CONSISTENT * scale).all():
+        return "covariance not positive definite"
+    eig = np.linalg.eigvalsh(P)
+    if not (eig[..., 0] > 0).all():
+        return "covariance not positive definite"
+    if bounds is not None and not (eig[..., -1] <= bounds.cap).all():
+        return "covariance beyond the run's largest"
+    return None
+
+
+def _position(xy: np.ndarray, bounds: Bounds) -> str | None:
+    inside = (xy[..., :2] >= bounds.low) & (xy[..., :2] <= bounds.high)
+    return None if inside.all() else "position out of bounds"
+
+
+def _altitude(h: float, bounds: Bounds) -> str | None:
+    low, high = bounds.altitude
+    return None if low < h <= high else "position out of bounds"
+
+
+def _recorded(arrays: dict, bounds: Bounds) -> str | None:
+    """Why a report's estimates cannot be recorded (None: they can): the world's
+    metrics read them, so they must stay where arithmetic is safe, yet an honest UAV
+    misled by a member may hold one beyond `Spec.estimates`' bounds. Positions are
+    refused beyond the field plus twice the run's margin (a misled estimate moves at
+    most at a plausible speed from a plausible place), covariances below the floor of a
+    filter that took in an estimate at the floor (`plausibility.Bounds.adopted`)."""
+    margin = -bounds.low
+    xy = arrays["mean"][:, :2]
+    if not ((xy >= bounds.low - margin) & (xy <= bounds.high + margin)).all():
+        return "position out of bounds"
+    if not (np.linalg.eigvalsh(arrays["cov"])[:, 0] >= bounds.adopted).all():
+        return "covariance below the sensor's accuracy"
+    return None

@@ -7,6 +7,7 @@ from __future__ import annotations
 import json
 
 import msgspec
+import numpy as np
 
 from . import messages, security, transport
 
@@ -63,6 +64,7 @@ def document() -> str:
         lines += ["| field | type |", "|---|---|"]
         lines += [f"| `{f.name}` | `{_type(f.type)}` |" for f in info]
         lines += [""]
+    lines += _admits()
     schema = msgspec.json.schema(messages.Message)
     lines += [
         "## JSON Schema",
@@ -76,6 +78,40 @@ def document() -> str:
         "",
     ]
     return "\n".join(lines)
+
+
+def _admits() -> list[str]:
+    """What each field of a radio part may hold (`messages.Spec`): one rule for the
+    check at the radio and the code that uses the message."""
+    n, m, p = -1, -2, -3  # stand-ins for the run's sizes, named in the table
+    spec = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1)
+    lines = [
+        "## What a message may hold",
+        "",
+        "One rule (`uavtrack.agents.messages.Spec`) decides what a receiver takes: the "
+        "message's cycle within the window the receiver keeps, its sender one of the run's "
+        "programs, at most 4 parts, each round at most the run's rounds, and each array of "
+        "a part exactly this dtype and shape (N UAVs, M targets, P programs) with values in "
+        "its domain. A message that breaks it is dropped whole and counted by reason; an "
+        "estimate beyond the run's plausibility bounds (`uavtrack.plausibility.Bounds`, "
+        "derived from the scenario) is not used and is counted, the rest of the message is. "
+        "Whatever the rule admits, the receivers use without error. On the wire float64 "
+        "is `<f8`, int64 `<i8` and bool `|b1`.",
+        "",
+        "| protocol | field | dtype | shape | domain |",
+        "|---|---|---|---|---|",
+    ]
+    size = {n: "N", m: "M", p: "P"}
+    for protocol in ("presence", "flood", "consensus", "beacon", "bids", "upload", "download"):
+        for name, (dtype, shape, domain) in spec.contents(protocol).items():
+            axes = [size.get(x, str(x)) for x in shape]
+            shown = "(" + ", ".join(axes) + ("," if len(axes) == 1 else "") + ")"
+            kind = np.dtype(dtype).name
+            lines.append(f"| {protocol} | `{name}` | {kind} | {shown} | {domain} |")
+    lines += ["", "Domains:", ""]
+    lines += [f"- **{name}**: {text}" for name, text in messages.DOMAINS.items()]
+    lines += [""]
+    return lines
 
 
 def _type(annotation) -> str:
