@@ -36,11 +36,13 @@ class Served:
     "done" (every step), "failed" (the world said this UAV failed, at step `at`),
     "world gone" (the world ended or went silent at step `at`), "no world" (no world of
     the run answered), "not in run" (this program's number is not one of the run's),
-    "taken" (another program with this number is running), "under way" (the run had
-    started, at step `at`), "needs key" (the run authenticates its members and this
-    program has no key), "not authentic" (the only world that answered could not prove
-    it is the run's: another key file's, or a forgery), "other run" (only worlds of
-    other runs, `others`, answered)."""
+    "taken" (the world's Hello names this number a member: another program holding its
+    key runs it), "under way" (the run had started, at step `at`), "needs key" (the run
+    authenticates its members and this program has no key), "wrong key" (the key this
+    program holds is not the one the world's Hello names for its number: a damaged or
+    forged key file), "not authentic" (the only world that answered could not prove it
+    is the run's: another key file's, or a forgery), "other run" (only worlds of other
+    runs, `others`, answered)."""
 
     ran: int
     steps: int
@@ -90,7 +92,9 @@ def serve(
         return Served(0, scenario.steps, "needs key", programs=programs, central=central)
     if me >= programs:
         return Served(0, scenario.steps, "not in run", programs=programs, central=central)
-    if transport.alive(f"{k_['alive']}{me}"):  # another program with this number runs
+    if hello.authenticated and not _holds(credential, hello.publics, me):
+        return Served(0, scenario.steps, "wrong key", programs=programs, central=central)
+    if me in hello.members:  # the world's word, signed: not a token anyone can make
         return Served(0, scenario.steps, "taken", programs=programs, central=central)
     if hello.step >= 0:
         return Served(0, scenario.steps, "under way", hello.step, programs, central)
@@ -118,6 +122,12 @@ def serve(
     finally:
         if node is not None:
             node.close()
+
+
+def _holds(credential: Credential, publics: list[bytes], me: int) -> bool:
+    """Whether `credential` holds the private key of the public key the Hello names for
+    program `me`."""
+    return me < len(publics) and credential.public() == bytes(publics[me])
 
 
 def _cycles(transport, link, mailbox, program, node, run, me, n, programs, central, scenario,

@@ -9,8 +9,11 @@ deadline), flies the UAVs and records the cycle with the simulator's own `Cycle`
 `metrics.Tally` and `simulation.Recorder`, so a swarm's trace and metrics have the
 format of `uavtrack run`'s.
 
-A program that misses its report of a cycle, or whose process is gone (its liveliness
-token dropped, confirmed by asking for it again), is lost from that cycle on: the cycle
+A program takes its number only by an authentic `Ready` (its own key's): then it is a
+member, and the world's Hello names it so no other program takes the number. A member
+that misses its report of a cycle, or whose process is gone (its own liveliness token
+dropped, confirmed by asking for it again; a token is a hint, see `transport.Mailbox`),
+is lost from that cycle on: the cycle
 records it as failed (no estimate, no observation, no decision), so every metric masks
 it in the one place it masks failed UAVs. Without the central node (centralized
 method), each UAV keeps its own filter and its last assigned target.
@@ -98,14 +101,18 @@ class WorldProgram:
         self.clock: Callable[[int], None] | None = None
         """Told each step k as it begins, before the step's Sense goes out (the ROS 2 /clock)."""
         self.step = -1
+        self.members: set[int] = set()
+        """Programs whose authentic Ready the world took, and not lost since."""
         self.central_alive = self.method.central
         self.prior: tuple[np.ndarray, np.ndarray] | None = None
         self._answered = 0
 
     def _gone(self) -> set[int]:
-        """The programs whose processes are gone (tokens confirmed gone)."""
-        tails = (key.rsplit("/", 1)[-1] for key in self.mailbox.gone)
-        return {int(t) for t in tails if t.isdigit()}
+        """The members whose processes are gone: heard from, then their own tokens
+        confirmed gone (a token is a hint: it only cuts the wait for the report of a
+        program that will not send one)."""
+        with self.mailbox.cond:  # an authentic word, on Zenoh's thread, takes one back
+            return self.mailbox.gone & self.members
 
     @property
     def programs(self) -> list[int]:
@@ -127,6 +134,7 @@ class WorldProgram:
             self.link.gate.authenticates,
             self.keyring.public() if self.keyring is not None else [],
             self.step,
+            sorted(self.members),
         )
         self.link.hello(message)
 
@@ -143,6 +151,7 @@ class WorldProgram:
             self.hello()
             self.mailbox.wait(lambda: False, min(deadline, time.monotonic() + 0.2))
             waiting = {p for p in waiting if self.mailbox.take(("ready", p)) is None}
+            self.members = set(self.programs) - waiting
             if waiting and time.monotonic() > deadline:
                 raise TimeoutError(self._not_started(waiting))
 
@@ -188,6 +197,7 @@ class WorldProgram:
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
+                self.members.discard(int(i))  # its program ends with its UAV
             self._lose(k, alive, self._gone())
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
@@ -228,6 +238,7 @@ class WorldProgram:
         """Programs lost at step k (gone or silent): failed from k on, `alive` (1, N)
         updated in place."""
         n = self.scenario.n_uavs
+        self.members -= programs
         for i in sorted(programs):
             if i < n and alive[0, i]:
                 alive[0, i] = False
