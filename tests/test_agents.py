@@ -444,3 +444,38 @@ def test_the_message_schema_page_is_what_the_code_says():
     assert f"schema version {messages.VERSION}" in page.read_text()
     for cls in messages.Message.__args__:  # every message and every field is on the page
         assert f"### `{cls.__struct_config__.tag}`" in page.read_text()
+
+
+def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_them():
+    # programs 0-3 start and wait for 4, which never comes; a stranger holds 4's token.
+    # The world names 4, from the programs' authentic presence, not from the tokens
+    from uavtrack.agents.program import serve
+    from uavtrack.agents.security import Keyring
+    from uavtrack.agents.world import WorldProgram
+
+    run, bus = "a1b2c3d4e5f6", Bus()
+    scenario = uavtrack.Scenario(steps=3)
+    ring = Keyring(run, 5)
+    MemoryTransport(bus).announce(f"uavtrack/{run}/alive/4")
+    link = MemoryTransport(bus)
+    link.announce(f"uavtrack/{run}/alive/world")
+    world = WorldProgram(scenario, "distributed", 0, link, run, startup=10.0, keyring=ring)
+    ended = []
+
+    def program(me):
+        ended.append(serve(MemoryTransport(bus), run, me, credential=ring.credential(me)).end)
+
+    threads = [threading.Thread(target=program, args=(p,), daemon=True) for p in range(4)]
+    for thread in threads:
+        thread.start()
+    try:
+        with pytest.raises(TimeoutError) as refused:
+            world.run_trial()
+    finally:
+        link.close()  # the programs hear their world gone
+        for thread in threads:
+            thread.join(60)
+    assert str(refused.value) == (
+        "program 4 did not start within 10 s; 0, 1, 2, 3 started and waited for them"
+    )
+    assert ended == ["world gone"] * 4

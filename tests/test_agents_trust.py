@@ -154,7 +154,8 @@ def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_pla
     # whose secret is not 0's is told that its key is not 0's (exit 2); a stranger
     # holding the swarm's TLS certificate but no key makes every token of the run and
     # sends a Ready in every name. Neither takes a place: the real programs join, and
-    # the run is the simulator's
+    # the run is the simulator's. Once the real program 0 has joined (the world's Hello
+    # names it), a second program with its key is told that 0 runs already (exit 2)
     import dataclasses
 
     from uavtrack.agents.security import Credential
@@ -212,7 +213,13 @@ def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_pla
         stranger.run = run
         stranger.go.set()
         assert stranger.started.wait(120) and stranger.error is None, stranger.error
-        members = [start(key) for key in joined["keys"]]
+        hellos = []
+        probe.subscribe(f"uavtrack/{run}/hello", lambda _, payload: hellos.append(payload))
+        members = [start(key) for key in joined["keys"][:2]]
+        assert wait_until(lambda: any(0 in members_of(h, run) for h in hellos[-5:]), 300)
+        second = start(joined["keys"][0])
+        _, twice = second.communicate(timeout=300)
+        members += [start(key) for key in joined["keys"][2:]]
         thread.join(600)
         outputs = [p.communicate(timeout=120) for p in members]
         _, said = impostor.communicate(timeout=120)
@@ -230,11 +237,27 @@ def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_pla
     for process, (out, err) in zip(members, outputs, strict=True):
         assert process.returncode == 0, err.decode()
         assert b"ran 8 of 8 cycles" in out
+    assert second.returncode == 2 and "program 0 of run" in twice.decode()
+    assert "is already running" in twice.decode()
     assert impostor.returncode == 2 and said.decode().count("\n") == 1
     assert "does not hold program 0's key" in said.decode()
     swarm = done["swarm"]
     assert swarm.traffic.lost == {} and stranger.rounds >= 1
     assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "distributed", seed=5).trace)
+
+
+def members_of(payload: bytes, run: str) -> list[int]:
+    """The members a world's Hello names (none if the payload is not one)."""
+    import msgspec
+
+    from uavtrack.agents.messages import Hello, decode
+    from uavtrack.agents.security import Envelope
+
+    try:
+        message = decode(msgspec.msgpack.decode(payload, type=Envelope).body, run)
+    except msgspec.DecodeError:
+        return []
+    return list(message.members) if isinstance(message, Hello) else []
 
 
 # ------------------------------------------------------------------ TLS files

@@ -209,8 +209,9 @@ OTHERS = 3.0
 """Seconds a program waits for its own world once worlds of other runs have answered."""
 
 
-def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:
-    """Say who this program has heard, to every program that has not yet heard it."""
+def _presence(link: Link, mailbox: Mailbox, me: int, programs: int, world: bool = False) -> None:
+    """Say who this program has heard, to every program that has not yet heard it, and
+    with `world` to the world too until its Hello names this program a member."""
     heard = np.zeros(programs, dtype=bool)
     acknowledged = np.zeros(programs, dtype=bool)
     with mailbox.cond:
@@ -223,17 +224,22 @@ def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:
     body = encode(Radio(VERSION, link.run, -1, me, [part("presence", 0, {"heard": heard})]))
     for q in np.flatnonzero(~acknowledged):
         link.send_body(int(q), body)
+    hello = mailbox.inbox.get(("hello",))
+    if world and hello is not None and me not in hello.members:
+        link.send_body(WORLD, body)
 
 
 def meet(link: Link, mailbox: Mailbox, me: int, programs: int, wait: float) -> bool:
     """Announce this program to the others until it has heard every one of them (UAVs
     0 .. N-1 and the central node N if any): then the routes between all programs
-    exist, and no message of the first cycle is lost to a subscription still in transit."""
+    exist, and no message of the first cycle is lost to a subscription still in transit.
+    The world hears it too: its authentic presence makes this program a member, which
+    the world's Hello then names, so a second program with the same key is refused."""
     others = [p for p in range(programs) if p != me]
     heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
     limit = time.monotonic() + wait
     while time.monotonic() < limit and not mailbox.world_gone:
-        _presence(link, mailbox, me, programs)
+        _presence(link, mailbox, me, programs, world=True)
         if mailbox.wait(heard, time.monotonic() + 0.1):
             return True
     return False

@@ -504,6 +504,8 @@ class Mailbox:
         if isinstance(message, Radio):
             if message.sender != sender:
                 return "not from its sender"
+            if self.me == WORLD and message.k == -1:  # a presence: the world needs only to
+                return None  # have heard it (`heard`), whenever it comes
             if message.k < self.oldest:
                 return "outside the window of cycles"
             parts = spec.radio(message, max(self.now, 0))

@@ -9,8 +9,9 @@ deadline), flies the UAVs and records the cycle with the simulator's own `Cycle`
 `metrics.Tally` and `simulation.Recorder`, so a swarm's trace and metrics have the
 format of `uavtrack run`'s.
 
-A program takes its number only by an authentic `Ready` (its own key's): then it is a
-member, and the world's Hello names it so no other program takes the number. A member
+A program takes its number only by an authentic message (its presence as it meets the
+others, then its `Ready`; sealed with its own key): then it is a member, and the world's
+Hello names it, so no other program takes the number. A member
 that misses its report of a cycle, or whose process is gone (its own liveliness token
 dropped, confirmed by asking for it again; a token is a hint, see `transport.Mailbox`),
 is lost from that cycle on: the cycle
@@ -102,7 +103,7 @@ class WorldProgram:
         """Told each step k as it begins, before the step's Sense goes out (the ROS 2 /clock)."""
         self.step = -1
         self.members: set[int] = set()
-        """Programs whose authentic Ready the world took, and not lost since."""
+        """Programs heard from (an authentic message) and not gone or lost since."""
         self.central_alive = self.method.central
         self.prior: tuple[np.ndarray, np.ndarray] | None = None
         self._answered = 0
@@ -151,18 +152,16 @@ class WorldProgram:
             self.hello()
             self.mailbox.wait(lambda: False, min(deadline, time.monotonic() + 0.2))
             waiting = {p for p in waiting if self.mailbox.take(("ready", p)) is None}
-            self.members = set(self.programs) - waiting
+            with self.mailbox.cond:  # a program that went before the run is no member
+                self.members = (self.mailbox.heard - self.mailbox.gone) & set(self.programs)
             if waiting and time.monotonic() > deadline:
                 raise TimeoutError(self._not_started(waiting))
+        self.members = set(self.programs)  # all ready: one gone since is lost at step 0
 
     def _not_started(self, waiting: set[int]) -> str:
-        """Which programs kept the run from starting, and which were there."""
-        present = {
-            int(k.rsplit("/", 1)[-1])
-            for k in self.transport.alive(self.keys["alive"])
-            if k.rsplit("/", 1)[-1].isdigit()
-        }
-        missing = sorted(waiting - present) or sorted(waiting)
+        """Which programs kept the run from starting (never heard from, or gone), and
+        which were there (members: heard from, by authentic messages)."""
+        missing = sorted(waiting - self.members) or sorted(waiting)
         started = sorted(set(self.programs) - set(missing))
         names = ", ".join(map(str, missing))
         there = f"; {', '.join(map(str, started))} started and waited for them" if started else ""
