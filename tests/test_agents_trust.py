@@ -240,7 +240,7 @@ def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_pla
     assert second.returncode == 2 and "program 0 of run" in twice.decode()
     assert "is already running" in twice.decode()
     assert impostor.returncode == 2 and said.decode().count("\n") == 1
-    assert "does not hold program 0's key" in said.decode()
+    assert f"--key: {forged} does not hold program 0's key" in said.decode()
     swarm = done["swarm"]
     assert swarm.traffic.lost == {} and stranger.rounds >= 1
     assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "distributed", seed=5).trace)

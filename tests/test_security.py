@@ -121,7 +121,7 @@ def test_a_key_file_is_private_never_overwritten_and_read_back(tmp_path):
         Credential.read(tmp_path / "bad")
 
 
-@pytest.mark.parametrize("mode", [0o644, 0o640, 0o604, 0o660, 0o606])
+@pytest.mark.parametrize("mode", [0o644, 0o640, 0o604, 0o660, 0o606], ids=lambda m: f"{m:04o}")
 def test_a_key_file_open_to_others_is_refused_with_the_fix(tmp_path, mode):
     # as ssh refuses a private key: a key file others may read may have been stolen
     path = tmp_path / "k.key"
