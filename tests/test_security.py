@@ -138,7 +138,7 @@ def test_a_key_file_open_to_others_is_refused_with_the_fix(tmp_path, mode):
 def test_a_key_file_is_written_private_whatever_the_umask(tmp_path):
     import os
 
-    old = os.umask(0o277)  # would leave a file created 0600 unreadable to its owner
+    old = os.umask(0o277)  # would leave a file created 0600 at 0400
     try:
         Keyring(RUN, 2).credential(0).write(tmp_path / "k.key")
     finally:

@@ -159,7 +159,7 @@ class Credential:
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
         fd = os.open(path, flags, 0o600)
         with os.fdopen(fd, "w", encoding="ascii") as handle:
-            if os.name == "posix":  # a umask of 0o277 would leave it unreadable to its owner
+            if os.name == "posix":  # a umask takes bits away: with 0o277 it would be 0400
                 os.fchmod(handle.fileno(), 0o600)
             handle.write(self.to_json() + "\n")
 

@@ -11,13 +11,12 @@ format of `uavtrack run`'s.
 
 A program takes its number only by an authentic message (its presence as it meets the
 others, then its `Ready`; sealed with its own key): then it is a member, and the world's
-Hello names it, so no other program takes the number. A member
-that misses its report of a cycle, or whose process is gone (its own liveliness token
-dropped, confirmed by asking for it again; a token is a hint, see `transport.Mailbox`),
-is lost from that cycle on: the cycle
-records it as failed (no estimate, no observation, no decision), so every metric masks
-it in the one place it masks failed UAVs. Without the central node (centralized
-method), each UAV keeps its own filter and its last assigned target.
+Hello names it, so no other program takes the number. A member that misses its report
+of a cycle, or whose process is gone (its own liveliness token dropped, confirmed by
+asking for it again; a token is a hint, see `transport.Mailbox`), is lost from that
+cycle on: the cycle records it as failed (no estimate, no observation, no decision), so
+every metric masks it in the one place it masks failed UAVs. Without the central node
+(centralized method), each UAV keeps its own filter and its last assigned target.
 """
 
 from __future__ import annotations
