@@ -1,6 +1,7 @@
 """The agent form: one program per UAV, equal to the batch simulator, delivering each
 radio message only where it can be heard."""
 
+import dataclasses
 import signal
 import subprocess
 import sys
@@ -204,13 +205,15 @@ def test_realtime_overruns_are_the_cycles_longer_than_dt():
     assert swarm.traffic.overruns == [k for k, t in enumerate(took) if t > scenario.dt]
 
 
-def hello_on(bus, scenario, method="distributed", run="a1b2c3d4e5f6", step=-1):
+def hello_on(bus, scenario, method="distributed", run="a1b2c3d4e5f6", step=-1, **world_options):
     """A world that only says hello, every 50 ms, until `stop` is set."""
     from uavtrack.agents.world import WorldProgram
 
-    world = WorldProgram(scenario, method, 0, MemoryTransport(bus), run)
+    members = world_options.pop("members", set())
+    world = WorldProgram(scenario, method, 0, MemoryTransport(bus), run, **world_options)
     world.prior = (np.zeros((scenario.n_targets, 4)), np.eye(4))
     world.step = step
+    world.members = members
     stop = threading.Event()
 
     def say():
@@ -233,13 +236,28 @@ def test_a_program_tells_why_it_did_not_run():
     try:
         out = serve(MemoryTransport(bus), run, 5, first=5)
         assert (out.end, out.programs, out.central) == ("not in run", 5, False)
-        MemoryTransport(bus).announce(f"uavtrack/{run}/alive/2")  # program 2 runs already
-        assert serve(MemoryTransport(bus), run, 2, first=5).end == "taken"
+        # a token is anyone's to make: it takes no number (the program goes on to meet
+        # the others, none of whom come here, and gives up after `wait`)
+        MemoryTransport(bus).announce(f"uavtrack/{run}/alive/2")
+        assert serve(MemoryTransport(bus), run, 2, wait=0.5, first=5).end == "world gone"
         # a key of another world: the Hello it hears is not signed by the run's world
         other = Keyring(run, 5).credential(1)
         assert serve(MemoryTransport(bus), run, 1, first=0.5, credential=other).end == (
             "not authentic"
         )
+    finally:
+        stop.set()
+    # the run's world names program 2 a member in its signed Hello: 2 is taken; a key
+    # file of this run with another secret in it is no key of 1's
+    ring = Keyring(run, 5)
+    bus = Bus()
+    stop = hello_on(bus, uavtrack.Scenario(steps=3), keyring=ring, members={2})
+    try:
+        assert serve(MemoryTransport(bus), run, 2, first=5, credential=ring.credential(2)).end == (
+            "taken"
+        )
+        forged = dataclasses.replace(ring.credential(1), secret=bytes(range(32)))
+        assert serve(MemoryTransport(bus), run, 1, first=5, credential=forged).end == "wrong key"
     finally:
         stop.set()
     bus = Bus()
@@ -426,3 +444,38 @@ def test_the_message_schema_page_is_what_the_code_says():
     assert f"schema version {messages.VERSION}" in page.read_text()
     for cls in messages.Message.__args__:  # every message and every field is on the page
         assert f"### `{cls.__struct_config__.tag}`" in page.read_text()
+
+
+def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_them():
+    # programs 0-3 start and wait for 4, which never comes; a stranger holds 4's token.
+    # The world names 4, from the programs' authentic presence, not from the tokens
+    from uavtrack.agents.program import serve
+    from uavtrack.agents.security import Keyring
+    from uavtrack.agents.world import WorldProgram
+
+    run, bus = "a1b2c3d4e5f6", Bus()
+    scenario = uavtrack.Scenario(steps=3)
+    ring = Keyring(run, 5)
+    MemoryTransport(bus).announce(f"uavtrack/{run}/alive/4")
+    link = MemoryTransport(bus)
+    link.announce(f"uavtrack/{run}/alive/world")
+    world = WorldProgram(scenario, "distributed", 0, link, run, startup=10.0, keyring=ring)
+    ended = []
+
+    def program(me):
+        ended.append(serve(MemoryTransport(bus), run, me, credential=ring.credential(me)).end)
+
+    threads = [threading.Thread(target=program, args=(p,), daemon=True) for p in range(4)]
+    for thread in threads:
+        thread.start()
+    try:
+        with pytest.raises(TimeoutError) as refused:
+            world.run_trial()
+    finally:
+        link.close()  # the programs hear their world gone
+        for thread in threads:
+            thread.join(60)
+    assert str(refused.value) == (
+        "program 4 did not start within 10 s; 0, 1, 2, 3 started and waited for them"
+    )
+    assert ended == ["world gone"] * 4

@@ -245,8 +245,17 @@ def test_programs_cannot_join_a_run_under_way(tmp_path):
 # ------------------------------------------------------------------ TLS
 
 
-def make_certificates(folder: Path, name: str = "swarm") -> dict[str, Path]:
-    """A CA and one certificate for 127.0.0.1 and localhost signed by it (PEM files)."""
+def make_certificates(
+    folder: Path,
+    name: str = "swarm",
+    host_days: tuple[float, float] = (-1 / 288, 1),
+    ca_days: tuple[float, float] = (-1 / 288, 1),
+    signer: dict[str, Path] | None = None,
+) -> dict[str, Path]:
+    """A CA and one certificate for 127.0.0.1 and localhost signed by it (PEM files; the
+    private keys private to their owner, as openssl writes them). host_days, ca_days:
+    the validity of each from and to, in days from now; signer: another set's CA signs
+    the host certificate instead (the CA file written is still this set's)."""
     import datetime
     import ipaddress
 
@@ -270,18 +279,19 @@ def make_certificates(folder: Path, name: str = "swarm") -> dict[str, Path]:
                 serialization.NoEncryption(),
             )
         )
+        key_path.chmod(0o600)
         cert_path.write_bytes(cert.public_bytes(serialization.Encoding.PEM))
         return key_path, cert_path
 
-    def build(cn, issuer, public, signer, ca):
+    def build(cn, issuer, public, signer_key, ca, days):
         builder = (
             x509.CertificateBuilder()
             .subject_name(subject(cn))
             .issuer_name(issuer)
             .public_key(public)
             .serial_number(x509.random_serial_number())
-            .not_valid_before(now - datetime.timedelta(minutes=5))
-            .not_valid_after(now + datetime.timedelta(days=1))
+            .not_valid_before(now + datetime.timedelta(days=days[0]))
+            .not_valid_after(now + datetime.timedelta(days=days[1]))
             .add_extension(x509.BasicConstraints(ca=ca, path_length=None), critical=True)
         )
         if not ca:
@@ -296,15 +306,19 @@ def make_certificates(folder: Path, name: str = "swarm") -> dict[str, Path]:
                 ),
                 critical=False,
             )
-        return builder.sign(signer, hashes.SHA256())
+        return builder.sign(signer_key, hashes.SHA256())
 
     ca_key = ec.generate_private_key(ec.SECP256R1())
-    ca = build(f"{name} CA", subject(f"{name} CA"), ca_key.public_key(), ca_key, True)
-    _, ca_path = save("ca", ca_key, ca)
+    ca = build(f"{name} CA", subject(f"{name} CA"), ca_key.public_key(), ca_key, True, ca_days)
+    ca_key_path, ca_path = save("ca", ca_key, ca)
+    issuer, issuer_key = ca.subject, ca_key
+    if signer is not None:
+        issuer_key = serialization.load_pem_private_key(signer["ca_key"].read_bytes(), None)
+        issuer = x509.load_pem_x509_certificate(signer["ca"].read_bytes()).subject
     key = ec.generate_private_key(ec.SECP256R1())
-    cert = build(name, ca.subject, key.public_key(), ca_key, False)
+    cert = build(name, issuer, key.public_key(), issuer_key, False, host_days)
     key_path, cert_path = save("host", key, cert)
-    return {"ca": ca_path, "cert": cert_path, "key": key_path}
+    return {"ca": ca_path, "cert": cert_path, "key": key_path, "ca_key": ca_key_path}
 
 
 def tls_options(files):

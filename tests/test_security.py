@@ -2,6 +2,7 @@
 and attacks on a running swarm (forged, malformed and replayed messages, forged tokens)."""
 
 import threading
+import time
 
 import msgspec
 import numpy as np
@@ -115,8 +116,47 @@ def test_a_key_file_is_private_never_overwritten_and_read_back(tmp_path):
     with pytest.raises(ValueError, match="cannot read"):
         Credential.read(tmp_path / "link")
     (tmp_path / "bad").write_text('{"uavtrack_credential": 1, "run": "x"}')
+    (tmp_path / "bad").chmod(0o600)
     with pytest.raises(ValueError, match="missing or malformed"):
         Credential.read(tmp_path / "bad")
+
+
+@pytest.mark.parametrize("mode", [0o644, 0o640, 0o604, 0o660, 0o606], ids=lambda m: f"{m:04o}")
+def test_a_key_file_open_to_others_is_refused_with_the_fix(tmp_path, mode):
+    # as ssh refuses a private key: a key file others may read may have been stolen
+    path = tmp_path / "k.key"
+    Keyring(RUN, 2).credential(1).write(path)
+    path.chmod(mode)
+    with pytest.raises(ValueError) as refused:
+        Credential.read(path)
+    said = str(refused.value)
+    assert f"permissions {mode:04o} are too open" in said and f"chmod 600 {path}" in said
+    path.chmod(0o600)  # the fix it names works
+    assert Credential.read(path).program == 1
+
+
+def test_a_key_file_is_written_private_whatever_the_umask(tmp_path):
+    import os
+
+    old = os.umask(0o277)  # would leave a file created 0600 at 0400
+    try:
+        Keyring(RUN, 2).credential(0).write(tmp_path / "k.key")
+    finally:
+        os.umask(old)
+    assert (tmp_path / "k.key").stat().st_mode & 0o777 == 0o600
+    assert Credential.read(tmp_path / "k.key").program == 0
+
+
+def test_uavtrack_agent_refuses_a_key_file_others_can_read(tmp_path, capsys):
+    from uavtrack import cli
+
+    path = tmp_path / "k.key"
+    Keyring(RUN, 2).credential(1).write(path)
+    path.chmod(0o644)
+    code = cli.main(["agent", "--key", str(path), "--connect", "tcp/127.0.0.1:1"])
+    out, err = capsys.readouterr()
+    assert code == 2 and out == "" and err.count("\n") == 1
+    assert "--key:" in err and "0644 are too open" in err and f"chmod 600 {path}" in err
 
 
 # ------------------------------------------------------------------ what a run admits
@@ -233,6 +273,109 @@ def test_a_mailbox_keeps_a_bounded_window_whatever_a_member_sends():
     assert all(len(rounds) <= spec().rounds + 1 for rounds in box.radio.values())
     assert box.drops["outside the window of cycles"] > 1500
     assert box.drops["round out of range"] > 0
+
+
+def test_what_comes_before_the_hello_is_bounded_in_bytes_and_its_drops_counted():
+    # before the Hello nothing can be opened, so a program keeps what comes, unverified:
+    # whatever a stranger sends, in whatever names, it keeps at most a few MB
+    ring, _, (g0, g1, _) = gates()
+    box = Mailbox(Gate(RUN, 1, 0, ring.credential(1)))
+
+    def kept():
+        return sum(len(p) for queue in box._early.values() for p in queue)
+
+    junk = b"\x00" * (1 << 20)
+    for sender in range(12):  # 12 MB of large messages, each in another's name
+        box.handler("k", msgspec.msgpack.encode(Envelope(sender, 1, 1, junk, b"")))
+    assert kept() == 0 and box.drops == {"too large before the run's keys": 12}
+    body = b"\x00" * 60_000  # under a sender's share: 200 senders' worth is 12 MB
+    for sender in range(200):
+        for seq in (1, 2):
+            box.handler("k", msgspec.msgpack.encode(Envelope(sender, 1, seq, body, b"")))
+    assert 3 << 20 < kept() <= 4 << 20  # 4 MB in all
+    assert all(len(queue) == 1 for queue in box._early.values())  # one 60 kB each
+    assert box.drops["over the buffer before the run's keys"] > 200  # of 400
+    # a member's presence said before the Hello is refused while the buffer is full, and
+    # opened once said again after it: nothing honest is lost for good
+    presence = radio([Part("presence", 0, 0, {"heard": Array.of(np.ones(3, dtype=bool))})], -1, 0)
+    box.handler("k", g0.seal(1, encode(presence)))
+    box.gate.programs = 3  # the Hello's count, as serve() sets it
+    box.learn(spec(), ring.public())
+    assert box.early_bytes == 0 and not box._early
+    box.handler("k", g0.seal(1, encode(presence)))
+    assert box.content(-1, "presence", 0, 0) is not None
+
+
+def test_a_token_is_a_hint_about_programs_heard_and_an_authentic_word_takes_it_back():
+    ring, _, (g0, g1, _) = gates()
+    bus = Bus()
+    box = Mailbox(g1, spec(), MemoryTransport(bus))
+    box.transport.watch(f"uavtrack/{RUN}/alive/", box.lost)  # as the world watches
+    stranger = MemoryTransport(bus)
+    stranger.announce(f"uavtrack/{RUN}/alive/0")  # in 0's name, before 0 said a word
+    stranger.announce(f"uavtrack/{RUN}/alive/2")
+    stranger.close()  # both go: no one here heard from 0 or 2, nothing is believed
+    assert not box.wait(lambda: False, time.monotonic() + 0.3)
+    assert not box.gone and not box.suspects
+    hello = radio([Part("presence", 0, 0, {"heard": Array.of(np.ones(3, dtype=bool))})], -1, 0)
+    member = MemoryTransport(bus)
+    member.announce(f"uavtrack/{RUN}/alive/0")  # program 0 makes its token, then speaks
+    box.handler("k", g0.seal(1, encode(hello)))
+    assert box.heard == {0}
+    stranger = MemoryTransport(bus)
+    stranger.announce(f"uavtrack/{RUN}/alive/0")
+    stranger.close()  # a copy of 0's token goes: 0's own is still there
+    assert not box.wait(lambda: False, time.monotonic() + 0.3)
+    assert not box.gone
+    member.close()  # 0's own token goes: confirmed, 0 is gone
+    assert box.wait(lambda: box.is_gone(0), time.monotonic() + 30)
+    box.handler("k", g0.seal(1, encode(hello)))  # and yet it speaks: it is back
+    assert not box.is_gone(0)
+
+
+def test_tokens_that_come_and_go_without_end_never_hold_a_wait_past_its_deadline():
+    _, _, (g0, g1, _) = gates()
+    bus = Bus()
+    box = Mailbox(g1, spec(), MemoryTransport(bus))
+    box.transport.watch(f"uavtrack/{RUN}/alive/", box.lost)  # as the world watches
+    member = MemoryTransport(bus)
+    member.announce(f"uavtrack/{RUN}/alive/0")
+    box.handler("k", g0.seal(1, encode(radio([], -1, 0))))
+    stop = threading.Event()
+    asked = []
+    original = MemoryTransport.alive
+
+    def counted(self, key):
+        asked.append(key)
+        return original(self, key)
+
+    def flap():  # a copy of member 0's token, and one of 2, which no program holds
+        while not stop.is_set():
+            for program in (0, 2):
+                copy = MemoryTransport(bus)
+                copy.announce(f"uavtrack/{RUN}/alive/{program}")
+                copy.close()
+
+    box.transport.alive = counted.__get__(box.transport)
+    flapper = threading.Thread(target=flap, daemon=True)
+    flapper.start()
+    done = {}
+
+    def wait():
+        start = time.monotonic()
+        done["ok"] = box.wait(lambda: False, start + 2.0)
+        done["took"] = time.monotonic() - start  # 2 s, or more on a machine that stalls
+
+    waiter = threading.Thread(target=wait)
+    try:
+        waiter.start()
+        waiter.join(60)  # a wait that kept confirming would never end
+    finally:
+        stop.set()
+        flapper.join(10)
+    assert done["ok"] is False and not box.gone
+    # a check (one query, two when it finds nothing) per half second at most
+    assert 1 <= len(asked) <= 2 * (done["took"] / 0.5 + 1)
 
 
 # ------------------------------------------------------------------ attacks on a swarm
@@ -444,3 +587,31 @@ def test_a_forged_liveliness_token_loses_no_healthy_uav():
     assert "key" in done
     assert swarm.traffic.lost == {}
     assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "distributed", seed=1).trace)
+
+
+def test_the_security_page_backs_every_line_with_a_test_that_exists():
+    # docs/security.md: each row of its tables names tests as `file.py::test` (or
+    # `::test`, of the file named before in the row); each must be a test of that file
+    import re
+    from pathlib import Path
+
+    root = Path(__file__).parent.parent
+    page = (root / "docs" / "security.md").read_text()
+    lines = page.splitlines()
+    rows = [
+        row
+        for row, after in zip(lines, lines[1:] + [""], strict=True)
+        if row.startswith("| ") and not after.startswith("|---")  # not a table's header
+    ]
+    named = 0
+    for row in rows:
+        refs = re.findall(r"`(\w+\.py)?::(test_\w+)`", row)
+        assert refs or "not defended" in row, row
+        current = None
+        for module, test in refs:
+            current = module or current
+            assert current is not None, row
+            source = (root / "tests" / current).read_text()
+            assert f"def {test}(" in source, (current, test)
+            named += 1
+    assert named >= 30

@@ -26,8 +26,14 @@ def main() -> int:
     from .transport import ZenohOptions, ZenohTransport, zenoh_reason
 
     credential = Credential.from_json(spec["credential"]) if spec["credential"] else None
+    options = ZenohOptions(**spec["zenoh"])
+    try:  # this program's own TLS files, named if its peers would refuse them
+        options.check(spec["connect"])
+    except ValueError as exc:
+        print(f"program {spec['program']}: {exc}", file=sys.stderr)
+        return 2
     try:
-        transport = ZenohTransport([], spec["connect"], ZenohOptions(**spec["zenoh"]))
+        transport = ZenohTransport([], spec["connect"], options)
     except Exception as exc:  # the world is already gone, or its endpoint refuses
         print(f"program {spec['program']}: cannot join: {zenoh_reason(exc)}", file=sys.stderr)
         return 1

@@ -65,7 +65,9 @@ class Hello(msgspec.Struct, tag="hello", frozen=True):
     """The run: its scenario (JSON), method, the trial's fault key, every UAV's prior
     (mean (Nt, 4) and covariance (4, 4)), the deadline of a round [s], whether its
     messages are authenticated and the programs' X25519 public keys (the world's last),
-    and the step the run is at (-1: not started; programs join only before)."""
+    the step the run is at (-1: not started; programs join only before), and the members:
+    the programs whose authentic Ready the world has (and has not lost since), whose
+    numbers no other program may take."""
 
     version: int
     run: str
@@ -78,6 +80,7 @@ class Hello(msgspec.Struct, tag="hello", frozen=True):
     authenticated: bool
     publics: list[bytes]
     step: int = -1
+    members: list[int] = []
 
 
 class Sense(msgspec.Struct, tag="sense", frozen=True):

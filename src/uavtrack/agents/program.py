@@ -36,11 +36,13 @@ class Served:
     "done" (every step), "failed" (the world said this UAV failed, at step `at`),
     "world gone" (the world ended or went silent at step `at`), "no world" (no world of
     the run answered), "not in run" (this program's number is not one of the run's),
-    "taken" (another program with this number is running), "under way" (the run had
-    started, at step `at`), "needs key" (the run authenticates its members and this
-    program has no key), "not authentic" (the only world that answered could not prove
-    it is the run's: another key file's, or a forgery), "other run" (only worlds of
-    other runs, `others`, answered)."""
+    "taken" (the world's Hello names this number a member: another program holding its
+    key runs it), "under way" (the run had started, at step `at`), "needs key" (the run
+    authenticates its members and this program has no key), "wrong key" (the key this
+    program holds is not the one the world's Hello names for its number: a damaged or
+    forged key file), "not authentic" (the only world that answered could not prove it
+    is the run's: another key file's, or a forgery), "other run" (only worlds of other
+    runs, `others`, answered)."""
 
     ran: int
     steps: int
@@ -90,7 +92,9 @@ def serve(
         return Served(0, scenario.steps, "needs key", programs=programs, central=central)
     if me >= programs:
         return Served(0, scenario.steps, "not in run", programs=programs, central=central)
-    if transport.alive(f"{k_['alive']}{me}"):  # another program with this number runs
+    if hello.authenticated and not _holds(credential, hello.publics, me):
+        return Served(0, scenario.steps, "wrong key", programs=programs, central=central)
+    if me in hello.members:  # the world's word, signed: not a token anyone can make
         return Served(0, scenario.steps, "taken", programs=programs, central=central)
     if hello.step >= 0:
         return Served(0, scenario.steps, "under way", hello.step, programs, central)
@@ -118,6 +122,12 @@ def serve(
     finally:
         if node is not None:
             node.close()
+
+
+def _holds(credential: Credential, publics: list[bytes], me: int) -> bool:
+    """Whether `credential` holds the private key of the public key the Hello names for
+    program `me`."""
+    return me < len(publics) and credential.public() == bytes(publics[me])
 
 
 def _cycles(transport, link, mailbox, program, node, run, me, n, programs, central, scenario,
@@ -199,8 +209,9 @@ OTHERS = 3.0
 """Seconds a program waits for its own world once worlds of other runs have answered."""
 
 
-def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:
-    """Say who this program has heard, to every program that has not yet heard it."""
+def _presence(link: Link, mailbox: Mailbox, me: int, programs: int, world: bool = False) -> None:
+    """Say who this program has heard, to every program that has not yet heard it, and
+    with `world` to the world too until its Hello names this program a member."""
     heard = np.zeros(programs, dtype=bool)
     acknowledged = np.zeros(programs, dtype=bool)
     with mailbox.cond:
@@ -213,17 +224,22 @@ def _presence(link: Link, mailbox: Mailbox, me: int, programs: int) -> None:
     body = encode(Radio(VERSION, link.run, -1, me, [part("presence", 0, {"heard": heard})]))
     for q in np.flatnonzero(~acknowledged):
         link.send_body(int(q), body)
+    hello = mailbox.inbox.get(("hello",))
+    if world and hello is not None and me not in hello.members:
+        link.send_body(WORLD, body)
 
 
 def meet(link: Link, mailbox: Mailbox, me: int, programs: int, wait: float) -> bool:
     """Announce this program to the others until it has heard every one of them (UAVs
     0 .. N-1 and the central node N if any): then the routes between all programs
-    exist, and no message of the first cycle is lost to a subscription still in transit."""
+    exist, and no message of the first cycle is lost to a subscription still in transit.
+    The world hears it too: its authentic presence makes this program a member, which
+    the world's Hello then names, so a second program with the same key is refused."""
     others = [p for p in range(programs) if p != me]
     heard = lambda: all(mailbox.content(-1, "presence", p, 0) is not None for p in others)  # noqa: E731
     limit = time.monotonic() + wait
     while time.monotonic() < limit and not mailbox.world_gone:
-        _presence(link, mailbox, me, programs)
+        _presence(link, mailbox, me, programs, world=True)
         if mailbox.wait(heard, time.monotonic() + 0.1):
             return True
     return False

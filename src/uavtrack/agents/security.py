@@ -27,7 +27,9 @@ Trust).
 
 What this does not do: hide the messages from the network (use TLS, `--tls-*`: mutual
 TLS lets only holders of a certificate of the swarm's CA connect at all), or keep a
-program whose key is stolen from speaking as itself.
+program whose key is stolen from speaking as itself. A key file is refused when others
+than its owner may read it (as ssh refuses a private key), since a key file that others
+can read is a key that may have been stolen.
 """
 
 from __future__ import annotations
@@ -89,6 +91,25 @@ def _crypto():
     return hashes, ed25519, x25519, HKDF
 
 
+def check_private(path: Path | str, mode: int) -> None:
+    """ValueError when a secret file of permission bits `mode` is open to its group or to
+    others (as ssh refuses such a private key), naming the file and the fix."""
+    if os.name == "posix" and mode & 0o077:
+        raise ValueError(
+            f"{path}: permissions {stat.S_IMODE(mode):04o} are too open (a key must be "
+            f"private to its owner); chmod 600 {path}"
+        )
+
+
+def public_of(secret: bytes) -> bytes:
+    """The X25519 public key (32 bytes) of the private key `secret` (32 bytes)."""
+    from cryptography.hazmat.primitives import serialization
+
+    _, _, x25519, _ = _crypto()
+    key = x25519.X25519PrivateKey.from_private_bytes(secret).public_key()
+    return key.public_bytes(serialization.Encoding.Raw, serialization.PublicFormat.Raw)
+
+
 @dataclass(frozen=True)
 class Credential:
     """What one program needs to join a run: the run, its number, its X25519 private
@@ -133,23 +154,32 @@ class Credential:
         return out
 
     def write(self, path: Path) -> None:
-        """Write to `path`, readable by the owner only; never through a link, never
-        over an existing file."""
+        """Write to `path`, readable and writable by the owner only (mode 0600 whatever
+        the umask); never through a link, never over an existing file."""
         flags = os.O_WRONLY | os.O_CREAT | os.O_EXCL | getattr(os, "O_NOFOLLOW", 0)
         fd = os.open(path, flags, 0o600)
         with os.fdopen(fd, "w", encoding="ascii") as handle:
+            if os.name == "posix":  # a umask takes bits away: with 0o277 it would be 0400
+                os.fchmod(handle.fileno(), 0o600)
             handle.write(self.to_json() + "\n")
+
+    def public(self) -> bytes:
+        """This program's X25519 public key, as the world's Hello names it."""
+        return public_of(self.secret)
 
     @classmethod
     def read(cls, path: Path) -> Credential:
-        """The credential in the file `path`; ValueError naming what is wrong."""
+        """The credential in the file `path`; ValueError naming what is wrong (also a
+        file that its group or others may read: `check_private`)."""
         try:
             fd = os.open(path, os.O_RDONLY | getattr(os, "O_NOFOLLOW", 0))
         except OSError as exc:
             raise ValueError(f"cannot read {path}: {exc.strerror}") from None
         with os.fdopen(fd, encoding="ascii", errors="replace") as handle:
-            if not stat.S_ISREG(os.fstat(handle.fileno()).st_mode):
+            mode = os.fstat(handle.fileno()).st_mode
+            if not stat.S_ISREG(mode):
                 raise ValueError(f"{path} is not a regular file")
+            check_private(path, mode)
             text = handle.read(4096)
         try:
             return cls.from_json(text)

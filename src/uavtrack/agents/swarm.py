@@ -207,6 +207,10 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
             f"--transport zenoh needs eclipse-zenoh: {install_hint('agents')}"
         ) from None
     endpoint = world_endpoint(o.listen, o.zenoh.tls)
+    try:  # before Zenoh: a certificate its peers refuse would show only as timeouts
+        o.zenoh.check([endpoint, *o.connect])
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     try:
         link = ZenohTransport([endpoint], list(o.connect), o.zenoh, mode="router")
     except Exception as exc:  # zenoh reports a busy port, a bad endpoint, no answer so

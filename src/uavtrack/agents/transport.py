@@ -76,7 +76,7 @@ class Transport:
     def watch(self, key: str, on_gone: Callable[[str], None]) -> None:
         """Call on_gone(key) when a token announced as `key` (or under it, when it ends
         with a slash) is gone. Anyone on the network can make and drop a token: treat
-        it as a hint and confirm with `alive`."""
+        it as a hint, about a program already heard, and confirm with `alive`."""
 
     def alive(self, key: str) -> set[str]:
         """The keys announced now as `key` (or under it, when it ends with a slash)."""
@@ -179,6 +179,16 @@ class ZenohOptions:
     @property
     def tls(self) -> bool:
         return self.tls_ca is not None
+
+    def check(self, endpoints: list[str]) -> None:
+        """ValueError naming what is wrong, before Zenoh starts: TLS files with an endpoint
+        they do not secure (it would run in clear text), or TLS files of this host that its
+        peers would refuse (`tls.check`)."""
+        if self.tls:
+            from . import tls
+
+            tls.refuse_clear(endpoints)
+            tls.check(self.tls_ca, self.tls_cert, self.tls_key)
 
 
 def zenoh_config(
@@ -336,6 +346,15 @@ EARLY = 4
 Hello): the latest; older ones are superseded (presence messages, sent again and again)."""
 EARLY_SENDERS = 1024
 """Senders named by early payloads a program keeps at most."""
+EARLY_BYTES = 64 * 1024
+"""Bytes of early payloads a program keeps per sender named: an early message of the
+protocol is a presence (a few bytes per program), so a larger one is not one of the run's."""
+EARLY_TOTAL = 4 * 1024 * 1024
+"""Bytes of early payloads a program keeps in all: unverified until the Hello, they may
+all be a stranger's, who names any sender it likes."""
+CONFIRM_EVERY = 0.5
+"""Seconds between two checks of the tokens said gone: a stranger who makes and drops
+tokens as fast as it can costs a program one liveliness query per half second."""
 
 
 class Mailbox:
@@ -346,8 +365,15 @@ class Mailbox:
     from which a sender's content is final; other messages by kind. `now` is the
     program's current cycle: radio messages of cycles outside `spec`'s window around it
     are dropped, as are those of forgotten cycles. Every drop is counted in `drops`, by
-    reason. `received` counts the payloads delivered here. A liveliness token that goes
-    is a suspect until `transport` confirms it gone.
+    reason. `received` counts the payloads delivered here.
+
+    Liveliness is a hint, never a belief: anyone who reaches the network can make and
+    drop a token in any name. A token that goes counts only for a program `heard` (an
+    authentic message of it was opened here: it had made its own token before it said a
+    word, and no one else can drop that token); it is a suspect until `transport`
+    confirms it gone (asked twice), at most once per `CONFIRM_EVERY` seconds; then it is
+    in `gone`. An authentic message of a program said gone takes it back: gone is "heard
+    from, then its own token gone", never "a token went".
     """
 
     def __init__(
@@ -364,20 +390,28 @@ class Mailbox:
         self.received = 0
         self.now = -1
         self.oldest = -(2**62)  # radio messages of earlier cycles are no longer needed
-        self.gone: set[str] = set()
-        self.suspects: set[str] = set()
+        self.heard: set[int] = set()
+        self.gone: set[int] = set()
+        self.suspects: set[int] = set()
         self.joins = 0
         self._early: dict[int, deque[bytes]] = {}
+        self._early_bytes = 0
+        self._confirmed = -float("inf")
         self._need: Callable[[], bool] | None = None
 
     @property
     def world_gone(self) -> bool:
-        """Whether the world program's token is gone (confirmed)."""
-        return any(key.endswith("/alive/world") for key in self.gone)
+        """Whether the world program is gone (heard, then its token confirmed gone)."""
+        return WORLD in self.gone
 
     def is_gone(self, program: int) -> bool:
-        """Whether program `program`'s token is gone (confirmed)."""
-        return any(key.endswith(f"/alive/{program}") for key in self.gone)
+        """Whether program `program` is gone (heard, then its token confirmed gone)."""
+        return program in self.gone
+
+    @property
+    def early_bytes(self) -> int:
+        """Bytes of the payloads kept until the Hello."""
+        return self._early_bytes
 
     @property
     def dropped(self) -> int:
@@ -398,17 +432,34 @@ class Mailbox:
         with self.cond:
             self.received += 1
             if self.spec is None and key != self.hello_key:
-                sender = peek_sender(payload)
-                if sender is None:
-                    self._drop("malformed")
-                elif sender in self._early or len(self._early) < EARLY_SENDERS:
-                    self._early.setdefault(sender, deque(maxlen=EARLY)).append(payload)
-                else:
-                    self._drop("before the run's keys")
+                self._keep_early(payload)
                 return
             self._take(payload)
             if self._need is None or self._need():
                 self.cond.notify_all()
+
+    def _keep_early(self, payload: bytes) -> None:
+        """Keep a payload that came before the Hello (it cannot be opened yet), within
+        `EARLY` payloads and `EARLY_BYTES` per sender it names, `EARLY_SENDERS` senders
+        and `EARLY_TOTAL` bytes: a sender's oldest go first; what does not fit is dropped
+        by reason (a presence dropped here is said again after the Hello)."""
+        sender = peek_sender(payload) if len(payload) <= EARLY_BYTES else None
+        if len(payload) > EARLY_BYTES:  # not even decoded
+            reason = "too large before the run's keys"
+        elif sender is None:
+            reason = "malformed"
+        elif self._early_bytes + len(payload) > EARLY_TOTAL:
+            reason = "over the buffer before the run's keys"
+        elif sender not in self._early and len(self._early) >= EARLY_SENDERS:
+            reason = "before the run's keys"
+        else:
+            queue = self._early.setdefault(sender, deque())
+            queue.append(payload)
+            self._early_bytes += len(payload)
+            while len(queue) > EARLY or sum(map(len, queue)) > EARLY_BYTES:
+                self._early_bytes -= len(queue.popleft())  # superseded by the newer
+            return
+        self._drop(reason)
 
     def joined(self, key: str, payload: bytes) -> None:
         """A program asks for the Hello (the world's side; the request is not read)."""
@@ -420,7 +471,7 @@ class Mailbox:
         with self.cond:
             self.gate.learn(publics)
             self.spec = spec
-            early, self._early = self._early, {}
+            early, self._early, self._early_bytes = self._early, {}, 0
             for payload in (p for queue in early.values() for p in queue):
                 self._take(payload)
             self.cond.notify_all()
@@ -430,6 +481,8 @@ class Mailbox:
         if isinstance(opened, str):
             return
         sender, body = opened
+        self.heard.add(sender)  # an authentic word: the sender is a member, and not gone
+        self.gone.discard(sender)
         message = decode(body, self.run)
         if message is None:
             self._drop("malformed")
@@ -451,6 +504,8 @@ class Mailbox:
         if isinstance(message, Radio):
             if message.sender != sender:
                 return "not from its sender"
+            if self.me == WORLD and message.k == -1:  # a presence: the world needs only to
+                return None  # have heard it (`heard`), whenever it comes
             if message.k < self.oldest:
                 return "outside the window of cycles"
             parts = spec.radio(message, max(self.now, 0))
@@ -501,10 +556,14 @@ class Mailbox:
         return "not from its sender"
 
     def lost(self, key: str) -> None:
-        """A liveliness token went away: a hint, confirmed by the program before use."""
+        """A liveliness token went away: a hint, about a program heard only (see the
+        class docstring), confirmed before use."""
+        tail = key.rsplit("/", 1)[-1]
+        program = WORLD if tail == "world" else int(tail) if tail.isdigit() else None
         with self.cond:
-            self.suspects.add(key)
-            self.cond.notify_all()
+            if program is not None and program in self.heard:
+                self.suspects.add(program)
+                self.cond.notify_all()
 
     def content(self, k: int, protocol: str, sender: int, round_: int):
         """The content of a sender's round (or its final content), or None if not here."""
@@ -522,7 +581,8 @@ class Mailbox:
     def wait(self, ready: Callable[[], bool], deadline: float) -> bool:
         """Wait until ready() holds (checked under the lock) or the deadline passes; the
         program is woken when ready() holds, when a token goes (confirmed with the
-        transport before `gone` takes it), or every half second.
+        transport, at most once per `CONFIRM_EVERY` s, before `gone` takes it), or every
+        half second. Tokens that go, however many, never keep a wait past its deadline.
 
         Time this process spent stopped (SIGSTOP, a suspended machine) does not count
         against the deadline: when a half-second wait took much longer, the deadline
@@ -531,13 +591,17 @@ class Mailbox:
             self._need = ready
             try:
                 while not ready():
-                    if self.suspects:
+                    now = time.monotonic()
+                    due = self._confirmed + CONFIRM_EVERY
+                    if self.suspects and now >= due:
                         self._confirm()
                         continue
-                    left = deadline - time.monotonic()
+                    left = deadline - now
                     if left <= 0:
                         return False
                     slice_ = min(left, 0.5)
+                    if self.suspects:
+                        slice_ = min(slice_, due - now)
                     before = time.monotonic()
                     self.cond.wait(slice_)
                     stopped = time.monotonic() - before - slice_
@@ -547,22 +611,26 @@ class Mailbox:
             finally:
                 self._need = None
 
+    def _token(self, program: int) -> str:
+        return keys(self.run)["alive"] + ("world" if program == WORLD else str(program))
+
     def _confirm(self) -> None:
         """Move the suspects whose tokens are really gone to `gone`; called with the lock
         held, which it releases while it asks the transport."""
         suspects, self.suspects = set(self.suspects), set()
         if self.transport is None:
-            self.gone |= suspects
-            return
-        self.cond.release()
-        try:  # asked twice: one query may go unanswered on a loaded machine
-            gone = {key for key in suspects if not self.transport.alive(key)}
-            if gone:
-                time.sleep(0.2)
-                gone = {key for key in gone if not self.transport.alive(key)}
-        finally:
-            self.cond.acquire()
+            gone = suspects
+        else:
+            self.cond.release()
+            try:  # asked twice: one query may go unanswered on a loaded machine
+                gone = {p for p in suspects if not self.transport.alive(self._token(p))}
+                if gone:
+                    time.sleep(0.2)
+                    gone = {p for p in gone if not self.transport.alive(self._token(p))}
+            finally:
+                self.cond.acquire()
         self.gone |= gone
+        self._confirmed = time.monotonic()
 
     def take(self, identity: tuple):
         with self.cond:

@@ -9,11 +9,14 @@ deadline), flies the UAVs and records the cycle with the simulator's own `Cycle`
 `metrics.Tally` and `simulation.Recorder`, so a swarm's trace and metrics have the
 format of `uavtrack run`'s.
 
-A program that misses its report of a cycle, or whose process is gone (its liveliness
-token dropped, confirmed by asking for it again), is lost from that cycle on: the cycle
-records it as failed (no estimate, no observation, no decision), so every metric masks
-it in the one place it masks failed UAVs. Without the central node (centralized
-method), each UAV keeps its own filter and its last assigned target.
+A program takes its number only by an authentic message (its presence as it meets the
+others, then its `Ready`; sealed with its own key): then it is a member, and the world's
+Hello names it, so no other program takes the number. A member that misses its report
+of a cycle, or whose process is gone (its own liveliness token dropped, confirmed by
+asking for it again; a token is a hint, see `transport.Mailbox`), is lost from that
+cycle on: the cycle records it as failed (no estimate, no observation, no decision), so
+every metric masks it in the one place it masks failed UAVs. Without the central node
+(centralized method), each UAV keeps its own filter and its last assigned target.
 """
 
 from __future__ import annotations
@@ -98,14 +101,18 @@ class WorldProgram:
         self.clock: Callable[[int], None] | None = None
         """Told each step k as it begins, before the step's Sense goes out (the ROS 2 /clock)."""
         self.step = -1
+        self.members: set[int] = set()
+        """Programs heard from (an authentic message) and not gone or lost since."""
         self.central_alive = self.method.central
         self.prior: tuple[np.ndarray, np.ndarray] | None = None
         self._answered = 0
 
     def _gone(self) -> set[int]:
-        """The programs whose processes are gone (tokens confirmed gone)."""
-        tails = (key.rsplit("/", 1)[-1] for key in self.mailbox.gone)
-        return {int(t) for t in tails if t.isdigit()}
+        """The members whose processes are gone: heard from, then their own tokens
+        confirmed gone (a token is a hint: it only cuts the wait for the report of a
+        program that will not send one)."""
+        with self.mailbox.cond:  # an authentic word, on Zenoh's thread, takes one back
+            return self.mailbox.gone & self.members
 
     @property
     def programs(self) -> list[int]:
@@ -127,6 +134,7 @@ class WorldProgram:
             self.link.gate.authenticates,
             self.keyring.public() if self.keyring is not None else [],
             self.step,
+            sorted(self.members),
         )
         self.link.hello(message)
 
@@ -143,17 +151,16 @@ class WorldProgram:
             self.hello()
             self.mailbox.wait(lambda: False, min(deadline, time.monotonic() + 0.2))
             waiting = {p for p in waiting if self.mailbox.take(("ready", p)) is None}
+            with self.mailbox.cond:  # a program that went before the run is no member
+                self.members = (self.mailbox.heard - self.mailbox.gone) & set(self.programs)
             if waiting and time.monotonic() > deadline:
                 raise TimeoutError(self._not_started(waiting))
+        self.members = set(self.programs)  # all ready: one gone since is lost at step 0
 
     def _not_started(self, waiting: set[int]) -> str:
-        """Which programs kept the run from starting, and which were there."""
-        present = {
-            int(k.rsplit("/", 1)[-1])
-            for k in self.transport.alive(self.keys["alive"])
-            if k.rsplit("/", 1)[-1].isdigit()
-        }
-        missing = sorted(waiting - present) or sorted(waiting)
+        """Which programs kept the run from starting (never heard from, or gone), and
+        which were there (members: heard from, by authentic messages)."""
+        missing = sorted(waiting - self.members) or sorted(waiting)
         started = sorted(set(self.programs) - set(missing))
         names = ", ".join(map(str, missing))
         there = f"; {', '.join(map(str, started))} started and waited for them" if started else ""
@@ -188,6 +195,7 @@ class WorldProgram:
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
+                self.members.discard(int(i))  # its program ends with its UAV
             self._lose(k, alive, self._gone())
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
@@ -228,6 +236,7 @@ class WorldProgram:
         """Programs lost at step k (gone or silent): failed from k on, `alive` (1, N)
         updated in place."""
         n = self.scenario.n_uavs
+        self.members -= programs
         for i in sorted(programs):
             if i < n and alive[0, i]:
                 alive[0, i] = False

@@ -65,7 +65,9 @@ TlsKeyOpt = Annotated[
 
 def zenoh_options(config, ca, cert, key, endpoints: list[str]):
     """The Zenoh options of the command line, checked: readable files, the three TLS
-    files together, a tls/ endpoint only with them (or a configuration file)."""
+    files together, a tls/ endpoint only with them (or a configuration file), no clear
+    endpoint with them, and TLS files this host's peers would accept (in date, the
+    certificate the CA's, the key the certificate's and private: `agents.tls`)."""
     from ..agents.transport import ZenohOptions
 
     for option, path in (
@@ -88,6 +90,10 @@ def zenoh_options(config, ca, cert, key, endpoints: list[str]):
         )
     absolute = lambda p: None if p is None else str(p.expanduser().resolve())  # noqa: E731
     options = ZenohOptions(absolute(config), absolute(ca), absolute(cert), absolute(key))
+    try:
+        options.check(endpoints)
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if config is not None:
         try:
             import zenoh
@@ -468,7 +474,7 @@ def agent(
             raise Interrupted("the program left the swarm") from None
         finally:
             transport.close()
-        _ended(served, run, uav, connect)
+        _ended(served, run, uav, connect, key)
 
 
 def _join(connect: str, options):
@@ -483,7 +489,7 @@ def _join(connect: str, options):
         raise UsageError(f"cannot connect to {connect}: {transports.zenoh_reason(exc)}") from None
 
 
-def _ended(served, run: str, uav: int, connect: str) -> None:
+def _ended(served, run: str, uav: int, connect: str, key: Path | None = None) -> None:
     """Say how the program ended; bad input (a run it cannot join) exits 2."""
     usage = {
         "not in run": f"--uav {uav}: run {run} has programs 0 to {served.programs - 1} only",
@@ -492,6 +498,8 @@ def _ended(served, run: str, uav: int, connect: str) -> None:
         "before the first cycle",
         "needs key": f"run {run} authenticates its programs: give this program's key file "
         "with --key (uavtrack swarm --no-spawn --keys DIR writes them)",
+        "wrong key": f"--key: {key} does not hold program {uav}'s key of run {run} (the "
+        "world's Hello names another public key): a damaged or forged key file",
         "not authentic": f"the world of run {run} at {connect} did not prove it holds the "
         "run's key: check that --key is this run's key file",
         "other run": f"the world at {connect} runs {', '.join(served.others)}, not run {run}"
