@@ -9,7 +9,8 @@ test in the project goes through `assert_same_trace`, as PettingZoo's
 Decisions and truth must agree exactly: UAV and target states, observations,
 assignments, actions, who is alive. Estimates (mean, covariance) and bids are floats
 computed in different orders by different forms, so they agree to `atol` (1e-9 by
-default). Counters (rounds, messages) are compared when both traces hold them.
+default). Counters (rounds, messages, late messages) are compared when both traces hold
+them: a form whose messages missed their cycle says so in `late`.
 """
 
 from __future__ import annotations
@@ -18,7 +19,7 @@ import numpy as np
 
 EXACT = ("targets", "uavs", "observed", "assignment", "action", "alive")
 CLOSE = ("mean", "cov", "bids")
-COUNTERS = ("rounds", "messages", "delivered", "conflicts")
+COUNTERS = ("rounds", "messages", "delivered", "late", "conflicts")
 
 
 def differences(a, b, atol: float = 1e-9, counters: bool = True) -> list[str]:

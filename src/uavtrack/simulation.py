@@ -24,7 +24,7 @@ import numpy as np
 
 from . import estimation, flight, gate, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
-from .faults import Faults, trial_key
+from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
@@ -233,6 +233,13 @@ class Cycle:
         np.int64,
     )
     delivered: np.ndarray = _record("()", "radio messages that arrived", np.int64)
+    late: np.ndarray = _record(
+        f"({len(PROTOCOLS)},)",
+        "radio messages the fault model delivers that had not arrived when their receiver "
+        "stopped waiting, by protocol (" + ", ".join(PROTOCOLS) + "): late, or never sent "
+        "(their sender stopped or gone); always 0 in the simulator, whose radio is on time",
+        np.int64,
+    )
     conflicts: np.ndarray = _record(
         "()", "targets followed by two or more UAVs while another has none", np.int64
     )
@@ -406,6 +413,7 @@ def finish(
         rounds=fused.rounds,
         messages=fused.sent + assigned.sent,
         delivered=fused.delivered + assigned.delivered,
+        late=np.zeros((B, len(PROTOCOLS)), dtype=np.int64),
         conflicts=conflicts(target, alive, bids.shape[-1]),
         alive=alive,
         decision_time_ms=np.where(alive, ms[..., timing.CPU], np.nan),

@@ -8,10 +8,12 @@ wrote it) and ``format`` (the trace format, `FORMAT`). A failed UAV's rows of ``
 ``cov`` and ``bids`` are NaN from the step it fails.
 
 Which files are read: the format number, not the uavtrack version, decides. A file of
-this format (or one without a ``format`` entry, written before the number was stamped,
-whose layout is format 1) is read whatever uavtrack version wrote it; when that version
-differs from the running one, `read` says so with a `TraceVersionWarning` (the command
-line prints it as a note). A file of a newer format is refused, naming both versions.
+this format or of format 1 (or one without a ``format`` entry, written before the number
+was stamped, whose layout is format 1) is read whatever uavtrack version wrote it; when
+that version differs from the running one, `read` says so with a `TraceVersionWarning`
+(the command line prints it as a note). Format 1 has no ``late`` (messages that missed
+their cycle, counted from format 2): it is read as zeros, as those versions counted none.
+A file of a newer format is refused, naming both versions.
 """
 
 from __future__ import annotations
@@ -32,10 +34,14 @@ from ..errors import UsageError
 from ..files import write_npz
 from ..simulation import RECORDED, Result, Trace
 
-FORMAT = 1
+FORMAT = 2
 """The trace format this uavtrack writes and reads. It changes only when an array is
 added, removed or changes meaning; uavtrack versions that write the same format read
-each other's traces."""
+each other's traces. Format 2 added ``late``."""
+
+ADDED = {"late": 2}
+"""Arrays added after format 1, with the format that added them: a file of an older
+format is read with them at zero (nothing of theirs was counted then)."""
 
 EPOCH = datetime.datetime(2000, 1, 1)
 """Where a trace's simulated clock starts when a format wants a date (netCDF's CF time
@@ -94,9 +100,11 @@ def read(path: str | Path) -> TraceFile:
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{path}: not a uavtrack trace file ({exc})") from None
     version = str(arrays["uavtrack"]) if "uavtrack" in arrays else "unknown"
-    _check_format(path, arrays.get("format"), version)
+    written = _check_format(path, arrays.get("format"), version)
     names = ["targets"] + [f.name for f in RECORDED]
+    later = [f for f in RECORDED if ADDED.get(f.name, 0) > written and f.name not in arrays]
     missing = [n for n in names + ["scenario", "method"] if n not in arrays]
+    missing = [n for n in missing if n not in {f.name for f in later}]
     if missing:
         older = " (written before traces carried their scenario: run it again)"
         hint = older if "scenario" in missing and len(missing) <= 2 else ""
@@ -105,12 +113,17 @@ def read(path: str | Path) -> TraceFile:
         scenario = Scenario.from_dict(json.loads(str(arrays["scenario"])), origin=str(path))
     except (json.JSONDecodeError, ScenarioError) as exc:
         raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
+    if later:  # arrays of a later format, not counted when the file was written
+        sizes = {"Nu": scenario.n_uavs, "Nt": scenario.n_targets}
+        steps = arrays["targets"].shape[0] if arrays["targets"].ndim else 0
+        for f in later:
+            arrays[f.name] = np.zeros(_shape(f, sizes, steps), f.metadata["dtype"])
     _check_shapes(path, arrays, scenario)
     if version != __version__:
         writer = "an unknown uavtrack version" if version == "unknown" else f"uavtrack {version}"
         warnings.warn(
             f"{path} was written by {writer}; uavtrack {__version__} reads it as trace "
-            f"format {FORMAT}",
+            f"format {written}",
             TraceVersionWarning,
             stacklevel=2,
         )
@@ -119,16 +132,16 @@ def read(path: str | Path) -> TraceFile:
     return TraceFile(trace, scenario, str(arrays["method"]), seed, version)
 
 
-def _check_format(path: Path, entry: np.ndarray | None, version: str) -> None:
-    """Refuse a format this version cannot read; no entry is format 1."""
+def _check_format(path: Path, entry: np.ndarray | None, version: str) -> int:
+    """The file's format, or refuse one this version cannot read; no entry is format 1."""
     if entry is None:
-        return
+        return 1
     try:
         number = int(entry)
     except (TypeError, ValueError):
         number = None
-    if number == FORMAT:
-        return
+    if number is not None and 1 <= number <= FORMAT:
+        return number
     if number is not None and number > FORMAT:
         raise UsageError(
             f"{path}: trace format {number}, written by uavtrack {version}, is newer than "
@@ -149,8 +162,7 @@ def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario)
     steps = targets.shape[0] if targets.ndim else 0
     expected = {"targets": (steps, scenario.n_targets, 4)}
     for f in RECORDED:
-        dims = [d.strip() for d in f.metadata["shape"].strip("()").split(",") if d.strip()]
-        expected[f.name] = (steps, *(sizes[d] if d in sizes else int(d) for d in dims))
+        expected[f.name] = _shape(f, sizes, steps)
     for name, shape in expected.items():
         array = arrays[name]
         if array.shape != shape:
@@ -161,6 +173,13 @@ def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario)
             )
         if not (np.issubdtype(array.dtype, np.number) or array.dtype == bool):
             raise UsageError(f"{path}: {name} holds {array.dtype}, not numbers")
+
+
+def _shape(f, sizes: dict[str, int], steps: int) -> tuple[int, ...]:
+    """The shape `Cycle` declares for field `f` over `steps` steps, its team's sizes
+    (``Nu``, ``Nt``) from `sizes`."""
+    dims = [d.strip() for d in f.metadata["shape"].strip("()").split(",") if d.strip()]
+    return (steps, *(sizes[d] if d in sizes else int(d) for d in dims))
 
 
 def load(
