@@ -20,6 +20,7 @@ from uavtrack.agents.messages import (
     VERSION,
     Array,
     Hello,
+    Lost,
     Radio,
     Ready,
     Report,
@@ -37,7 +38,7 @@ BAD = ("nan", "+inf", "-inf", "zero", "negative", "1e300", "wrong shape", "wrong
 
 FLOATS = {"nan": math.nan, "+inf": math.inf, "-inf": -math.inf, "1e300": 1e300}
 OTHER_DTYPE = {"f": "<i8", "i": "<f8", "u": "<f8", "b": "<i8"}
-WORLDS = ("sense", "tick", "hello", "ready")
+WORLDS = ("sense", "tick", "hello", "ready", "lost")
 """Kinds only the world sends (and Ready, only about oneself): a member forges them."""
 
 
@@ -133,6 +134,7 @@ def forged(run: str, k: int, me: int, n: int, m: int) -> list:
             [b"k" * 32] * (n + 1),
         ),  # fmt: skip
         Ready(VERSION, run, me),
+        Lost(VERSION, run, k, (me + 1) % n, "forged"),
     ]
 
 

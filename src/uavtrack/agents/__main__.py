@@ -52,7 +52,8 @@ def main() -> int:
     if served.end in ("done", "failed"):
         return 0
     at = f" at step {served.at}" if served.at >= 0 else ""
-    print(f"program {spec['program']}: {served.end}{at}", file=sys.stderr)
+    why = f": {served.why}" if served.why else ""
+    print(f"program {spec['program']}: {served.end}{at}{why}", file=sys.stderr)
     return 1
 
 

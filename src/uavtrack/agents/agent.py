@@ -77,10 +77,11 @@ class AgentRadio:
         self.alive: dict[int, np.ndarray] = {}  # cycle -> (N,) alive
         self.central: dict[int, bool] = {}  # cycle -> the central node is alive
         self.bad: dict[int, np.ndarray | None] = {}  # cycle -> (N+1, N+1) link states
-        self.missing = 0  # expected messages that never came (a crashed sender)
+        self.late: dict[str, int] = {}  # this cycle's messages that missed it, by protocol
 
     def begin(self, k: int, links: np.ndarray, alive: np.ndarray, central: bool = True) -> None:
         self.links[k], self.alive[k], self.central[k] = links, alive, central
+        self.late = {}
         previous = self.bad.get(k - 1)
         states = self.faults.link_states(k, None if previous is None else previous[None])
         self.bad[k] = None if states is None else states[0]
@@ -135,11 +136,18 @@ class AgentRadio:
         with mailbox.cond:
             for q in expected:
                 value = mailbox.content(sent_at, protocol, q, round_)
-                if value is None:
-                    self.missing += 1
-                    continue
-                contents[q] = value
+                if value is not None:
+                    contents[q] = value
+        self.missed(protocol, len(expected) - len(contents))
         return Inbox(contents, len(senders), len(contents))
+
+    def missed(self, protocol: str, count: int) -> None:
+        """`count` messages of `protocol` that the fault model delivers had not come when
+        this program stopped waiting for them: late (or never sent: their sender stopped
+        or gone). The simulator's radio is never late, so a cycle with such a message
+        may decide otherwise than the simulator's: it is counted, never silent."""
+        if count > 0:
+            self.late[protocol] = self.late.get(protocol, 0) + count
 
 
 def dropped(mailbox: Mailbox, reasons: dict[str, int]) -> None:
@@ -252,6 +260,7 @@ class UavAgent:
             int(sent + more[0]),
             int(delivered + more[1]),
             *(1e3 * (plan_seconds + solve_seconds)).tolist(),  # CPU, wall
+            late=dict(self.radio.late),
         )
         self.mean, self.cov, self.modes = tracker.close(*belief, fused_mean, fused_cov)
         return report
@@ -462,9 +471,9 @@ class UavAgent:
                 mean[None, None], cov[None, None], down, arrived, s, k, self.measured
             )
         )
-        if not s.faulty:
+        if not s.faulty:  # the download arrived, or was late (counted in `_download`)
             one = int(self.n > 1)
-            return mean, cov, one, one, one, target
+            return mean, cov, one, one, one * int(arrived[0, 0]), target
         sent, delivered = upload or (
             int(self.radio.alive[k - self.radio.delay][self.me]),
             int(arrived[0, 0]),
@@ -491,6 +500,8 @@ class UavAgent:
                 time.monotonic() + self.radio.deadline,
             )
         content = mailbox.content(sent_at, "download", central, 0) if expect else None
+        if expect and content is None:  # late, or the node's token went: it never came
+            self.radio.missed("download", 1)
         if content is None:
             return nothing_heard(1, 1, self.m), np.zeros((1, 1), dtype=bool), -1
         content = self._plausible(content)
@@ -541,6 +552,7 @@ class CentralAgent:
             for q in expected:
                 content = mailbox.content(sent_at, "upload", q, 0)
                 if content is None:
+                    self.radio.missed("upload", 1)
                     continue
                 content = plausible(self.spec, mailbox, content)
                 heard[0, q] = True
@@ -551,8 +563,9 @@ class CentralAgent:
                 pass  # counted when sent: the downloads below
             elif s.faulty:
                 sent, delivered = int(alive_then.sum()), int(heard.sum())
-            else:
-                sent = delivered = n if n > 1 else 0
+            else:  # every upload arrives, but one that was late
+                sent = n if n > 1 else 0
+                delivered = int(heard.sum()) if n > 1 else 0
             down, targets = central_node(got, heard, reported, s, k)
         if s.delay > 0:
             for i in np.flatnonzero(alive):
@@ -565,5 +578,6 @@ class CentralAgent:
         cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(
-            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, cpu, wall
-        )
+            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, cpu, wall,
+            late=dict(self.radio.late),
+        )  # fmt: skip

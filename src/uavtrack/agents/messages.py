@@ -8,10 +8,11 @@ the wire each travels in a `security.Envelope` that names its sender and receive
 World -> everyone: `Hello` (the run's scenario, method, fault key, priors and the
 programs' public keys; signed by the world). World -> one program: `Sense` (a UAV's
 measurements, believed pose and radio links of one cycle), `Tick` (the central node's
-cycle). Program -> world: `Ready`, then a `Report` per cycle (the action and what the
-trace records). Program -> program: `Radio`, one per receiver and round, bundling the
-parts of the protocols that run in that round (the D_i flooding with the consensus,
-beacons with bids, uploads, downloads).
+cycle), `Lost` (the world no longer counts this program, and why). Program -> world:
+`Ready`, then a `Report` per cycle (the action, what the trace records, and the radio
+messages of the cycle that missed it). Program -> program: `Radio`, one per receiver and
+round, bundling the parts of the protocols that run in that round (the D_i flooding with
+the consensus, beacons with bids, uploads, downloads).
 
 `decode` returns None for anything malformed, of another version or of another run;
 `Spec` is the one rule of what a message of the run may hold, field by field
@@ -34,9 +35,10 @@ import msgspec
 import numpy as np
 
 from .. import estimation
+from ..faults import PROTOCOLS
 from ..plausibility import CONSISTENT, Bounds
 
-VERSION = 4
+VERSION = 5
 """Schema version; a message of another version is dropped."""
 
 
@@ -140,6 +142,18 @@ class Report(msgspec.Struct, tag="report", frozen=True):
     bytes: int = 0
     received: int = 0
     drops: dict[str, int] = {}
+    late: dict[str, int] = {}  # messages of this cycle that missed it, by protocol
+
+
+class Lost(msgspec.Struct, tag="lost", frozen=True):
+    """The world no longer counts this program, from step k, and why (one line): it
+    missed the cycle's deadline, or its session ended. Not a failure of the fault model."""
+
+    version: int
+    run: str
+    k: int
+    program: int
+    reason: str
 
 
 class Part(msgspec.Struct, array_like=True, frozen=True):
@@ -163,7 +177,7 @@ class Radio(msgspec.Struct, tag="radio", frozen=True):
     parts: list[Part]
 
 
-Message = Hello | Sense | Tick | Ready | Report | Radio
+Message = Hello | Sense | Tick | Ready | Report | Radio | Lost
 _encoder = msgspec.msgpack.Encoder()
 _decoder = msgspec.msgpack.Decoder(Message)
 
@@ -456,6 +470,9 @@ class Spec:
         if len(message.drops) > 64 or not all(
             len(reason) <= 80 and 0 <= c <= COUNT for reason, c in message.drops.items()
         ):
+            return "count out of range"
+        most = self.programs * (self.rounds + 1)  # a message per sender and round
+        if not all(p in PROTOCOLS and 0 <= c <= most for p, c in message.late.items()):
             return "count out of range"
         times = (message.decision_ms, message.decision_wall_ms)
         if not all(np.isfinite(t) and 0 <= t <= MILLISECONDS for t in times):

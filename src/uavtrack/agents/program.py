@@ -26,15 +26,19 @@ from .transport import ANY_HELLO, Link, Mailbox, Transport, inbox_key, keys
 
 STARTUP = 120.0
 """Seconds a program waits for the world's first message."""
-LINGER = 10.0
-"""Seconds a program that ran its last cycle waits for the world to finish."""
+LINGER = 30.0
+"""Seconds a program that ran its last cycle waits for the world to finish (answering it,
+should it ask again for the last report): longer than a world stopped past the Zenoh
+lease takes to hear its programs again once it runs."""
 
 
 @dataclass(frozen=True)
 class Served:
     """How a program ended: the cycles it ran of the run's `steps`, and why it stopped:
     "done" (every step), "failed" (the world said this UAV failed, at step `at`),
-    "world gone" (the world ended or went silent at step `at`), "no world" (no world of
+    "lost" (the world no longer counts this program from step `at`, for the reason
+    `why`: it missed a cycle's deadline, or its session ended; not a failure of the fault
+    model), "world gone" (the world ended or went silent at step `at`), "no world" (no world of
     the run answered), "not in run" (this program's number is not one of the run's),
     "taken" (the world's Hello names this number a member: another program holding its
     key runs it), "under way" (the run had started, at step `at`), "needs key" (the run
@@ -51,6 +55,7 @@ class Served:
     programs: int = 0
     central: bool = False
     others: tuple[str, ...] = ()
+    why: str = ""
 
     def name(self, me: int) -> str:
         """How to call program `me` of this run."""
@@ -144,11 +149,17 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
         _presence(link, mailbox, me, programs)  # until the run starts: others may need it
         mailbox.wait(lambda: first_ in mailbox.inbox or mailbox.world_gone, time.monotonic() + 0.1)
     counted = (transport.published, transport.bytes, mailbox.received)
-    ran, end, at = 0, "done", -1
+    ran, end, at, why = 0, "done", -1, ""
+    kind = "tick" if me == n else "sense"
+    last = None  # the last report sent
     for k in range(scenario.steps):
-        want = ("tick", k) if me == n else ("sense", k)
-        patience = time.monotonic() + wait
-        mailbox.wait(lambda want=want: want in mailbox.inbox or mailbox.world_gone, patience)
+        want = (kind, k)
+        asked = None if last is None else (kind, last.k)
+        answering(link, mailbox, last, asked, lambda want=want: want in mailbox.inbox, wait)
+        lost = mailbox.inbox.get(("lost",))
+        if lost is not None:  # the world no longer counts this program, and says why
+            end, at, why = "lost", lost.k, lost.reason
+            break
         got = mailbox.take(want)
         if got is None:  # the world is gone or silent: stop
             end, at = "world gone", k
@@ -168,15 +179,39 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
         )
         counted = now
         link.send(WORLD, report)
+        last = report
+        mailbox.take(want)  # asked again while this cycle ran: this report answers it
         if node is not None:
             bank = program.ctx.const.actions[report.action]
             node.publish(k, program.believed, bank, report.mean.array(), report.cov.array())
         ran += 1
     if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
         node.close()  # now, not when the lingering ends
-    # stay until the world is done: closing at once could lose the last report in flight
-    mailbox.wait(lambda: mailbox.world_gone, time.monotonic() + LINGER)
-    return Served(ran, scenario.steps, end, at, programs, central)
+    if end == "done" and last is not None:  # stay until the world is done: closing at
+        # once could lose the last report in flight, or leave the world asking for it
+        answering(link, mailbox, last, (kind, last.k), lambda: False, LINGER)
+    return Served(ran, scenario.steps, end, at, programs, central, why=why)
+
+
+def answering(link: Link, mailbox: Mailbox, last, asked, ready, seconds: float) -> None:
+    """Wait up to `seconds` until ready() holds, the world says this program is lost, or
+    the world is gone; meanwhile, should the world's message `asked` (the Sense or Tick
+    that report `last` answered) come again, send `last` again: a world that was stopped
+    asks again for the reports that its programs' closed sessions lost."""
+    until = time.monotonic() + seconds
+    while True:
+        mailbox.wait(
+            lambda: (
+                ready()
+                or asked in mailbox.inbox
+                or ("lost",) in mailbox.inbox
+                or mailbox.world_gone
+            ),
+            until,
+        )
+        if last is None or mailbox.take(asked) is None:
+            return
+        link.send(WORLD, last)
 
 
 def _hello(transport: Transport, mailbox: Mailbox, run: str, wait: float):

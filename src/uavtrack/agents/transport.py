@@ -29,8 +29,21 @@ from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
-from .messages import Hello, Message, Radio, Ready, Report, Sense, Spec, Tick, decode, encode
+from .messages import (
+    Hello,
+    Lost,
+    Message,
+    Radio,
+    Ready,
+    Report,
+    Sense,
+    Spec,
+    Tick,
+    decode,
+    encode,
+)
 from .security import EVERYONE, WORLD, Gate, peek_sender
+from .stops import STOPS, Stops
 
 ANY_HELLO = "uavtrack/*/hello"
 """Every world's Hello: a program listens to them to tell a world of another run."""
@@ -191,6 +204,20 @@ class ZenohOptions:
             tls.check(self.tls_ca, self.tls_cert, self.tls_key)
 
 
+LEASE = 10.0
+"""Seconds a Zenoh session lasts without hearing its peer (its lease): a program out of
+reach longer loses its session (the world counts it lost), and a world stopped longer
+loses its programs' sessions, which they open again when it runs (`stops`)."""
+SESSION = {
+    "transport/link/tx/lease": int(1000 * LEASE),
+    "transport/link/tx/keep_alive": 4,  # keep-alives per lease
+    # a client whose session closed opens it again after 1 s, then every 2 s, then 4 s
+    "connect/retry": {"period_init_ms": 1000, "period_max_ms": 4000, "period_increase_factor": 2},
+}
+"""The Zenoh session settings uavtrack's rules rest on, set unless a configuration file
+sets them: the lease (`LEASE`), and how a client whose session closed connects again."""
+
+
 def zenoh_config(
     listen: list[str],
     connect: list[str],
@@ -198,10 +225,10 @@ def zenoh_config(
     options: ZenohOptions | None = None,
     mode: str = "peer",
 ) -> Any:
-    """A Zenoh configuration: the file of `options` if any, then `mode` and no multicast
-    scouting (where the file does not set them), the endpoints (to listen on: `listen`,
-    none else), and TLS (mutual: every member shows a certificate of the CA) when its
-    files are given."""
+    """A Zenoh configuration: the file of `options` if any, then `mode`, no multicast
+    scouting and the session's lease and reconnection (`SESSION`) where the file does not
+    set them, the endpoints (to listen on: `listen`, none else), and TLS (mutual: every
+    member shows a certificate of the CA) when its files are given."""
     import zenoh
 
     options = options or ZenohOptions()
@@ -212,6 +239,10 @@ def zenoh_config(
         conf.insert_json5("scouting/multicast/enabled", "false")
     if conf.get_json("transport/shared_memory/enabled") == "null":
         conf.insert_json5("transport/shared_memory/enabled", "false")  # no SHM watchdogs
+    default = zenoh.Config()
+    for key, value in SESSION.items():  # uavtrack's rules rest on these, not on defaults
+        if conf.get_json(key) in ("null", default.get_json(key)):  # unless the file sets them
+            conf.insert_json5(key, json.dumps(value))
     # the endpoints are uavtrack's, whatever the file says: a program listens on nothing
     # (not Zenoh's default, every interface), the world where --listen says
     conf.insert_json5("listen/endpoints", json.dumps(listen))
@@ -355,6 +386,12 @@ all be a stranger's, who names any sender it likes."""
 CONFIRM_EVERY = 0.5
 """Seconds between two checks of the tokens said gone: a stranger who makes and drops
 tokens as fast as it can costs a program one liveliness query per half second."""
+MEANWHILE = 1.0
+"""Seconds between two calls of a wait's `meanwhile` (the world asking again, `world`)."""
+REJOIN = LEASE
+"""Seconds after this process ran again from a stop (`stops`) during which a token
+confirmed gone is not believed yet: the sessions its peers closed while it was stopped
+open again within a few seconds (`SESSION`), their tokens with them."""
 
 
 class Mailbox:
@@ -373,13 +410,19 @@ class Mailbox:
     word, and no one else can drop that token); it is a suspect until `transport`
     confirms it gone (asked twice), at most once per `CONFIRM_EVERY` seconds; then it is
     in `gone`. An authentic message of a program said gone takes it back: gone is "heard
-    from, then its own token gone", never "a token went".
+    from, then its own token gone", never "a token went". Within `REJOIN` seconds of this
+    process running again from a stop (`stops`), a token confirmed gone stays a suspect:
+    its session may have closed because this process was silent, and opens again.
     """
 
     def __init__(
-        self, gate: Gate, spec: Spec | None = None, transport: Transport | None = None
+        self,
+        gate: Gate,
+        spec: Spec | None = None,
+        transport: Transport | None = None,
+        stops: Stops = STOPS,
     ) -> None:
-        self.gate, self.spec, self.transport = gate, spec, transport
+        self.gate, self.spec, self.transport, self.stops = gate, spec, transport, stops
         self.run, self.me = gate.run, gate.me
         self.hello_key = keys(gate.run)["hello"]
         self.cond = threading.Condition()
@@ -532,9 +575,13 @@ class Mailbox:
             if isinstance(arrays, str):
                 return arrays
             kind = "sense" if isinstance(message, Sense) else "tick"
-            if (kind, message.k) in self.inbox:
-                return "duplicate"
-            self.inbox[(kind, message.k)] = (message, arrays)
+            if (kind, message.k) not in self.inbox:  # else the world asks again: one will do
+                self.inbox[(kind, message.k)] = (message, arrays)
+            return None
+        if isinstance(message, Lost):
+            if sender != WORLD or message.program != self.me:
+                return "not from its sender"
+            self.inbox[("lost",)] = message
             return None
         if isinstance(message, Ready):
             if message.program != sender or self.me != WORLD:
@@ -578,20 +625,35 @@ class Mailbox:
             return rounds.get(final)
         return None
 
-    def wait(self, ready: Callable[[], bool], deadline: float) -> bool:
+    def wait(
+        self,
+        ready: Callable[[], bool],
+        deadline: float,
+        meanwhile: Callable[[], None] | None = None,
+    ) -> bool:
         """Wait until ready() holds (checked under the lock) or the deadline passes; the
         program is woken when ready() holds, when a token goes (confirmed with the
         transport, at most once per `CONFIRM_EVERY` s, before `gone` takes it), or every
         half second. Tokens that go, however many, never keep a wait past its deadline.
+        `meanwhile`, if given, is called every `MEANWHILE` seconds (without the lock).
 
         Time this process spent stopped (SIGSTOP, a suspended machine) does not count
         against the deadline: when a half-second wait took much longer, the deadline
         moves by as much, so a program that was stopped does not blame the others."""
         with self.cond:
             self._need = ready
+            called = time.monotonic()
             try:
                 while not ready():
                     now = time.monotonic()
+                    if meanwhile is not None and now >= called + MEANWHILE:
+                        self.cond.release()
+                        try:
+                            meanwhile()
+                        finally:
+                            self.cond.acquire()
+                        called = time.monotonic()
+                        continue
                     due = self._confirmed + CONFIRM_EVERY
                     if self.suspects and now >= due:
                         self._confirm()
@@ -602,6 +664,8 @@ class Mailbox:
                     slice_ = min(left, 0.5)
                     if self.suspects:
                         slice_ = min(slice_, due - now)
+                    if meanwhile is not None:
+                        slice_ = max(0.0, min(slice_, called + MEANWHILE - now))
                     before = time.monotonic()
                     self.cond.wait(slice_)
                     stopped = time.monotonic() - before - slice_
@@ -629,8 +693,12 @@ class Mailbox:
                     gone = {p for p in gone if not self.transport.alive(self._token(p))}
             finally:
                 self.cond.acquire()
+        now = time.monotonic()
+        if gone and self.stops.since(now - REJOIN):  # its session may be opening again
+            self.suspects |= gone
+            gone = set()
         self.gone |= gone
-        self._confirmed = time.monotonic()
+        self._confirmed = now
 
     def take(self, identity: tuple):
         with self.cond:

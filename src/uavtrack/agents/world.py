@@ -16,7 +16,14 @@ of a cycle, or whose process is gone (its own liveliness token dropped, confirme
 asking for it again; a token is a hint, see `transport.Mailbox`), is lost from that
 cycle on: the cycle records it as failed (no estimate, no observation, no decision), so
 every metric masks it in the one place it masks failed UAVs. Without the central node
-(centralized method), each UAV keeps its own filter and its last assigned target.
+(centralized method), each UAV keeps its own filter and its last assigned target. Why
+each was lost is kept (`Traffic.why`) and told to the program (`messages.Lost`).
+
+The radio messages the programs could not wait for are counted in the cycle (`Cycle.
+late`, from their reports). A world that was stopped (`stops`) past the Zenoh lease
+lost its programs' sessions and what was in flight on them: it believes no token gone
+while their sessions open again (`transport.REJOIN`), and asks again, every second, for
+the reports of the cycle that do not come.
 """
 
 from __future__ import annotations
@@ -29,11 +36,13 @@ import numpy as np
 
 from .. import simulation, world
 from ..config import Scenario
+from ..faults import PROTOCOLS
 from ..methods import get
 from ..metrics import Tally
-from .messages import VERSION, Array, Hello, Sense, Spec, Tick
+from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
 from .security import WORLD, Gate, Keyring
-from .transport import ANY_JOIN, Link, Mailbox, Transport, inbox_key, keys
+from .stops import STOPS
+from .transport import ANY_JOIN, LEASE, REJOIN, Link, Mailbox, Transport, inbox_key, keys
 
 
 @dataclass
@@ -45,7 +54,10 @@ class Traffic:
     programs; overruns: the steps whose cycle took longer than dt (with --realtime);
     drops: messages dropped by the world and every program, by reason; failed: UAVs
     failed by the fault model (uav -> step); lost: programs gone or silent past their
-    deadline (program -> step; the central node is program N).
+    deadline (program -> step; the central node is program N), and why: why each was
+    lost, in one line; late: radio messages that missed their cycle (`simulation.Cycle.
+    late`), by protocol, and late_from: the first step with one (-1: none), from which the
+    trace may differ from the simulator's.
     """
 
     cycle_seconds: list[float] = field(default_factory=list)
@@ -56,12 +68,23 @@ class Traffic:
     drops: dict[str, int] = field(default_factory=dict)
     failed: dict[int, int] = field(default_factory=dict)
     lost: dict[int, int] = field(default_factory=dict)
+    why: dict[int, str] = field(default_factory=dict)
+    late: dict[str, int] = field(default_factory=dict)
+    late_from: int = -1
     program_drops: dict[int, dict[str, int]] = field(default_factory=dict)
 
     @property
     def dropped(self) -> int:
         """Messages dropped, whatever the reason, by the world and every program."""
         return sum(self.drops.values())
+
+    def count_late(self, k: int, late: np.ndarray) -> None:
+        """The late messages of step k, (P,) by protocol (`faults.PROTOCOLS`)."""
+        for protocol, count in zip(PROTOCOLS, late.tolist(), strict=True):
+            if count:
+                self.late[protocol] = self.late.get(protocol, 0) + count
+        if late.any() and self.late_from < 0:
+            self.late_from = k
 
 
 class WorldProgram:
@@ -91,7 +114,8 @@ class WorldProgram:
         gate = keyring.gate() if keyring is not None else Gate(run, WORLD, programs, None)
         self.link = Link(transport, gate)
         self.spec = Spec.of(scenario, self.method.central)
-        self.mailbox = Mailbox(gate, self.spec, transport)
+        self.stops = STOPS.watch()  # a stop of the world is not its programs' fault
+        self.mailbox = Mailbox(gate, self.spec, transport, self.stops)
         transport.subscribe(inbox_key(run, WORLD), self.mailbox.handler)
         transport.subscribe(ANY_JOIN, self.mailbox.joined)  # any run's: a program of
         # another run hears this world's Hello, and can tell its user
@@ -106,6 +130,8 @@ class WorldProgram:
         self.central_alive = self.method.central
         self.prior: tuple[np.ndarray, np.ndarray] | None = None
         self._answered = 0
+        self.began = -float("inf")  # when the current cycle began (monotonic clock)
+        self.asked: dict[int, Sense | Tick] = {}  # this cycle's message to each program
 
     def _gone(self) -> set[int]:
         """The members whose processes are gone: heard from, then their own tokens
@@ -182,21 +208,22 @@ class WorldProgram:
         )
         recorder = simulation.Recorder(T, timed=True) if trace else None
         told = np.ones(Nu, dtype=bool)  # the UAVs sent a Sense last cycle
-        started = time.monotonic()
+        due = time.monotonic()  # when the next cycle is due (with realtime)
         noises = simulation.sensor_noise(sensor_rngs, Nu, Nt, T)
         for k, noise in enumerate(noises):
-            begin = time.monotonic()
+            begin = self.began = time.monotonic()
             self.step = k
             if self.clock is not None:
                 self.clock(k)
             self.mailbox.begin(k, k)
             self._answer_joins()
+            self._tell_lost()
             was = alive
             alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
                 self.members.discard(int(i))  # its program ends with its UAV
-            self._lose(k, alive, self._gone())
+            self._lose(k, alive, dict.fromkeys(self._gone(), self._gone_why()))
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory[:, k]
@@ -204,6 +231,7 @@ class WorldProgram:
             self.send(k, believed[0], observed[0], z, graph[0], alive[0], told)
             told = alive[0].copy()
             cycle, actions = self.collect(k, uavs, observed, alive)
+            self.traffic.count_late(k, cycle.late[0])
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
@@ -213,9 +241,12 @@ class WorldProgram:
             if realtime:
                 if took > s.dt:
                     self.traffic.overruns.append(k)
-                due = started + (k + 1) * s.dt  # the schedule: a late cycle is not made up
-                if time.monotonic() < due:
-                    time.sleep(due - time.monotonic())
+                due += s.dt
+                now = time.monotonic()
+                if now < due:
+                    time.sleep(due - now)
+                else:  # late: the schedule starts again now; a late cycle is not made up
+                    due = now
             if progress is not None:
                 progress(k + 1)
         for drops in (self.mailbox.reasons(), *self.traffic.program_drops.values()):
@@ -232,25 +263,54 @@ class WorldProgram:
             self._answered = self.mailbox.joins
             self.hello()
 
-    def _lose(self, k: int, alive: np.ndarray, programs: set[int]) -> None:
-        """Programs lost at step k (gone or silent): failed from k on, `alive` (1, N)
-        updated in place."""
+    def _lose(self, k: int, alive: np.ndarray, programs: dict[int, str]) -> None:
+        """Programs lost at step k (gone or silent), each with why: failed from k on,
+        `alive` (1, N) updated in place; each is told (`messages.Lost`)."""
         n = self.scenario.n_uavs
-        self.members -= programs
-        for i in sorted(programs):
+        self.members -= set(programs)
+        for i, why in sorted(programs.items()):
             if i < n and alive[0, i]:
                 alive[0, i] = False
-                if i not in self.traffic.failed:
-                    self.traffic.lost.setdefault(i, k)
-            elif i == n and self.central_alive:
+                if i in self.traffic.failed:
+                    continue
+            elif not (i == n and self.central_alive):
+                continue
+            if i == n:
                 self.central_alive = False
-                self.traffic.lost.setdefault(n, k)
+            if i not in self.traffic.lost:
+                self.traffic.lost[i], self.traffic.why[i] = k, why
+                self._tell(i)
+
+    def _tell(self, i: int) -> None:
+        """Tell lost program i why it is lost."""
+        k, why = self.traffic.lost[i], self.traffic.why[i]
+        self.link.send(i, Lost(VERSION, self.run, k, i, why))
+
+    def _tell_lost(self) -> None:
+        """Every lost program hears why again, once a cycle: one out of reach when it was
+        lost hears it once it is back (one message per lost program; none if it is gone)."""
+        for i in self.traffic.lost:
+            self._tell(i)
+
+    def _gone_why(self) -> str:
+        """Why a program whose token is gone is lost (confirmed gone, `REJOIN` s after the
+        world ran again if it was stopped)."""
+        if self.stops.since(time.monotonic() - 2 * REJOIN):
+            return (
+                f"its Zenoh session closed while the world was stopped and did not open "
+                f"again within {REJOIN:g} s of the world running again"
+            )
+        return (
+            "its liveliness token went: its process ended, or it was out of reach longer "
+            f"than the Zenoh session's lease ({LEASE:g} s)"
+        )
 
     def send(self, k, believed, observed, z, graph, alive, told) -> None:
         """Each UAV told last cycle its Sense (a UAV no longer alive learns it has failed),
         and the central node its Tick."""
         rows = np.nonzero(observed)[0]  # the UAV of each measurement, in order
         alive_array = Array.of(alive)
+        self.asked = {}
         for i in np.flatnonzero(told):
             message = Sense(
                 VERSION,
@@ -265,8 +325,11 @@ class WorldProgram:
                 self.central_alive,
             )
             self.link.send(int(i), message)
+            self.asked[int(i)] = message
         if self.central_alive:
-            self.link.send(self.scenario.n_uavs, Tick(VERSION, self.run, k, alive_array))
+            n = self.scenario.n_uavs
+            self.asked[n] = Tick(VERSION, self.run, k, alive_array)
+            self.link.send(n, self.asked[n])
 
     def collect(self, k, uavs, observed, alive):
         """Wait for every living UAV's report (and the central node's); build the Cycle.
@@ -282,13 +345,33 @@ class WorldProgram:
             gone = self._gone()
             return all(("report", k, i) in mailbox.inbox or i in gone for i in expected)
 
-        mailbox.wait(ready, limit)
+        def ask_again() -> None:
+            """After the world was stopped: what was in flight on the sessions that
+            closed meanwhile is gone, this cycle's Sense or the report answering it; each
+            program whose report has not come is sent its message again (it answers
+            with its report), until it comes."""
+            if self.stops.since(self.began - REJOIN):
+                with mailbox.cond:
+                    due = [i for i in expected if ("report", k, i) not in mailbox.inbox]
+                for i in due:
+                    if i in self.asked:
+                        self.link.send(i, self.asked[i])
+
+        mailbox.wait(ready, limit, meanwhile=ask_again)
         reports = {}
         for i in expected:
             got = mailbox.take(("report", k, i))
             if got is not None:
                 reports[i] = got
-        self._lose(k, alive, set(expected) - set(reports))
+        gone, late = self._gone(), f"no report of step {k} within the cycle's deadline"
+        self._lose(
+            k,
+            alive,
+            {
+                i: self._gone_why() if i in gone else f"{late} ({self.cycle_deadline():g} s)"
+                for i in set(expected) - set(reports)
+            },
+        )
         observed &= alive[:, :, None]
         mean = np.full((1, Nu, Nt, 4), np.nan)
         cov = np.full((1, Nu, Nt, 4, 4), np.nan)
@@ -298,9 +381,12 @@ class WorldProgram:
         rounds = np.zeros((1, Nu), dtype=np.int64)
         decision, wall = np.full((1, Nu), np.nan), np.full((1, Nu), np.nan)
         sent = delivered = 0
+        missed = np.zeros(len(PROTOCOLS), dtype=np.int64)
         for i, (report, arrays) in reports.items():
             sent += report.sent
             delivered += report.delivered
+            for protocol, count in report.late.items():
+                missed[list(PROTOCOLS).index(protocol)] += count
             self.traffic.published += report.published
             self.traffic.bytes += report.bytes
             self.traffic.received += report.received
@@ -322,6 +408,7 @@ class WorldProgram:
             rounds=rounds,
             messages=np.array([sent]),
             delivered=np.array([delivered]),
+            late=missed[None],
             conflicts=simulation.conflicts(target, alive, Nt),
             alive=alive.copy(),
             decision_time_ms=decision,

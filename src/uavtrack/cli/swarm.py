@@ -288,8 +288,12 @@ def swarm(
         "overruns": traffic.overruns if realtime else None,
         "failed": {str(k): v for k, v in traffic.failed.items()},
         "lost": {str(k): v for k, v in traffic.lost.items()},
+        "lost_why": {str(k): v for k, v in traffic.why.items()},
         "dropped_messages": traffic.dropped,
         "dropped_by_reason": dict(sorted(traffic.drops.items())),
+        "late_messages": sum(traffic.late.values()),
+        "late_by_protocol": dict(sorted(traffic.late.items())),
+        "late_from_step": traffic.late_from if traffic.late else None,
     }
     rows = [
         ("transport", out.transport + ("" if sign else ", messages not signed")),
@@ -311,15 +315,22 @@ def swarm(
         (f"{k} (central node)" if central and k == n else str(k)): v
         for k, v in traffic.lost.items()
     }
-    for name, found in (
-        ("UAVs failed by the fault model (uav: step)", traffic.failed),
-        ("programs lost (program: step)", lost),
-    ):
-        if found:
-            rows.append((name, ", ".join(f"{k}: {v}" for k, v in found.items())))
+    if traffic.failed:
+        found = ", ".join(f"{k}: {v}" for k, v in traffic.failed.items())
+        rows.append(("UAVs failed by the fault model (uav: step)", found))
+    for (name, k), program in zip(lost.items(), traffic.lost, strict=True):
+        rows.append((f"program {name} lost at step {k}", traffic.why.get(program, "")))
     if traffic.dropped:
         reasons = ", ".join(f"{r}: {c}" for r, c in sorted(traffic.drops.items()))
         rows.append(("messages dropped", f"{traffic.dropped} ({reasons})"))
+    if traffic.late:
+        kinds = ", ".join(f"{p}: {c}" for p, c in sorted(traffic.late.items()))
+        rows.append(
+            (
+                "radio messages late (missed their cycle)",
+                f"{swarm_info['late_messages']} ({kinds}), from step {traffic.late_from}",
+            )
+        )
     show(
         out.result,
         scenario,
@@ -332,6 +343,25 @@ def swarm(
         source=source_of(config, set_, team),
         bag=bag,
     )
+    for line in swarm_notes(traffic, lost):
+        typer.echo(f"uavtrack: note: {line}", err=True)
+
+
+def swarm_notes(traffic, names: dict[str, int]) -> list[str]:
+    """One line per program the world lost, saying why, and one if radio messages were
+    late: each is a reason why the run's numbers may differ from `uavtrack run`'s."""
+    lines = [
+        f"program {name} lost at step {k}: {traffic.why.get(program, 'no reason recorded')}"
+        for (name, k), program in zip(names.items(), traffic.lost, strict=True)
+    ]
+    if traffic.late:
+        count = sum(traffic.late.values())
+        which = "message" if count == 1 else "messages"
+        lines.append(
+            f"{count} radio {which} missed their cycle from step {traffic.late_from} (late, "
+            "or their sender stopped): this run may differ from the simulator's from that step"
+        )
+    return lines
 
 
 def reachable(endpoint: str) -> list[str]:
@@ -513,6 +543,11 @@ def _ended(served, run: str, uav: int, connect: str, key: Path | None = None) ->
             "run id and that uavtrack swarm --no-spawn is waiting"
         )
     name = f"{served.name(uav)} {uav} of run {run}"
+    if served.end == "lost":
+        raise RunError(
+            f"{name}: the world lost it at step {served.at} ({served.why}), after "
+            f"{served.ran} of {served.steps} cycles"
+        )
     if served.end == "world gone":
         raise RunError(
             f"{name}: the world ended or went silent at step {served.at}, after {served.ran} "
