@@ -155,6 +155,26 @@ def test_a_late_upload_or_download_is_counted_not_skipped_silently(
     assert (trace.delivered + trace.late.sum(axis=1) == trace.messages).all()
 
 
+def test_a_uav_waits_for_its_download_while_the_node_waits_for_the_uploads(monkeypatch):
+    # the central node sends the downloads only once the uploads are in (it may wait a
+    # round's deadline for them) and its work is done: here that work takes 1.4 rounds'
+    # deadlines at step 2, and the UAVs, waiting two, take their downloads on time
+    from uavtrack.agents import agent
+
+    work = agent.central_node
+
+    def slow(got, heard, reported, setting, k):
+        if k == 2:
+            time.sleep(1.4)
+        return work(got, heard, reported, setting, k)
+
+    monkeypatch.setattr(agent, "central_node", slow)
+    scenario = uavtrack.Scenario(steps=4)
+    swarm = run_swarm(scenario, "centralized", seed=1, transport="memory", deadline=1.0)
+    reference = uavtrack.simulate(scenario, "centralized", seed=1).trace
+    assert equal_until_counted(swarm, reference) is None  # nothing late: the same trace
+
+
 def test_a_swarm_on_time_counts_no_late_message():
     scenario = uavtrack.Scenario(steps=6)
     for method in ("distributed", "centralized"):

@@ -491,13 +491,13 @@ class UavAgent:
         lost = bool(self.radio.lost(sent_at, "download", 0, np.array(central), self.me))
         expect = bool(self.radio.alive[sent_at][self.me]) and not lost
         expect = expect and self.radio.central[sent_at]
-        if expect:
-            mailbox.wait(
+        if expect:  # two rounds: the node waits up to a round's deadline for the uploads
+            mailbox.wait(  # before it sends the downloads
                 lambda: (
                     mailbox.content(sent_at, "download", central, 0) is not None
                     or mailbox.is_gone(central)
                 ),
-                time.monotonic() + self.radio.deadline,
+                time.monotonic() + 2 * self.radio.deadline,
             )
         content = mailbox.content(sent_at, "download", central, 0) if expect else None
         if expect and content is None:  # late, or the node's token went: it never came
