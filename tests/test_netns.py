@@ -229,6 +229,9 @@ def test_the_world_cut_from_half_the_swarm_for_5_s_loses_nobody(network, tmp_pat
 
 
 def test_a_link_flapping_every_second_loses_nobody_silently(network, tmp_path):
+    # ten flaps (10 s) mid-run: on an idle machine nobody is lost; on a loaded one TCP's
+    # backed-off retransmissions can keep the flapping host silent past the lease, and the
+    # rule then is that only that UAV is lost, the run finishes and says why
     steps = 20
     seen = {}
 
@@ -236,17 +239,26 @@ def test_a_link_flapping_every_second_loses_nobody_silently(network, tmp_path):
         assert swarm.reached(8), swarm.said
         seen["from"] = swarm.step
         with network.flapping(host(2), down=0.5, up=0.5) as flaps:
-            swarm.finished()
+            while len(flaps) < 10 and not swarm.finished(limit=0.5):
+                pass
         seen["flaps"] = len(flaps)
 
     result, trace, programs, _ = across(network, tmp_path, steps, act)
     assert seen["flaps"] >= 3
-    assert result["swarm"]["lost"] == {} and trace.alive.all()
-    all_ran(programs, steps)
+    lost, why = result["swarm"]["lost"], result["swarm"]["lost_why"]
+    assert set(lost) <= {"2"} and set(why) == set(lost), (lost, why)
+    others = [i for i in range(UAVS) if i != 2]
+    assert trace.alive[:, others].all()
+    all_ran([programs[i] for i in others], steps)
+    if lost:
+        k = lost["2"]
+        assert k >= seen["from"] and not trace.alive[k:, 2].any() and why["2"]
+    else:
+        all_ran(programs, steps)
     reference = simulated(steps)
     assert differences(head(trace, seen["from"]), head(reference, seen["from"])) == []
-    lost, differ = first_loss(trace), first_difference(trace, reference)
-    assert differ is None or lost is not None and seen["from"] <= lost <= differ
+    loss, differ = first_loss(trace), first_difference(trace, reference)
+    assert differ is None or loss is not None and seen["from"] <= loss <= differ
 
 
 def lease() -> float:
