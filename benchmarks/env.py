@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import uavtrack
-from uavtrack import files, threads
+from uavtrack import _files as files, _process as threads
 from uavtrack.env import parallel_env, vector_env
 from uavtrack.errors import UsageError
 

@@ -25,7 +25,8 @@ import time
 from pathlib import Path
 
 import uavtrack
-from uavtrack import Scenario, files, threads
+from uavtrack import Scenario
+from uavtrack import _files as files, _process as threads
 from uavtrack.errors import UsageError
 from uavtrack.flight import jsbsim as flight
 from uavtrack.simulation import run

@@ -48,9 +48,9 @@ import numpy as np  # noqa: E402
 from tests import netns  # noqa: E402
 
 import uavtrack  # noqa: E402
-from uavtrack import files  # noqa: E402
+from uavtrack import _files as files  # noqa: E402
 from uavtrack.agents.transport import zenoh_config  # noqa: E402
-from uavtrack.equivalence import differences  # noqa: E402
+from uavtrack.testing import differences  # noqa: E402
 from uavtrack.errors import UsageError  # noqa: E402
 
 UAVS = 5

@@ -13,7 +13,7 @@ import json
 from joblib import Parallel, delayed
 
 import uavtrack
-from uavtrack.experiments import trials
+from uavtrack.experiments.jobs import trials
 
 PAPER = {"distributed": 0.8031, "centralized": 0.8048, "greedy": 0.6664}
 BASE = {"dt": 1.0, "uav.altitude": 500.0}  # the first guess

@@ -29,8 +29,8 @@ import numpy as np
 import uavtrack
 from uavtrack.agents import agent, run_swarm
 from uavtrack.agents.messages import Array, Part
-from uavtrack.experiments import paired
-from uavtrack.plausibility import Bounds
+from uavtrack.experiments.jobs import paired
+from uavtrack.robust.plausibility import Bounds
 
 LIAR = 1
 """The lying member."""

@@ -14,7 +14,7 @@ import numpy as np
 from joblib import Parallel, delayed
 
 import uavtrack
-from uavtrack.trackers import TRACKERS
+from uavtrack.experiments.trackers import TRACKERS
 
 STICKY = [[0.95, 0.04, 0.01], [0.10, 0.85, 0.05], [0.30, 0.30, 0.40]]
 CANDIDATES = {

@@ -16,7 +16,7 @@ import uavtrack
 from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.security import WORLD, Envelope, Gate
 from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
-from uavtrack.equivalence import assert_same_trace
+from uavtrack.testing import assert_same_trace
 
 from .processes import alive, children_of, wait_until
 

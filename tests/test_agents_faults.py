@@ -332,7 +332,7 @@ def tls_options(files):
 
 def test_a_swarm_over_mutual_tls_equals_the_simulator_and_refuses_strangers(tmp_path):
     from uavtrack.agents.transport import ZenohTransport
-    from uavtrack.equivalence import assert_same_trace
+    from uavtrack.testing import assert_same_trace
 
     files = make_certificates(tmp_path / "swarm")
     foreign = make_certificates(tmp_path / "stranger", "stranger")

@@ -34,7 +34,7 @@ from uavtrack.agents import world as world_module
 from uavtrack.agents.security import WORLD, Gate
 from uavtrack.agents.stops import SLACK, TICK, Stops
 from uavtrack.agents.transport import REJOIN, Bus, Link, Mailbox, MemoryTransport
-from uavtrack.equivalence import differences
+from uavtrack.testing import differences
 from uavtrack.faults import PROTOCOLS
 
 ROOT = Path(__file__).resolve().parents[1]

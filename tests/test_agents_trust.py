@@ -11,7 +11,7 @@ import pytest
 
 import uavtrack
 from uavtrack.agents import run_swarm
-from uavtrack.equivalence import assert_same_trace
+from uavtrack.testing import assert_same_trace
 
 from .processes import wait_until
 from .test_agents_faults import make_certificates, tls_options

@@ -7,7 +7,7 @@ import json
 
 import pytest
 
-from uavtrack import bench
+from uavtrack.experiments import bench
 
 
 def test_kalman_equals_filterpy():
@@ -86,7 +86,7 @@ def test_run_case_reports_its_memory_peak_beside_the_estimate():
 
 
 def test_scaling_figure_needs_scaled_cases(tmp_path):
-    from uavtrack import plots
+    from uavtrack.experiments import figures as plots
 
     rows = bench.cycle_cases([(4, 4), (8, 8)], ("distributed",), repeats=1, scaled=True)
     assert [r["scaled"] for r in rows] == [True, True]

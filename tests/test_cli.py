@@ -301,7 +301,7 @@ def test_compare_gives_paired_differences_of_the_first_method(capsys):
 
 
 def test_paired_differences_leave_out_undefined_trials():
-    from uavtrack.experiments import paired
+    from uavtrack.experiments.jobs import paired
 
     p = paired(np.array([1.0, np.nan, 3.0, 6.0]), np.array([0.0, 1.0, np.nan, 2.0]))
     assert p["trials"] == 2 and p["mean"] == pytest.approx(2.5)
@@ -439,7 +439,7 @@ def test_two_outputs_at_one_path_are_refused(capsys, tmp_path):
 
 
 def test_long_work_off_a_terminal_says_how_far_it_is_once_a_minute(capsys, monkeypatch):
-    from uavtrack import progress
+    from uavtrack import _progress as progress
 
     clock = {"now": 0.0}
     monkeypatch.setattr(progress.time, "monotonic", lambda: clock["now"])

@@ -69,7 +69,7 @@ def test_reproduce_again_reuses_every_job(quick, capsys):
 
 
 def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
-    from uavtrack.experiments import SENSITIVITY
+    from uavtrack.experiments.reproduce import SENSITIVITY
 
     code, out, _ = run_cli(
         capsys, "reproduce", "--quick", "--sensitivity", "--out", str(quick), "--no-progress"
@@ -330,7 +330,7 @@ def test_a_job_file_of_another_seed_is_not_used(tmp_path, capsys):
 
 
 def test_a_second_run_on_a_locked_folder_is_refused(tmp_path, capsys):
-    from uavtrack import runner
+    from uavtrack.experiments import store as runner
 
     out = tmp_path / "s"
     with runner.Store(out, {"kind": "sweep"}):
@@ -402,7 +402,7 @@ def test_animate_into_a_folder_is_refused(tmp_path, capsys):
 
 
 def test_a_full_disk_ends_the_run_in_one_line(tmp_path, capsys, monkeypatch):
-    from uavtrack import files
+    from uavtrack import _files as files
 
     def full(path, text):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
@@ -414,7 +414,7 @@ def test_a_full_disk_ends_the_run_in_one_line(tmp_path, capsys, monkeypatch):
 
 
 def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, capsys, monkeypatch):
-    from uavtrack import experiments
+    from uavtrack.experiments import jobs as experiments
 
     real = experiments.run
 
@@ -619,7 +619,7 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_job_runs(tmp_pat
 def test_a_full_disk_under_the_results_folder_names_the_folder(tmp_path, capsys, monkeypatch):
     import errno
 
-    from uavtrack import runner
+    from uavtrack.experiments import store as runner
 
     def full(fd, data, offset):
         raise OSError(errno.ENOSPC, "No space left on device")

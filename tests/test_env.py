@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack.equivalence import assert_same_trace
+from uavtrack.testing import assert_same_trace
 
 pytest.importorskip("pettingzoo")
 from pettingzoo.test import (  # noqa: E402

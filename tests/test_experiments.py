@@ -3,8 +3,8 @@ import pytest
 from scipy import stats
 
 import uavtrack
-from uavtrack import experiments
-from uavtrack.experiments import Profile
+from uavtrack.experiments import jobs as experiments
+from uavtrack.experiments.reproduce import Profile
 from uavtrack.metrics import METRICS
 
 

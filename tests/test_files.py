@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from uavtrack import files
+from uavtrack import _files as files
 from uavtrack.errors import UsageError
 
 

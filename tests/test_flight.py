@@ -11,7 +11,7 @@ import pytest
 import uavtrack
 from uavtrack import Scenario, ScenarioError
 from uavtrack.config import G
-from uavtrack.equivalence import assert_same_trace
+from uavtrack.testing import assert_same_trace
 
 jsbsim = pytest.importorskip("jsbsim")
 

@@ -263,7 +263,7 @@ def spd(rng, shape, scale=1.0):
 @pytest.mark.parametrize("seed", range(6))
 def test_adopt_and_intersect_with_a_mask_agree_in_both_forms(seed):
     # the same admitted tuples in the dense and the edge layout give the same choice
-    from uavtrack import gate
+    from uavtrack.robust import gate
 
     rng = np.random.default_rng(seed)
     B, n, m = 2, 6, 3

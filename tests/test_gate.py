@@ -6,7 +6,7 @@ import pytest
 from scipy import stats
 
 import uavtrack
-from uavtrack import gate
+from uavtrack.robust import gate
 
 
 def test_the_threshold_is_the_chi_square_quantile_with_two_degrees_of_freedom():

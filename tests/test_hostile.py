@@ -14,20 +14,10 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import uavtrack
-from uavtrack import estimation, gate
+from uavtrack import estimation
+from uavtrack.robust import gate
 from uavtrack.agents import messages, run_swarm
-from uavtrack.agents.messages import (
-    VERSION,
-    Array,
-    Hello,
-    Lost,
-    Radio,
-    Ready,
-    Report,
-    Sense,
-    Tick,
-    encode,
-)
+from uavtrack.agents.messages import VERSION, Array, Hello, Lost, Radio, Ready, Report, Sense, Tick, encode
 from uavtrack.agents.security import WORLD
 from uavtrack.agents.transport import Link
 
@@ -359,7 +349,7 @@ def test_a_member_lying_within_the_bounds_takes_the_team_over_unless_the_gate_is
     ids=["gate", "gate-ci", "gate-faults"],
 )
 def test_memory_swarm_with_the_gate_equals_the_simulator(method, overrides):
-    from uavtrack.equivalence import assert_same_trace
+    from uavtrack.testing import assert_same_trace
 
     scenario = uavtrack.Scenario(steps=40).with_overrides(overrides)
     swarm = run_swarm(scenario, method, seed=3, transport="memory")

@@ -137,7 +137,7 @@ def test_the_combined_covariance_holds_the_spread_of_the_modes():
 
 import uavtrack  # noqa: E402
 from uavtrack import Scenario  # noqa: E402
-from uavtrack.equivalence import assert_same_trace  # noqa: E402
+from uavtrack.testing import assert_same_trace  # noqa: E402
 
 IMM = {"tracker.model": "imm"}
 
@@ -207,7 +207,8 @@ def test_uavtrack_trackers_writes_its_table_and_figure(tmp_path, capsys):
 
     from PIL import Image
 
-    from uavtrack import cli, trackers
+    from uavtrack import cli
+    from uavtrack.experiments import trackers
 
     out = tmp_path / "t"
     code = cli.main(["trackers", "--quick", "--out", str(out), "--no-progress"])
@@ -235,7 +236,7 @@ def test_uavtrack_trackers_writes_its_table_and_figure(tmp_path, capsys):
 
 
 def test_the_nees_band_is_chi_square():
-    from uavtrack.trackers import nees_band
+    from uavtrack.experiments.statistics import nees_band
 
     low, high = nees_band(1)  # one 4-D error: the chi-square(4) quantiles
     assert (low, high) == pytest.approx((0.4844, 11.1433), abs=1e-4)

@@ -5,7 +5,7 @@ import pytest
 
 import uavtrack
 from uavtrack import fusion, network
-from uavtrack.equivalence import assert_same_trace, differences
+from uavtrack.testing import assert_same_trace, differences
 
 
 @pytest.fixture(scope="module")
@@ -101,7 +101,8 @@ def test_conflicts_count_doubled_targets_while_one_is_free():
 
 
 def test_the_registry_serves_plugins_and_registered_methods(monkeypatch):
-    from uavtrack import methods, registry
+    from uavtrack import methods
+    from uavtrack.methods import registry
 
     class Sticky(methods.Distributed):
         name = "sticky-test"
@@ -144,7 +145,7 @@ def test_a_rule_may_be_an_ordinary_method_with_state():
 def test_a_download_its_measurement_contradicts_is_not_taken():
     # robust.gate: UAV 0 measured target 0 30 m from the central node's estimate (keeps
     # its own), target 1 near it (takes it), and target 2 long ago (takes it)
-    from uavtrack import gate
+    from uavtrack.robust import gate
     from uavtrack.methods import take_download
 
     scenario = uavtrack.Scenario(steps=40).with_overrides({"robust.gate": 0.9999})

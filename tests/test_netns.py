@@ -26,7 +26,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack.equivalence import differences
+from uavtrack.testing import differences
 
 from . import netns
 

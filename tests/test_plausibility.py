@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 import uavtrack
 from uavtrack import assignment, estimation, planning, sensing
 from uavtrack.agents.messages import VERSION, Array, Part, Radio, Spec
-from uavtrack.plausibility import Bounds, best_accuracy, covariance_floor
+from uavtrack.robust.plausibility import Bounds, best_accuracy, covariance_floor
 
 SCENARIOS = [
     {},

@@ -3,7 +3,7 @@ import pytest
 from PIL import Image
 
 import uavtrack
-from uavtrack import plots
+from uavtrack.experiments import figures as plots
 
 
 @pytest.fixture

@@ -3,8 +3,8 @@ import pytest
 from scipy import stats
 
 import uavtrack
-from uavtrack import robustness
-from uavtrack.experiments import unique
+from uavtrack.experiments import robustness
+from uavtrack.experiments.jobs import unique
 
 
 def test_plan_shares_equal_configurations_and_covers_every_series():

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import experiments, runner
+from uavtrack.experiments import jobs as experiments, store as runner
 from uavtrack.errors import UsageError
 
 
@@ -202,7 +202,7 @@ def test_every_rejection_of_a_job_file_is_kept(tmp_path):
 
 def test_a_long_label_makes_a_short_unique_file_name():
     from uavtrack import Scenario
-    from uavtrack.experiments import Job
+    from uavtrack.experiments.jobs import Job
 
     long = ",".join(f"tracker.transition=[{i}]" * 3 for i in range(20))
     a = Job("trials", long, "distributed", Scenario(), 0, 25, 0)

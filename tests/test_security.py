@@ -13,7 +13,7 @@ from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.messages import VERSION, Array, Part, Radio, Report, Sense, Spec, encode
 from uavtrack.agents.security import EVERYONE, WINDOW, WORLD, Credential, Envelope, Gate, Keyring
 from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
-from uavtrack.equivalence import assert_same_trace
+from uavtrack.testing import assert_same_trace
 
 pytest.importorskip("cryptography")
 

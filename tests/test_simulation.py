@@ -9,8 +9,9 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import estimation, network, sensing, simulation
-from uavtrack.equivalence import assert_same_trace
+from uavtrack import estimation, network, sensing
+from uavtrack import simulation
+from uavtrack.testing import assert_same_trace
 
 from . import reference as reference_check
 

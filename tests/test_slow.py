@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack.experiments import compare
+from uavtrack.experiments.jobs import compare
 
 from .test_estimation import nees_runs
 

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from uavtrack import threads
+from uavtrack import _process as threads
 
 PROBE = (
     "import json, sys\n"

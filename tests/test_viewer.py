@@ -14,7 +14,7 @@ import uavtrack
 pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
-from uavtrack import viewer  # noqa: E402
+from uavtrack.viz import rerun as viewer  # noqa: E402
 
 from .test_files import on_a_small_disk  # noqa: E402
 

@@ -12,12 +12,17 @@ planning and neighbourhood Hungarian auctions, with centralized and greedy basel
 """
 
 import importlib
+import importlib.abc
+import importlib.util
+import sys
+import warnings
 from typing import TYPE_CHECKING
 
-from . import threads as _threads
-from ._version import __version__
+from . import _process
 
-_threads.pin()  # BLAS threads for every entry point, before numpy loads (see `threads`)
+__version__ = "0.2.0"
+
+_process.pin()  # BLAS threads for every entry point, before numpy loads (see `_process`)
 
 # the public names load their module on first use, so that the command line answers
 # bad input without loading numpy
@@ -40,22 +45,78 @@ _PUBLIC = {
 }
 _MODULES = {
     "assignment",
-    "bench",
     "config",
     "estimation",
     "experiments",
+    "faults",
     "fusion",
     "metrics",
     "methods",
     "network",
     "planning",
-    "plots",
-    "report",
-    "runner",
+    "radio",
+    "robust",
     "sensing",
     "simulation",
+    "testing",
     "world",
 }
+
+_MOVED = {
+    "uavtrack.bench": "uavtrack.experiments.bench",
+    "uavtrack.equivalence": "uavtrack.testing",
+    "uavtrack.files": "uavtrack._files",
+    "uavtrack.flight.experiment": "uavtrack.experiments.flight",
+    "uavtrack.flight.mavlink": "uavtrack.io.mavlink",
+    "uavtrack.gate": "uavtrack.robust.gate",
+    "uavtrack.lifeline": "uavtrack._process",
+    "uavtrack.plausibility": "uavtrack.robust.plausibility",
+    "uavtrack.plots": "uavtrack.experiments.figures uavtrack.viz.scene",
+    "uavtrack.progress": "uavtrack._progress",
+    "uavtrack.registry": "uavtrack.methods.registry",
+    "uavtrack.report": "uavtrack.experiments.report uavtrack.experiments.statistics",
+    "uavtrack.robustness": "uavtrack.experiments.robustness uavtrack.experiments.statistics",
+    "uavtrack.runner": "uavtrack.experiments.store",
+    "uavtrack.threads": "uavtrack._process",
+    "uavtrack.trackers": "uavtrack.experiments.trackers uavtrack.experiments.statistics",
+    "uavtrack.viewer": "uavtrack.viz.rerun",
+}
+"""The import paths of the layout before 0.2, served for one release with a
+DeprecationWarning: old path -> the module(s) that hold its names now."""
+
+
+class _Moved(importlib.abc.MetaPathFinder, importlib.abc.Loader):
+    """Serves an old import path: a module whose names are looked up in the new ones."""
+
+    def find_spec(self, name, path=None, target=None):
+        if name in _MOVED:
+            return importlib.util.spec_from_loader(name, self)
+        return None
+
+    def create_module(self, spec):
+        return None
+
+    def exec_module(self, module) -> None:
+        homes = [importlib.import_module(m) for m in _MOVED[module.__name__].split()]
+        warnings.warn(
+            f"{module.__name__} moved to {' and '.join(h.__name__ for h in homes)}; "
+            "the old path goes in the next release",
+            DeprecationWarning,
+            stacklevel=2,
+        )
+
+        def find(attr: str):
+            for home in homes:
+                if hasattr(home, attr):
+                    return getattr(home, attr)
+            raise AttributeError(f"module {module.__name__!r} has no attribute {attr!r}")
+
+        module.__getattr__ = find
+        module.__doc__ = f"Moved to {', '.join(h.__name__ for h in homes)}."
+
+
+if not any(isinstance(finder, _Moved) for finder in sys.meta_path):
+    sys.meta_path.append(_Moved())
 
 
 def __getattr__(name: str):

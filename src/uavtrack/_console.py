@@ -12,7 +12,7 @@ import sys
 
 def main() -> None:
     if sys.argv[1:] == ["--version"]:
-        from ._version import __version__
+        from . import __version__
 
         print(f"uavtrack {__version__}")
         return

@@ -13,7 +13,6 @@ derived from it.
 
 from __future__ import annotations
 
-import os
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import cache
@@ -22,13 +21,14 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, flight, gate, network, planning, sensing, timing, world
+from . import _process, estimation, flight, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
+from .robust import gate
 from .world import initial_conditions, streams, trial_seed  # noqa: F401 (public here too)
 
 NOISE_BLOCK = 64
@@ -682,7 +682,7 @@ def _neighbours(scenario: Scenario) -> float:
 def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> None:
     """Refuse, with a one-line ScenarioError, a run that cannot fit in the memory available."""
     parts = memory_estimate(scenario, batch, trace)
-    need, have = sum(parts.values()), available_memory()
+    need, have = sum(parts.values()), _process.available_memory()
     if need <= 0.9 * have:
         return
     field_ = max(parts, key=parts.get)
@@ -702,21 +702,6 @@ def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> Non
 
 def _size(n: float) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
-
-
-def available_memory() -> int:
-    """Bytes of memory available to new allocations (MemAvailable on Linux)."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as info:
-            for line in info:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except OSError:
-        pass
-    try:
-        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
-    except (ValueError, OSError, AttributeError):
-        return 2**62  # unknown: do not refuse
 
 
 @dataclass(frozen=True)

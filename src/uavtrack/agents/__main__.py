@@ -11,7 +11,7 @@ parent-death signal where there is one, and a watch every half second).
 import json
 import sys
 
-from ..lifeline import die_with
+from .._process import die_with
 
 
 def main() -> int:

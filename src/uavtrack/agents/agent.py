@@ -31,7 +31,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import assignment, estimation, fusion, gate, network, simulation, timing
+from .. import assignment, estimation, fusion, network, simulation, timing
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -46,6 +46,7 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
+from ..robust import gate
 from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
 

@@ -36,7 +36,7 @@ import numpy as np
 
 from .. import estimation
 from ..faults import PROTOCOLS
-from ..plausibility import CONSISTENT, Bounds
+from ..robust.plausibility import CONSISTENT, Bounds
 
 VERSION = 5
 """Schema version; a message of another version is dropped."""

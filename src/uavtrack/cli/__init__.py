@@ -20,11 +20,12 @@ import typer
 from typer import core as typer_core
 from typer.exceptions import TyperException
 
-from .. import registry, threads
-from .._version import __version__
+from .. import __version__
+from .. import _process as threads
+from .._files import check_distinct, check_new_folder, check_output, dumps
+from .._progress import bar
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
-from ..files import check_distinct, check_new_folder, check_output, dumps
-from ..progress import bar
+from ..methods import registry
 
 if TYPE_CHECKING:
     from ..config import Scenario
@@ -151,10 +152,10 @@ TrialStepsOpt = Annotated[
 
 
 def load_scenario(
-    config: Path | None, overrides: list[str] | None, team: str | None = None
+    config: Path | None, overrides: list[str] | None, team: str | None = None, fly: bool = True
 ) -> Scenario:
     """The scenario from an optional TOML file, scaled to --team NxM, then the
-    FIELD=VALUE overrides."""
+    FIELD=VALUE overrides; for a command that flies it (`fly`), checked to be flyable."""
     from ..config import Scenario
 
     changes = parse_overrides(overrides or [])
@@ -165,7 +166,12 @@ def load_scenario(
         if both:
             raise ScenarioError(f"--team sets n_uavs and n_targets; do not --set {both[0]} too")
         scenario = scenario.scaled(n_uavs, n_targets)
-    return scenario.with_overrides(changes, origin="--set")
+    scenario = scenario.with_overrides(changes, origin="--set")
+    if fly:  # up front: JSBSim and the aircraft, before any work (`flight.check`)
+        from ..flight import check
+
+        check(scenario)
+    return scenario
 
 
 def source_of(config: Path | None, overrides: list[str] | None, team: str | None) -> str:
@@ -358,7 +364,7 @@ def run(
                 "give --rerun FILE.rrd to save the recording instead"
             )
         try:
-            from .. import viewer
+            from ..viz import rerun as viewer
         except ImportError as exc:
             raise UsageError(f"--rerun: {exc}") from None
     with steps_bar(scenario) as advance:
@@ -482,8 +488,8 @@ def compare(
 ) -> None:
     """Run the methods on the same trials, in this process: mean and std of each metric,
     and the paired differences of the first method minus each other, with 95% intervals."""
-    from ..experiments import against_first, summarize
-    from ..experiments import compare as run_compare
+    from ..experiments.jobs import compare as run_compare
+    from ..experiments.statistics import against_first, summarize
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     names = chosen_methods(methods)
@@ -507,7 +513,7 @@ def compare(
     from rich.markup import escape
     from rich.table import Table
 
-    from ..report import pm
+    from ..experiments.statistics import pm
 
     table = Table(
         title=f"{trials} trials of {scenario.steps} steps, seed {seed}: mean over trials",
@@ -547,7 +553,7 @@ def paired_table(pairs: dict, first: str, trials: int):
     from rich.markup import escape
     from rich.table import Table
 
-    from ..report import ci
+    from ..experiments.statistics import ci
 
     table = Table(
         title=f"{first} minus each other method, paired on the same {trials} trials: "
@@ -760,7 +766,7 @@ def fail(message: str, code: int = 2) -> int:
 
 
 def interrupted(kept: str) -> int:
-    from ..runner import stop_workers
+    from ..experiments.store import stop_workers
 
     stop_workers()
     if _signal["terminated"]:  # SIGTERM: 128 + 15

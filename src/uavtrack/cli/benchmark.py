@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..files import check_output, write_json
+from .._files import check_output, write_json
 from . import app, console
 
 
@@ -32,7 +32,7 @@ def bench(
         check_output(json_out, "--json")
     if figure is not None:
         check_output(figure, "--figure")
-    from ..bench import bench as run_bench
+    from ..experiments.bench import bench as run_bench
 
     results = run_bench(quick, progress=lambda what: print(f"bench: {what}", file=sys.stderr))
     if json_out is not None:
@@ -63,7 +63,7 @@ def bench(
     if json_out is not None:
         typer.echo(f"wrote {json_out}")
     if figure is not None:
-        from ..plots import scaling_figure
+        from ..experiments.figures import scaling_figure
 
         scaling_figure(results["cases"], figure)
         typer.echo(f"wrote {figure}")

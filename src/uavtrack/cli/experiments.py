@@ -10,8 +10,8 @@ from typing import Annotated
 
 import typer
 
+from .._files import check_output, check_outputs, write_json, write_text
 from ..errors import Interrupted, ScenarioError, UsageError
-from ..files import check_output, check_outputs, write_json, write_text
 from . import (
     ConfigOpt,
     MethodName,
@@ -78,10 +78,11 @@ def run_jobs(plan, out: Path, manifest: dict, engine, workers, address, progress
     """
     import time
 
+    from .._process import available_memory
     from ..errors import RunError
-    from ..experiments import unique
-    from ..runner import Store, check_scheduler, execute, resolve_workers
-    from ..simulation import available_memory, check_memory, memory_estimate
+    from ..experiments.jobs import unique
+    from ..experiments.store import Store, check_scheduler, execute, resolve_workers
+    from ..simulation import check_memory, memory_estimate
 
     jobs = unique(j for group in plan.values() for j in group)
     if address and engine != EngineName.dask:
@@ -256,8 +257,9 @@ def reproduce(
 ) -> None:
     """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder,
     with the uncalibrated first guess beside the defaults."""
-    from .. import plots, report
-    from ..experiments import Profile, reproduce_plan, summarize_reproduction
+    from ..experiments import figures as plots
+    from ..experiments import report
+    from ..experiments.reproduce import Profile, reproduce_plan, summarize_reproduction
 
     scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
@@ -286,7 +288,7 @@ def _print_reproduction(summary: dict, out: Path, info: dict) -> None:
     from rich.markup import escape
     from rich.table import Table
 
-    from ..report import ci, pm
+    from ..experiments.statistics import ci, pm
 
     table = Table(title="Fig. 5: overall observation rate (mean ± std)")
     for col in ("method", "ours", "paper", "distributed − this method, paired [95% CI]"):
@@ -298,7 +300,7 @@ def _print_reproduction(summary: dict, out: Path, info: dict) -> None:
         table.add_row(m, pm(r["mean"], r["std"]), pm(p["mean"], p["std"]), escape(diff))
     console().print(table)
     if "sensitivity" in summary:
-        from ..report import sensitivity_verdicts
+        from ..experiments.report import sensitivity_verdicts
 
         trials = summary["sensitivity"]["base"]["distributed - centralized"]["trials"]
         typer.echo(
@@ -354,7 +356,7 @@ def sweep(
     """Vary one scenario field, or several as a grid (comm_range 25 50 faults.loss 0 0.2:
     four cells); every method on the same trials in every cell."""
     from ..config import parse_value
-    from ..experiments import sweep_axes, sweep_plan
+    from ..experiments.jobs import sweep_axes, sweep_plan
 
     scenario = load_scenario(config, set_, team)
     steps = explicit_steps(config, set_, steps)
@@ -384,8 +386,9 @@ def sweep(
         "plan": ({"field": field, "values": axes[field]} if one else {"fields": axes})
         | {"methods": names, "trials": trials},
     }
-    from .. import plots, report
-    from ..experiments import summarize_sweep
+    from ..experiments import figures as plots
+    from ..experiments import report
+    from ..experiments.jobs import summarize_sweep
 
     with run_jobs(plan, out, manifest, engine, workers, address, progress, ["sweep.png"]) as (
         results,
@@ -404,7 +407,7 @@ def sweep(
     from rich.markup import escape
     from rich.table import Table
 
-    from ..report import level_text, pm
+    from ..experiments.statistics import level_text, pm
 
     what = field if one else " x ".join(axes)
     table = Table(title=f"observation rate against {what} (mean ± std, {trials} trials)")
@@ -477,8 +480,8 @@ def animate(
     ] = 10,
 ) -> None:
     """Animate one trial like the paper's Figure 4, as a GIF."""
-    from .. import plots
-    from ..progress import bar
+    from .._progress import bar
+    from ..experiments import figures as plots
     from ..simulation import simulate
 
     if out.suffix.lower() != ".gif":
@@ -505,7 +508,7 @@ def refuse_set(scenario, fields: tuple[str, ...], command: str, what: str) -> No
     """Refuse a base scenario that sets any of `fields` (names or "group." prefixes),
     which `command` sets itself."""
     from ..errors import UsageError
-    from ..experiments import difference
+    from ..experiments.jobs import difference
 
     set_here = {
         k: v for k, v in difference(type(scenario)(), scenario).items() if k.startswith(fields)

@@ -9,8 +9,8 @@ from typing import Annotated
 
 import typer
 
+from .._files import check_new_file, check_new_folder, new_folder, replacing, write_bytes
 from ..errors import RunError, UsageError
-from ..files import check_new_file, check_new_folder, new_folder, replacing, write_bytes
 from . import app
 from .experiments import note
 

@@ -56,7 +56,7 @@ def flight(
     moderate turbulence; and the two winds with planner.wind (the planner knows the
     wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps."""
     from ..config import Scenario, flatten, read_toml
-    from ..flight import experiment
+    from ..experiments import flight as experiment
     from . import parse_overrides
 
     own = ("wind.", "uav.dynamics", "planner.wind")

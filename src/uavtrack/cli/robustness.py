@@ -49,8 +49,9 @@ def robustness(
 ) -> None:
     """Every method under message loss, bursts, delay, a round budget, UAV failures and
     position error, with and without the robustness options, into a folder."""
-    from .. import plots, report
-    from .. import robustness as experiment
+    from ..experiments import figures as plots
+    from ..experiments import report
+    from ..experiments import robustness as experiment
 
     scenario = load_scenario(config, set_, team)
     refuse_set(scenario, ("faults.", "robust."), "robustness", "the faults and the robust options")
@@ -69,7 +70,7 @@ def robustness(
 def _print(summary: dict, out: Path, info: dict) -> None:
     from rich.table import Table
 
-    from ..report import level_text
+    from ..experiments.statistics import level_text
 
     table = Table(title="observation rate under faults (mean over trials)")
     for col in ("fault", "level", "distributed", "robust", "centralized", "greedy"):

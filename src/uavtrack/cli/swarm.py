@@ -12,8 +12,8 @@ from typing import Annotated
 
 import typer
 
+from .._files import check_distinct, check_output
 from ..errors import Interrupted, RunError, UsageError, install_hint
-from ..files import check_distinct, check_output
 from . import (
     BagOpt,
     ConfigOpt,

@@ -50,7 +50,7 @@ def trackers(
     """The distributed method with the paper's tracker (cv + max_consensus), the IMM,
     covariance intersection and both, on the paper's and on manoeuvring targets:
     observation rate, RMSE, NEES against its band, OSPA; into a folder."""
-    from .. import trackers as experiment
+    from ..experiments import trackers as experiment
 
     scenario = load_scenario(config, set_, team)
     refuse_set(

@@ -234,7 +234,7 @@ class UAVTrackingEnv(ParallelEnv):
         return self.result().trace, run.k - 1
 
     def _image(self) -> np.ndarray:
-        from ..plots import frame
+        from ..viz.scene import frame
 
         trace, k = self._trace()
         return frame(trace, self.scenario, k, f"{self.method.name} (env)")

@@ -22,12 +22,12 @@ from typing import Any
 
 import numpy as np
 
-from . import estimation, planning, sensing, threads, world
-from .config import Scenario
-from .errors import install_hint
-from .experiments import resized
-from .methods import get
-from .simulation import (
+from .. import _process as threads
+from .. import estimation, planning, sensing, world
+from ..config import Scenario
+from ..errors import install_hint
+from ..methods import get
+from ..simulation import (
     Context,
     initial_state,
     memory_estimate,
@@ -37,6 +37,7 @@ from .simulation import (
     step,
     trial_seed,
 )
+from .reproduce import resized
 
 
 def timed(*functions: Callable[[], Any], repeats: int, block: float = 0.05) -> list[float]:
@@ -137,7 +138,7 @@ def set_distance_cases(repeats: int) -> list[dict[str, Any]]:
     """OSPA and GOSPA: one 1000 x 1000 pair of point sets, and a step's per-UAV scoring
     of 25 trials of the default team (all n! matchings at once against one assignment
     solve per set)."""
-    from . import metrics
+    from .. import metrics
 
     rng = np.random.default_rng(0)
     X, Y = rng.uniform(0, 200, (2, 1000, 2))
@@ -387,7 +388,7 @@ def machine() -> dict[str, Any]:
         cores = len(os.sched_getaffinity(0))
     except AttributeError:
         cores = os.cpu_count()
-    from . import __version__
+    from .. import __version__
 
     tiny = np.ones(20)
     call = min(timeit.repeat(lambda: tiny + tiny, number=20000, repeat=5)) / 20000

@@ -15,9 +15,8 @@ from typing import Any
 import numpy as np
 
 from ..config import G, Scenario
-from ..experiments import Job, collect, describe, difference, label_of, paired, trial_jobs, unique
-from ..report import ci, pm
-from ..robustness import ci95
+from .jobs import Job, collect, describe, difference, label_of, paired, trial_jobs, unique
+from .statistics import ci, ci95, pm
 
 JSBSIM = {"uav.dynamics": "jsbsim"}
 
@@ -122,7 +121,7 @@ def characterise(scenario: Scenario, seconds: float = 60.0, seed: int = 0) -> di
       (as the method flies): the bank error |phi - phi_cmd| over each cycle (mean, max,
       and the mean at the cycle's end), and the altitude and airspeed excursions.
     """
-    from .jsbsim import FT, Fleet, substeps
+    from ..flight.jsbsim import FT, Fleet, substeps
 
     base = scenario.with_overrides({"n_uavs": 1, "uav.altitudes": None, **JSBSIM})
     phi = math.radians(base.uav.bank_angle_deg)

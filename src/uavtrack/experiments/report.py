@@ -4,8 +4,9 @@ from __future__ import annotations
 
 from typing import Any
 
-from .config import Scenario
-from .metrics import rank_names
+from ..config import Scenario
+from ..metrics import rank_names
+from .statistics import ci, level_text, number, pm, signed
 
 PAPER_NOTE = (
     "The paper reports only Fig. 5's overall rates as numbers; its other figures are "
@@ -17,36 +18,6 @@ NA_NOTE = (
     "n/a: a standard deviation or a confidence interval needs at least two trials; "
     "summary.json holds null there."
 )
-
-
-def _missing(value: float | None) -> bool:
-    return value is None or value != value  # None or NaN
-
-
-def pm(mean: float | None, std: float | None, digits: int = 4) -> str:
-    """``mean ± std``; n/a for what could not be computed."""
-    if _missing(mean):
-        return "n/a"
-    spread = "n/a" if _missing(std) else f"{std:.{digits}f}"
-    return f"{mean:.{digits}f} ± {spread}"
-
-
-def ci(p: dict[str, float], negate: bool = False, digits: int = 4) -> str:
-    """``mean [low, high]`` of a paired difference (of its negation if `negate`)."""
-    mean, low, high = p["mean"], p["ci_low"], p["ci_high"]
-    if negate:
-        mean, low, high = -mean, -high, -low
-    if _missing(mean):
-        return "n/a"
-    if _missing(low) or _missing(high):
-        return f"{signed(mean, digits)} [n/a]"
-    return f"{signed(mean, digits)} [{signed(low, digits)}, {signed(high, digits)}]"
-
-
-def signed(x: float, digits: int = 4) -> str:
-    """x with its sign, and +0 rather than -0 for what rounds to zero."""
-    text = f"{x:+.{digits}f}"
-    return "+" + text[1:] if float(text) == 0 else text
 
 
 def _per_method(results: dict[str, Any], columns: list[str], key: str) -> list[str]:
@@ -124,8 +95,8 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
         out.append(
             f"| {m} | {r['rmse_best']['mean']:.2f} | {r['rmse']['mean']:.2f} | "
             f"{r['nees_best']['mean']:.2f} | {r['nees']['mean']:.2f} | "
-            f"{_num(r['ospa_best']['mean'])} | {_num(r['ospa']['mean'])} | "
-            f"{_num(r['gospa_best']['mean'])} | "
+            f"{number(r['ospa_best']['mean'])} | {number(r['ospa']['mean'])} | "
+            f"{number(r['gospa_best']['mean'])} | "
             f"{r['rounds']['mean']:.2f} | {r['messages']['mean']:.2f} |"
         )
     cut, order = scenario.evaluation.ospa_cutoff, scenario.evaluation.ospa_order
@@ -202,10 +173,6 @@ def reproduction(summary: dict[str, Any], scenario: Scenario, info: dict[str, An
     ]
     out += parameter_table(scenario)
     return "\n".join(out) + "\n"
-
-
-def _num(value: float | None, digits: int = 2) -> str:
-    return "n/a" if _missing(value) else f"{value:.{digits}f}"
 
 
 def _spreads(c: dict[str, Any], paper: dict[str, Any]) -> list[str]:
@@ -402,6 +369,8 @@ FAULT_MODEL = (
     "many rounds of flooding and of consensus per cycle; `failure_rate`, UAVs failing for "
     "good; `position_std`, each UAV's own position error (GPS), per axis and cycle."
 )
+
+
 SERIES_NOTE = (
     "Series: *distributed*, the paper's method as printed; *robust*, the same with "
     "`robust.extra_rounds = 2`, `robust.stale = true` (time-stamped tuples predicted "
@@ -419,17 +388,6 @@ ABLATION = {
     "all (robust)": "robust",
 }
 """Ablation columns: heading -> series."""
-
-
-def level_text(value: Any) -> str:
-    """A level or swept value as text: none for an unset field, numbers without noise."""
-    if value is None:
-        return "none"
-    if isinstance(value, bool):
-        return "true" if value else "false"
-    if isinstance(value, float):
-        return f"{value:g}"
-    return str(value)
 
 
 def robustness(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> str:

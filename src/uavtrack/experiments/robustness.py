@@ -21,23 +21,15 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from .config import Scenario
-from .experiments import (
-    Job,
-    collect,
-    describe,
-    difference,
-    label_of,
-    paired,
-    trial_jobs,
-    unique,
-)
+from ..config import Scenario
+from .jobs import Job, collect, difference, label_of, trial_jobs, unique
+from .statistics import ci95, describe, paired
 
 ROBUST = {"robust.extra_rounds": 2, "robust.stale": True, "robust.position_noise": True}
 """The robust series: every mechanism on; 2 extra rounds (assumed: a margin of two rounds
 covers the D_i a UAV underestimates when one or two flooding messages are lost)."""
+
 
 MECHANISMS = {
     "extra rounds": {"robust.extra_rounds": 2},
@@ -45,6 +37,7 @@ MECHANISMS = {
     "position noise": {"robust.position_noise": True},
 }
 """The mechanisms of the ablation, each alone."""
+
 
 SERIES = ("distributed", "robust", "centralized", "greedy")
 
@@ -234,12 +227,3 @@ def summarize(
         ablation[fault.name] = entry
     out["ablation"] = ablation
     return out
-
-
-def ci95(values: np.ndarray) -> float:
-    """Half-width of the 95% t confidence interval of the mean (NaN for one value)."""
-    values = np.asarray(values, dtype=float)
-    n = len(values)
-    if n < 2:
-        return float("nan")
-    return float(stats.t.ppf(0.975, n - 1) * values.std(ddof=1) / np.sqrt(n))

@@ -38,72 +38,47 @@ from collections.abc import Callable, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
-from ._version import __version__
-from .config import flatten
-from .errors import RunError, UsageError, install_hint
-from .experiments import Job, run_job
-from .files import dumps, write_json
-from .progress import bar
+from .. import __version__
+from .._files import dumps, write_json
+from .._progress import bar
+from ..config import flatten
+from ..errors import RunError, UsageError, install_hint
+from ..io.results import checksum, read_jobs  # noqa: F401 (read_jobs: public here too)
+from .jobs import Job, run_job
 
 LOCK = ".lock"
 
 
 PRESENTATION = frozenset(
     {
-        "bench.py",
-        "equivalence.py",
+        "_files.py",
+        "_progress.py",
         "errors.py",
-        "files.py",
-        "plots.py",
-        "progress.py",
-        "report.py",
-        "robustness.py",
-        "runner.py",
+        "testing.py",
+        "experiments/bench.py",
+        "experiments/figures.py",
+        "experiments/report.py",
+        "experiments/robustness.py",
+        "experiments/statistics.py",
+        "experiments/store.py",
     }
 )
-"""Modules that do not change a job's numbers (reports, figures, storage, the command line)."""
+"""Modules that do not change a job's numbers (reports, figures, storage), by their path
+in the package; the command line (`cli/`) and the pictures (`viz/`) are left out too."""
 
 
 def code_hash() -> str:
     """SHA-256 over the source files that compute results: results of other code are not
     mixed in, while a change to a report, a figure or the command line keeps them."""
     digest = hashlib.sha256()
-    package = Path(__file__).parent
+    package = Path(__file__).parents[1]  # the uavtrack package
     for path in sorted(package.rglob("*.py")):
-        if path.name in PRESENTATION or path.parent.name == "cli":
+        name = path.relative_to(package).as_posix()
+        if name in PRESENTATION or name.split("/")[0] in ("cli", "viz"):
             continue
-        digest.update(path.relative_to(package).as_posix().encode())
+        digest.update(name.encode())
         digest.update(path.read_bytes())
     return digest.hexdigest()[:16]
-
-
-def checksum(body: dict[str, Any]) -> str:
-    """SHA-256 of the canonical JSON of a job file's body."""
-    text = json.dumps(body, sort_keys=True, separators=(",", ":"), allow_nan=False)
-    return hashlib.sha256(text.encode()).hexdigest()
-
-
-def read_jobs(
-    root: str | Path, left_out: list[str] | None = None
-) -> Iterator[tuple[dict[str, Any], dict[str, Any]]]:
-    """The intact job files of a results folder, read only: (job, metrics) each, in the
-    order of their names. A file whose checksum fails is skipped and its name appended to
-    `left_out` (a later run of the experiment computes it again); a folder without a
-    manifest is refused in one line."""
-    root = Path(root).expanduser()
-    if not (root / "manifest.json").is_file():
-        raise UsageError(f"{root}: not a uavtrack results folder (no manifest.json)")
-    for path in sorted((root / "raw").glob("*.json")):
-        try:
-            record = json.loads(path.read_text(encoding="utf-8"))
-            body = {k: record[k] for k in ("job", "seconds", "metrics")}
-            intact = checksum(body) == record["sha256"]
-        except (OSError, ValueError, KeyError, TypeError):
-            intact = False
-        if intact:
-            yield body["job"], body["metrics"]
-        elif left_out is not None:
-            left_out.append(path.name)
 
 
 class Store:
@@ -410,7 +385,7 @@ class EngineError(RunError):
 def exit_with_parent(parent: int) -> None:
     """Worker initialiser: end this process once `parent` is gone, even by SIGKILL
     (`lifeline.die_with`); Ctrl-C is the parent's to handle."""
-    from .lifeline import die_with
+    from .._process import die_with
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     die_with(parent)

@@ -14,14 +14,13 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
-from .config import Scenario
-from .experiments import Job, collect, describe, difference, label_of, paired, trial_jobs, unique
-from .report import ci, pm
-from .robustness import ci95
+from ..config import Scenario
+from .jobs import Job, collect, difference, label_of, trial_jobs, unique
+from .statistics import ci, ci95, describe, nees_band, paired, pm
 
 MOTIONS = ("ncv", "manoeuvring")
+
 
 TRACKERS = {
     "cv + max_consensus": {},
@@ -48,6 +47,7 @@ TRACKERS = {
 mode is a pair of coordinated turns at +-8 deg/s (the targets' turns, up to 15 deg/s,
 average 7.5) instead of a 0.5 m/s^2 noise mode: the measurement behind the default
 mode set."""
+
 
 METHOD = "distributed"
 
@@ -86,13 +86,6 @@ def plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]
         ]
         for motion in MOTIONS
     }
-
-
-def nees_band(samples: float, dim: int = 4, level: float = 0.95) -> tuple[float, float]:
-    """The band of the mean NEES of `samples` independent `dim`-D errors of a consistent
-    estimator: chi-square(dim x samples) quantiles divided by samples."""
-    low, high = stats.chi2.ppf([(1 - level) / 2, (1 + level) / 2], dim * samples)
-    return float(low / samples), float(high / samples)
 
 
 def summarize(

@@ -6,8 +6,11 @@ and flies the UAVs through the cycle.
 `unicycle.Unicycle` is the paper's eq. (1) (the bank angle turns the heading at once);
 `jsbsim.Fleet` flies each UAV as a JSBSim fixed-wing aircraft whose autopilot holds the
 bank angle, the altitude and the airspeed, in wind and turbulence; `mavlink` turns the same
-decision into the setpoints a real autopilot accepts. The world owns the autopilots; the
-planner keeps the unicycle model whatever flies the UAVs (the mismatch is the point).
+decision into the setpoints a real autopilot accepts (`uavtrack.io.mavlink`). The world
+owns the autopilots; the planner keeps the unicycle model whatever flies the UAVs (the
+mismatch is the point). Whether JSBSim can fly a scenario's aircraft is checked where a
+flight starts (`check`), never while a scenario is built or read: a JSBSim scenario loads,
+and its traces export, on a machine without JSBSim.
 
 Every autopilot answers `fly(uavs, bank, alive)`: the UAV states (B, Nu, 5) x, y, h, V,
 heading after one cycle of dt with the bank angles (B, Nu) [rad] held (positive: turn
@@ -22,6 +25,7 @@ from typing import Protocol
 import numpy as np
 
 from ..config import Scenario
+from ..errors import ScenarioError
 
 
 class Autopilot(Protocol):
@@ -41,8 +45,24 @@ def start(
     if scenario.uav.dynamics == "jsbsim":
         from .jsbsim import Fleet
 
+        check(scenario)
         fleet = Fleet(scenario, seeds, uavs)
         return fleet, fleet.states()
     from .unicycle import Unicycle
 
     return Unicycle(scenario.dt), uavs
+
+
+def check(scenario: Scenario) -> None:
+    """Refuse (ScenarioError, one line) a scenario whose UAVs cannot be flown: with
+    ``uav.dynamics = jsbsim``, JSBSim missing, an aircraft that does not load, has no
+    uavtrack autopilot or cannot fly level at the scenario's airspeed and altitudes. The
+    unicycle flies anything the scenario admits."""
+    if scenario.uav.dynamics != "jsbsim":
+        return
+    from . import jsbsim
+
+    try:
+        jsbsim.check(scenario)
+    except ValueError as exc:
+        raise ScenarioError(str(exc)) from None

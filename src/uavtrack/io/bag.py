@@ -36,10 +36,10 @@ try:
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.bag needs rosbags: {install_hint('io')} ({exc})") from None
 
-from ..files import check_new_folder, new_folder
-from ..flight.mavlink import LocalFrame
+from .._files import check_new_folder, new_folder
 from ..metrics import team_best
 from ..network import radio_links
+from .mavlink import LocalFrame
 from .ros2 import FRAME, estimate_of, header_of, pose_of, store, transform_of, uav_pose
 
 

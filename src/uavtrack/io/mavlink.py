@@ -36,7 +36,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..errors import RunError, install_hint
-from .jsbsim import WGS84_A, WGS84_E2
+from ..flight.jsbsim import WGS84_A, WGS84_E2
 
 IGNORE_RATES = 0b0000_0111
 """SET_ATTITUDE_TARGET type_mask: ignore the body roll, pitch and yaw rates."""

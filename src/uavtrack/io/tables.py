@@ -250,7 +250,7 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
     experiment's seed: trial t ran with ``uavtrack.trial_seed(plan_seed, t)``), then every
     scalar metric (NaN where the metric was not computed). Job files whose checksum fails
     are left out and named in ``frame.attrs["left_out"]``."""
-    from ..runner import read_jobs
+    from .results import read_jobs
 
     base = _base_scenario(Path(folder))
     rows, left_out = [], []

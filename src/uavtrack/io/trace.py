@@ -28,10 +28,10 @@ from pathlib import Path
 
 import numpy as np
 
-from .._version import __version__
+from .. import __version__
+from .._files import write_npz
 from ..config import Scenario, ScenarioError
 from ..errors import UsageError
-from ..files import write_npz
 from ..simulation import RECORDED, Result, Trace
 
 FORMAT = 2

@@ -17,7 +17,7 @@ import importlib
 from importlib.metadata import entry_points
 from typing import Any
 
-from .errors import UsageError
+from ..errors import UsageError
 
 BUILT_IN = {
     "distributed": "uavtrack.methods:Distributed",

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import network
+from .. import network
 
 
 def threshold(probability: float) -> float:

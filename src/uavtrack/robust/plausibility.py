@@ -43,8 +43,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import estimation, sensing
-from .config import MAX_ALTITUDE, Scenario
+from .. import estimation, sensing
+from ..config import MAX_ALTITUDE, Scenario
 
 SIGMAS = 6.0
 """Standard deviations within which a Gaussian quantity of the run is taken to stay."""

@@ -28,17 +28,17 @@ from pathlib import Path
 
 import numpy as np
 
-from .errors import install_hint
+from ..errors import install_hint
 
 try:
     import rerun as rr
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.viewer needs rerun-sdk: {install_hint('viz')} ({exc})") from None
 
-from .errors import RunError, UsageError
-from .files import write_bytes
-from .network import in_range
-from .sensing import observation_radius
+from .._files import write_bytes
+from ..errors import RunError, UsageError
+from ..network import in_range
+from ..sensing import observation_radius
 
 ENTITIES = (
     "world/field",

@@ -1,5 +1,10 @@
-"""BLAS threads: set in this one place, on ``import uavtrack``, for every command, worker,
-agent program and library entry point.
+"""What a process uavtrack runs (a command, a worker, a UAV program, a library entry
+point) takes from its machine, read or set in this one place: its BLAS threads, the
+memory available to it, and its end with the process that started it. Imports nothing
+heavy: a program calls it before it loads numpy.
+
+BLAS threads, set on ``import uavtrack``, for every command, worker, agent program and
+library entry point:
 
 uavtrack's arrays are small per call (a cycle of the default team is about 200 numpy
 calls on 4 to 260 elements) or, for large teams, memory-bound; a second BLAS thread
@@ -14,12 +19,21 @@ distributed cycle of 300 UAVs and 300 targets took 84 ms of CPU with one thread 
 * Otherwise, one thread. Before numpy loads this goes through the environment (so
   worker processes and agent programs inherit it); when numpy was loaded first, through
   threadpoolctl, for this process.
+
+The end with its parent: a process started by uavtrack ends with the process that
+started it, even when that one is killed with SIGKILL. Two ways, both cheap and both
+needed: the kernel's parent-death signal on Linux (``prctl(PR_SET_PDEATHSIG)``, at
+once), and a thread that checks every half second whether the parent changed (anywhere,
+and for a parent that died before the signal was asked for).
 """
 
 from __future__ import annotations
 
 import os
+import signal
 import sys
+import threading
+import time
 
 VARIABLE = "UAVTRACK_BLAS_THREADS"
 THREAD_VARIABLES = (
@@ -107,3 +121,41 @@ def check() -> None:
 def describe() -> str:
     """How BLAS threads were set in this process, for benchmark records."""
     return state["how"] or "not set"
+
+
+PR_SET_PDEATHSIG = 1
+
+
+def die_with(parent: int) -> None:
+    """End this process when `parent` is gone, and now if it already is."""
+    try:
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(PR_SET_PDEATHSIG, int(signal.SIGKILL), 0, 0, 0)
+    except (OSError, AttributeError):  # not Linux: the watch alone
+        pass
+    if os.getppid() != parent:
+        os._exit(1)
+
+    def watch() -> None:
+        while os.getppid() == parent:
+            time.sleep(0.5)
+        os._exit(1)
+
+    threading.Thread(target=watch, daemon=True, name="uavtrack-parent-watch").start()
+
+
+def available_memory() -> int:
+    """Bytes of memory available to new allocations (MemAvailable on Linux)."""
+    try:
+        with open("/proc/meminfo", encoding="ascii") as info:
+            for line in info:
+                if line.startswith("MemAvailable:"):
+                    return int(line.split()[1]) * 1024
+    except OSError:
+        pass
+    try:
+        return os.sysconf("SC_AVPHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    except (ValueError, OSError, AttributeError):
+        return 2**62  # unknown: do not refuse

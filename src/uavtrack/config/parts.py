@@ -1,0 +1,664 @@
+"""The parts of a scenario (sensor, UAV, wind, targets, tracker, fusion, evaluation,
+estimation, planner, faults, robustness), each a validated pydantic model.
+
+Each field states its unit and its source: a paper equation or section, or
+"assumed" with the reason. The paper (Sec. 7) gives V, k_d, k_r, k_theta,
+sigma_1, sigma_2, the team sizes, r_C, the FOV, trials and steps, and the shape of
+the action set; everything else is an assumption, chosen for physical consistency
+(see the documentation's Parameters page).
+"""
+
+from __future__ import annotations
+
+import math
+from numbers import Integral, Real
+from typing import Annotated, Any, Literal
+
+from pydantic import (
+    BaseModel,
+    BeforeValidator,
+    ConfigDict,
+    Field,
+    Strict,
+    field_validator,
+    model_validator,
+)
+
+G = 9.81
+"""Gravitational acceleration [m/s^2], eq. (1)."""
+
+
+def _integer(value: Any) -> Any:
+    """Integers of any kind (numpy's too) become int; anything else is left to fail."""
+    if isinstance(value, Integral) and not isinstance(value, bool):
+        return int(value)
+    return value
+
+
+def _real(value: Any) -> Any:
+    """Real numbers of any kind (ints, numpy floats) become float; bools and text fail."""
+    if isinstance(value, Real) and not isinstance(value, bool):
+        return float(value)
+    return value
+
+
+Int = Annotated[int, BeforeValidator(_integer), Strict()]
+"""An integer field: true, 5.0 or "5" are refused rather than read as 1 or 5."""
+
+
+Float = Annotated[float, BeforeValidator(_real), Strict()]
+"""A float field: ints are accepted, booleans and text are refused; inf and NaN too."""
+
+
+class _Part(BaseModel):
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False
+    )
+
+
+class SensorModel(_Part):
+    """Range-bearing sensor with a distance-dependent noise (eq. 2-4)."""
+
+    k_d: Float = Field(
+        0.1056, gt=0, le=1000, description="range-noise scale [m], (0, 1000]; paper eq. (3), Sec. 7"
+    )
+    k_r: Float = Field(
+        10.07,
+        ge=0,
+        le=100,
+        description="range-noise growth rate [-], [0, 100]; paper eq. (3), Sec. 7",
+    )
+    k_theta: Float = Field(
+        0.01, gt=0, le=1, description="bearing-noise scale [rad], (0, 1]; paper eq. (3), Sec. 7"
+    )
+    half_fov_deg: Float = Field(
+        5.0,
+        gt=0,
+        lt=90,
+        description=(
+            "half field of view alpha [deg], (0, 90); paper Sec. 7.1 (FOV 2*alpha = 10 deg)"
+        ),
+    )
+
+    @property
+    def alpha(self) -> float:
+        """Half field of view [rad]."""
+        return math.radians(self.half_fov_deg)
+
+
+MAX_ALTITUDE = 20_000.0
+"""Highest flight altitude accepted [m] (above any fixed-wing UAV's ceiling)."""
+
+
+class UAVModel(_Part):
+    """Fixed-wing UAVs at constant speed and altitude, bank-angle actions (eq. 1)."""
+
+    speed: Float = Field(15.0, gt=0, le=300, description="airspeed V [m/s], (0, 300]; paper Sec. 7")
+    bank_angle_deg: Float = Field(
+        45.0,
+        gt=0,
+        lt=90,
+        description=(
+            "bank angle phi of the action set {-phi, 0, +phi} [deg], (0, 90); assumed: the "
+            "paper does not give it; 45 deg, a usual limit for small fixed-wing UAVs, gives a "
+            "turn radius V^2/(g tan phi) = 22.9 m, inside the 37 m observation disk"
+        ),
+    )
+    altitude: Float = Field(
+        425.0,
+        gt=0,
+        le=MAX_ALTITUDE,
+        description=(
+            "mean flight altitude [m], (0, 20000]; assumed: the observation radius h tan(alpha) "
+            "must exceed the turn radius for a UAV to orbit a target in view (37 m against "
+            "23 m at 425 m); calibrated with dt against the paper's Fig. 5 (see the docs, "
+            "Calibration)"
+        ),
+    )
+    altitude_spacing: Float = Field(
+        5.0,
+        ge=-1000,
+        le=1000,
+        description=(
+            "altitude difference between consecutive UAVs [m], [-1000, 1000] (negative: UAV 0 "
+            "flies highest); assumed: the paper flies each UAV at its own altitude; 5 m keeps "
+            "the team's spread (20 m for 5 UAVs) well inside r_C = 50 m; results barely "
+            "depend on it (0 to 10 m tried)"
+        ),
+    )
+    altitudes: tuple[Annotated[Float, Field(gt=0, le=MAX_ALTITUDE)], ...] | None = Field(
+        None,
+        description=(
+            "explicit per-UAV altitudes [m], each in (0, 20000], overriding altitude and "
+            "altitude_spacing; length n_uavs; not set by default"
+        ),
+    )
+    start_spread: Float = Field(
+        20.0,
+        ge=0,
+        le=100_000,
+        description=(
+            "side of the square around the field centre where UAVs start [m], [0, 100000]; "
+            "assumed: the team takes off together"
+        ),
+    )
+    dynamics: Literal["unicycle", "jsbsim"] = Field(
+        "unicycle",
+        description=(
+            "how the world flies a UAV [-], (unicycle, jsbsim); unicycle: the paper's eq. (1), "
+            "the bank angle turns the heading at once; jsbsim: a JSBSim fixed-wing aircraft "
+            "(uav.aircraft) whose autopilot holds the bank angle, altitude and airspeed, "
+            "integrated at uav.jsbsim_rate_hz; beyond the paper (its Sec. 8 names the "
+            "simplified kinematics as its first limit); the planner keeps eq. (1) either way"
+        ),
+    )
+    aircraft: str = Field(
+        "trackwing",
+        min_length=1,
+        max_length=200,
+        description=(
+            "the JSBSim model flown with uav.dynamics = jsbsim; beyond the paper: trackwing "
+            "(uavtrack's 2.5 kg UAV, trimmed at 15 m/s), a model shipped with JSBSim, or the "
+            "folder of another model; its autopilot must answer uavtrack's (docs, Real flight)"
+        ),
+    )
+    jsbsim_rate_hz: Float = Field(
+        120.0,
+        ge=50,
+        le=1000,
+        description=(
+            "rate JSBSim integrates the aircraft and runs its autopilot [Hz], [50, 1000]; "
+            "beyond the paper; JSBSim's default 120 Hz; each cycle of dt is split into "
+            "round(dt x rate) steps"
+        ),
+    )
+
+
+class WindModel(_Part):
+    """Steady wind and JSBSim's turbulence, felt by the aircraft of uav.dynamics = jsbsim."""
+
+    speed: Float = Field(
+        0.0,
+        ge=0,
+        le=50,
+        description=(
+            "steady wind speed [m/s], [0, 50]; beyond the paper; the autopilot holds the "
+            "airspeed, so a UAV's ground speed grows downwind and shrinks upwind"
+        ),
+    )
+    direction_deg: Float = Field(
+        0.0,
+        ge=0,
+        lt=360,
+        description=(
+            "direction the wind blows from [deg], [0, 360), clockwise from the scenario's +y "
+            "axis (north), as a weather report gives it: 270 blows towards +x; beyond the paper"
+        ),
+    )
+    turbulence: Literal["none", "light", "moderate", "severe"] = Field(
+        "none",
+        description=(
+            "beyond the paper: JSBSim's Dryden turbulence (MIL-F-8785C, Tustin form) at the "
+            "intensities of "
+            "the milspec: light, moderate, severe (wind at 20 ft of 15, 30, 45 kt, probability "
+            "of exceedance 1e-2, 1e-3, 1e-5), or none; seeded from each trial's flight stream"
+        ),
+    )
+
+    def velocity(self) -> tuple[float, float]:
+        """The air mass's velocity (east, north) = (+x, +y) [m/s]: it moves away from
+        the direction the wind blows from."""
+        towards = math.radians(self.direction_deg) + math.pi  # clockwise from north
+        return self.speed * math.sin(towards), self.speed * math.cos(towards)
+
+
+class ManoeuvreModel(_Part):
+    """Manoeuvring targets (target.motion = "manoeuvring"), beyond the paper: each target
+    flies segments of random length, each straight or a coordinated turn, at a new speed
+    or stopping, with the white acceleration of eq. (15) on top."""
+
+    interval: Float = Field(
+        8.0,
+        gt=0,
+        le=1000,
+        description=(
+            "mean length of a segment [s], (0, 1000], exponentially distributed; assumed: a "
+            "ground vehicle changes what it does every few seconds"
+        ),
+    )
+    turn_probability: Float = Field(
+        0.5,
+        ge=0,
+        le=1,
+        description="probability that a segment is a turn [-], [0, 1]; assumed: half of them",
+    )
+    turn_rate_max_deg: Float = Field(
+        15.0,
+        ge=0,
+        le=90,
+        description=(
+            "largest turn rate [deg/s], [0, 90], a turn's rate uniform in +-it; assumed: a "
+            "vehicle at 3 m/s turning at 15 deg/s follows an 11 m radius"
+        ),
+    )
+    speed_max: Float = Field(
+        3.0,
+        gt=0,
+        le=50,
+        description=(
+            "largest speed [m/s], (0, 50], a segment's speed uniform in [speed_max / 4, "
+            "speed_max]; assumed: slow vehicles, as target.initial_velocity_std"
+        ),
+    )
+    stop_probability: Float = Field(
+        0.15,
+        ge=0,
+        le=1,
+        description="probability that a segment is a stop [-], [0, 1]; assumed",
+    )
+    acceleration_max: Float = Field(
+        0.5,
+        gt=0,
+        le=20,
+        description=(
+            "largest acceleration along the path when the speed changes [m/s^2], (0, 20]; "
+            "assumed: a gentle vehicle"
+        ),
+    )
+
+
+class TargetModel(_Part):
+    """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
+
+    sigma_1: Float = Field(
+        0.16,
+        ge=0,
+        le=10,
+        description=(
+            "acceleration-noise std along x [m/s^2], [0, 10] (a velocity increment per "
+            "step [m/s] with target.noise_form = 'printed'); paper eq. (15), Sec. 7"
+        ),
+    )
+    sigma_2: Float = Field(
+        0.16,
+        ge=0,
+        le=10,
+        description=(
+            "acceleration-noise std along y [m/s^2], [0, 10] (a velocity increment per "
+            "step [m/s] with target.noise_form = 'printed'); paper eq. (15), Sec. 7"
+        ),
+    )
+    initial_velocity_std: Float = Field(
+        1.0,
+        ge=0,
+        le=50,
+        description=(
+            "std of each initial velocity component [m/s], [0, 50]; assumed: slow ground "
+            "vehicles or pedestrians; the paper says only that targets move randomly"
+        ),
+    )
+    motion: Literal["ncv", "manoeuvring"] = Field(
+        "ncv",
+        description=(
+            "how targets move [-], (ncv, manoeuvring); ncv: the paper's nearly constant "
+            "velocity (eq. 13); manoeuvring: beyond the paper, straight legs, coordinated "
+            "turns, speed changes and stops (target.manoeuvre), reflected at the walls"
+        ),
+    )
+    manoeuvre: ManoeuvreModel = Field(
+        default_factory=ManoeuvreModel, description="manoeuvres (target.motion = manoeuvring)"
+    )
+    noise_form: Literal["acceleration", "printed"] = Field(
+        "acceleration",
+        description=(
+            "reading of eq. (15) [-]: 'acceleration' takes sigma as a white acceleration "
+            "[m/s^2] (Q = sigma^2 [[dT^4/4, dT^3/2], [dT^3/2, dT^2]] per axis), 'printed' "
+            "as the printed matrix sigma^2 [[dT^2/4, dT/2], [dT/2, 1]], a velocity "
+            "increment of std sigma per step; the two agree at dT = 1 s; assumed "
+            "'acceleration' (sigma keeps its unit at any time step); filter and truth alike"
+        ),
+    )
+
+
+class TrackerModel(_Part):
+    """The local filter of each (UAV, target): the paper's Kalman filter or an IMM."""
+
+    model: Literal["cv", "imm"] = Field(
+        "cv",
+        description=(
+            "the filter [-], (cv, imm); cv: the paper's nearly-constant-velocity Kalman filter "
+            "(eq. 22-25); imm: beyond the paper, an interacting multiple model filter whose "
+            "first mode is that filter and whose other modes have the larger accelerations "
+            "of tracker.manoeuvre_std; fusion and planning read its combined estimate"
+        ),
+    )
+    manoeuvre_std: tuple[Annotated[Float, Field(gt=0, le=100)], ...] = Field(
+        (0.5, 2.3),
+        min_length=1,
+        max_length=5,
+        description=(
+            "white-acceleration std of each further IMM mode [m/s^2], each in (0, 100], 1 to "
+            "5 modes; assumed: 0.5 m/s^2 covers the manoeuvring targets' turns and stops, "
+            "2.3 m/s^2 a reflection at a wall; tuned on 16 trials of each target motion for "
+            "a mean NEES near 4 (docs, Trackers)"
+        ),
+    )
+    turn_rates_deg: tuple[Annotated[Float, Field(gt=0, le=90)], ...] = Field(
+        (),
+        max_length=3,
+        description=(
+            "turn rates of further IMM modes [deg/s], each in (0, 90], at most 3: each adds "
+            "two coordinated-turn modes (left and right at that known rate, the paper's "
+            "noise), after the manoeuvre modes; none by default (docs, Trackers, measures "
+            "them against the noise-only modes)"
+        ),
+    )
+    transition: tuple[tuple[Annotated[Float, Field(ge=0, le=1)], ...], ...] = Field(
+        ((0.95, 0.04, 0.01), (0.10, 0.85, 0.05), (0.30, 0.30, 0.40)),
+        description=(
+            "IMM mode transition matrix [-], entries in [0, 1], each row summing to 1, one "
+            "row and column per mode (the cv mode first); p_ij = P(mode j at k+1 | mode i "
+            "at k); assumed: a manoeuvre lasts several cycles, a jump one or two"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _square(self) -> TrackerModel:
+        m = 1 + len(self.manoeuvre_std) + 2 * len(self.turn_rates_deg)
+        if len(self.transition) != m or any(len(row) != m for row in self.transition):
+            raise ValueError(
+                f"transition must be {m} x {m} (one row and column per mode: the cv "
+                f"mode, {len(self.manoeuvre_std)} of tracker.manoeuvre_std and "
+                f"{2 * len(self.turn_rates_deg)} of tracker.turn_rates_deg)"
+            )
+        for i, row in enumerate(self.transition):
+            if abs(sum(row) - 1.0) > 1e-9:
+                raise ValueError(f"transition row {i} sums to {sum(row):g}, not 1")
+        return self
+
+
+class FusionModel(_Part):
+    """How a UAV combines its estimate with its neighbours' (Algorithm 2, lines 15-25)."""
+
+    rule: Literal["max_consensus", "covariance_intersection"] = Field(
+        "max_consensus",
+        description=(
+            "the fusion rule of each consensus round [-], (max_consensus, "
+            "covariance_intersection); max_consensus: the paper's eq. (27), adopt the most "
+            "confident tuple; covariance_intersection: beyond the paper, fuse the received "
+            "estimates by covariance intersection with weights 1 / trace(P) (fast CI), "
+            "consistent whatever their correlation; the consensus of distributed and greedy "
+            "(centralized has no consensus: its node takes each target's best upload)"
+        ),
+    )
+
+
+class EvaluationModel(_Part):
+    """How the estimates are scored against the truth as point sets (not in the paper)."""
+
+    ospa_cutoff: Float = Field(
+        20.0,
+        gt=0,
+        le=100_000,
+        description=(
+            "cut-off c of OSPA and GOSPA [m], (0, 100000]; assumed: about half the "
+            "observation radius (37 m): an estimate farther off would not bring its UAV "
+            "over the target"
+        ),
+    )
+    ospa_order: Float = Field(
+        1.0,
+        ge=1,
+        le=10,
+        description="order p of OSPA and GOSPA [-], [1, 10]; assumed: 1, the mean error",
+    )
+
+
+class EstimationModel(_Part):
+    """Initial belief shared by all UAVs (the paper does not say how filters start)."""
+
+    initial_position_std: Float = Field(
+        5.0,
+        gt=0,
+        le=10_000,
+        description=(
+            "std of the initial position cue and of the prior [m], (0, 10000]; assumed: every "
+            "UAV starts with a cue of each target (a consistent Gaussian prior around the truth)"
+        ),
+    )
+    initial_velocity_std: Float = Field(
+        1.0,
+        gt=0,
+        le=100,
+        description=(
+            "prior velocity std [m/s], (0, 100]; assumed: equal to the targets' initial "
+            "velocity spread, so the prior is consistent"
+        ),
+    )
+
+
+Bool = Annotated[bool, Strict()]
+"""A boolean field: true or false only (not 1 or "yes")."""
+
+
+class PlannerModel(_Part):
+    """Receding-horizon action search (Algorithm 1, lines 1-4)."""
+
+    horizon: Int = Field(
+        3,
+        ge=2,
+        le=10,
+        description=(
+            "planning horizon h [steps], 2 to 10; assumed: the paper does not give it; 3 steps "
+            "(1.5 s) keeps the search at 27 sequences per target; under eq. (1) the bank angle "
+            "chosen at step k first moves the UAV at k+2, so h >= 2"
+        ),
+    )
+    discount: Float = Field(
+        1.0,
+        gt=0,
+        le=1,
+        description=(
+            "weight lambda^(t-1) of the t-th step's det G [-], (0, 1]; Algorithm 1 sums "
+            "undiscounted (1.0)"
+        ),
+    )
+    prune: Bool = Field(
+        True,
+        description=(
+            "true or false; beyond the paper (Algorithm 1 scores every target; the "
+            "decisions are the same): score only the bids an assignment can read (a UAV in "
+            "neighbourhoods of at most k members needs its k best; greedy its best), "
+            "skipping targets whose upper bound of det G cannot reach them; false: score "
+            "every bid, so that the "
+            "trace holds them all (as it always does when messages can be lost or late)"
+        ),
+    )
+    wind: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: plan with the steady wind (wind.speed and "
+            "wind.direction_deg, as an autopilot's wind estimate gives it): eq. (1) flown in "
+            "the air mass at the UAV's airspeed, plus the wind's drift; false: eq. (1) over "
+            "the ground at the ground speed, the paper's model"
+        ),
+    )
+
+
+class FaultModel(_Part):
+    """Faults the paper leaves open (Sec. 8); every default means "no fault".
+
+    Realised per trial from its own random stream (`uavtrack.faults`), the same for
+    every method, so differences between methods stay paired.
+    """
+
+    loss: Float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description=(
+            "probability [-], [0, 1], that one radio message is lost (each directed link, "
+            "round and protocol: beacons, D_i flooding, consensus tuples, bids, uploads, "
+            "downloads); beyond the paper (Sec. 8); independent unless burst_length > 1"
+        ),
+    )
+    burst_length: Float = Field(
+        1.0,
+        ge=1,
+        le=1000,
+        description=(
+            "mean length of a link's loss bursts [cycles], [1, 1000]; beyond the paper; 1: "
+            "independent losses; "
+            "above 1: a Gilbert-Elliott channel per directed link with the same long-run "
+            "loss, which needs burst_length >= 1 / (1 - loss)"
+        ),
+    )
+    delay: Int = Field(
+        0,
+        ge=0,
+        le=50,
+        description=(
+            "cycles by which every message arrives late [cycles], 0 to 50; beyond the paper; a "
+            "message of round r of cycle k is received in round r of cycle k + delay"
+        ),
+    )
+    round_budget: Int | None = Field(
+        None,
+        ge=1,
+        le=1000,
+        description=(
+            "most rounds a cycle has time for, in the D_i flooding and in the consensus "
+            "[rounds], 1 to 1000; beyond the paper; not set: unlimited, as the paper"
+        ),
+    )
+    failure_rate: Float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description=(
+            "probability [-], [0, 1], per UAV and cycle, that a UAV fails for good (it no "
+            "longer senses, sends or counts as observing); beyond the paper"
+        ),
+    )
+    failures: tuple[tuple[Annotated[Int, Field(ge=0)], Annotated[Int, Field(ge=0)]], ...] = Field(
+        (),
+        description=(
+            "explicit failures as [uav, step] pairs [-], uav in [0, n_uavs), step in [0, "
+            "steps): the UAV is down from that step on; beyond the paper; none by default"
+        ),
+    )
+    position_std: Float = Field(
+        0.0,
+        ge=0,
+        le=1000,
+        description=(
+            "standard deviation of each UAV's own position error per axis (GPS) [m], "
+            "[0, 1000], drawn per UAV and cycle; beyond the paper; the UAV converts its "
+            "measurements and plans from where it believes it is"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _bursts(self) -> FaultModel:
+        if self.burst_length > 1 and not 0 < self.loss < 1:
+            raise ValueError(
+                f"burst_length {self.burst_length:g} needs 0 < loss < 1 (at loss {self.loss:g} "
+                "every message is lost or none is); use burst_length 1"
+            )
+        if self.burst_length > 1:
+            least = 1.0 / (1.0 - self.loss)
+            if self.burst_length < least:
+                raise ValueError(
+                    f"burst_length {self.burst_length:g} is shorter than {least:.3g}, the mean "
+                    f"burst of independent losses at loss {self.loss:g}; use burst_length 1 "
+                    f"(independent) or at least {least:.3g}"
+                )
+        return self
+
+    @field_validator("failures", mode="after")
+    @classmethod
+    def _sorted(cls, value: tuple) -> tuple:
+        return tuple(sorted(value))  # one order: the same failures are the same scenario
+
+    @model_validator(mode="after")
+    def _one_failure_per_uav(self) -> FaultModel:
+        seen: dict[int, int] = {}
+        for uav, step in self.failures:
+            if uav in seen:
+                raise ValueError(
+                    f"failures lists UAV {uav} twice (steps {seen[uav]} and {step}); a UAV "
+                    "fails once"
+                )
+            seen[uav] = step
+        return self
+
+
+class RobustModel(_Part):
+    """Mechanisms against faults, beyond the paper; off by default (the paper as printed)."""
+
+    extra_rounds: Int = Field(
+        0,
+        ge=0,
+        le=100,
+        description=(
+            "consensus rounds run beyond the D_i a UAV learned [rounds], 0 to 100; beyond the "
+            "paper: lost flooding messages make D_i too small; 0: the paper's rule"
+        ),
+    )
+    stale: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: time-stamp consensus tuples and predict stale ones "
+            "forward to "
+            "the current step before comparing them, and drop from the auction a neighbour "
+            "whose bid did not arrive this cycle (instead of using its last bid); false: the "
+            "paper's protocol, which has no time stamps"
+        ),
+    )
+    position_noise: Bool = Field(
+        False,
+        description=(
+            "true or false; beyond the paper: each UAV adds its own position-error variance "
+            "(faults.position_std^2, as its GPS reports it) to the covariance R of every "
+            "converted measurement, which the conversion of eq. (5) otherwise ignores"
+        ),
+    )
+    gate: Float | None = Field(
+        None,
+        ge=0.9,
+        lt=1,
+        description=(
+            "probability [-], [0.9, 1), with which an honest estimate passes the measurement "
+            "gate; beyond the paper: a UAV adopts (consensus) or takes (centralized download) "
+            "no estimate of a target that contradicts its own measurement of the target this "
+            "cycle (nu^T (H P H^T + R)^-1 nu above the chi-square quantile -2 ln(1 - p); "
+            "0.9999: 18.4), its own estimate included, nor, within robust.gate_memory cycles "
+            "of its last measurement of the target, one that contradicts its own estimate the "
+            "same way; a neighbour caught on one target is believed on none in that round; "
+            "assumed as an option against a member that lies with high confidence; not set: "
+            "the paper's rule, the most confident estimate is adopted"
+        ),
+    )
+    gate_memory: Int = Field(
+        12,
+        ge=0,
+        le=10_000_000,
+        description=(
+            "cycles after a UAV last measured a target (the initial cue counts as a "
+            "measurement at step 0) during which robust.gate checks estimates of the target "
+            "against the UAV's own [cycles], 0 to 10^7; needs robust.gate; assumed: 12 (6 s "
+            "at dT = 0.5 s), long enough to bridge a tracking UAV's gaps in view, short enough "
+            "that an estimate of a target reflected at a wall (which the filter's model does "
+            "not know) is still near its prediction; 4 to 16 measured in the docs (Faults and "
+            "robustness)"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _memory(self) -> RobustModel:
+        if self.gate is None and self.gate_memory != 12:
+            raise ValueError(
+                f"robust.gate_memory {self.gate_memory} needs robust.gate (it does nothing "
+                "otherwise); set robust.gate or leave robust.gate_memory unset"
+            )
+        return self

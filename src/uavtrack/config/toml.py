@@ -1,0 +1,165 @@
+"""Reading and writing scenarios as TOML, dotted field names (``a.b``), values given on
+the command line, and one-line messages for pydantic's validation errors.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from pydantic import (
+    ValidationError,
+)
+
+from ..errors import ScenarioError
+
+
+def read_toml(path: str | Path) -> dict[str, Any]:
+    """Parse a TOML file into a dict, with one-line errors."""
+    try:
+        text = Path(path).read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
+        raise ScenarioError(f"cannot read config file {path}: {reason}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        raise ScenarioError(f"config file {path} is not valid TOML: {exc}") from None
+
+
+def flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
+    """A nested dict as ``{"a.b": value}`` (the dotted field names of a scenario)."""
+    out: dict[str, Any] = {}
+    for key, value in data.items():
+        if isinstance(value, dict):
+            out.update(flatten(value, f"{prefix}{key}."))
+        else:
+            out[f"{prefix}{key}"] = value
+    return out
+
+
+def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
+    """Set ``data["a"]["b"] = value`` for ``dotted = "a.b"``, refusing unknown names."""
+    keys = dotted.split(".")
+    node = data
+    for depth, key in enumerate(keys):
+        if not isinstance(node, dict) or key not in node:
+            where = ".".join(keys[: depth + 1])
+            raise ScenarioError(f"unknown scenario field '{where}'{_did_you_mean(dotted, data)}")
+        if depth == len(keys) - 1:
+            if isinstance(node[key], dict):
+                raise ScenarioError(f"'{dotted}' is a group of fields; set one of its fields")
+            node[key] = value
+        else:
+            node = node[key]
+
+
+def _did_you_mean(dotted: str, data: dict[str, Any]) -> str:
+    """'; did you mean X?' for the field name of `data` closest to `dotted`, and where
+    every field is listed."""
+    close = closest(dotted, data)
+    return f"; did you mean {close}?{_PARAMS_HINT}" if close else _PARAMS_HINT
+
+
+def closest(dotted: str, data: dict[str, Any]) -> str | None:
+    """The dotted field name of the nested dict `data` closest to `dotted`, or None."""
+    import difflib
+
+    names = list(flatten(data))
+    leaves = {name.rsplit(".", 1)[-1]: name for name in names}
+    close = difflib.get_close_matches(dotted, names, n=1, cutoff=0.6)
+    if not close:  # a leaf name without its group, or a typo in it
+        found = difflib.get_close_matches(dotted.rsplit(".", 1)[-1], leaves, n=1, cutoff=0.7)
+        close = [leaves[found[0]]] if found else []
+    return close[0] if close else None
+
+
+_PARAMS_HINT = " (uavtrack params lists every field)"
+
+
+def describe_errors(exc: ValidationError) -> str:
+    """Pydantic errors as one line: ``field: problem (got value)``, joined by '; '."""
+    parts = []
+    for err in exc.errors():
+        loc = ".".join(str(p) for p in err["loc"])
+        if err["type"] == "extra_forbidden":
+            from .scenario import Scenario  # the scenario is built with these helpers
+
+            close = closest(loc, Scenario().model_dump())
+            parts.append(f"unknown field '{loc}'" + (f" (did you mean {close}?)" if close else ""))
+            continue
+        msg = err["msg"].removeprefix("Value error, ")
+        got = err.get("input")
+        shown = "" if isinstance(got, dict) or got is None else f" (got {got!r})"
+        parts.append(f"{loc}: {msg}{shown}" if loc else f"{msg}{shown}")
+    return "; ".join(parts)
+
+
+def parse_value(text: str, where: str = "value") -> Any:
+    """Read a command-line value as TOML (numbers, booleans, lists), ``none`` as None (an
+    optional field left unset), else as a string.
+
+    A value is one line: text after a line break would otherwise be read as more TOML
+    or dropped. `where` names the value in the error message.
+    """
+    if "\n" in text or "\r" in text:
+        raise ScenarioError(f"{where}: value {text!r} spans several lines; give it on one line")
+    if text.strip() == "none":  # TOML has no null: `none` unsets an optional field
+        return None
+    try:
+        return tomllib.loads(f"v = {text}")["v"]
+    except tomllib.TOMLDecodeError:
+        return text
+
+
+def dump_toml(
+    data: dict[str, Any], docs: dict[str, str] | None = None, unset: list[str] = ()
+) -> str:
+    """Minimal TOML writer for the scenario's shape: scalars, lists, nested tables; with
+    `docs` (dotted name -> description) each key gets its description as a comment, and
+    the dotted names in `unset` are written as commented-out keys."""
+    import textwrap
+
+    def entry(prefix: str, key: str, value: Any) -> list[str]:
+        name = prefix + key
+        lines = []
+        if docs is not None and docs.get(name):
+            lines += [f"# {part}" for part in textwrap.wrap(docs[name], 86)]
+        lines.append(
+            f"# {key} =   (not set)" if value is _UNSET else f"{key} = {_toml_value(value)}"
+        )
+        return lines
+
+    def keys(table: dict[str, Any], prefix: str) -> list[str]:
+        missing = {n[len(prefix) :]: _UNSET for n in unset if n.startswith(prefix)}
+        missing = {k: v for k, v in missing.items() if "." not in k and k not in table}
+        out = []
+        for key, value in {**table, **missing}.items():
+            if not isinstance(value, dict):
+                out += entry(prefix, key, value)
+        return out
+
+    def tables(table: dict[str, Any], prefix: str) -> list[str]:
+        out = []
+        for key, value in ((k, v) for k, v in table.items() if isinstance(v, dict)):
+            name = prefix + key
+            out += ["", f"[{name}]", *keys(value, f"{name}."), *tables(value, f"{name}.")]
+        return out
+
+    return "\n".join(keys(data, "") + tables(data, "")) + "\n"
+
+
+_UNSET = object()
+
+
+def _toml_value(value: Any) -> str:
+    if isinstance(value, bool):
+        return "true" if value else "false"
+    if isinstance(value, int | float):
+        return repr(value)
+    if isinstance(value, str):
+        return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(value, list | tuple):
+        return "[" + ", ".join(_toml_value(v) for v in value) + "]"
+    raise TypeError(f"cannot write {type(value).__name__} to TOML")

@@ -1,0 +1,169 @@
+"""``centralized``: every UAV uploads its tables to a central node whatever the radio
+range; the node takes the most confident estimate of each target over the team
+(max-consensus on the complete graph), plans for every UAV it heard from and solves one
+global assignment, and sends each UAV the fused estimates and its target. A lost upload
+leaves the UAV out of the central fusion and assignment; a lost download leaves it with
+its own estimates and its previous target.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import assignment, fusion, timing
+from ..robust import gate
+from .base import Assigned, Fused, Inputs, Method, Setting
+
+
+class Centralized(Method):
+    """A central node with everyone's data: global fusion, one global assignment."""
+
+    name = "centralized"
+    central = True
+
+    def fuse(self, inputs: Inputs) -> Fused:
+        if not inputs.setting.faulty:
+            return self._perfect(inputs)
+        return self._over_links(inputs)
+
+    @staticmethod
+    def _perfect(inputs: Inputs) -> Fused:
+        b, n, _ = inputs.gamma.shape
+        source = np.broadcast_to(np.argmax(inputs.gamma, axis=-2)[:, None, :], inputs.gamma.shape)
+        rounds = np.full((b, n), 1 if n > 1 else 0, dtype=np.int64)
+        # every UAV uploads its table and downloads the fused one
+        messages = np.full(b, 2 * n if n > 1 else 0, dtype=np.int64)
+        mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+        s, measured = inputs.setting, inputs.measured
+        if s.gate is not None and measured is not None:  # as `take_download`
+            use = gate.agreeing(mean, cov, measured, s.gate, (inputs.mean, inputs.cov))
+            mean = np.where(use[..., None], mean, inputs.mean)
+            cov = np.where(use[..., None, None], cov, inputs.cov)
+        return Fused(mean, cov, rounds, messages, messages.copy())
+
+    @staticmethod
+    def _over_links(inputs: Inputs) -> Fused:
+        """Uploads, the central node's work, downloads, with faults."""
+        s, radio, k = inputs.setting, inputs.radio, inputs.k
+        B, n, m = inputs.gamma.shape
+        stamp = np.full((B, n, m), k)
+        tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
+        radio.send("upload", {**tuples, "uavs": inputs.believed, "alive": inputs.alive})
+        upload, up_ok = radio.receive_central("upload")
+        sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
+        seconds = np.zeros((B, n, 2))
+        if s.delay > 0:  # counted when sent: uploads now, downloads below
+            up = radio.transmitted_central("upload")
+            sent, delivered = sent + up[0], delivered + up[1]
+        if upload is None:
+            down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
+        else:
+            up_ok = up_ok & upload["alive"]
+            if s.delay == 0:
+                sent += upload["alive"].sum(axis=1)
+                delivered += up_ok.sum(axis=1)
+            start = timing.start()
+            down, down_target = central_node(
+                {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
+            )
+            seconds += timing.since(start) / B
+        radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
+        if s.delay > 0:
+            down_sent = radio.transmitted_central("download")
+            sent, delivered = sent + down_sent[0], delivered + down_sent[1]
+        download, down_ok = radio.receive_central("download")
+        mean, cov = inputs.mean, inputs.cov
+        target = None
+        if download is not None:
+            down_ok = down_ok & inputs.alive
+            if s.delay == 0:
+                sent += download["alive"].sum(axis=1)
+                delivered += down_ok.sum(axis=1)
+            mean, cov = take_download(mean, cov, download, down_ok, s, k, inputs.measured)
+            target = np.where(down_ok, download["target"], -1)
+        rounds = np.where(inputs.alive, 1, 0)
+        return Fused(mean, cov, rounds, sent, delivered, seconds, target)
+
+    def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
+        B, n, _ = bids.shape
+        none = np.zeros(B, dtype=np.int64)
+        if not inputs.setting.faulty:
+            target, seconds = assignment.centralized(bids)
+            return Assigned(target, np.repeat(seconds[:, None], n, axis=1), none, none)
+        # the node's target if its download arrived, else the previous one, else the own best
+        target = fused.target if fused.target is not None else np.full((B, n), -1)
+        target = np.where(target >= 0, target, inputs.previous)
+        target = np.where(target >= 0, target, assignment.greedy(bids))
+        target = np.where(inputs.alive, target, -1)
+        return Assigned(target, fused.seconds, none, none)
+
+
+def nothing_heard(B: int, n: int, m: int) -> dict[str, np.ndarray]:
+    """A download that carries no estimate (confidence -inf): the node heard nobody."""
+    return {
+        "gamma": np.full((B, n, m), -np.inf),
+        "mean": np.zeros((B, n, m, 4)),
+        "cov": np.zeros((B, n, m, 4, 4)),
+        "stamp": np.zeros((B, n, m), dtype=np.int64),
+    }
+
+
+def central_node(
+    got: dict, heard: np.ndarray, uavs: np.ndarray, setting: Setting, k: int
+) -> tuple[dict, np.ndarray]:
+    """The central node's work on the uploads it received.
+
+    got: the uploaded tuples (B, N, M, ...) ("gamma", "mean", "cov", "stamp"); heard
+    (B, N): whose upload arrived; uavs (B, N, 5): the states they reported. Per target
+    the most confident uploaded estimate (ties to the lowest UAV), predicted forward with
+    ``robust.stale``; bids of every UAV heard from, planned from its reported state; one
+    global assignment over them. Returns the download of every UAV (the fused tuples,
+    (B, N, M, ...), confidence -inf where the node heard nobody) and its target (B, N),
+    -1 for a UAV not heard from.
+    """
+    B, n, m = got["gamma"].shape
+    if setting.stale:
+        got = setting.forward(got, k)
+    score = np.where(heard[..., None], got["gamma"], -np.inf)
+    best = np.argmax(score, axis=1)  # per target, the most confident uploader
+    b, j = np.arange(B)[:, None], np.arange(m)
+    central = {key: value[b, best, j] for key, value in got.items()}  # (B, M, ...)
+    value = np.zeros((B, n, m))  # bids of the UAVs heard from, planned from their reports
+    t, i = np.nonzero(heard)
+    if t.size:
+        value[t, i] = setting.plan(uavs[t, i][None], central["mean"][t][None])[0][0]
+    targets, _ = assignment.centralized(value, heard)
+    anyone = heard.any(axis=1)
+    down = nothing_heard(B, n, m)
+    for key, value in central.items():
+        down[key] = np.where(
+            anyone.reshape((B,) + (1,) * value.ndim),
+            np.repeat(value[:, None], n, axis=1),
+            down[key],
+        )
+    return down, np.where(anyone[:, None], targets, -1)
+
+
+def take_download(
+    mean: np.ndarray,
+    cov: np.ndarray,
+    got: dict,
+    arrived: np.ndarray,
+    setting: Setting,
+    k: int,
+    measured: gate.Measured | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A UAV's estimates after the central node's download: the downloaded tuple of each
+    target where it arrived and carries one (predicted forward with ``robust.stale``)
+    and, with ``robust.gate``, agrees with the UAV's measurement (`gate.agreeing`), its
+    own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); arrived (B, N)."""
+    got = {key: got[key] for key in ("gamma", "mean", "cov", "stamp")}
+    if setting.stale:
+        got = setting.forward(got, k)
+    use = arrived[..., None] & np.isfinite(got["gamma"])  # (B, N, M)
+    if setting.gate is not None and measured is not None:
+        use &= gate.agreeing(got["mean"], got["cov"], measured, setting.gate, (mean, cov))
+    return (
+        np.where(use[..., None], got["mean"], mean),
+        np.where(use[..., None, None], got["cov"], cov),
+    )

@@ -1,0 +1,110 @@
+"""``distributed``, the paper's method: the D_i flooding protocol and max-consensus over
+the radio with per-UAV stopping, then beacons and bids to one-hop neighbours and each
+UAV's Hungarian auction over its neighbourhood (`assignment.local`). A new auction rule
+plugs in by subclassing `Distributed` and replacing `solve` (examples/custom_method.py).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import assignment, fusion
+from .base import Assigned, Fused, Held, Inputs, Method, Setting
+
+
+class Distributed(Method):
+    """The paper's method: Algorithm 2 with Algorithm 1's neighbourhood auction."""
+
+    name = "distributed"
+
+    @staticmethod
+    def solve(bids: np.ndarray) -> np.ndarray:
+        """The neighbourhood problem: targets (n,) of the n members, Remark 2."""
+        return assignment.hungarian(bids)
+
+    @property
+    def built_in_solve(self) -> bool:
+        """Whether `solve` is this class's own, which reads only each member's k best
+        bids in a problem of k members (a subclass's may read any bid)."""
+        return type(self).solve is Distributed.solve
+
+    def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
+        """A UAV's bids serve the auction of every neighbourhood it belongs to, and in
+        an auction of k members only each member's k best bids matter
+        (`assignment.hungarian`): it needs as many as the largest of them has members.
+        A replaced `solve` may read any bid: then all."""
+        if not setting.prune or not self.built_in_solve:
+            return None
+        return largest
+
+    def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
+        s, radio, k = inputs.setting, inputs.radio, inputs.k
+        B, n, m = bids.shape
+        radio.send("beacon", {})
+        radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
+        beacon, inbox = radio.receive("beacon"), radio.receive("bids")
+        sent = np.zeros(B, dtype=np.int64)
+        delivered = np.zeros(B, dtype=np.int64)
+        everyone = np.ones((B, n), dtype=bool)
+        if s.delay > 0:  # counted when sent, as the fusion's
+            once = inputs.alive.astype(np.int64)
+            for protocol in ("beacon", "bids"):
+                more = radio.transmitted(protocol, once, first=0)
+                sent, delivered = sent + more[0], delivered + more[1]
+        for arrived in (beacon, inbox) if s.delay == 0 else ():
+            if arrived is not None:
+                sent, delivered = fusion.count(arrived, everyone, sent, delivered)
+        alive = inputs.alive
+        idx = np.arange(n)
+        held = inputs.held
+        if inbox is None:  # nothing has arrived yet: every UAV alone
+            members = np.zeros((B, n, n), dtype=bool)
+            view = bids
+        elif s.delay == 0 and held is None:  # all bids current, none lost: one shared view
+            members = inbox.delivered.adjacency()
+            view = bids
+        else:
+            got = inbox.delivered.adjacency()  # bids that arrived this cycle
+            heard = beacon.delivered.adjacency() if beacon is not None else got
+            members, view, stamp = bid_view(
+                got,
+                inbox.content["bids"][:, None],
+                inbox.content["stamp"][:, None],
+                heard,
+                held,
+                s.stale,
+            )
+            held = held if held is None else Held(view, stamp)
+            view = np.array(np.broadcast_to(view, (B, n, n, m)))
+            view[:, idx, idx] = bids  # a UAV's own bids are current
+        if not alive.all():
+            members = members & alive[:, :, None] & alive[:, None, :]
+        solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
+        target, seconds = assignment.auction(view, members, solve)
+        return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
+
+
+def bid_view(
+    got: np.ndarray,
+    bids: np.ndarray,
+    stamp: np.ndarray,
+    heard: np.ndarray,
+    held: Held | None,
+    stale: bool,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """A receiver's auction after this cycle's arrivals: who takes part, and the bids it
+    holds of each sender. Broadcasts over leading receiver axes.
+
+    got (..., N) bool: the senders whose bid arrived this cycle; bids (..., N, M) and
+    stamp (..., N): those bids and the step they were sent; heard (..., N): the senders
+    whose beacon arrived; held: the bids held before (None when messages are never
+    lost: nothing to remember). Without `stale`, a sender heard by its beacon takes part
+    with the last bid held of it, however old; with `stale`, only senders whose bid
+    arrived take part. Returns (members (..., N), bids held (..., N, M), their stamps).
+    """
+    if held is None:
+        return got, bids, stamp
+    value = np.where(got[..., None], bids, held.value)
+    stamp = np.where(got, stamp, held.stamp)
+    members = got if stale else heard & (stamp >= 0)
+    return members, value, stamp
