@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 import uavtrack
-from uavtrack import _files as files, _process as threads
+from uavtrack import _files, _process
 from uavtrack.env import parallel_env, vector_env
 from uavtrack.errors import UsageError
 
@@ -87,7 +87,7 @@ def main() -> None:
         parser.error("--steps and --repeats must be at least 1")
     if args.out is not None:  # refused before the timings, in one line (exit 2)
         try:
-            files.check_output(args.out, "--out")
+            _files.check_output(args.out, "--out")
         except UsageError as exc:
             parser.error(str(exc))
     single_runs, rows = [], []
@@ -117,7 +117,7 @@ def main() -> None:
         "machine": {
             "cpus": os.cpu_count(),
             "python": platform.python_version(),
-            "blas_threads": threads.describe(),
+            "blas_threads": _process.describe(),
             "uavtrack": uavtrack.__version__,
         },
         "scenario": "the paper's Sec. 7.1: 5 UAVs, 4 targets; Box observations, team reward",
@@ -129,7 +129,7 @@ def main() -> None:
         "actions, one process; times_single = vector / single agent-steps per wall second",
     }
     if args.out is not None:
-        files.write_text(args.out, json.dumps(out, indent=2) + "\n")
+        _files.write_text(args.out, json.dumps(out, indent=2) + "\n")
         print(f"wrote {args.out}")
 
 

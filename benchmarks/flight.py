@@ -25,8 +25,7 @@ import time
 from pathlib import Path
 
 import uavtrack
-from uavtrack import Scenario
-from uavtrack import _files as files, _process as threads
+from uavtrack import Scenario, _files, _process
 from uavtrack.errors import UsageError
 from uavtrack.flight import jsbsim as flight
 from uavtrack.simulation import run
@@ -91,7 +90,7 @@ def main() -> None:
     args = parser.parse_args()
     if args.out is not None:  # refused before the timings, in one line (exit 2)
         try:
-            files.check_output(args.out, "--out")
+            _files.check_output(args.out, "--out")
         except UsageError as exc:
             parser.error(str(exc))
     warm = Scenario(steps=3)  # one-time imports and set-ups, outside the timings
@@ -116,7 +115,7 @@ def main() -> None:
         "machine": {
             "cpus": os.cpu_count(),
             "python": platform.python_version(),
-            "blas_threads": threads.describe(),
+            "blas_threads": _process.describe(),
             "jsbsim": __import__("jsbsim").__version__,
             "uavtrack": uavtrack.__version__,
         },
@@ -130,7 +129,7 @@ def main() -> None:
     }
     print(f"peak RSS {peak_mib:.0f} MiB")
     if args.out is not None:
-        files.write_text(args.out, json.dumps(out, indent=2) + "\n")
+        _files.write_text(args.out, json.dumps(out, indent=2) + "\n")
         print(f"wrote {args.out}")
 
 

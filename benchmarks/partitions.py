@@ -48,10 +48,10 @@ import numpy as np  # noqa: E402
 from tests import netns  # noqa: E402
 
 import uavtrack  # noqa: E402
-from uavtrack import _files as files  # noqa: E402
+from uavtrack import _files  # noqa: E402
 from uavtrack.agents.transport import zenoh_config  # noqa: E402
-from uavtrack.testing import differences  # noqa: E402
 from uavtrack.errors import UsageError  # noqa: E402
+from uavtrack.testing import differences  # noqa: E402
 
 UAVS = 5
 AT = 20
@@ -151,7 +151,7 @@ def main() -> None:
         parser.error(f"--seeds must be at least 1 and --steps more than {AT}")
     if args.out is not None:
         try:
-            files.check_output(args.out, "--out")
+            _files.check_output(args.out, "--out")
         except UsageError as exc:
             parser.error(str(exc))
     reason = netns.unavailable()
@@ -197,7 +197,7 @@ def main() -> None:
         "of radio messages the swarm lost",
     }
     if args.out is not None:
-        files.write_text(args.out, json.dumps(out, indent=2) + "\n")
+        _files.write_text(args.out, json.dumps(out, indent=2) + "\n")
         print(f"wrote {args.out}")
 
 

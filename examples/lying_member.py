@@ -5,7 +5,7 @@ UAV `LIAR` runs the honest program but sends, in every consensus round, a tuple 
 target that passes every check of the run (`uavtrack.agents.messages.Spec`): its
 estimate moved by `SHIFT` metres along x and y (folded back into the field, velocity
 kept) with the most confidence the run admits: a covariance at the floor of the
-sensor's accuracy (`uavtrack.plausibility.Bounds.floor`) and gamma = 1 / trace of it.
+sensor's accuracy (`uavtrack.robust.plausibility.Bounds.floor`) and gamma = 1 / trace of it.
 With ``--lie bids`` it bids instead the largest bid the run admits for every target.
 The lying swarm runs over the in-process transport, so each trial is the agent form
 itself; the honest runs are the simulator's (the agent form equals it, seed for seed).
@@ -56,7 +56,7 @@ def lie(content: dict[str, Array], scenario) -> dict[str, Array]:
 
 def bid_lie(content: dict[str, Array], scenario) -> dict[str, Array]:
     """Bids that pass every check of the run: the largest the run admits (the horizon
-    times the bound of det G at the nadir, `uavtrack.plausibility.Bounds.bid`), for
+    times the bound of det G at the nadir, `uavtrack.robust.plausibility.Bounds.bid`), for
     every target."""
     bids = np.full(content["bids"].shape, Bounds.of(scenario).bid)
     return dict(content, bids=Array.of(bids))

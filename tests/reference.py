@@ -7,7 +7,7 @@ every processor: numpy picks SIMD kernels by CPU (AVX2, AVX-512, ...), and BLAS 
 own, so an estimate computed on another machine may differ in its last bits (about 1e-14
 relative in the stored results below, between an AVX-512 and a baseline SSE path). Within
 one machine, two forms of a computation are compared with the tolerances of
-`uavtrack.equivalence`.
+`uavtrack.testing`.
 
 A float trace field is stored as a sketch, one number per step: the step's values
 projected on fixed weights from an integer hash, which changes when any value of the step

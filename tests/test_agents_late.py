@@ -34,8 +34,8 @@ from uavtrack.agents import world as world_module
 from uavtrack.agents.security import WORLD, Gate
 from uavtrack.agents.stops import SLACK, TICK, Stops
 from uavtrack.agents.transport import REJOIN, Bus, Link, Mailbox, MemoryTransport
-from uavtrack.testing import differences
 from uavtrack.faults import PROTOCOLS
+from uavtrack.testing import differences
 
 ROOT = Path(__file__).resolve().parents[1]
 

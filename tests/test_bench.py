@@ -86,14 +86,14 @@ def test_run_case_reports_its_memory_peak_beside_the_estimate():
 
 
 def test_scaling_figure_needs_scaled_cases(tmp_path):
-    from uavtrack.experiments import figures as plots
+    from uavtrack.experiments import figures
 
     rows = bench.cycle_cases([(4, 4), (8, 8)], ("distributed",), repeats=1, scaled=True)
     assert [r["scaled"] for r in rows] == [True, True]
-    plots.scaling_figure(rows, tmp_path / "s.png")
+    figures.scaling_figure(rows, tmp_path / "s.png")
     assert (tmp_path / "s.png").stat().st_size > 0
     with pytest.raises(ValueError, match="no scaled decision-cycle cases"):
-        plots.scaling_figure(
+        figures.scaling_figure(
             bench.cycle_cases([(3, 2)], ("greedy",), repeats=1), tmp_path / "t.png"
         )
     assert not (tmp_path / "t.png").exists()

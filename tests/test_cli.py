@@ -323,9 +323,9 @@ def test_bench_json_to_a_folder_is_refused_at_once(capsys, tmp_path):
 
 
 def test_memory_refusal_names_the_field(capsys, monkeypatch):
-    from uavtrack import simulation
+    from uavtrack import _process
 
-    monkeypatch.setattr(simulation, "available_memory", lambda: 20 * 2**20)
+    monkeypatch.setattr(_process, "available_memory", lambda: 20 * 2**20)
     code, _, err = run_cli(
         capsys,
         "run",
@@ -439,12 +439,12 @@ def test_two_outputs_at_one_path_are_refused(capsys, tmp_path):
 
 
 def test_long_work_off_a_terminal_says_how_far_it_is_once_a_minute(capsys, monkeypatch):
-    from uavtrack import _progress as progress
+    from uavtrack import _progress
 
     clock = {"now": 0.0}
-    monkeypatch.setattr(progress.time, "monotonic", lambda: clock["now"])
-    monkeypatch.setattr(progress, "on_terminal", lambda: False)
-    with progress.bar(10, "trial-steps", "trial-steps") as advance:
+    monkeypatch.setattr(_progress.time, "monotonic", lambda: clock["now"])
+    monkeypatch.setattr(_progress, "on_terminal", lambda: False)
+    with _progress.bar(10, "trial-steps", "trial-steps") as advance:
         for _ in range(10):
             clock["now"] += 25.0  # a step every 25 s: a line at 75 s, 150 s, 225 s
             advance(1)
@@ -454,7 +454,7 @@ def test_long_work_off_a_terminal_says_how_far_it_is_once_a_minute(capsys, monke
         "uavtrack: trial-steps: 6 of 10 (60%), 2 min 30 s elapsed, about 1 min 40 s left",
         "uavtrack: trial-steps: 9 of 10 (90%), 3 min 45 s elapsed, about 25 s left",
     ]
-    with progress.bar(10, "steps", "steps", enabled=False) as advance:
+    with _progress.bar(10, "steps", "steps", enabled=False) as advance:
         clock["now"] += 1000
         advance(5)
     assert capsys.readouterr().err == ""

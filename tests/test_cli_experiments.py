@@ -222,7 +222,8 @@ def test_a_wrong_sweep_is_refused_before_the_experiment_modules_load():
         "from uavtrack import cli\n"
         "assert cli.main(['sweep', 'comm_rang', '1', '2']) == 2\n"
         "assert cli.main(['sweep', 'comm_range', 'abc']) == 2\n"
-        "heavy = [m for m in ('scipy.stats', 'matplotlib', 'uavtrack.plots') if m in sys.modules]\n"
+        "heavy = ('scipy.stats', 'matplotlib', 'uavtrack.experiments.figures')\n"
+        "heavy = [m for m in heavy if m in sys.modules]\n"
         "print(heavy)\n"
     )
     proc = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=300)
@@ -330,10 +331,10 @@ def test_a_job_file_of_another_seed_is_not_used(tmp_path, capsys):
 
 
 def test_a_second_run_on_a_locked_folder_is_refused(tmp_path, capsys):
-    from uavtrack.experiments import store as runner
+    from uavtrack.experiments import store
 
     out = tmp_path / "s"
-    with runner.Store(out, {"kind": "sweep"}):
+    with store.Store(out, {"kind": "sweep"}):
         code, _, err = run_cli(capsys, *tiny_sweep(out))
     assert code == 2 and f"{out} is in use by another uavtrack run (pid {os.getpid()})" in err
     assert err.count("\n") == 1
@@ -402,28 +403,28 @@ def test_animate_into_a_folder_is_refused(tmp_path, capsys):
 
 
 def test_a_full_disk_ends_the_run_in_one_line(tmp_path, capsys, monkeypatch):
-    from uavtrack import _files as files
+    from uavtrack import _files
 
     def full(path, text):
         raise OSError(errno.ENOSPC, "No space left on device", str(path))
 
-    monkeypatch.setattr(files, "write_text", full)
+    monkeypatch.setattr(_files, "write_text", full)
     code, _, err = run_cli(capsys, *tiny_sweep(tmp_path / "s"))
     assert code == 1 and err.count("\n") == 1
     assert "No space left on device" in err and err.startswith("uavtrack: error: cannot write")
 
 
 def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, capsys, monkeypatch):
-    from uavtrack.experiments import jobs as experiments
+    from uavtrack.experiments import jobs
 
-    real = experiments.run
+    real = jobs.run
 
     def broken(*args, **kwargs):
         result = real(*args, **kwargs)
         result.metrics["observation_rate"][:] = float("nan")
         return result
 
-    monkeypatch.setattr(experiments, "run", broken)
+    monkeypatch.setattr(jobs, "run", broken)
     out = tmp_path / "s"
     code, _, err = run_cli(capsys, *tiny_sweep(out))
     assert code == 1 and "jobs failed" in err
@@ -619,12 +620,12 @@ def test_an_output_that_cannot_be_written_is_refused_before_any_job_runs(tmp_pat
 def test_a_full_disk_under_the_results_folder_names_the_folder(tmp_path, capsys, monkeypatch):
     import errno
 
-    from uavtrack.experiments import store as runner
+    from uavtrack.experiments import store
 
     def full(fd, data, offset):
         raise OSError(errno.ENOSPC, "No space left on device")
 
-    monkeypatch.setattr(runner.os, "pwrite", full)
+    monkeypatch.setattr(store.os, "pwrite", full)
     code, out, err = run_cli(capsys, *tiny_sweep(tmp_path / "s"))
     assert code == 2 and out == ""
     assert err.strip() == (

@@ -3,18 +3,19 @@ import pytest
 from scipy import stats
 
 import uavtrack
-from uavtrack.experiments import jobs as experiments
+from uavtrack.experiments import jobs as job_lists
+from uavtrack.experiments import reproduce, statistics
 from uavtrack.experiments.reproduce import Profile
 from uavtrack.metrics import METRICS
 
 
 def test_reproduce_plan_shares_the_default_runs():
-    plan = experiments.reproduce_plan(uavtrack.Scenario(), Profile())
+    plan = reproduce.reproduce_plan(uavtrack.Scenario(), Profile())
     keys = {name: {j.key for j in jobs} for name, jobs in plan.items()}
     # r_C = 50 m (Fig. 8) and alpha = 5 deg (Fig. 9) are Fig. 5's distributed runs
     default = {k for k in keys["compare"] if "__distributed__" in k}
     assert default <= keys["comm_range"] and default <= keys["fov"]
-    jobs = experiments.unique(j for group in plan.values() for j in group)
+    jobs = job_lists.unique(j for group in plan.values() for j in group)
     assert len(jobs) == len({j.key for j in jobs})
     trial_jobs = [j for j in jobs if j.kind == "trials"]
     # 3 methods at the defaults and at the first guess + 7 other ranges + 5 other FOVs,
@@ -26,20 +27,20 @@ def test_reproduce_plan_shares_the_default_runs():
 
 def test_sensitivity_moves_one_assumed_parameter_at_a_time():
     base = uavtrack.Scenario()
-    plain = experiments.reproduce_plan(base, Profile())
-    plan = experiments.reproduce_plan(base, Profile(), sensitivity=True)
+    plain = reproduce.reproduce_plan(base, Profile())
+    plan = reproduce.reproduce_plan(base, Profile(), sensitivity=True)
     assert {k: [j.key for j in v] for k, v in plain.items()} == {
         k: [j.key for j in v] for k, v in plan.items() if k != "sensitivity"
     }
     moved = set()
     for job in plan["sensitivity"]:
-        diff = experiments.difference(base.with_overrides({"steps": 500}), job.scenario)
+        diff = job_lists.difference(base.with_overrides({"steps": 500}), job.scenario)
         assert len(diff) == 1, diff
         ((field, value),) = diff.items()
-        assert value in experiments.SENSITIVITY[field] and value != base.value(field)
+        assert value in reproduce.SENSITIVITY[field] and value != base.value(field)
         moved.add(field)
         assert "assumed" in dict((n, d) for n, _, d in base.describe())[field]
-    assert moved == set(experiments.SENSITIVITY)
+    assert moved == set(reproduce.SENSITIVITY)
 
 
 def test_conclusion_verdicts_follow_the_confidence_interval():
@@ -50,14 +51,14 @@ def test_conclusion_verdicts_follow_the_confidence_interval():
     for gap, verdict in cases.items():
         dist = {"observation_rate": 0.8 + noise}
         cent = {"observation_rate": 0.8 - gap + noise[::-1]}
-        out = experiments.conclusions([dist, cent, greedy])
+        out = reproduce.conclusions([dist, cent, greedy])
         assert out["distributed - centralized"]["mean"] == pytest.approx(gap)
         assert out["near_centralized"] == verdict
         assert out["above_greedy"] == "yes"
 
 
 def test_chunks_cover_trials_exactly_once():
-    jobs = experiments.trial_jobs(uavtrack.Scenario(), {"comm_range": 20.0}, "greedy", 23, 10, 0)
+    jobs = job_lists.trial_jobs(uavtrack.Scenario(), {"comm_range": 20.0}, "greedy", 23, 10, 0)
     covered = [t for j in jobs for t in range(j.first, j.first + j.count)]
     assert covered == list(range(23))
     assert jobs[0].label == "comm_range=20"
@@ -65,9 +66,9 @@ def test_chunks_cover_trials_exactly_once():
 
 def test_results_do_not_depend_on_chunking():
     scenario = uavtrack.Scenario(steps=40)
-    whole = experiments.run_job(experiments.trial_jobs(scenario, {}, "distributed", 4, 4, 9)[0])
+    whole = job_lists.run_job(job_lists.trial_jobs(scenario, {}, "distributed", 4, 4, 9)[0])
     parts = [
-        experiments.run_job(j) for j in experiments.trial_jobs(scenario, {}, "distributed", 4, 2, 9)
+        job_lists.run_job(j) for j in job_lists.trial_jobs(scenario, {}, "distributed", 4, 2, 9)
     ]
     for name in ("observation_rate", "per_target", "rounds", "messages"):
         assert np.array_equal(np.asarray(whole[name]), np.concatenate([p[name] for p in parts]))
@@ -76,7 +77,7 @@ def test_results_do_not_depend_on_chunking():
 
 def test_paired_confidence_interval_matches_t_test(rng):
     a, b = rng.normal(0.8, 0.05, 30), rng.normal(0.7, 0.05, 30)
-    p = experiments.paired(a, b)
+    p = statistics.paired(a, b)
     lo, hi = stats.ttest_rel(a, b).confidence_interval(0.95)
     assert p["mean"] == pytest.approx(np.mean(a - b))
     assert (p["ci_low"], p["ci_high"]) == pytest.approx((lo, hi))
@@ -92,7 +93,7 @@ def test_describe_sorted_ranks():
             continue
         metrics[name] = np.zeros(2)
     metrics["decision_time_ms"] = np.array([0.5, np.nan])  # measured for trial 0 only
-    d = experiments.describe(metrics)
+    d = statistics.describe(metrics)
     assert d["sorted_mean"] == pytest.approx([0.35, 0.85])
     assert d["per_target_mean"] == pytest.approx([0.75, 0.45])
     assert d["mean"] == pytest.approx(0.6) and d["std"] == pytest.approx(np.std([0.5, 0.7], ddof=1))
@@ -102,10 +103,10 @@ def test_describe_sorted_ranks():
 
 def test_resized_team_keeps_the_altitude_spread():
     base = uavtrack.Scenario()
-    big = experiments.resized(base, 21, 30)
+    big = reproduce.resized(base, 21, 30)
     assert (big.n_uavs, big.n_targets) == (21, 30)
     assert min(big.altitudes()) == pytest.approx(415.0) and max(big.altitudes()) == pytest.approx(
         435.0
     )
     assert len(set(big.altitudes())) == 21
-    assert experiments.resized(base, 5, 4) == base
+    assert reproduce.resized(base, 5, 4) == base

@@ -6,7 +6,7 @@ import sys
 import numpy as np
 import pytest
 
-from uavtrack import _files as files
+from uavtrack import _files
 from uavtrack.errors import UsageError
 
 
@@ -14,7 +14,7 @@ from uavtrack.errors import UsageError
 def test_npz_lands_at_exactly_the_path_given(tmp_path, name):
     path = tmp_path / name
     path.write_text("earlier content")
-    files.write_npz(path, {"a": np.arange(3), "b": np.eye(2)})
+    _files.write_npz(path, {"a": np.arange(3), "b": np.eye(2)})
     assert sorted(p.name for p in tmp_path.iterdir()) == [name]  # nothing hidden beside it
     with np.load(path) as npz:
         assert np.array_equal(npz["a"], np.arange(3)) and np.array_equal(npz["b"], np.eye(2))
@@ -32,17 +32,17 @@ def test_outputs_that_are_not_regular_files_are_refused(tmp_path):
         (tmp_path / "missing" / "x.npz", "does not exist"),
     ):
         with pytest.raises(UsageError, match=message):
-            files.check_output(path, "--trace")
-    with pytest.raises(UsageError, match="not a regular file"), files.replacing(fifo):
+            _files.check_output(path, "--trace")
+    with pytest.raises(UsageError, match="not a regular file"), _files.replacing(fifo):
         pass
     assert fifo.exists() and not fifo.is_file()  # left alone
 
 
 def test_json_is_strict_and_writes_null_for_non_finite(tmp_path):
     data = {"a": float("nan"), "b": [1.0, float("inf")], "c": np.float64(2.5), "d": np.arange(2)}
-    text = files.dumps(data)
+    text = _files.dumps(data)
     assert json.loads(text) == {"a": None, "b": [1.0, None], "c": 2.5, "d": [0, 1]}
-    files.write_json(tmp_path / "x.json", data)
+    _files.write_json(tmp_path / "x.json", data)
 
     def refuse(constant):
         raise ValueError(constant)
@@ -51,11 +51,11 @@ def test_json_is_strict_and_writes_null_for_non_finite(tmp_path):
 
 
 def test_atomic_write_leaves_nothing_on_failure(tmp_path):
-    with pytest.raises(RuntimeError), files.replacing(tmp_path / "x.npz") as tmp:
+    with pytest.raises(RuntimeError), _files.replacing(tmp_path / "x.npz") as tmp:
         tmp.write_bytes(b"partial")
         raise RuntimeError("disk full")
     assert not any(tmp_path.iterdir())
-    with files.replacing(tmp_path / "y.json") as tmp:
+    with _files.replacing(tmp_path / "y.json") as tmp:
         tmp.write_text("{}")
     assert [p.name for p in tmp_path.iterdir()] == ["y.json"]
     assert (tmp_path / "y.json").stat().st_mode & 0o777 != 0o600
@@ -79,12 +79,12 @@ def on_a_small_disk(folder, limit: int, *args, timeout: float = 300):
 
 
 def test_bytes_on_a_full_disk_fail_naming_the_file_and_leave_nothing(tmp_path):
-    code = "from uavtrack import files; files.write_bytes('out.bin', bytes(100_000))"
+    code = "from uavtrack import _files; _files.write_bytes('out.bin', bytes(100_000))"
     proc = on_a_small_disk(tmp_path, 40_000, "-c", code)
     assert proc.returncode == 1 and "OSError" in proc.stderr
     assert "out.bin" in proc.stderr.splitlines()[-1] and "File too large" in proc.stderr
     assert list(tmp_path.iterdir()) == []
-    files.write_bytes(tmp_path / "out.bin", memoryview(b"abc"))
+    _files.write_bytes(tmp_path / "out.bin", memoryview(b"abc"))
     assert (tmp_path / "out.bin").read_bytes() == b"abc"
 
 
@@ -92,10 +92,10 @@ def test_a_link_to_nothing_is_no_new_output(tmp_path):
     link = tmp_path / "out"
     link.symlink_to(tmp_path / "gone")
     (tmp_path / "taken.nc").write_text("mine")
-    for check in (files.check_new_folder, files.check_new_file):
+    for check in (_files.check_new_folder, _files.check_new_file):
         with pytest.raises(UsageError, match=f"{link} is a link to {tmp_path / 'gone'}, which"):
             check(link, "--out", "the tables")
     with pytest.raises(UsageError, match="taken.nc exists; give a new name for the netCDF"):
-        files.check_new_file(tmp_path / "taken.nc", "--out", "the netCDF")
-    assert files.check_new_file(tmp_path / "new.nc", "--out", "the netCDF") == tmp_path / "new.nc"
+        _files.check_new_file(tmp_path / "taken.nc", "--out", "the netCDF")
+    assert _files.check_new_file(tmp_path / "new.nc", "--out", "the netCDF") == tmp_path / "new.nc"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "taken.nc"]

@@ -1,4 +1,4 @@
-"""The measurement gate (`uavtrack.gate`, ``robust.gate``): its test statistic, its
+"""The measurement gate (`uavtrack.robust.gate`, ``robust.gate``): its test statistic, its
 threshold, what it admits, and that the simulator and the agents run it alike."""
 
 import numpy as np

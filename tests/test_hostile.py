@@ -15,11 +15,22 @@ from hypothesis import strategies as st
 
 import uavtrack
 from uavtrack import estimation
-from uavtrack.robust import gate
 from uavtrack.agents import messages, run_swarm
-from uavtrack.agents.messages import VERSION, Array, Hello, Lost, Radio, Ready, Report, Sense, Tick, encode
+from uavtrack.agents.messages import (
+    VERSION,
+    Array,
+    Hello,
+    Lost,
+    Radio,
+    Ready,
+    Report,
+    Sense,
+    Tick,
+    encode,
+)
 from uavtrack.agents.security import WORLD
 from uavtrack.agents.transport import Link
+from uavtrack.robust import gate
 
 pytest.importorskip("cryptography")
 

@@ -16,7 +16,16 @@ from uavtrack.world import fly
 
 mavutil = pytest.importorskip("pymavlink.mavutil")
 
-from uavtrack.io.mavlink import ARDUPLANE_GUIDED, IGNORE_RATES, PX4_OFFBOARD, LocalFrame, MavlinkPilot, Vehicle, euler, quaternion
+from uavtrack.io.mavlink import (  # noqa: E402
+    ARDUPLANE_GUIDED,
+    IGNORE_RATES,
+    PX4_OFFBOARD,
+    LocalFrame,
+    MavlinkPilot,
+    Vehicle,
+    euler,
+    quaternion,
+)
 
 
 @pytest.mark.parametrize("roll, pitch, yaw", [(0.3, 0.0, 1.0), (-0.785, 0.05, -2.5), (0, 0, 0)])

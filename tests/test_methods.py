@@ -145,8 +145,8 @@ def test_a_rule_may_be_an_ordinary_method_with_state():
 def test_a_download_its_measurement_contradicts_is_not_taken():
     # robust.gate: UAV 0 measured target 0 30 m from the central node's estimate (keeps
     # its own), target 1 near it (takes it), and target 2 long ago (takes it)
-    from uavtrack.robust import gate
     from uavtrack.methods import take_download
+    from uavtrack.robust import gate
 
     scenario = uavtrack.Scenario(steps=40).with_overrides({"robust.gate": 0.9999})
     setting = uavtrack.simulation.Context.of(

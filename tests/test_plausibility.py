@@ -1,4 +1,4 @@
-"""The limits of an honest claim (`uavtrack.plausibility`) and the rule of what a message
+"""The limits of an honest claim (`uavtrack.robust.plausibility`) and the rule of what a message
 may hold (`uavtrack.agents.messages.Spec`): honest runs stay inside, the bounds are what
 their mathematics says, and what breaks one is refused or not used, by reason."""
 

@@ -3,17 +3,18 @@ import pytest
 from PIL import Image
 
 import uavtrack
-from uavtrack.experiments import figures as plots
+from uavtrack.experiments import figures
+from uavtrack.viz import scene
 
 
 @pytest.fixture
 def kept(monkeypatch):
-    """Figures handed to plots.save, kept open for inspection instead of written."""
-    figures = []
-    monkeypatch.setattr(plots, "save", lambda fig, path, dpi=130: figures.append(fig))
-    yield figures
-    for fig in figures:
-        plots.plt.close(fig)
+    """Figures handed to figures.save, kept open for inspection instead of written."""
+    drawn = []
+    monkeypatch.setattr(figures, "save", lambda fig, path, dpi=130: drawn.append(fig))
+    yield drawn
+    for fig in drawn:
+        figures.plt.close(fig)
 
 
 def timing_summary():
@@ -32,7 +33,7 @@ def overlapping(labels):
 
 
 def test_fig7_tick_labels_do_not_overlap(kept):
-    plots.fig7(timing_summary(), "unused.png")
+    figures.fig7(timing_summary(), "unused.png")
     fig = kept[0]
     fig.canvas.draw()
     ax = fig.axes[0]
@@ -52,7 +53,7 @@ def test_sweep_axis_names_the_unit(kept):
         "values": [10.0, 50.0],
         "methods": {"distributed": [{"mean": 0.6, "std": 0.1}, {"mean": 0.7, "std": None}]},
     }
-    plots.sweep_figure(summary, "unused.png")
+    figures.sweep_figure(summary, "unused.png")
     assert kept[0].axes[0].get_xlabel() == "comm_range [m]"
 
 
@@ -64,7 +65,7 @@ def test_fig5_numbers_targets_from_zero(kept):
         "std": 0.1,
         "trials": 2,
     }
-    plots.fig5({"compare": {"distributed": row}}, "unused.png")
+    figures.fig5({"compare": {"distributed": row}}, "unused.png")
     names = [t.get_text() for t in kept[0].axes[0].get_xticklabels()]
     assert names == ["target 0", "target 1", "target 2", "overall"]
 
@@ -73,31 +74,31 @@ def test_animation_frames_legend_and_link_colour(tmp_path, monkeypatch):
     scenario = uavtrack.Scenario(steps=6)
     trace = uavtrack.simulate(scenario, seed=0).trace
     legends = []
-    real_legend = plots.plt.Axes.legend
+    real_legend = figures.plt.Axes.legend
 
     def keep(ax, *args, **kwargs):
         legends.append(kwargs.get("handles"))
         return real_legend(ax, *args, **kwargs)
 
-    monkeypatch.setattr(plots.plt.Axes, "legend", keep)
+    monkeypatch.setattr(figures.plt.Axes, "legend", keep)
     frames = []
-    n = plots.animate(trace, scenario, tmp_path / "a.gif", every=2, progress=frames.append)
+    n = scene.animate(trace, scenario, tmp_path / "a.gif", every=2, progress=frames.append)
     assert n == 4 and len(frames) == 4  # steps 0, 2, 4 and the last, 5
     with Image.open(tmp_path / "a.gif") as im:
         assert im.size == (1000, 800) and im.n_frames == 4
     labels = [h.get_label() for h in legends[0]]
     assert "radio link" in labels and "observation disk" in labels
     link = next(h for h in legends[0] if h.get_label() == "radio link")
-    uav0 = plots.plt.cm.tab10(0)
+    uav0 = figures.plt.cm.tab10(0)
     assert link.get_color() == "dimgray" and link.get_color() != uav0
 
 
 def test_uav_labels_never_overlap_even_when_the_uavs_do():
     # the first frame of the default scenario: all five UAVs start within metres
     for points in (np.zeros((5, 2)), np.array([[0, 0], [3, 1], [1, 4], [5, 5], [2, 2.0]])):
-        offsets = np.asarray(plots.label_offsets(points))
+        offsets = np.asarray(scene.label_offsets(points))
         boxes = points + offsets
-        w, h = plots.LABEL
+        w, h = scene.LABEL
         for a in range(len(boxes)):
             for b in range(a):
                 dx, dy = np.abs(boxes[a] - boxes[b])
@@ -117,7 +118,7 @@ def test_a_gif_is_written_frame_by_frame(tmp_path):
             yield np.full((20, 30, 3), colour, dtype=np.uint8)
 
     with open(tmp_path / "x.gif", "wb") as out:
-        n = plots.write_gif(out, frames(), fps=5, progress=lambda _: written.append(len(written)))
+        n = scene.write_gif(out, frames(), fps=5, progress=lambda _: written.append(len(written)))
     assert n == 3
     with Image.open(tmp_path / "x.gif") as im:
         assert im.n_frames == 3 and im.info["duration"] == 200 and im.info["loop"] == 0

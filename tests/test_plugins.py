@@ -60,7 +60,7 @@ def uavtrack(site: Path, *args: str, cwd: Path) -> subprocess.CompletedProcess:
 
 def test_importing_the_example_runs_nothing_and_registers_nothing():
     code = (
-        "import runpy, uavtrack.registry as r\n"
+        "import runpy, uavtrack.methods.registry as r\n"
         f"ns = runpy.run_path({str(EXAMPLE)!r}, run_name='custom_method')\n"
         "assert 'sequential' not in r.names(), r.names()\n"
         "assert ns['SequentialAuction'].name == 'sequential'\n"

@@ -3,7 +3,7 @@ import pytest
 from scipy import stats
 
 import uavtrack
-from uavtrack.experiments import robustness
+from uavtrack.experiments import robustness, statistics
 from uavtrack.experiments.jobs import unique
 
 
@@ -28,8 +28,8 @@ def test_plan_shares_equal_configurations_and_covers_every_series():
 def test_ci95_is_the_t_interval(rng):
     values = rng.normal(0.7, 0.05, 12)
     low, high = stats.t.interval(0.95, 11, loc=values.mean(), scale=stats.sem(values))
-    assert robustness.ci95(values) == pytest.approx((high - low) / 2)
-    assert np.isnan(robustness.ci95(values[:1]))
+    assert statistics.ci95(values) == pytest.approx((high - low) / 2)
+    assert np.isnan(statistics.ci95(values[:1]))
 
 
 def test_series_settings():

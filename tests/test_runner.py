@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack.experiments import jobs as experiments, store as runner
 from uavtrack.errors import UsageError
+from uavtrack.experiments import jobs as job_lists
+from uavtrack.experiments import store as runner
 
 
 def small_jobs(trials=4, chunk=2):
@@ -13,7 +14,7 @@ def small_jobs(trials=4, chunk=2):
     return [
         j
         for m in ("distributed", "greedy")
-        for j in experiments.trial_jobs(scenario, {}, m, trials, chunk, seed=3)
+        for j in job_lists.trial_jobs(scenario, {}, m, trials, chunk, seed=3)
     ]
 
 
@@ -46,7 +47,7 @@ def test_interrupted_run_resumes_without_recomputing(tmp_path, monkeypatch):
     assert not list(store.raw.glob(".*"))  # no temporary files left
     ran = []
     monkeypatch.setattr(
-        runner, "run_job", lambda job: ran.append(job.key) or experiments.run_job(job)
+        runner, "run_job", lambda job: ran.append(job.key) or job_lists.run_job(job)
     )
     with runner.Store(tmp_path / "out", manifest()) as again:
         skipped, failed = runner.execute(jobs, again, workers=1, progress=False)
@@ -62,7 +63,7 @@ def test_failed_job_is_recorded_and_others_finish(tmp_path, monkeypatch):
     def flaky(job):
         if job.key == bad:
             raise RuntimeError("sensor exploded")
-        return experiments.run_job(job)
+        return job_lists.run_job(job)
 
     monkeypatch.setattr(runner, "run_job", flaky)
     store = runner.Store(tmp_path / "out", manifest())
@@ -72,7 +73,7 @@ def test_failed_job_is_recorded_and_others_finish(tmp_path, monkeypatch):
     assert "sensor exploded" in record["error"]
     assert all(store.done(j) for j in jobs if j.key != bad) and not store.done(jobs[1])
     # the next run retries only the failed job and clears its record
-    monkeypatch.setattr(runner, "run_job", experiments.run_job)
+    monkeypatch.setattr(runner, "run_job", job_lists.run_job)
     skipped, failed = runner.execute(jobs, store, workers=1, progress=False)
     assert skipped == len(jobs) - 1 and not failed
     assert not (store.failed / f"{bad}.json").exists()
@@ -127,7 +128,7 @@ def test_fault_realisations_do_not_depend_on_the_workers(tmp_path):
     scenario = uavtrack.Scenario(steps=25).with_overrides(
         {"faults.loss": 0.3, "faults.failure_rate": 0.01, "faults.position_std": 2.0}
     )
-    jobs = experiments.trial_jobs(scenario, {}, "distributed", 4, 1, seed=3)
+    jobs = job_lists.trial_jobs(scenario, {}, "distributed", 4, 1, seed=3)
     with runner.Store(tmp_path / "one", manifest()) as one:
         runner.execute(jobs, one, workers=1, progress=False)
         a = collect(one, jobs)
@@ -135,7 +136,7 @@ def test_fault_realisations_do_not_depend_on_the_workers(tmp_path):
         runner.execute(jobs, two, workers=2, progress=False)
         b = collect(two, jobs)
     assert a == b
-    whole = experiments.run_job(experiments.trial_jobs(scenario, {}, "distributed", 4, 4, 3)[0])
+    whole = job_lists.run_job(job_lists.trial_jobs(scenario, {}, "distributed", 4, 4, 3)[0])
     assert (
         np.concatenate([a[j.key]["observation_rate"] for j in jobs]).tolist()
         == whole["observation_rate"]

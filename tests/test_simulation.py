@@ -9,8 +9,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import estimation, network, sensing
-from uavtrack import simulation
+from uavtrack import _process, estimation, network, sensing, simulation
 from uavtrack.testing import assert_same_trace
 
 from . import reference as reference_check
@@ -238,7 +237,7 @@ def test_memory_estimate_bounds_the_measured_peak(fields, batch, trace):
 
 
 def test_a_run_that_cannot_fit_is_refused_naming_the_field(monkeypatch):
-    monkeypatch.setattr(simulation, "available_memory", lambda: 50 * 2**20)
+    monkeypatch.setattr(_process, "available_memory", lambda: 50 * 2**20)
     big = uavtrack.Scenario(n_uavs=100, n_targets=100, uav={"altitude_spacing": 0.2})
     with pytest.raises(uavtrack.ScenarioError, match=r"needs about .* MiB .* reduce n_uavs"):
         uavtrack.simulate(big, trace=False)

@@ -7,7 +7,7 @@ import sys
 
 import pytest
 
-from uavtrack import _process as threads
+from uavtrack import _process
 
 PROBE = (
     "import json, sys\n"
@@ -17,15 +17,15 @@ PROBE = (
     "import numpy, threadpoolctl\n"
     "info = threadpoolctl.threadpool_info()\n"
     "blas = [p['num_threads'] for p in info if p['user_api'] == 'blas']\n"
-    "print(json.dumps({{'loaded': loaded, 'blas': blas, 'how': uavtrack.threads.describe(),\n"
+    "print(json.dumps({{'loaded': loaded, 'blas': blas, 'how': uavtrack._process.describe(),\n"
     "                  'child': __import__('os').environ.get('OPENBLAS_NUM_THREADS')}}))\n"
 )
 
 
 def probe(before: str = "", **env: str) -> dict:
     """What BLAS runs on in a fresh interpreter that imports uavtrack."""
-    environ = {k: v for k, v in os.environ.items() if k not in threads.THREAD_VARIABLES}
-    environ.pop(threads.VARIABLE, None)
+    environ = {k: v for k, v in os.environ.items() if k not in _process.THREAD_VARIABLES}
+    environ.pop(_process.VARIABLE, None)
     environ.update(env)
     out = subprocess.run(
         [sys.executable, "-c", PROBE.format(before=before)],
@@ -39,7 +39,7 @@ def probe(before: str = "", **env: str) -> dict:
 
 def native() -> int:
     """BLAS threads of a numpy loaded without uavtrack and without thread variables."""
-    environ = {k: v for k, v in os.environ.items() if k not in threads.THREAD_VARIABLES}
+    environ = {k: v for k, v in os.environ.items() if k not in _process.THREAD_VARIABLES}
     code = (
         "import numpy, threadpoolctl\n"
         "print([p['num_threads'] for p in threadpoolctl.threadpool_info()"

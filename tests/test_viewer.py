@@ -14,7 +14,7 @@ import uavtrack
 pytest.importorskip("rerun")
 from rerun.chunk import RrdReader  # noqa: E402
 
-from uavtrack.viz import rerun as viewer  # noqa: E402
+from uavtrack.viz import rerun  # noqa: E402
 
 from .test_files import on_a_small_disk  # noqa: E402
 
@@ -44,9 +44,9 @@ def test_a_saved_recording_holds_every_entity_for_every_step(tmp_path):
     scenario = uavtrack.Scenario(steps=25, faults={"failures": [[3, 10]]})
     result = uavtrack.simulate(scenario, seed=2)
     path = tmp_path / "run.rrd"
-    viewer.save(result.trace, scenario, path)
+    rerun.save(result.trace, scenario, path)
     dynamic, static = contents(path)
-    assert set(dynamic) | (static - {"__properties"}) == set(viewer.ENTITIES)
+    assert set(dynamic) | (static - {"__properties"}) == set(rerun.ENTITIES)
     assert static - {"__properties"} == {"world/field", "world/targets/paths"}
     for entity, steps in dynamic.items():
         assert sorted(steps) == list(range(25)), entity
@@ -82,12 +82,12 @@ def column(path, entity, name):
 
 def test_recordings_of_different_runs_have_different_ids_and_a_top_view(tmp_path):
     a, b = uavtrack.Scenario(steps=3), uavtrack.Scenario(steps=3, comm_range=80)
-    assert viewer.recording_id("distributed-0", a) != viewer.recording_id("distributed-0", b)
-    viewer.save(uavtrack.simulate(a, seed=0).trace, a, tmp_path / "a.rrd", "distributed-0")
+    assert rerun.recording_id("distributed-0", a) != rerun.recording_id("distributed-0", b)
+    rerun.save(uavtrack.simulate(a, seed=0).trace, a, tmp_path / "a.rrd", "distributed-0")
     reader = RrdReader(tmp_path / "a.rrd")
     assert [r.recording_id for r in reader.recordings()] == [f"distributed-0-{a.digest()}"]
     assert len(reader.blueprints()) == 1  # the default layout travels with the file
-    above = viewer.blueprint(a).root_container.contents[0]
+    above = rerun.blueprint(a).root_container.contents[0]
     assert above.name == "field from above" and "EyeControls3D" in above.properties
 
 
@@ -96,7 +96,7 @@ def test_one_entity_per_kind_whatever_the_team(tmp_path):
     for team in ((3, 2), (40, 30)):
         scenario = uavtrack.Scenario(steps=4).scaled(*team)
         result = uavtrack.simulate(scenario, seed=0)
-        viewer.save(result.trace, scenario, tmp_path / "r.rrd")
+        rerun.save(result.trace, scenario, tmp_path / "r.rrd")
         dynamic, static = contents(tmp_path / "r.rrd")
         kinds.append(set(dynamic) | static)
         assert dynamic["world/uavs"][3] == team[0]
@@ -155,7 +155,7 @@ def test_a_recording_with_rerun_turned_off_is_refused_in_one_line(tmp_path):
 
 def test_each_metric_has_a_view_on_its_own_scale(tmp_path):
     scenario = uavtrack.Scenario(steps=8)
-    viewer.save(uavtrack.simulate(scenario, seed=1).trace, scenario, tmp_path / "m.rrd")
+    rerun.save(uavtrack.simulate(scenario, seed=1).trace, scenario, tmp_path / "m.rrd")
     reader = RrdReader(tmp_path / "m.rrd")
     views, ranges = {}, {}
     for chunk in reader.stream(store=reader.blueprints()[0]):  # the layout, read back
@@ -169,7 +169,7 @@ def test_each_metric_has_a_view_on_its_own_scale(tmp_path):
             view = chunk.entity_path.rsplit("/", 1)[0]
             ranges[view] = batch.column("ScalarAxis:range").to_pylist()[0][0]
     series = {origin: view for view, (kind, origin) in views.items() if "TimeSeries" in kind}
-    metrics = {e for e in viewer.ENTITIES if e.startswith("metrics/")}
+    metrics = {e for e in rerun.ENTITIES if e.startswith("metrics/")}
     assert set(series) == metrics  # one view per metric, none shared
     assert ranges == {series["metrics/observation_rate"]: [0.0, 1.0]}  # a share: [0, 1]
 
@@ -184,7 +184,7 @@ def test_the_viz_extra_reads_a_recording_back(tmp_path):
     assert {"rerun-sdk", "pyarrow"} <= viz  # Rerun writes, pyarrow holds what it reads back
     scenario = uavtrack.Scenario(steps=12)
     trace = uavtrack.simulate(scenario, seed=4).trace
-    viewer.save(trace, scenario, tmp_path / "r.rrd")
+    rerun.save(trace, scenario, tmp_path / "r.rrd")
     # read back with the viz extra alone: no pandas, polars or datafusion
     code = (
         "import sys, json\n"
@@ -218,5 +218,5 @@ def test_a_recording_of_a_team_that_all_failed_warns_of_nothing(tmp_path):
     assert not trace.alive.any()
     with warnings.catch_warnings():
         warnings.simplefilter("error")
-        viewer.save(trace, scenario, tmp_path / "x.rrd")
+        rerun.save(trace, scenario, tmp_path / "x.rrd")
     assert (tmp_path / "x.rrd").stat().st_size > 0

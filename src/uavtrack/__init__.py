@@ -64,22 +64,22 @@ _MODULES = {
 
 _MOVED = {
     "uavtrack.bench": "uavtrack.experiments.bench",
-    "uavtrack.equivalence": "uavtrack.testing",
+    "uavtrack.testing": "uavtrack.testing",
     "uavtrack.files": "uavtrack._files",
     "uavtrack.flight.experiment": "uavtrack.experiments.flight",
-    "uavtrack.flight.mavlink": "uavtrack.io.mavlink",
-    "uavtrack.gate": "uavtrack.robust.gate",
+    "uavtrack.io.mavlink": "uavtrack.io.mavlink",
+    "uavtrack.robust.gate": "uavtrack.robust.gate",
     "uavtrack.lifeline": "uavtrack._process",
-    "uavtrack.plausibility": "uavtrack.robust.plausibility",
+    "uavtrack.robust.plausibility": "uavtrack.robust.plausibility",
     "uavtrack.plots": "uavtrack.experiments.figures uavtrack.viz.scene",
     "uavtrack.progress": "uavtrack._progress",
-    "uavtrack.registry": "uavtrack.methods.registry",
+    "uavtrack.methods.registry": "uavtrack.methods.registry",
     "uavtrack.report": "uavtrack.experiments.report uavtrack.experiments.statistics",
     "uavtrack.robustness": "uavtrack.experiments.robustness uavtrack.experiments.statistics",
     "uavtrack.runner": "uavtrack.experiments.store",
-    "uavtrack.threads": "uavtrack._process",
+    "uavtrack._process": "uavtrack._process",
     "uavtrack.trackers": "uavtrack.experiments.trackers uavtrack.experiments.statistics",
-    "uavtrack.viewer": "uavtrack.viz.rerun",
+    "uavtrack.viz.rerun": "uavtrack.viz.rerun",
 }
 """The import paths of the layout before 0.2, served for one release with a
 DeprecationWarning: old path -> the module(s) that hold its names now."""

@@ -93,7 +93,7 @@ def _admits() -> list[str]:
         "programs, at most 4 parts, each round at most the run's rounds, and each array of "
         "a part exactly this dtype and shape (N UAVs, M targets, P programs) with values in "
         "its domain. A message that breaks it is dropped whole and counted by reason; an "
-        "estimate beyond the run's plausibility bounds (`uavtrack.plausibility.Bounds`, "
+        "estimate beyond the run's plausibility bounds (`uavtrack.robust.plausibility.Bounds`, "
         "derived from the scenario) is not used and is counted, the rest of the message is. "
         "Whatever the rule admits, the receivers use without error. On the wire float64 "
         "is `<f8`, int64 `<i8` and bool `|b1`.",

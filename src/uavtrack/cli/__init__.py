@@ -20,8 +20,7 @@ import typer
 from typer import core as typer_core
 from typer.exceptions import TyperException
 
-from .. import __version__
-from .. import _process as threads
+from .. import __version__, _process
 from .._files import check_distinct, check_new_folder, check_output, dumps
 from .._progress import bar
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
@@ -594,7 +593,7 @@ def params(
     ] = False,
 ) -> None:
     """Show every scenario parameter with its value, unit, range and source."""
-    scenario = load_scenario(config, set_, team)
+    scenario = load_scenario(config, set_, team, fly=False)
     if toml:
         typer.echo(scenario.to_toml(comments=True), nl=False)
         return
@@ -622,7 +621,7 @@ def main(argv: list[str] | None = None) -> int:
     argv = _optional_values(sys.argv[1:] if argv is None else list(argv))
     _terminate_as_interrupt()
     try:
-        threads.check()
+        _process.check()
         # without standalone mode typer returns exit codes (typer.Exit, Ctrl-C -> 130)
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
         code = code if isinstance(code, int) else 0
@@ -632,7 +631,7 @@ def main(argv: list[str] | None = None) -> int:
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
         return fail(exc.format_message() + _hint(exc.format_message(), argv))
-    except (UsageError, threads.ThreadsError) as exc:
+    except (UsageError, _process.ThreadsError) as exc:
         return fail(str(exc))
     except Interrupted as exc:
         return interrupted(str(exc))

@@ -257,8 +257,7 @@ def reproduce(
 ) -> None:
     """Run every experiment of the paper's Section 7 (Figures 5 to 9) into a folder,
     with the uncalibrated first guess beside the defaults."""
-    from ..experiments import figures as plots
-    from ..experiments import report
+    from ..experiments import figures, report
     from ..experiments.reproduce import Profile, reproduce_plan, summarize_reproduction
 
     scenario = load_scenario(config, set_, team)
@@ -268,8 +267,8 @@ def reproduce(
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     plan = reproduce_plan(scenario, profile, seed, sensitivity)
     manifest = manifest_of("reproduce", seed, profile, scenario)
-    figures = [f"fig{k}.png" for k in range(5, 10)] + ["sensitivity.png"]
-    with run_jobs(plan, out, manifest, engine, workers, address, progress, figures) as (
+    pictures = [f"fig{k}.png" for k in range(5, 10)] + ["sensitivity.png"]
+    with run_jobs(plan, out, manifest, engine, workers, address, progress, pictures) as (
         results,
         info,
     ):
@@ -277,7 +276,7 @@ def reproduce(
         summary = summarize_reproduction(plan, results, profile, scenario)
         summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
         write_json(out / "summary.json", summary)
-        plots.reproduction_figures(summary, out)
+        figures.reproduction_figures(summary, out)
         if "sensitivity" not in summary:  # an earlier run's chart would not match the report
             (out / "sensitivity.png").unlink(missing_ok=True)
         write_text(out / "report.md", report.reproduction(summary, scenario, info))
@@ -386,8 +385,7 @@ def sweep(
         "plan": ({"field": field, "values": axes[field]} if one else {"fields": axes})
         | {"methods": names, "trials": trials},
     }
-    from ..experiments import figures as plots
-    from ..experiments import report
+    from ..experiments import figures, report
     from ..experiments.jobs import summarize_sweep
 
     with run_jobs(plan, out, manifest, engine, workers, address, progress, ["sweep.png"]) as (
@@ -401,7 +399,7 @@ def sweep(
             summary["unit"] = summary["units"][field]
         summary["settings"] = info
         write_json(out / "summary.json", summary)
-        plots.sweep_figure(summary, out / "sweep.png")
+        figures.sweep_figure(summary, out / "sweep.png")
         write_text(out / "report.md", report.sweep(summary, scenario, info))
 
     from rich.markup import escape
@@ -481,8 +479,8 @@ def animate(
 ) -> None:
     """Animate one trial like the paper's Figure 4, as a GIF."""
     from .._progress import bar
-    from ..experiments import figures as plots
     from ..simulation import simulate
+    from ..viz import scene
 
     if out.suffix.lower() != ".gif":
         raise UsageError(f"--out must name a .gif file, got {out}")
@@ -490,9 +488,9 @@ def animate(
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     with steps_bar(scenario) as advance:
         result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))
-    frames = len(plots.animation_frames(scenario.steps, every))
+    frames = len(scene.animation_frames(scenario.steps, every))
     with bar(frames, "frames", "frames") as advance:
-        plots.animate(
+        scene.animate(
             result.trace,
             scenario,
             out,

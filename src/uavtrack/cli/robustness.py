@@ -49,8 +49,7 @@ def robustness(
 ) -> None:
     """Every method under message loss, bursts, delay, a round budget, UAV failures and
     position error, with and without the robustness options, into a folder."""
-    from ..experiments import figures as plots
-    from ..experiments import report
+    from ..experiments import figures, report
     from ..experiments import robustness as experiment
 
     scenario = load_scenario(config, set_, team)
@@ -61,7 +60,7 @@ def robustness(
         scenario,
         dict(locals()),  # the command's options, by name
         lambda jobs: [f"fault_{name}.png" for name in jobs if name != "ablation"],
-        plots.robustness_figures,
+        figures.robustness_figures,
         report.robustness,
     )
     _print(summary, out, info)

@@ -22,8 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from .. import _process as threads
-from .. import estimation, planning, sensing, world
+from .. import _process, estimation, planning, sensing, world
 from ..config import Scenario
 from ..errors import install_hint
 from ..methods import get
@@ -402,8 +401,8 @@ def machine() -> dict[str, Any]:
         "scipy": scipy.__version__,
         "blas": blas,
         "uavtrack": __version__,
-        "threads": {name: os.environ.get(name) for name in threads.THREAD_VARIABLES[:3]},
-        "blas_threads": threads.describe(),
+        "threads": {name: os.environ.get(name) for name in _process.THREAD_VARIABLES[:3]},
+        "blas_threads": _process.describe(),
         "date": time.strftime("%Y-%m-%d %H:%M:%S"),
     }
 

@@ -5,7 +5,7 @@ PlotJuggler open.
 Time: the simulated clock, step k at k dt seconds (also on ``/clock``, for
 ``use_sim_time``). Frame ``map``: x east, y north, z up [m] from the scenario's origin;
 GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
-`flight.mavlink.LocalFrame`). Topics:
+`io.mavlink.LocalFrame`). Topics:
 
 * ``/clock`` rosgraph_msgs/msg/Clock, each step;
 * ``/tf`` tf2_msgs/msg/TFMessage: ``map`` -> ``uav_i`` (its pose) and ``map`` ->

@@ -26,42 +26,40 @@ examples/custom_method.py); `register` adds a method to the `registry` the comma
 and the experiments read, and other packages can add theirs by entry point.
 """
 
-from __future__ import annotations
+import importlib
+from typing import TYPE_CHECKING
 
-from ..errors import UsageError
-from . import registry
-from .base import Assigned, Fused, Held, Inputs, Method, Setting, consensus, gated
-from .centralized import Centralized, central_node, nothing_heard, take_download
-from .distributed import Distributed, bid_view
-from .greedy import Greedy
-
-METHODS: dict[str, Method] = {
-    m.name: registry.register(m) for m in (Distributed(), Centralized(), Greedy())
-}
-"""The built-in methods by name; `registry` holds every method (plugins and `register`)."""
-
-
-def register(method: Method) -> Method:
-    """Make `method` available by its name (in this process) and return it."""
-    if not isinstance(method, Method):
-        raise TypeError(f"a method must be a uavtrack.methods.Method, not {type(method).__name__}")
-    return registry.register(method)
+_WHERE = {
+    "METHODS": "builtin", "get": "builtin", "register": "builtin",
+    "Method": "base", "Inputs": "base", "Fused": "base", "Assigned": "base", "Held": "base",
+    "Setting": "base", "consensus": "base", "gated": "base",
+    "Distributed": "distributed", "bid_view": "distributed",
+    "Centralized": "centralized", "central_node": "centralized",
+    "nothing_heard": "centralized", "take_download": "centralized",
+    "Greedy": "greedy",
+}  # fmt: skip
+"""Where each public name lives. They load on first use, so that `registry` (which the
+command line reads to list the choices) comes without numpy."""
 
 
-def get(method: str | Method) -> Method:
-    """A method by name (``distributed``, ``centralized``, ``greedy``, or any registered)
-    or an instance."""
-    if isinstance(method, Method):
-        return method
-    if not isinstance(method, str):
-        raise ValueError(f"unknown method {method!r}; choose one of: {', '.join(registry.names())}")
-    found = registry.load(method)
-    if not isinstance(found, Method):
-        raise UsageError(
-            f"method {method!r} is a {type(found).__name__}, not a uavtrack.methods.Method"
-        )
-    return found
+def __getattr__(name: str):
+    if name not in _WHERE:
+        raise AttributeError(f"module 'uavtrack.methods' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{_WHERE[name]}", __name__), name)
+    globals()[name] = value
+    return value
 
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(_WHERE))
+
+
+if TYPE_CHECKING:
+    from .base import Assigned, Fused, Held, Inputs, Method, Setting, consensus, gated
+    from .builtin import METHODS, get, register
+    from .centralized import Centralized, central_node, nothing_heard, take_download
+    from .distributed import Distributed, bid_view
+    from .greedy import Greedy
 
 __all__ = [  # noqa: RUF022 (the interface, the methods, then their stages)
     "METHODS", "Method", "Inputs", "Fused", "Assigned", "Held", "Setting", "get", "register",

@@ -33,7 +33,9 @@ from ..errors import install_hint
 try:
     import rerun as rr
 except ImportError as exc:  # an optional extra
-    raise ImportError(f"uavtrack.viewer needs rerun-sdk: {install_hint('viz')} ({exc})") from None
+    raise ImportError(
+        f"uavtrack.viz.rerun needs rerun-sdk: {install_hint('viz')} ({exc})"
+    ) from None
 
 from .._files import write_bytes
 from ..errors import RunError, UsageError
