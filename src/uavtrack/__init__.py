@@ -64,22 +64,22 @@ _MODULES = {
 
 _MOVED = {
     "uavtrack.bench": "uavtrack.experiments.bench",
-    "uavtrack.testing": "uavtrack.testing",
+    "uavtrack.equivalence": "uavtrack.testing",
     "uavtrack.files": "uavtrack._files",
     "uavtrack.flight.experiment": "uavtrack.experiments.flight",
-    "uavtrack.io.mavlink": "uavtrack.io.mavlink",
-    "uavtrack.robust.gate": "uavtrack.robust.gate",
+    "uavtrack.flight.mavlink": "uavtrack.io.mavlink",
+    "uavtrack.gate": "uavtrack.robust.gate",
     "uavtrack.lifeline": "uavtrack._process",
-    "uavtrack.robust.plausibility": "uavtrack.robust.plausibility",
+    "uavtrack.plausibility": "uavtrack.robust.plausibility",
     "uavtrack.plots": "uavtrack.experiments.figures uavtrack.viz.scene",
     "uavtrack.progress": "uavtrack._progress",
-    "uavtrack.methods.registry": "uavtrack.methods.registry",
+    "uavtrack.registry": "uavtrack.methods.registry",
     "uavtrack.report": "uavtrack.experiments.report uavtrack.experiments.statistics",
     "uavtrack.robustness": "uavtrack.experiments.robustness uavtrack.experiments.statistics",
     "uavtrack.runner": "uavtrack.experiments.store",
-    "uavtrack._process": "uavtrack._process",
+    "uavtrack.threads": "uavtrack._process",
     "uavtrack.trackers": "uavtrack.experiments.trackers uavtrack.experiments.statistics",
-    "uavtrack.viz.rerun": "uavtrack.viz.rerun",
+    "uavtrack.viewer": "uavtrack.viz.rerun",
 }
 """The import paths of the layout before 0.2, served for one release with a
 DeprecationWarning: old path -> the module(s) that hold its names now."""
@@ -116,7 +116,7 @@ class _Moved(importlib.abc.MetaPathFinder, importlib.abc.Loader):
 
 
 if not any(isinstance(finder, _Moved) for finder in sys.meta_path):
-    sys.meta_path.append(_Moved())
+    sys.meta_path.insert(0, _Moved())  # before the path finders: an old path is never a file
 
 
 def __getattr__(name: str):

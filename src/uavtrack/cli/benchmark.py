@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from .._files import check_output, write_json
-from . import app, console
+from .app import app, console
 
 
 @app.command()

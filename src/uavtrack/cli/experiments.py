@@ -12,7 +12,7 @@ import typer
 
 from .._files import check_output, check_outputs, write_json, write_text
 from ..errors import Interrupted, ScenarioError, UsageError
-from . import (
+from .app import (
     ConfigOpt,
     MethodName,
     MethodOpt,

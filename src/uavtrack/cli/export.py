@@ -11,7 +11,7 @@ import typer
 
 from .._files import check_new_file, check_new_folder, new_folder, replacing, write_bytes
 from ..errors import RunError, UsageError
-from . import app
+from .app import app
 from .experiments import note
 
 

@@ -8,7 +8,7 @@ from typing import Annotated
 import typer
 
 from ..errors import UsageError
-from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
+from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
@@ -57,7 +57,7 @@ def flight(
     wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps."""
     from ..config import Scenario, flatten, read_toml
     from ..experiments import flight as experiment
-    from . import parse_overrides
+    from .app import parse_overrides
 
     own = ("wind.", "uav.dynamics", "planner.wind")
     given = [*parse_overrides(set_ or []), *(flatten(read_toml(config)) if config else {})]

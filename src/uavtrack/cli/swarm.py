@@ -14,7 +14,7 @@ import typer
 
 from .._files import check_distinct, check_output
 from ..errors import Interrupted, RunError, UsageError, install_hint
-from . import (
+from .app import (
     BagOpt,
     ConfigOpt,
     MethodName,

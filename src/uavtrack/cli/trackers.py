@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from . import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
+from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,

@@ -112,7 +112,7 @@ class Scenario(_Part):
         try:
             super().__init__(**data)
         except ValidationError as exc:
-            raise ScenarioError(describe_errors(exc)) from None
+            raise ScenarioError(describe_errors(exc, Scenario().model_dump())) from None
 
     @model_validator(mode="after")
     def _altitude_count(self) -> Scenario:
@@ -270,7 +270,9 @@ class Scenario(_Part):
         try:
             return cls.model_validate(data)
         except ValidationError as exc:
-            raise ScenarioError(f"{origin}: {describe_errors(exc)}") from None
+            raise ScenarioError(
+                f"{origin}: {describe_errors(exc, Scenario().model_dump())}"
+            ) from None
         except ScenarioError as exc:  # raised by __init__, which validation calls
             raise ScenarioError(f"{origin}: {exc}") from None
 

@@ -78,15 +78,14 @@ def closest(dotted: str, data: dict[str, Any]) -> str | None:
 _PARAMS_HINT = " (uavtrack params lists every field)"
 
 
-def describe_errors(exc: ValidationError) -> str:
-    """Pydantic errors as one line: ``field: problem (got value)``, joined by '; '."""
+def describe_errors(exc: ValidationError, fields: dict[str, Any] | None = None) -> str:
+    """Pydantic errors as one line: ``field: problem (got value)``, joined by '; '. An
+    unknown field is given the closest of `fields` (a scenario's nested dict), if any."""
     parts = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"])
         if err["type"] == "extra_forbidden":
-            from .scenario import Scenario  # the scenario is built with these helpers
-
-            close = closest(loc, Scenario().model_dump())
+            close = closest(loc, fields) if fields is not None else None
             parts.append(f"unknown field '{loc}'" + (f" (did you mean {close}?)" if close else ""))
             continue
         msg = err["msg"].removeprefix("Value error, ")
