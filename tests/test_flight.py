@@ -11,6 +11,7 @@ import pytest
 import uavtrack
 from uavtrack import Scenario, ScenarioError
 from uavtrack.config import G
+from uavtrack.flight import check as check_flight
 from uavtrack.testing import assert_same_trace
 
 jsbsim = pytest.importorskip("jsbsim")
@@ -215,8 +216,9 @@ def test_without_jsbsim_the_setting_names_the_extra(monkeypatch):
     monkeypatch.setitem(sys.modules, "jsbsim", None)  # import jsbsim fails
     flight.check_aircraft.cache_clear()
     try:
+        flown = Scenario().with_overrides(JSBSIM)  # built and read without JSBSim
         with pytest.raises(ScenarioError, match=r"needs JSBSim.*\.\[flight\]") as info:
-            Scenario().with_overrides(JSBSIM)
+            check_flight(flown)
     finally:
         flight.check_aircraft.cache_clear()
     assert "\n" not in str(info.value)
@@ -365,7 +367,7 @@ def test_a_model_jsbsim_cannot_parse_is_refused_in_one_line(tmp_path, monkeypatc
     folder, _ = entity_folder(tmp_path, "autopilot")
     monkeypatch.setattr(flight, "check_xml", lambda folder: None)
     with pytest.raises(ScenarioError, match="JSBSim could not load the model in") as info:
-        Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)})
+        check_flight(Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)}))
     assert "reference to external entity in attribute" in str(info.value)
     assert "\n" not in str(info.value)
 
@@ -377,5 +379,5 @@ def test_an_aircraft_file_that_is_not_xml_is_refused_in_one_line(tmp_path):
     shutil.copytree(flight.AIRCRAFT / "trackwing", folder)
     (folder / "Systems" / "autopilot.xml").write_text("<system><property>&nosuch;</system>")
     with pytest.raises(ScenarioError, match=r"autopilot.xml is not well-formed XML \(") as info:
-        Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)})
+        check_flight(Scenario().with_overrides({**JSBSIM, "uav.aircraft": str(folder)}))
     assert "\n" not in str(info.value)

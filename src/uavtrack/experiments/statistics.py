@@ -11,7 +11,6 @@ from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
-from scipy import stats
 
 from ..metrics import METRICS, mean_std, sorted_rates
 
@@ -150,6 +149,8 @@ def level_text(value: Any) -> str:
 
 def ci95(values: np.ndarray) -> float:
     """Half-width of the 95% t confidence interval of the mean (NaN for one value)."""
+    from scipy import stats  # loaded here: a command refuses bad input before this import
+
     values = np.asarray(values, dtype=float)
     n = len(values)
     if n < 2:
@@ -160,5 +161,7 @@ def ci95(values: np.ndarray) -> float:
 def nees_band(samples: float, dim: int = 4, level: float = 0.95) -> tuple[float, float]:
     """The band of the mean NEES of `samples` independent `dim`-D errors of a consistent
     estimator: chi-square(dim x samples) quantiles divided by samples."""
+    from scipy import stats  # loaded here: a command refuses bad input before this import
+
     low, high = stats.chi2.ppf([(1 - level) / 2, (1 + level) / 2], dim * samples)
     return float(low / samples), float(high / samples)
