@@ -300,6 +300,16 @@ def test_uavtrack_agent_exit_codes(capsys, monkeypatch):
         stop.set()
 
 
+def test_tls_options_with_a_ca_alone_are_refused_naming_the_three_files(tmp_path):
+    from uavtrack.agents.transport import ZenohOptions
+
+    ca = tmp_path / "ca.pem"
+    ca.write_text("not read: the options are refused first\n")
+    for cert, key in ((None, None), (str(ca), None), (None, str(ca))):
+        with pytest.raises(ValueError, match="TLS needs all three of tls_ca, tls_cert and tls_key"):
+            ZenohOptions(tls_ca=str(ca), tls_cert=cert, tls_key=key).check(["tls/127.0.0.1:1"])
+
+
 def test_the_endpoints_are_uavtracks_whatever_a_zenoh_file_says(tmp_path):
     zenoh_or_skip()
     from uavtrack.agents.transport import ZenohOptions, zenoh_config

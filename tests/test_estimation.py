@@ -177,3 +177,12 @@ def test_nees_closed_form_equals_solve(data):
     assert estimation.nees(np.zeros(4), P, e) == pytest.approx(expected, rel=1e-7, abs=1e-9)
     stacked = estimation.nees(np.zeros((3, 4)), np.stack([P] * 3), np.stack([e] * 3))
     assert stacked.shape == (3,) and np.allclose(stacked, expected, rtol=1e-7, atol=1e-9)
+
+
+def test_a_filter_step_refuses_a_transition_without_its_noise_or_the_reverse():
+    mean, cov = np.zeros((1, 4)), np.eye(4)[None]
+    nothing = (np.zeros(1, dtype=bool), np.zeros((0, 2)), np.zeros((0, 2, 2)))
+    A, Q = estimation.transition(1.0), estimation.process_noise(1.0, 1.0, 1.0)
+    for pair in ((A, None), (None, Q)):
+        with pytest.raises(ValueError, match="A and Q are given together, or neither"):
+            estimation.filter_step(mean, cov, *nothing, *pair)

@@ -90,3 +90,19 @@ def test_a_round_is_the_same_in_the_dense_and_the_edge_form(rng):
     cov = np.stack([own["cov"][0, 0] if q == 0 else offered["cov"][0, q] for q in heard], 1)
     x, P = fusion.intersect(mean, cov, fusion.fast_weights(cov, np.ones(mean.shape[:2], bool)))
     assert np.allclose(dense["mean"][0, 0], x) and np.allclose(dense["cov"][0, 0], P)
+
+
+@pytest.mark.parametrize("form", ["dense", "edges"])
+def test_a_round_of_tuples_without_confidence_fuses_only_what_is_admitted(rng, form):
+    # tuples that carry no "gamma" (all finite, then): the admitted mask alone decides
+    from uavtrack import network
+
+    B, n, m = 1, 4, 2
+    links = network.links(np.ones((B, n, n), dtype=bool), form)
+    cov = np.stack([spd(rng) for _ in range(B * n * m)]).reshape(B, n, m, 4, 4)
+    own = {"mean": rng.normal(size=(B, n, m, 4)), "cov": cov}
+    t, i, q = links.pairs()
+    admitted = np.broadcast_to((i == q)[..., None], np.broadcast(t, i, q).shape + (m,))
+    out = fusion.intersect_round(own, own, links, admitted)  # each admits only its own
+    assert np.allclose(out["mean"], own["mean"], rtol=1e-10, atol=1e-12)
+    assert np.allclose(out["cov"], own["cov"], rtol=1e-10, atol=1e-12)

@@ -38,8 +38,8 @@ def bar(
         yield lambda amount=1: None
         return
     if enabled is None and not on_terminal():
-        with lines(total, label, completed) as advance:
-            yield advance
+        with lines(total, label, completed) as step:
+            yield step
         return
     from rich.console import Console
     from rich.progress import (
@@ -63,7 +63,8 @@ def bar(
         console=Console(stderr=True),
         transient=False,
     )
-    task = progress.add_task(label, total=total, completed=completed, rate="")
+    # rich keeps a task's completed as a float (Task.completed); add_task says int
+    task = progress.add_task(label, total=total, completed=completed, rate="")  # pyright: ignore[reportArgumentType]
     start, fresh = time.perf_counter(), [0.0]
 
     def advance(amount: float = 1) -> None:

@@ -15,6 +15,14 @@ every problem whose optimum is not unique by a clear margin, so the answers are 
 of `hungarian`, ties included.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import itertools
@@ -27,22 +35,30 @@ import numpy as np
 from . import timing
 
 
-def linear_sum_assignment(cost: np.ndarray, maximize: bool = False):
+def linear_sum_assignment(
+    cost: np.ndarray, maximize: bool = False
+) -> tuple[np.ndarray, np.ndarray]:
     """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
     second to load, and batches of trials solve their problems by `solve_many`, without
     it unless bids tie."""
     return load_solver()(cost, maximize=maximize)
 
 
-_SOLVER: list[Callable] = []
+Solver = Callable[[np.ndarray], np.ndarray]
+"""A neighbourhood's assignment: bids (n, m) -> (n,) the column of each row."""
+
+_SOLVER: list[Callable[..., tuple[np.ndarray, np.ndarray]]] = []
 
 
-def load_solver() -> Callable:
+def load_solver() -> Callable[..., tuple[np.ndarray, np.ndarray]]:
     """scipy's `linear_sum_assignment`, importing `scipy.optimize` on first use; the
     import is set-up, not a decision's time (`timing.set_up`)."""
     if not _SOLVER:
         with timing.set_up():
-            from scipy.optimize import linear_sum_assignment as solve
+            # scipy ships no type stubs; pyright reads its Python source
+            from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
+                linear_sum_assignment as solve,
+            )
         _SOLVER.append(solve)
     return _SOLVER[0]
 
@@ -75,7 +91,7 @@ def hungarian(bids: np.ndarray) -> np.ndarray:
     return _solve(bids)
 
 
-def local(bids: np.ndarray, me: int, solve: Callable | None = None) -> int:
+def local(bids: np.ndarray, me: int, solve: Solver | None = None) -> int:
     """One UAV's auction (Algorithm 1 lines 5-9): its target from the bids of its closed
     neighbourhood, (n, m) with its own row at `me` and the others in index order."""
     return int((solve or hungarian)(bids)[me])
@@ -242,7 +258,7 @@ def _restricted_many(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
 
 def _rounds_many(bids: np.ndarray) -> np.ndarray:
     """`_solve`'s rounds (k >= m, every bid scored) for each problem of (Q, k, m)."""
-    Q, k, m = bids.shape
+    Q, k, _ = bids.shape
     choice = np.empty((Q, k), dtype=np.int64)
     left = np.broadcast_to(np.arange(k), (Q, k))
     while left.shape[1]:
@@ -262,17 +278,17 @@ def _lsa_many(bids: np.ndarray) -> np.ndarray:
     todo = np.arange(Q)
     if math.perm(max(r, c), min(r, c)) <= ENUMERATED:
         if r <= c:  # each row a distinct column
-            cols = _permutations(c, r)  # (E, r)
-            total = bids[:, np.arange(r), cols].sum(axis=2)  # (Q, E)
+            perm = _permutations(c, r)  # (E, r) the column of each row
+            total = bids[:, np.arange(r), perm].sum(axis=2)  # (Q, E)
         else:  # each column a distinct row
-            owner = _permutations(r, c)  # (E, c)
-            total = bids[:, owner, np.arange(c)].sum(axis=2)
+            perm = _permutations(r, c)  # (E, c) the row of each column
+            total = bids[:, perm, np.arange(c)].sum(axis=2)
         pick, unique = _unique_best(total, np.abs(bids).max(axis=(1, 2)) * min(r, c))
         done = np.flatnonzero(unique)
         if r <= c:
-            out[done] = cols[pick[done]]
+            out[done] = perm[pick[done]]
         else:
-            out[done[:, None], owner[pick[done]]] = np.arange(c)
+            out[done[:, None], perm[pick[done]]] = np.arange(c)
         todo = np.flatnonzero(~unique)
     for q in todo:
         rows, cols = linear_sum_assignment(bids[q], maximize=True)
@@ -314,7 +330,7 @@ def _permutations(n: int, r: int) -> np.ndarray:
 
 
 def neighbourhood(
-    bids: np.ndarray, adjacency: np.ndarray, solve: Callable | None = None
+    bids: np.ndarray, adjacency: np.ndarray, solve: Solver | None = None
 ) -> np.ndarray:
     """Distributed auction on a graph: each UAV solves its own neighbourhood and keeps
     its row. bids: (..., N, M); adjacency: (..., N, N) bool (no self-loops needed).
@@ -326,7 +342,7 @@ def neighbourhood(
 
 
 def auction(
-    bids: np.ndarray, members: np.ndarray, solve: Callable | None = None
+    bids: np.ndarray, members: np.ndarray, solve: Solver | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every UAV's `local` rule over the members of its closed neighbourhood, for B trials.
 
@@ -425,17 +441,18 @@ def _distinct(
     """Group equal (trial, neighbourhood[, bids held]) rows: (first row of each group,
     group of each row)."""
     if views is not None or trial.size <= 8:  # a dictionary: few rows, or bids in the key
-        groups: dict[tuple, int] = {}
-        first, which = [], np.empty(trial.size, dtype=np.int64)
+        groups: dict[tuple[int | bytes, ...], int] = {}
+        heads: list[int] = []
+        which = np.empty(trial.size, dtype=np.int64)
         for k in range(trial.size):
-            key = (int(trial[k]), members[k].tobytes())
+            key: tuple[int | bytes, ...] = (int(trial[k]), members[k].tobytes())
             if views is not None:
                 key += (views[k][members[k]].tobytes(),)
             if key not in groups:
-                groups[key] = len(first)
-                first.append(k)
+                groups[key] = len(heads)
+                heads.append(k)
             which[k] = groups[key]
-        return np.array(first), which
+        return np.array(heads), which
     n = members.shape[1]
     if n + int(trial.max()).bit_length() <= 62:  # the neighbourhood as an integer bitmask
         keys = (trial << n) | (members @ (1 << np.arange(n, dtype=np.int64)))

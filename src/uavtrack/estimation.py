@@ -5,12 +5,24 @@ covariances ``(..., 4, 4)``. The measurement is the converted position z^C = H s
 (eq. 6) with H = [I_2 0].
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from .config import TrackerModel
 
 
 def transition(dt: float) -> np.ndarray:
@@ -133,7 +145,9 @@ def filter_step(
     measurements of the K observing pairs, in the order of ``np.nonzero(observed)``.
     Returns (mean, cov) of the same shapes.
     """
-    if A is not None:
+    if (A is None) != (Q is None):
+        raise ValueError("A and Q are given together, or neither")
+    if A is not None and Q is not None:
         mean, cov = predict(mean, cov, A, Q)  # new arrays: updated in place below
     elif z.shape[0]:
         mean, cov = mean.copy(), cov.copy()  # the caller's arrays stay as they were
@@ -180,7 +194,7 @@ def _nees(P: np.ndarray, e: np.ndarray) -> np.ndarray:
     p02, p12, p03, p13 = P[2], P[6], P[3], P[7]
     inv_det = 1.0 / (a11 * a22 - a12 * a12)
 
-    def solve_a(x0, x1):  # A^-1 (x0, x1)
+    def solve_a(x0: np.ndarray, x1: np.ndarray) -> tuple[np.ndarray, np.ndarray]:  # A^-1 x
         return (a22 * x0 - a12 * x1) * inv_det, (a11 * x1 - a12 * x0) * inv_det
 
     u0, u1 = solve_a(e0, e1)  # A^-1 e1
@@ -208,6 +222,11 @@ class Modes:
     mean: np.ndarray
     cov: np.ndarray
     prob: np.ndarray
+
+
+Belief = tuple[np.ndarray, np.ndarray, Modes | None]
+"""What a `Tracker` holds of each (UAV, target): combined mean (..., 4), cov (..., 4, 4)
+and, for an IMM, its `Modes` (None for the Kalman filter)."""
 
 
 def imm_start(mean: np.ndarray, cov: np.ndarray, prob: np.ndarray) -> Modes:
@@ -313,7 +332,7 @@ class Tracker:
     mode_A: np.ndarray | None = None  # each mode's motion, when they differ (turn modes)
 
     @classmethod
-    def of(cls, dt: float, sigma: tuple[float, float], tracker) -> Tracker:
+    def of(cls, dt: float, sigma: tuple[float, float], tracker: TrackerModel) -> Tracker:
         """From the time step, the targets' acceleration std per axis and a
         `config.TrackerModel`."""
         A, Q = transition(dt), process_noise(dt, *sigma)
@@ -331,20 +350,37 @@ class Tracker:
             np.stack(motions) if rates else None,  # None: every mode moves with A
         )
 
-    def start(self, mean: np.ndarray, cov: np.ndarray) -> tuple:
+    def start(self, mean: np.ndarray, cov: np.ndarray) -> Belief:
         if self.transition_matrix is None:
             return mean, cov, None
         return mean, cov, imm_start(mean, cov, _stationary(self.transition_matrix))
 
-    def update(self, mean, cov, modes, observed, z, R) -> tuple:
+    def update(
+        self,
+        mean: np.ndarray,
+        cov: np.ndarray,
+        modes: Modes | None,
+        observed: np.ndarray,
+        z: np.ndarray,
+        R: np.ndarray,
+    ) -> Belief:
         if modes is None:
             return (*filter_step(mean, cov, observed, z, R, None, None), None)
         modes = imm_update(modes, observed, z, R)
         return (*combine(modes), modes)
 
-    def close(self, mean, cov, modes, fused_mean, fused_cov) -> tuple:
+    def close(
+        self,
+        mean: np.ndarray,
+        cov: np.ndarray,
+        modes: Modes | None,
+        fused_mean: np.ndarray,
+        fused_cov: np.ndarray,
+    ) -> Belief:
         if modes is None:
             return (*predict(fused_mean, fused_cov, self.A, self.Q), None)
+        if self.transition_matrix is None or self.mode_Q is None:
+            raise ValueError("modes given to a tracker without modes (a Kalman filter)")
         changed = (fused_mean != mean).any(axis=-1) | (fused_cov != cov).any(axis=(-2, -1))
         if changed.any():
             reset = changed[..., None]

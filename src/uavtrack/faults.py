@@ -26,11 +26,20 @@ sensor noise, and every method sees the same fault realisation (paired compariso
   N(0, position_std^2) per axis, drawn per UAV and cycle.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .config import FaultModel
 
@@ -45,7 +54,7 @@ _W0, _W1 = np.uint64(0x9E3779B9), np.uint64(0xBB67AE85)
 _LOW = np.uint64(0xFFFFFFFF)
 
 
-def philox(counter: tuple, key: tuple) -> tuple[np.ndarray, ...]:
+def philox(counter: tuple[ArrayLike, ...], key: tuple[ArrayLike, ...]) -> tuple[np.ndarray, ...]:
     """Philox4x32-10 of the counters (c0, c1, c2, c3) under the keys (k0, k1).
 
     Each argument is an array of uint32 (or broadcastable to one); returns the four
@@ -66,7 +75,9 @@ def philox(counter: tuple, key: tuple) -> tuple[np.ndarray, ...]:
     return c0, c1, c2, c3
 
 
-def uniform(key: np.ndarray, step, what, sender, receiver) -> np.ndarray:
+def uniform(
+    key: np.ndarray, step: ArrayLike, what: ArrayLike, sender: ArrayLike, receiver: ArrayLike
+) -> np.ndarray:
     """Uniform numbers in [0, 1) (53 bits), one per broadcast element of the counters.
 
     key: (..., 2) uint32 per element (the trial's key, broadcast).
@@ -120,7 +131,7 @@ class Faults:
         step: int,
         protocol: str,
         round_: int,
-        trial: np.ndarray,
+        trial: np.ndarray | int,
         sender: np.ndarray,
         receiver: np.ndarray,
         bad: np.ndarray | None = None,
@@ -135,6 +146,8 @@ class Faults:
         if loss >= 1:
             return np.ones(shape, dtype=bool)
         if self.bursty:
+            if bad is None:
+                raise ValueError("bursty losses need the link states `bad` (Faults.link_states)")
             return np.broadcast_to(bad[trial, receiver, sender], shape)
         ids = [np.where(np.asarray(x) == self.n, CENTRAL, x) for x in (sender, receiver)]
         u = uniform(self.key[trial], step, what(protocol, round_), *ids)

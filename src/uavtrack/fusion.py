@@ -25,15 +25,27 @@ The module has two layers:
 a plain graph with a perfect radio. All functions broadcast over a leading trial axis.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
 
 from . import network
 from .faults import Faults
-from .radio import Radio, RadioState
+from .radio import Inbox, Radio, RadioState
+
+Tuples = dict[str, np.ndarray]
+"""The tuples the UAVs exchange: field name -> (B, N, M, ...) array."""
 
 # ------------------------------------------------------------------ the rules
 
@@ -47,7 +59,7 @@ def flood(known: np.ndarray, offered: np.ndarray, delivered: network.Links) -> n
     In the edge form only the receivers with links (`network.Links.into`) can grow.
     """
     if delivered.edges:  # one segment per receiver, its self-link included
-        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        t, i, q = delivered.edge_list
         out = known.copy()
         if t.size:
             if known is offered:  # without delay a self-link offers the current set
@@ -80,7 +92,7 @@ def adopt(
     """
     n = own.shape[1]
     if delivered.edges:  # one segment per receiver, its self-link included
-        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        t, i, q = delivered.edge_list
         best = identity(own.shape)
         if t.size:
             if own is offered:  # without delay a self-link offers the current tuple
@@ -137,8 +149,8 @@ def fast_weights(cov: np.ndarray, present: np.ndarray) -> np.ndarray:
 
 
 def intersect_round(
-    own: dict, offered: dict, delivered: network.Links, admitted: np.ndarray | None = None
-) -> dict:
+    own: Tuples, offered: Tuples, delivered: network.Links, admitted: np.ndarray | None = None
+) -> Tuples:
     """One round of covariance intersection for every receiver (`fusion.rule` =
     covariance_intersection, beside `adopt`): per target, the receiver's own current
     estimate and the estimates delivered to it, fused by `intersect` with the weights of
@@ -155,7 +167,7 @@ def intersect_round(
     out = dict(own)
     usable = _usable(offered, own, delivered, admitted)
     if delivered.edges:  # one segment per receiver, its self-link included
-        t, i, q = delivered.trial, delivered.receiver, delivered.sender
+        t, i, q = delivered.edge_list
         if not t.size:
             return out
         is_own = delivered.own[:, None]
@@ -184,33 +196,37 @@ def intersect_round(
         out["mean"][heads] = mean_out
         out["cov"][heads] = fused
     else:
-        B, n = own["mean"].shape[:2]
+        n = own["mean"].shape[1]
         idx = np.arange(n)
         # candidates [trial, receiver, sender, target]: what each sender offered, and
         # on the diagonal the receiver's own current estimate
         mean = np.repeat(offered["mean"][:, None], n, axis=1)
         cov = np.repeat(offered["cov"][:, None], n, axis=1)
         mean[:, idx, idx], cov[:, idx, idx] = own["mean"], own["cov"]
-        present = np.broadcast_to(delivered.dense[..., None], mean.shape[:-1])
+        present = np.broadcast_to(delivered.matrix[..., None], mean.shape[:-1])
+        nothing = None  # (B, N, M): the receivers with nothing usable keep their own
         if usable is not None:
             present = present & usable
-            nothing = ~present.any(axis=2)  # (B, N, M): keeps its own
+            nothing = ~np.any(present, axis=2)
             present = present | (nothing[:, :, None] & np.eye(n, dtype=bool)[..., None])
         mean, cov, present = (np.moveaxis(x, 2, 3) for x in (mean, cov, present))
         out["mean"], out["cov"] = intersect(mean, cov, fast_weights(cov, present))
-        if usable is not None and nothing.any():  # exactly its own
+        if nothing is not None and nothing.any():  # exactly its own
             out["mean"] = np.where(nothing[..., None], own["mean"], out["mean"])
             out["cov"] = np.where(nothing[..., None, None], own["cov"], out["cov"])
     out["gamma"] = confidence(out["cov"])
     return out
 
 
-def _usable(offered: dict, own: dict, delivered: network.Links, admitted) -> np.ndarray | None:
+def _usable(
+    offered: Tuples, own: Tuples, delivered: network.Links, admitted: np.ndarray | None
+) -> np.ndarray | None:
     """Which candidate estimates may take part, in the layout of `delivered` (None:
-    all): admitted, and of finite confidence."""
+    all): admitted, and of finite confidence (tuples without "gamma": all finite)."""
     gamma, mine = offered.get("gamma"), own.get("gamma")
-    finite = gamma is None or (np.isfinite(gamma).all() and np.isfinite(mine).all())
-    if admitted is None and finite:
+    if gamma is None or mine is None:
+        return admitted
+    if admitted is None and np.isfinite(gamma).all() and np.isfinite(mine).all():
         return None
     t, i, q = delivered.pairs()
     if delivered.edges:
@@ -221,7 +237,12 @@ def _usable(offered: dict, own: dict, delivered: network.Links, admitted) -> np.
     return usable if admitted is None else usable & admitted
 
 
-def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) -> dict:
+def pick(
+    own: Tuples,
+    offered: Tuples,
+    best: np.ndarray,
+    rows: tuple[np.ndarray, np.ndarray] | None = None,
+) -> Tuples:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
     offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
     arrays of the only receivers whose choice may differ from their own (None: all)."""
@@ -234,7 +255,7 @@ def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) 
         b, i = rows
         best, keep = best[b, i], best[b, i] == i[:, None]  # (R, M)
         b = b[:, None]
-    out = {}
+    out: Tuples = {}
     for name, value in own.items():
         chosen = offered[name][b, best, j]
         mask = keep.reshape(keep.shape + (1,) * (chosen.ndim - keep.ndim))
@@ -315,7 +336,9 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
     return Depth(depth, sent, delivered, largest, ran)
 
 
-def count(inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray):
+def count(
+    inbox: Inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
     """Add a round's messages to the totals (B,): one per link into a receiving UAV,
     sent over `inbox.links`, delivered over `inbox.delivered`."""
     into = inbox.links.incoming()
@@ -330,19 +353,19 @@ class Outcome:
     """Outcome of the consensus rounds: tuples (dict of (B, N, M, ...) arrays), sent and
     delivered (B,) messages."""
 
-    tuples: dict
+    tuples: Tuples
     sent: np.ndarray
     delivered: np.ndarray
 
 
 def consensus(
     radio: Radio,
-    tuples: dict,
+    tuples: Tuples,
     rounds: np.ndarray,
-    score=None,
-    receive=None,
+    score: Callable[[Tuples], np.ndarray] | None = None,
+    receive: Callable[[Tuples], Tuples] | None = None,
     rule: str = "max_consensus",
-    admit=None,
+    admit: Callable[[Tuples, Tuples, network.Links], np.ndarray] | None = None,
 ) -> Outcome:
     """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
 
@@ -403,7 +426,10 @@ def perfect_radio(adjacency: np.ndarray, form: str = "auto") -> Radio:
     from .config import FaultModel
 
     adj = network.without_self_loops(adjacency)
-    faults = Faults(FaultModel(), np.zeros((adj.shape[0], 2), dtype=np.uint32), adj.shape[-1])
+    # every field of FaultModel has a default, given to Field positionally, which
+    # pyright's dataclass_transform does not read as one
+    model = FaultModel()  # pyright: ignore[reportCallIssue]
+    faults = Faults(model, np.zeros((adj.shape[0], 2), dtype=np.uint32), adj.shape[-1])
     alive = np.ones(adj.shape[:2], dtype=bool)
     return Radio(0, network.links(adj, form), alive, faults, RadioState())
 

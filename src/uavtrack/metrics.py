@@ -4,16 +4,28 @@ Every per-trial metric is listed once in `METRICS` with its unit and meaning; th
 command line, the JSON output and the reports read their labels from there.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import itertools
 from dataclasses import dataclass, field
 from functools import cache
-from typing import NamedTuple
+from typing import TYPE_CHECKING, NamedTuple
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from .estimation import confidence, nees
+
+if TYPE_CHECKING:
+    from .simulation import Cycle
 
 PER_UAV_SETS = 20
 """Up to this many targets the per-UAV OSPA and GOSPA are computed (an assignment per UAV
@@ -97,7 +109,9 @@ METRICS: dict[str, tuple[str, str]] = {
 """Per-trial metrics: name -> (unit, meaning)."""
 
 
-def team_best(mean: np.ndarray, cov: np.ndarray, alive: np.ndarray):
+def team_best(
+    mean: np.ndarray, cov: np.ndarray, alive: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """The team's best estimate of each target, as `Tally` takes it: the most confident
     living UAV's (1/trace P, the lowest index on ties). mean (..., Nu, Nt, 4), cov (...,
     Nu, Nt, 4, 4), alive (..., Nu). Returns the UAV (..., Nt) (-1 when none is alive),
@@ -107,12 +121,15 @@ def team_best(mean: np.ndarray, cov: np.ndarray, alive: np.ndarray):
     best = np.argmax(gamma, axis=-2)  # (..., Nt)
     chosen = np.take_along_axis(mean, best[..., None, :, None], axis=-3)[..., 0, :, :]
     P = np.take_along_axis(cov, best[..., None, :, None, None], axis=-4)[..., 0, :, :, :]
-    anyone = alive.any(axis=-1)[..., None]
+    anyone = np.any(alive, axis=-1)[..., None]
     return (
         np.where(anyone, best, -1),
         np.where(anyone[..., None], chosen, np.nan),
         np.where(anyone[..., None, None], P, np.nan),
     )
+
+
+_Mask = np.ndarray | None
 
 
 @dataclass
@@ -135,7 +152,10 @@ class Tally:
     steps: int = 0
     observed: np.ndarray = field(init=False)
     sums: dict[str, np.ndarray] = field(init=False)
-    _pending: list = field(init=False, repr=False)
+    # per step: mean, cov, best_mean, best_cov, truth, alive (None: everyone)
+    _pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, _Mask]] = (
+        field(init=False, repr=False)
+    )
     _block: int = field(init=False, repr=False)
 
     def __post_init__(self) -> None:
@@ -150,7 +170,7 @@ class Tally:
         self._pending = []
         self._block = int(np.clip(4096 // (self.batch * self.n_uavs * self.n_targets), 1, 64))
 
-    def add(self, cycle, truth: np.ndarray) -> None:
+    def add(self, cycle: Cycle, truth: np.ndarray) -> None:
         """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
         s = self.sums
         self.steps += 1
@@ -203,13 +223,15 @@ class Tally:
         s["decided"] += np.isfinite(cycle.decision_time_ms).any(axis=1) if not everyone else 1
         self.failed = (~alive).sum(axis=1).astype(float)
 
-    def _sets(self, mean, best_mean, truth, alive) -> None:
+    def _sets(
+        self, mean: np.ndarray, best_mean: np.ndarray, truth: np.ndarray, alive: np.ndarray
+    ) -> None:
         """OSPA and GOSPA of the pending steps (S, B, ...): each living UAV's estimates
         and the best ones, computed for the steps at once and added step by step (the
         sums are those of one step at a time, bit for bit)."""
         s, c, p = self.sums, self.cutoff, self.order
         X = truth[..., :2]
-        anyone = alive.any(axis=2)  # (S, B)
+        anyone = np.any(alive, axis=2)  # (S, B)
         if not alive.all():  # a failed UAV's estimates are NaN; its scores are masked out
             mean = np.where(alive[..., None, None], mean, 0.0)
             best_mean = np.where(anyone[..., None, None], best_mean, 0.0)
@@ -240,7 +262,7 @@ class Tally:
             self._sets(mean, best_mean, truth, alive)
             if any(m is not None for m in masks):
                 q = np.where(alive[..., None], q, 0.0)
-                anyone = alive.any(axis=2)  # (S, B)
+                anyone = np.any(alive, axis=2)  # (S, B)
                 best = np.where(anyone[..., None], nees(best_mean, best_cov, truth), 0.0)
             else:
                 best = nees(best_mean, best_cov, truth)
@@ -391,7 +413,7 @@ def ospa_and_gospa(
     return _scalar(spread), GOSPA(*(_scalar(v) for v in (distance, local, missed, false)))
 
 
-def _cut_costs(X, Y, c: float, p: float) -> tuple[np.ndarray, int, int]:
+def _cut_costs(X: ArrayLike, Y: ArrayLike, c: float, p: float) -> tuple[np.ndarray, int, int]:
     """min(|x - y|, c)^p for every pair, (..., m, n), with the set sizes."""
     if not (np.isfinite(c) and c > 0):
         raise ValueError(f"the cut-off c must be a positive number, got {c}")
@@ -425,7 +447,10 @@ def _optimal(cost: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray, np.n
         return chosen.sum(axis=-1), np.where(close, chosen, 0.0).sum(axis=-1), close.sum(-1)
     total, local, paired = np.zeros(shape), np.zeros(shape), np.zeros(shape)
     if m and n:
-        from scipy.optimize import linear_sum_assignment  # loaded when first needed
+        # loaded when first needed; scipy ships no type stubs, pyright reads its source
+        from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
+            linear_sum_assignment,
+        )
 
         for index in np.ndindex(shape):
             C = cost[index]

@@ -4,6 +4,14 @@ The graph follows the UAVs, so it changes every step and may split into several
 connected components (paper Sec. 3).
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -49,14 +57,17 @@ def radio_links(
         if not alive.all():
             adj &= alive[:, :, None] & alive[:, None, :]
         return links(adj, "dense")
-    from scipy.spatial import cKDTree
+    # scipy's compiled k-d tree ships no type stubs; the class exists at run time
+    from scipy.spatial import cKDTree  # pyright: ignore[reportMissingTypeStubs, reportAttributeAccessIssue]
 
-    parts = []
+    parts: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
     for b in range(B):
         living = np.flatnonzero(alive[b])
         pos = uavs[b, living, :3]
         # a margin on the radius: the tree's distance rounds differently from in_range
-        pairs = cKDTree(pos).query_pairs(comm_range * (1 + 1e-9) + 1e-9, output_type="ndarray")
+        pairs: np.ndarray = cKDTree(pos).query_pairs(
+            comm_range * (1 + 1e-9) + 1e-9, output_type="ndarray"
+        )
         i, q = living[pairs[:, 0]], living[pairs[:, 1]]
         keep = in_range(uavs[b, i, :3] - uavs[b, q, :3], comm_range)
         i, q = i[keep], q[keep]
@@ -121,6 +132,20 @@ class Links:
     def edges(self) -> bool:
         return self.dense is None
 
+    @property
+    def edge_list(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(trial, receiver, sender), each (E,) (edge form)."""
+        if self.trial is None or self.receiver is None or self.sender is None:
+            raise ValueError("links in the dense form have no edge list")
+        return self.trial, self.receiver, self.sender
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """The (B, N, N) bool relation [trial, receiver, sender] (dense form)."""
+        if self.dense is None:
+            raise ValueError("links in the edge form have no dense relation")
+        return self.dense
+
     @cached_property
     def starts(self) -> np.ndarray:
         """First edge of each (trial, receiver) segment (edge form)."""
@@ -132,39 +157,41 @@ class Links:
     @cached_property
     def segment(self) -> np.ndarray:
         """The (trial, receiver) segment of each edge, trial * N + receiver (edge form)."""
-        return self.trial * self.n + self.receiver
+        trial, receiver, _ = self.edge_list
+        return trial * self.n + receiver
 
     @cached_property
     def ordinal(self) -> np.ndarray:
         """The number of each edge's segment, 0, 1, ... in order (edge form)."""
-        row = np.zeros(self.trial.size, dtype=np.int64)
+        row = np.zeros(self.segment.size, dtype=np.int64)
         row[self.starts[1:]] = 1
         return np.cumsum(row)
 
     @property
     def heads(self) -> tuple[np.ndarray, np.ndarray]:
         """(trial, receiver) of each segment (edge form)."""
-        return self.trial[self.starts], self.receiver[self.starts]
+        trial, receiver, _ = self.edge_list
+        return trial[self.starts], receiver[self.starts]
 
     def into(self, receivers: np.ndarray) -> Links:
         """The links into the receivers where `receivers` (B, N) holds; the dense form,
         whose rules run on every receiver at once, is returned as it is."""
         if not self.edges or receivers.all():
             return self
-        keep = receivers[self.trial, self.receiver]
-        return Links(
-            self.batch, self.n, None, self.trial[keep], self.receiver[keep], self.sender[keep]
-        )
+        trial, receiver, sender = self.edge_list
+        keep = receivers[trial, receiver]
+        return Links(self.batch, self.n, None, trial[keep], receiver[keep], sender[keep])
 
     @cached_property
     def own(self) -> np.ndarray:
         """Whether each edge is a self-link (edge form)."""
-        return self.receiver == self.sender
+        _, receiver, sender = self.edge_list
+        return receiver == sender
 
     @cached_property
     def others(self) -> np.ndarray:
         """The dense relation as floats without self-links (dense form)."""
-        out = self.dense.astype(np.float64)
+        out = self.matrix.astype(np.float64)
         idx = np.arange(self.n)
         out[:, idx, idx] = 0.0
         return out
@@ -172,24 +199,23 @@ class Links:
     @cached_property
     def penalty(self) -> np.ndarray:
         """0 where a link exists, -inf elsewhere, (B, N, N, 1) (dense form)."""
-        return np.where(self.dense, 0.0, -np.inf)[..., None]
+        return np.where(self.matrix, 0.0, -np.inf)[..., None]
 
     def pairs(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """(trial, receiver, sender) index arrays in the layout of this form's masks."""
         if self.edges:
-            return self.trial, self.receiver, self.sender
+            return self.edge_list
         b, i, q = np.ogrid[: self.batch, : self.n, : self.n]
         return b, i, q
 
     def keep(self, mask: np.ndarray) -> Links:
         """The links where `mask` (in this form's layout) holds; self-links always stay."""
         if self.edges:
+            trial, receiver, sender = self.edge_list
             keep = mask | self.own
-            return Links(
-                self.batch, self.n, None, self.trial[keep], self.receiver[keep], self.sender[keep]
-            )
+            return Links(self.batch, self.n, None, trial[keep], receiver[keep], sender[keep])
         eye = np.eye(self.n, dtype=bool)
-        return Links(self.batch, self.n, self.dense & (mask | eye))
+        return Links(self.batch, self.n, self.matrix & (mask | eye))
 
     def incoming(self) -> np.ndarray:
         """Links into each receiver from others, (B, N) int."""
@@ -201,15 +227,16 @@ class Links:
             out = np.zeros(self.batch * self.n, dtype=np.int64)
             np.add.at(out, self.segment[~self.own], 1)
             return out.reshape(self.batch, self.n)
-        return self.dense.sum(axis=-1) - np.diagonal(self.dense, axis1=-2, axis2=-1)
+        dense = self.matrix
+        return dense.sum(axis=-1) - np.diagonal(dense, axis1=-2, axis2=-1)
 
     def adjacency(self) -> np.ndarray:
         """The dense relation without self-links, (B, N, N) bool."""
         if self.edges:
             adj = np.zeros((self.batch, self.n, self.n), dtype=bool)
-            adj[self.trial, self.receiver, self.sender] = True
+            adj[self.edge_list] = True
         else:
-            adj = self.dense.copy()
+            adj = self.matrix.copy()
         idx = np.arange(self.n)
         adj[:, idx, idx] = False
         return adj

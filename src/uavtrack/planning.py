@@ -24,6 +24,14 @@ actions ordered (-phi, 0, +phi); ties go to the lowest number. The last action o
 sequence never changes the score (eq. 1), so it is always the lowest.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import itertools
@@ -99,7 +107,9 @@ def rollout_nodes(
     return out
 
 
-def _rollout(uavs, actions, horizon, dt, g):
+def _rollout(
+    uavs: np.ndarray, actions: np.ndarray, horizon: int, dt: float, g: float
+) -> tuple[np.ndarray, np.ndarray]:
     """Node coordinates (x, y), each (..., Nu, K), level by level.
 
     A node at depth t is its parent moved by V dT (cos psi, sin psi), psi the heading
@@ -111,7 +121,7 @@ def _rollout(uavs, actions, horizon, dt, g):
     tangents = t.counts @ np.tan(actions)  # (K,) sum of tan(phi) over each node's actions
     heading = uavs[..., HEADING, None] + tangents * (g * dt / uavs[..., V, None])  # (..., Nu, K)
     step = (uavs[..., V] * dt)[..., None]
-    out = []
+    out: list[np.ndarray] = []
     for base, trig in ((uavs[..., X, None], np.cos), (uavs[..., Y, None], np.sin)):
         moves = step * trig(heading)
         level = base + moves[..., :1]
@@ -304,7 +314,17 @@ def plan_top(
     )
 
 
-def _plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, drift=None) -> Plan:
+def _plan(
+    uavs: np.ndarray,
+    mean: np.ndarray,
+    sensor: SensorModel,
+    bank_angle: float,
+    horizon: int,
+    dt: float,
+    discount: float,
+    g: float,
+    drift: np.ndarray | None = None,
+) -> Plan:
     actions = action_set(bank_angle)
     t = tree(len(actions), horizon)
     east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)

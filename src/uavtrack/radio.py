@@ -13,6 +13,14 @@ With no faults this is the paper's synchronous exchange: everything sent in roun
 of cycle k arrives in round r of cycle k over the links of k.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -118,7 +126,7 @@ class Radio:
         links = self.now.links
         if links.edges:
             other = ~links.own
-            trial, receiver, sender = links.trial[other], links.receiver[other], links.sender[other]
+            trial, receiver, sender = (x[other] for x in links.edge_list)
         else:
             trial, receiver, sender = np.nonzero(links.adjacency())
         count = rounds[trial, sender]

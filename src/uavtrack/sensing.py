@@ -9,6 +9,14 @@ d_O = h / cos(alpha). A target inside the disk yields z^P = (d, theta) + omega w
 where d is the 3-D range and theta the bearing in the inertial frame.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import numpy as np
@@ -170,7 +178,9 @@ def fisher_det_bound(d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel) -> 
     return a * (d_edge / sensor.k_theta) ** 2 / (d * d) ** 2 * (1.0 + 1e-9)
 
 
-def _range_coefficient(d, d_edge, sensor: SensorModel) -> tuple[np.ndarray, np.ndarray]:
+def _range_coefficient(
+    d: np.ndarray, d_edge: np.ndarray, sensor: SensorModel
+) -> tuple[np.ndarray, np.ndarray]:
     """a = 1/sigma_d^2 + 2 (sigma_d'/sigma_d)^2 + 2/d^2 of `fisher_information`, and d^2.
 
     With e = exp(-x), x = k_r (d/d_O - 1): 1/sigma_d = (1 - grow)/k_d and

@@ -11,13 +11,21 @@ fields stacked over the steps), the recorder and the metrics (`metrics.Tally`) a
 derived from it.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, field, fields, make_dataclass
 from functools import cache
 from numbers import Integral
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
@@ -25,11 +33,13 @@ from . import _process, estimation, flight, network, planning, sensing, timing, 
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
+from .fusion import Tuples
 from .methods import Assigned, Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
 from .robust import gate
-from .world import initial_conditions, streams, trial_seed  # noqa: F401 (public here too)
+from .world import initial_conditions, streams
+from .world import trial_seed as trial_seed  # public here too
 
 NOISE_BLOCK = 64
 """Most steps of sensor noise drawn at once per trial (a draw of n normals equals n
@@ -134,7 +144,7 @@ def _plan(
     return p.value, p.action
 
 
-def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable:
+def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable[[Tuples, int], Tuples]:
     """forward(tuples, k): time-stamped tuples predicted to step k (eq. 23 applied
     k - stamp times), their confidence recomputed (eq. 22)."""
     A, Q = estimation.transition(dt), estimation.process_noise(dt, sigma_1, sigma_2)
@@ -146,7 +156,7 @@ def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable:
             An, Qn = A @ An, A @ Qn @ A.T + Q
         return An, Qn
 
-    def forward(tuples: dict, k: int) -> dict:
+    def forward(tuples: Tuples, k: int) -> Tuples:
         lag = k - tuples["stamp"]
         mean, cov = tuples["mean"].copy(), tuples["cov"].copy()
         for n in np.unique(lag[lag > 0]):
@@ -259,22 +269,30 @@ RECORDED = tuple(f for f in fields(Cycle) if "shape" in f.metadata)
 """The fields of `Cycle` a trace holds."""
 
 
-def _trace_arrays(self) -> dict[str, np.ndarray]:
+def _trace_arrays(self: Any) -> dict[str, np.ndarray]:
     return {name: getattr(self, name) for name in self.__dataclass_fields__}
 
 
-Trace = make_dataclass(
-    "Trace",
-    [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in RECORDED],
-    frozen=True,
-    namespace={
-        "arrays": _trace_arrays,
-        "__doc__": "Everything a run did, step by step: targets (T, Nt, 4) the true target "
-        "states x, y, vx, vy at each cycle, then every field of `Cycle` over the T steps. "
-        "arrays() gives them as a dict (the .npz of `uavtrack run --trace`).",
-        "__module__": __name__,
-    },
-)
+if TYPE_CHECKING:  # what a checker knows of Trace, whose fields are made from Cycle's
+
+    class Trace:
+        def __init__(self, targets: np.ndarray, **recorded: np.ndarray) -> None: ...
+        def __getattr__(self, name: str) -> np.ndarray: ...
+        def arrays(self) -> dict[str, np.ndarray]: ...
+
+else:
+    Trace = make_dataclass(
+        "Trace",
+        [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in RECORDED],
+        frozen=True,
+        namespace={
+            "arrays": _trace_arrays,
+            "__doc__": "Everything a run did, step by step: targets (T, Nt, 4) the true target "
+            "states x, y, vx, vy at each cycle, then every field of `Cycle` over the T steps. "
+            "arrays() gives them as a dict (the .npz of `uavtrack run --trace`).",
+            "__module__": __name__,
+        },
+    )
 
 
 @dataclass(frozen=True)
@@ -294,7 +312,7 @@ class Pending:
     assigned: Any
     own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
     plan_seconds: np.ndarray  # (2,): CPU, wall (`timing`)
-    belief: tuple  # each UAV's own (mean, cov, modes) after its update, before fusion
+    belief: estimation.Belief  # each UAV's own (mean, cov, modes) after its update, before fusion
 
 
 def decide(
@@ -344,7 +362,9 @@ def decide(
     )
 
 
-def measured(state: State, observed, z, R, ctx: Context) -> gate.Measured | None:
+def measured(
+    state: State, observed: np.ndarray, z: np.ndarray, R: np.ndarray, ctx: Context
+) -> gate.Measured | None:
     """What the measurement gate reads (``robust.gate``; None without it)."""
     if ctx.setting.gate is None:
         return None
@@ -353,7 +373,15 @@ def measured(state: State, observed, z, R, ctx: Context) -> gate.Measured | None
     return gate.Measured.of(observed, z, R, recent)
 
 
-def _unplanned(state, believed, alive, observed, radio, fused, belief) -> Pending:
+def _unplanned(
+    state: State,
+    believed: np.ndarray,
+    alive: np.ndarray,
+    observed: np.ndarray,
+    radio: Radio,
+    fused: Any,
+    belief: estimation.Belief,
+) -> Pending:
     B, Nu = alive.shape
     nothing = np.zeros(B, dtype=np.int64)
     keep = np.where(alive, state.target, -1)
@@ -556,7 +584,7 @@ class BatchResult:
     method: str
     scenario: Scenario
     metrics: dict[str, np.ndarray]
-    traces: list | None = field(default=None, repr=False)
+    traces: list[Trace] | None = field(default=None, repr=False)
 
 
 def run(
@@ -572,7 +600,8 @@ def run(
     Decision times are measured only for a single trial (see `metrics.METRICS`).
     """
     method = get(method)
-    if not isinstance(scenario, Scenario):
+    # for callers whose types no checker saw
+    if not isinstance(scenario, Scenario):  # pyright: ignore[reportUnnecessaryIsInstance]
         raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
     seeds = [
         s if isinstance(s, np.random.SeedSequence) else np.random.SeedSequence(s) for s in seeds
@@ -625,7 +654,7 @@ class Recorder:
             self.arrays["decision_time_ms"][:, k] = np.nan
             self.arrays["decision_wall_ms"][:, k] = np.nan
 
-    def traces(self, trajectory: np.ndarray) -> list:
+    def traces(self, trajectory: np.ndarray) -> list[Trace]:
         """One Trace per trial, over the steps of `trajectory` (B, T', Nt, 4), T' at
         most the steps recorded (an episode cut short)."""
         n = trajectory.shape[1]
@@ -635,7 +664,7 @@ class Recorder:
         ]
 
 
-def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, int]:
+def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, float]:
     """Bytes a batch of `batch` trials needs at its peak, by the field that drives each part.
 
     The parts are the target trajectories (steps x n_targets), the planner's tree of
@@ -685,7 +714,7 @@ def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> Non
     need, have = sum(parts.values()), _process.available_memory()
     if need <= 0.9 * have:
         return
-    field_ = max(parts, key=parts.get)
+    field_ = max(parts, key=lambda name: parts[name])
     hint = {
         "steps": "steps (or run without a trace)" if trace else "steps",
         "planner.horizon": "planner.horizon (or n_uavs, n_targets)",
@@ -739,9 +768,9 @@ class Result:
     decision_wall_ms: float
     trace: Trace | None = field(default=None, repr=False)
 
-    def summary(self) -> dict:
+    def summary(self) -> dict[str, Any]:
         """JSON-ready metrics (the names of `metrics.METRICS`)."""
-        out = {"method": self.method, "seed": self.seed}
+        out: dict[str, Any] = {"method": self.method, "seed": self.seed}
         for name in METRICS:
             value = getattr(self, name)
             out[name] = [float(x) for x in value] if name == "per_target" else float(value)
@@ -761,7 +790,8 @@ def simulate(
     `trial_seed(seed, t)`; `progress` as in `run`.
     """
     scenario = Scenario() if scenario is None else scenario
-    if isinstance(seed, Integral) and not isinstance(seed, bool):
+    # pyright holds that no Integral int is a bool, which True is
+    if isinstance(seed, Integral) and not isinstance(seed, bool):  # pyright: ignore[reportUnnecessaryIsInstance]
         seed = int(seed)
         if seed < 0:
             raise ValueError(f"seed must be >= 0, got {seed}")

@@ -7,16 +7,28 @@ machine do not inflate. Wall time (`time.perf_counter`) is kept beside it; on a 
 their seconds with a last axis of two: [..., 0] CPU, [..., 1] wall.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import signal
 import threading
 import time
-from collections.abc import Iterator
+from collections.abc import Callable, Generator
 from contextlib import contextmanager
+from types import FrameType
+from typing import Any
 
 import numpy as np
-import numpy.ma  # noqa: F401  (np.unique loads it on first use: here, not inside a timed stage)
+
+# np.unique loads numpy.ma on first use: here, not inside a timed stage
+import numpy.ma  # noqa: F401  # pyright: ignore[reportUnusedImport]
 
 CPU, WALL = 0, 1
 """Indices of the two clocks along the last axis of a timed stage's seconds."""
@@ -54,7 +66,7 @@ def since(mark: tuple[float, float, float, float]) -> np.ndarray:
 
 
 @contextmanager
-def set_up() -> Iterator[None]:
+def set_up() -> Generator[None, None, None]:
     """One-time work inside a timed stage (loading a module on first use, or waiting for
     another thread to load it): it is not a decision's time, so `since` leaves it out.
 
@@ -77,12 +89,16 @@ HELD = (signal.SIGINT, signal.SIGTERM)
 """The signals `set_up` holds: those the command line turns into an orderly stop."""
 
 
-def _hold(signals: tuple[int, ...]) -> dict[int, tuple[object, list[int]]] | None:
+_Handler = Callable[[int, FrameType | None], Any]
+"""A Python signal handler."""
+
+
+def _hold(signals: tuple[int, ...]) -> dict[int, tuple[_Handler, list[int]]] | None:
     """Replace the Python handlers of `signals` with ones that only note the signal;
     None outside the main thread (where handlers cannot be set, nor run)."""
     if threading.current_thread() is not threading.main_thread():
         return None
-    held = {}
+    held: dict[int, tuple[_Handler, list[int]]] = {}
     for signum in signals:
         handler = signal.getsignal(signum)
         if callable(handler):  # a Python handler (SIG_DFL and SIG_IGN are left alone)
@@ -92,7 +108,7 @@ def _hold(signals: tuple[int, ...]) -> dict[int, tuple[object, list[int]]] | Non
     return held
 
 
-def _release(held: dict[int, tuple[object, list[int]]] | None) -> None:
+def _release(held: dict[int, tuple[_Handler, list[int]]] | None) -> None:
     """Put the handlers back, and deliver to them the signals that came meanwhile."""
     for signum, (handler, _) in (held or {}).items():
         signal.signal(signum, handler)

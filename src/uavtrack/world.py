@@ -10,11 +10,19 @@ and the same faults in a trial (common random numbers), and a trial gives the sa
 result alone, in a batch, or in another process.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import numpy as np
 
-from .config import G, Scenario
+from .config import G, ManoeuvreModel, Scenario
 
 X, Y, H, V, HEADING = range(5)
 
@@ -185,7 +193,7 @@ def manoeuvring_trajectories(
     accel: np.ndarray,
     dt: float,
     field_size: float,
-    manoeuvre,
+    manoeuvre: ManoeuvreModel,
     rng: np.random.Generator,
 ) -> np.ndarray:
     """Targets that manoeuvre (`config.ManoeuvreModel`), reflected at the walls.

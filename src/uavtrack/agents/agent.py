@@ -226,6 +226,7 @@ class UavAgent:
         tracker = self.ctx.const.tracker
         belief = tracker.update(self.mean, self.cov, self.modes, observed, zc, R)
         mean, cov = belief[:2]
+        target = -1  # the central node's choice (centralized only)
         if self.central:
             fused_mean, fused_cov, rounds, sent, delivered, target = self.upload(
                 k, mean, cov, believed
@@ -328,6 +329,8 @@ class UavAgent:
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
+        # the loop ends once both protocols sent their final round: D_i is known
+        assert stopped is not None and rounds is not None
         if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
             flood = self.radio.transmitted(k, "flood", stopped)
             tuples = self.radio.transmitted(k, "consensus", rounds)
@@ -373,6 +376,7 @@ class UavAgent:
         admitted = None
         if self.setting.gate is not None:  # every row measured as this UAV (its row is kept)
             mine, rows = self.measured, (1, len(ids))
+            assert mine is not None  # the sensing step measured, as the gate is on
             measured = gate.Measured(
                 *(
                     np.broadcast_to(x, rows + x.shape[2:])
@@ -440,6 +444,7 @@ class UavAgent:
         if rows.size == 1:
             target = int(assignment.greedy(bids))
         else:
+            assert isinstance(self.method, Distributed)  # the one kind of method that auctions
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
         return target, timing.since(start), (sent, delivered)
 
@@ -464,7 +469,7 @@ class UavAgent:
         # with delay, this UAV counts its upload when sent (the central node its downloads)
         upload = self.radio.transmitted(k, "upload", 1, 0, to=self.n) if s.delay else None
         down, arrived, target = self._download(k)
-        if down is None:  # nothing sent yet
+        if down is None or arrived is None:  # nothing sent yet
             return mean, cov, 1, *(upload or (0, 0)), -1
         mean, cov = (
             x[0, 0]

@@ -22,7 +22,7 @@ from ..methods import get
 from .agent import CentralAgent, UavAgent, part
 from .messages import VERSION, Radio, Ready, Spec, encode
 from .security import WORLD, Credential, Gate
-from .transport import ANY_HELLO, Link, Mailbox, Transport, inbox_key, keys
+from .transport import ANY_HELLO, Link, Mailbox, Transport, ZenohTransport, inbox_key, keys
 
 STARTUP = 120.0
 """Seconds a program waits for the world's first message."""
@@ -97,7 +97,7 @@ def serve(
         return Served(0, scenario.steps, "needs key", programs=programs, central=central)
     if me >= programs:
         return Served(0, scenario.steps, "not in run", programs=programs, central=central)
-    if hello.authenticated and not _holds(credential, hello.publics, me):
+    if hello.authenticated and credential is not None and not _holds(credential, hello.publics, me):
         return Served(0, scenario.steps, "wrong key", programs=programs, central=central)
     if me in hello.members:  # the world's word, signed: not a token anyone can make
         return Served(0, scenario.steps, "taken", programs=programs, central=central)
@@ -120,6 +120,8 @@ def serve(
     if ros2 is not None and me < n:
         from ..io.ros2 import UavNode
 
+        if not isinstance(transport, ZenohTransport):
+            raise ValueError("ROS 2 topics need the Zenoh transport")
         node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt)
     try:
         return _cycles(transport, link, mailbox, program, node, run, me, n, programs,

@@ -103,7 +103,7 @@ def _admits() -> list[str]:
     ]
     size = {n: "N", m: "M", p: "P"}
     for protocol in ("presence", "flood", "consensus", "beacon", "bids", "upload", "download"):
-        for name, (dtype, shape, domain) in spec.contents(protocol).items():
+        for name, (dtype, shape, domain) in (spec.contents(protocol) or {}).items():
             axes = [size.get(x, str(x)) for x in shape]
             shown = "(" + ", ".join(axes) + ("," if len(axes) == 1 else "") + ")"
             kind = np.dtype(dtype).name

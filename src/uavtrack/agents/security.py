@@ -42,8 +42,12 @@ import stat
 from collections.abc import Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import msgspec
+
+if TYPE_CHECKING:  # cryptography is loaded on first use (`_crypto`)
+    from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
 
 WORLD = -1
 """The world program's number on the wire."""
@@ -266,7 +270,7 @@ class Gate:
     me: int
     programs: int
     credential: Credential | None
-    signing: object | None = None
+    signing: Ed25519PrivateKey | None = None  # the world's
     drops: dict[str, int] = field(default_factory=dict)
     _publics: list[bytes] | None = None
     _keys: dict[tuple[int, int], bytes] = field(default_factory=dict)
@@ -299,6 +303,8 @@ class Gate:
         if key is None:
             hashes, _, x25519, HKDF = _crypto()
             other = receiver if sender == self.me else sender
+            # keys exist only in an authenticated run, once the Hello named the publics
+            assert self.credential is not None and self._publics is not None
             mine = x25519.X25519PrivateKey.from_private_bytes(self.credential.secret)
             theirs = x25519.X25519PublicKey.from_public_bytes(self._publics[self._index(other)])
             info = f"uavtrack|{self.run}|{sender}>{receiver}".encode()
@@ -316,6 +322,8 @@ class Gate:
         seq, tag = self._seq, b""
         if self.credential is not None:
             if receiver == EVERYONE:
+                if self.signing is None:
+                    raise ValueError("only the world, which holds the signing key, signs to all")
                 tag = self.signing.sign(_SIGNED + f"{self.run}|{seq}|".encode() + body)
             else:
                 tag = self._mac(self._key(self.me, receiver), self.me, receiver, seq, body)
@@ -355,6 +363,7 @@ class Gate:
             _, ed25519, _, _ = _crypto()
             from cryptography.exceptions import InvalidSignature
 
+            assert self.credential is not None  # only an authenticated run checks envelopes
             world = ed25519.Ed25519PublicKey.from_public_bytes(self.credential.world)
             try:
                 world.verify(e.tag, _SIGNED + f"{self.run}|{e.seq}|".encode() + e.body)

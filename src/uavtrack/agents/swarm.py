@@ -232,7 +232,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
 
             clock = ClockNode(link.session, o.ros2, scenario.dt)
             world.clock = clock.publish
-        if not o.spawn and keyring is not None:
+        if not o.spawn and keyring is not None and o.keys is not None:  # `swarm` checked keys
             written = write_keys(keyring, programs, o.keys)
         if o.announce is not None:
             o.announce(run, endpoint, written)
@@ -315,6 +315,7 @@ class Child:
             stderr=log,
             start_new_session=True,  # Ctrl-C is the swarm's to handle
         )
+        assert process.stdin is not None  # stdin=PIPE
         try:  # the program's spec and key, through a pipe only it reads
             process.stdin.write((json.dumps(spec) + "\n").encode())
             process.stdin.close()

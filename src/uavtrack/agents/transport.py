@@ -164,9 +164,9 @@ class MemoryTransport(Transport):
             self.bus.alive.append(key)
         self.announced.append(key)
 
-    def watch(self, prefix: str, on_gone: Callable[[str], None]) -> None:
+    def watch(self, key: str, on_gone: Callable[[str], None]) -> None:
         with self.bus.lock:
-            self.bus.watchers.append((prefix, on_gone))
+            self.bus.watchers.append((key, on_gone))
 
     def alive(self, key: str) -> set[str]:
         with self.bus.lock:
@@ -197,11 +197,14 @@ class ZenohOptions:
         """ValueError naming what is wrong, before Zenoh starts: TLS files with an endpoint
         they do not secure (it would run in clear text), or TLS files of this host that its
         peers would refuse (`tls.check`)."""
-        if self.tls:
+        ca, cert, key = self.tls_ca, self.tls_cert, self.tls_key
+        if ca is not None:
+            if cert is None or key is None:
+                raise ValueError("TLS needs all three of tls_ca, tls_cert and tls_key")
             from . import tls
 
             tls.refuse_clear(endpoints)
-            tls.check(self.tls_ca, self.tls_cert, self.tls_key)
+            tls.check(ca, cert, key)
 
 
 LEASE = 10.0
@@ -315,16 +318,16 @@ class ZenohTransport(Transport):
         self.published += 1
         self.bytes += len(payload)
 
-    def subscribe(self, prefix: str, handler: Callable[[str, bytes], None]) -> None:
+    def subscribe(self, key: str, handler: Callable[[str, bytes], None]) -> None:
         def listener(sample) -> None:
             handler(str(sample.key_expr), sample.payload.to_bytes())
 
-        self.keep.append(self.session.declare_subscriber(expression(prefix), listener))
+        self.keep.append(self.session.declare_subscriber(expression(key), listener))
 
     def announce(self, key: str) -> None:
         self.keep.append(self.session.liveliness().declare_token(key))
 
-    def watch(self, prefix: str, on_gone: Callable[[str], None]) -> None:
+    def watch(self, key: str, on_gone: Callable[[str], None]) -> None:
         import zenoh
 
         def listener(sample) -> None:
@@ -332,13 +335,11 @@ class ZenohTransport(Transport):
                 on_gone(str(sample.key_expr))
 
         self.keep.append(
-            self.session.liveliness().declare_subscriber(
-                expression(prefix), listener, history=False
-            )
+            self.session.liveliness().declare_subscriber(expression(key), listener, history=False)
         )
 
-    def alive(self, prefix: str) -> set[str]:
-        replies = self.session.liveliness().get(expression(prefix), timeout=2.0)
+    def alive(self, key: str) -> set[str]:
+        replies = self.session.liveliness().get(expression(key), timeout=2.0)
         return {str(reply.ok.key_expr) for reply in replies if reply.ok is not None}
 
     def close(self) -> None:

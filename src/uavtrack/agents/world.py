@@ -37,6 +37,7 @@ import numpy as np
 from .. import simulation, world
 from ..config import Scenario
 from ..faults import PROTOCOLS
+from ..flight.unicycle import Unicycle
 from ..methods import get
 from ..metrics import Tally
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
@@ -147,6 +148,7 @@ class WorldProgram:
         return list(range(n)) + ([n] if self.method.central else [])
 
     def hello(self) -> None:
+        assert self.prior is not None  # set by run_trial before the first Hello
         prior_mean, prior_cov = self.prior
         message = Hello(
             VERSION,
@@ -201,6 +203,7 @@ class WorldProgram:
         state, trajectory, sensor_rngs = simulation.initial_state(s, self.seeds)
         uavs, alive = state.uavs, state.alive
         self.prior = (state.mean[0, 0], state.cov[0, 0, 0])
+        pilot = state.flight if state.flight is not None else Unicycle(s.dt)
         self.wait_ready()
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
         tally = Tally(
@@ -235,7 +238,7 @@ class WorldProgram:
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
-            uavs = state.flight.fly(uavs, ctx.const.actions[actions], alive)
+            uavs = pilot.fly(uavs, ctx.const.actions[actions], alive)
             took = time.monotonic() - begin
             self.traffic.cycle_seconds.append(took)
             if realtime:

@@ -3,10 +3,11 @@
 from __future__ import annotations
 
 import sys
+from collections.abc import Sequence
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated
+from typing import Annotated, Any, cast
 
 import typer
 
@@ -369,11 +370,12 @@ def sweep(
             raise UsageError(f"--team sets n_uavs and n_targets; do not sweep {name} too")
         if name == "steps" and steps is not None:
             raise UsageError("sweep steps: --steps and --set steps do not apply; sweep one of them")
-    raw = {
+    raw: dict[str, Sequence[Any]] = {
         name: [parse_value(v, where=f"sweep value {name}") for v in given]
         for name, given in texts.items()
     }
-    axes = sweep_axes(scenario, raw)
+    # the sweep's functions only read the axes (a dict of lists is one of sequences)
+    axes = cast(dict[str, Sequence[Any]], sweep_axes(scenario, raw))
     names = chosen_methods(methods)
     plan = sweep_plan(scenario, axes, names, trials, chunk=10, seed=seed)  # every cell checked
     out = out or Path("results") / ("sweep-" + "-".join(axes))

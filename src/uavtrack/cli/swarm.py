@@ -94,7 +94,7 @@ def zenoh_options(config, ca, cert, key, endpoints: list[str]):
         options.check(endpoints)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
-    if config is not None:
+    if options.config is not None:
         try:
             import zenoh
 

@@ -77,6 +77,13 @@ class Episodes:
             return np.zeros(self.state.alive.shape, dtype=bool)
         return self.pending.alive
 
+    @property
+    def current(self) -> Pending:
+        """The pending cycle; RuntimeError once the episodes are over."""
+        if self.pending is None:
+            raise RuntimeError("the episode is over: call reset()")
+        return self.pending
+
     def step(self, actions: np.ndarray | None) -> np.ndarray:
         """Fly `actions` (B, Nu) indices into the action set (None: the method's) and
         return what they earn (B, Nu), read off the next cycle (0 after the last)."""
@@ -85,7 +92,7 @@ class Episodes:
         k, pending = self.state.k, self.pending
         self.state, cycle = finish(self.state, pending, self.ctx, actions)
         self.seen += pending.observed.any(axis=1)
-        if self.tally is not None:
+        if self.tally is not None and self.recorder is not None:  # record=True: both
             self.tally.add(cycle, self.trajectory[:, k])
             self.recorder.record(k, cycle)
         self.pending = self._decide()
@@ -116,7 +123,7 @@ class Episodes:
 
     def batch_result(self) -> BatchResult:
         """The steps flown as `simulation.run` reports them (record=True only)."""
-        if self.tally is None:
+        if self.tally is None or self.recorder is None:
             raise RuntimeError("these episodes keep no record (record=False)")
         traces = self.recorder.traces(self.trajectory[:, : self.k])
         return BatchResult(self.method.name, self.scenario, self.tally.summary(), traces)

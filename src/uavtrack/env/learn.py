@@ -17,7 +17,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import numpy as np
 
@@ -106,7 +106,9 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
     if vector.spaces.form != "box":
         raise ValueError("torchrl_env needs observation='box'")
     B, N = vector.num_envs, vector.num_agents
-    D, S = vector.observation_space.shape[0], vector.state_space.shape[0]
+    observed, state = vector.observation_space.shape, vector.state_space.shape
+    assert observed is not None and state is not None  # boxes have shapes
+    D, S = observed[0], state[0]
 
     class TrialsEnv(EnvBase):
         """num_envs trials of Nu agents; every trial ends at the same step."""
@@ -115,22 +117,24 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
             super().__init__(batch_size=torch.Size([B]), device="cpu")
             self.vector = vector
             agents = lambda **specs: Composite(**specs, shape=(B, N))  # noqa: E731
-            box = lambda *shape: Bounded(-BOUND, BOUND, shape, dtype=torch.float32)  # noqa: E731
+            box = lambda *shape: Bounded(-BOUND, BOUND, torch.Size(shape), dtype=torch.float32)  # noqa: E731
             self.observation_spec = Composite(
                 agents=agents(
                     observation=box(B, N, D),
-                    alive=Categorical(2, (B, N, 1), dtype=torch.bool),
+                    alive=Categorical(2, torch.Size((B, N, 1)), dtype=torch.bool),
                 ),
                 state=box(B, S),
                 shape=(B,),
             )
             self.action_spec = Composite(
-                agents=agents(action=Categorical(3, (B, N), dtype=torch.int64)), shape=(B,)
+                agents=agents(action=Categorical(3, torch.Size((B, N)), dtype=torch.int64)),
+                shape=(B,),
             )
             self.reward_spec = Composite(
-                agents=agents(reward=Unbounded((B, N, 1), dtype=torch.float32)), shape=(B,)
+                agents=agents(reward=Unbounded(torch.Size((B, N, 1)), dtype=torch.float32)),
+                shape=(B,),
             )
-            flag = lambda: Categorical(2, (B, 1), dtype=torch.bool)  # noqa: E731
+            flag = lambda: Categorical(2, torch.Size((B, 1)), dtype=torch.bool)  # noqa: E731
             self.done_spec = Composite(done=flag(), terminated=flag(), truncated=flag(), shape=(B,))
             self._seed = seed
             self._fresh = False  # an episode started by the step that ended the last
@@ -152,7 +156,8 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
             return self._out(false, false)
 
         def _step(self, tensordict):
-            actions = tensordict["agents", "action"].cpu().numpy().astype(np.int64)
+            action = cast(torch.Tensor, tensordict["agents", "action"])  # a leaf: a tensor
+            actions = action.cpu().numpy().astype(np.int64)
             _, rewards, terminated, truncated, info = vector.step(actions)
             done = bool(terminated.all())
             observations = info["final_observation"] if done else None

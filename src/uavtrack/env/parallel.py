@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, cast
 
 import gymnasium
 import numpy as np
@@ -113,7 +113,8 @@ class UAVTrackingEnv(ParallelEnv):
         return self.observation_spaces[self.possible_agents[self._agent(agent)]]
 
     def action_space(self, agent: str) -> spaces.Discrete:
-        return self.action_spaces[self.possible_agents[self._agent(agent)]]
+        # PettingZoo declares action_spaces of any space; every one here is Discrete(3)
+        return cast(spaces.Discrete, self.action_spaces[self.possible_agents[self._agent(agent)]])
 
     # ------------------------------------------------------------------ episode
 
@@ -136,7 +137,7 @@ class UAVTrackingEnv(ParallelEnv):
             )
         if not self.agents:
             raise RuntimeError("the episode is over: call reset()")
-        flown = self._run.pending.own.copy()
+        flown = self._run.current.own.copy()
         for agent, action in actions.items():
             i = self._agent(agent)  # a name that never was an agent is a mistake: refused
             if agent not in self.agents:
@@ -207,14 +208,19 @@ class UAVTrackingEnv(ParallelEnv):
                 f"unknown agent {agent!r}; agents are {self.possible_agents}"
             ) from None
 
+    def _started(self) -> Episodes:
+        if self._run is None:
+            raise RuntimeError("call reset() first")
+        return self._run
+
     def _observations(self, agents: list[str]) -> dict[str, Any]:
-        built = self.spaces.observe(self._run.view())
+        built = self.spaces.observe(self._started().view())
         if isinstance(built, dict):
             return {a: {key: x[0, self._index[a]] for key, x in built.items()} for a in agents}
         return {a: built[0, self._index[a]] for a in agents}
 
     def _infos(self, agents: list[str]) -> dict[str, dict]:
-        p = self._run.pending
+        p = self._started().current
         return {
             a: {
                 "paper_action": int(p.own[0, i]),
@@ -226,12 +232,14 @@ class UAVTrackingEnv(ParallelEnv):
         }
 
     def _trace(self) -> tuple[Trace, int]:
-        run = self._run
+        run = self._started()
         if run.k == 0:  # after reset: the first cycle as the method would close it
             recorder = Recorder(1, timed=True)
-            recorder.record(0, finish(run.state, run.pending, run.ctx, fly=False)[1])
+            recorder.record(0, finish(run.state, run.current, run.ctx, fly=False)[1])
             return recorder.traces(run.trajectory[:, :1])[0], 0
-        return self.result().trace, run.k - 1
+        trace = self.result().trace
+        assert trace is not None  # the episodes keep a record
+        return trace, run.k - 1
 
     def _image(self) -> np.ndarray:
         from ..viz.scene import frame
@@ -253,7 +261,7 @@ class UAVTrackingEnv(ParallelEnv):
         plt.pause(1 / self.metadata["render_fps"])
 
     def _text(self) -> str:
-        view: View = self._run.view()
+        view: View = self._started().view()
         seen = view.observed[0].any(axis=0)
         uavs = " ".join(
             f"{a}({u[0]:.0f},{u[1]:.0f})" + ("" if alive else "x")

@@ -107,7 +107,7 @@ class VectorEnv:
         self._start(int(seed))
         return self.observations(), self._info()
 
-    def step(self, actions: Any):
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         """Fly `actions` (num_envs, Nu) indices into {-phi, 0, +phi}; returns
         observations, rewards (num_envs, Nu), terminated and truncated (num_envs, Nu),
         and the info. When the episode ends (both flags set for every agent) the next
@@ -151,7 +151,7 @@ class VectorEnv:
         """(num_envs, Nu) the actions the method would fly now."""
         if not self.planned:
             raise RuntimeError("made with paper_actions=False: the method does not plan")
-        return self._started().pending.own.copy()
+        return self._started().current.own.copy()
 
     def observation_rate(self) -> np.ndarray:
         """(num_envs,) each trial's observation rate over the steps flown this episode."""
@@ -174,7 +174,8 @@ class VectorEnv:
         )
 
     def _info(self) -> dict[str, np.ndarray]:
-        info = {"alive": self._run.alive.copy()}
+        run = self._started()
+        info = {"alive": run.alive.copy()}
         if self.planned:
-            info["paper_action"] = self._run.pending.own.copy()
+            info["paper_action"] = run.current.own.copy()
         return info

@@ -198,6 +198,7 @@ def planner_case(
     """Planner per sequence-step against a per-sequence loop and the exhaustive search."""
     scenario = team(n_uavs, n_targets, steps=12)
     trace = simulate(scenario, "distributed", seed=1).trace
+    assert trace is not None  # simulate keeps the trace by default
     uavs, mean = trace.uavs[-1], trace.mean[-1]
     args = (scenario.sensor, np.radians(scenario.uav.bank_angle_deg), horizon, scenario.dt)
     ours = planning.plan(uavs, mean, *args)

@@ -34,7 +34,7 @@ import tempfile
 import threading
 import time
 import traceback
-from collections.abc import Callable, Iterator, Sequence
+from collections.abc import Callable, Generator, Iterator, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -391,7 +391,7 @@ def exit_with_parent(parent: int) -> None:
     die_with(parent)
 
 
-def local_engine(jobs: Sequence[Job], workers: int) -> Iterator[tuple]:
+def local_engine(jobs: Sequence[Job], workers: int) -> Generator[tuple, None, None]:
     """Run jobs in worker processes; yield results as they finish.
 
     At most two jobs per worker are queued at a time, so an interruption finds little to
@@ -476,7 +476,9 @@ def check_scheduler(address: str, timeout: float = 5.0) -> None:
         ) from None
 
 
-def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Iterator[tuple]:
+def dask_engine(
+    jobs: Sequence[Job], workers: int, address: str | None
+) -> Generator[tuple, None, None]:
     """Run jobs on a Dask cluster (or a LocalCluster of `workers` processes)."""
     try:
         from dask.distributed import Client, LocalCluster, as_completed
@@ -495,7 +497,7 @@ def dask_engine(jobs: Sequence[Job], workers: int, address: str | None) -> Itera
             n_workers=workers,
             threads_per_worker=1,
             processes=True,
-            dashboard_address=None,
+            dashboard_address=None,  # pyright: ignore[reportArgumentType] (None: no dashboard)
             death_timeout=60,  # a loaded machine starts a worker slowly; orphans end by
             # themselves within seconds of this process, whatever it is
         )
@@ -552,7 +554,7 @@ def execute(
                 else:
                     store.fail(job, error)
                     failed.append(job)
-                advance()
+                advance(1)
                 if on_result is not None:
                     on_result(job)
     finally:

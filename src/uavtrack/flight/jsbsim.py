@@ -211,6 +211,7 @@ def trim(folder: Path, altitude: float, airspeed: float, dt: float) -> tuple[flo
             ]
         )
 
+    r = np.full(3, np.inf)  # no residual yet
     for _ in range(30):
         r = accelerations(x)
         if np.abs(r).max() < 1e-8:

@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -55,7 +56,7 @@ class _Messages:
         self.Vector3 = t["geometry_msgs/msg/Vector3"]
         self.Color = t["std_msgs/msg/ColorRGBA"]
 
-    def header(self, ns: int, frame: str = FRAME):
+    def header(self, ns: int, frame: str = FRAME) -> Any:
         return header_of(ns, frame)
 
     def pose(self, x: float, y: float, z: float, yaw: float):
@@ -87,7 +88,7 @@ class _Messages:
             mesh_use_embedded_materials=False,
         )
 
-    def serialize(self, message) -> bytes:
+    def serialize(self, message) -> memoryview:
         return self.store.serialize_cdr(message, message.__msgtype__)
 
 

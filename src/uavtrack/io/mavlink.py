@@ -152,6 +152,8 @@ class SetpointStream(threading.Thread):
             if self._stopped:
                 return
             try:
+                if self.setpoint is None:
+                    raise RuntimeError("the setpoint stream started without a setpoint")
                 self.send(self.setpoint)
             except Exception as exc:  # noqa: BLE001 (a closed link, a dead interface)
                 self.error = exc
@@ -224,6 +226,7 @@ class Vehicle:
         deadline passes); unanswered, the command is repeated each second with its
         confirmation counting the repeats (MAVLink's command protocol)."""
         mavlink = _mavutil().mavlink
+        assert mavlink is not None  # the dialect loaded with the connection
         for confirmation in range(max(1, math.ceil(deadline))):
             params = (1, mode, 0, 0, 0, 0, 0)  # custom mode enabled, PX4's main mode
             self._send("command_long_send", self.target, 1, DO_SET_MODE, confirmation, *params)

@@ -32,6 +32,7 @@ def read_jobs(
     if not (root / "manifest.json").is_file():
         raise UsageError(f"{root}: not a uavtrack results folder (no manifest.json)")
     for path in sorted((root / "raw").glob("*.json")):
+        body: dict[str, Any] = {}
         try:
             record = json.loads(path.read_text(encoding="utf-8"))
             body = {k: record[k] for k in ("job", "seconds", "metrics")}

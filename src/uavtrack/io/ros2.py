@@ -261,8 +261,9 @@ def sim_ns(k: int, dt: float) -> int:
     return int(round(k * dt * 1e9))
 
 
-def header_of(ns: int, frame: str = FRAME):
-    """A std_msgs/Header stamped `ns` nanoseconds of the simulated clock, in `frame`."""
+def header_of(ns: int, frame: str = FRAME) -> Any:
+    """A std_msgs/Header stamped `ns` nanoseconds of the simulated clock, in `frame` (of
+    a class rosbags makes from the message definitions: Any to a checker)."""
     T = store().types
     stamp = T["builtin_interfaces/msg/Time"](sec=ns // 10**9, nanosec=ns % 10**9)
     return T["std_msgs/msg/Header"](stamp=stamp, frame_id=frame)

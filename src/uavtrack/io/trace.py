@@ -86,7 +86,7 @@ def write(path: str | Path, result: Result) -> None:
     write_npz(path, arrays)
 
 
-def read(path: str | Path) -> TraceFile:
+def read(path: str | os.PathLike[str]) -> TraceFile:
     """A trace file written by `write`; a one-line UsageError for anything else (see the
     module's documentation for which versions are read)."""
     path = Path(path).expanduser()
@@ -160,7 +160,7 @@ def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario)
     sizes = {"Nu": scenario.n_uavs, "Nt": scenario.n_targets}
     targets = arrays["targets"]
     steps = targets.shape[0] if targets.ndim else 0
-    expected = {"targets": (steps, scenario.n_targets, 4)}
+    expected: dict[str, tuple[int, ...]] = {"targets": (steps, scenario.n_targets, 4)}
     for f in RECORDED:
         expected[f.name] = _shape(f, sizes, steps)
     for name, shape in expected.items():
@@ -183,7 +183,7 @@ def _shape(f, sizes: dict[str, int], steps: int) -> tuple[int, ...]:
 
 
 def load(
-    source: str | os.PathLike | Result | TraceFile | Trace,
+    source: str | os.PathLike[str] | Result | TraceFile | Trace,
     scenario: Scenario | None = None,
     method: str | None = None,
     seed: int | None = None,

@@ -23,6 +23,14 @@ layout of `network.Links` (dense (B, N, N, M) or one row per edge, (E, M)), whic
 `fusion.adopt`, `fusion.intersect_round` and the consensus driver take.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import math
@@ -80,7 +88,7 @@ def seen(last: np.ndarray | None, observed: np.ndarray, k: int) -> np.ndarray:
     return np.where(observed, k, before)
 
 
-def recent(last: np.ndarray | None, k: int, memory: int, shape: tuple) -> np.ndarray:
+def recent(last: np.ndarray | None, k: int, memory: int, shape: tuple[int, ...]) -> np.ndarray:
     """Whether each UAV measured each target within the `memory` cycles before k, from
     `last` (`seen`; None: only the initial cue, at step 0). Returns `shape` (B, N, M)."""
     if last is None:

@@ -82,7 +82,10 @@ def save(trace, scenario, path: str | Path, name: str = "uavtrack") -> None:
     stream = rec.binary_stream()
     rec.send_blueprint(blueprint(scenario), make_active=False, make_default=True)
     log(rec, trace, scenario)
-    write_bytes(path, stream.read(flush=True))
+    data = stream.read(flush=True)
+    if data is None:  # nothing was encoded: no file rather than an empty one
+        raise RunError(f"cannot write {path}: Rerun encoded no recording")
+    write_bytes(path, data)
 
 
 def recording_id(name: str, scenario) -> str:
@@ -200,7 +203,8 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
     ground = np.concatenate([trace.targets[..., :2], np.zeros((T, nt, 1))], axis=-1)
     rec.log(
         "world/targets/paths",
-        rr.LineStrips3D(np.swapaxes(ground, 0, 1), colors=[90, 90, 90], radii=0.2),
+        # rerun takes an (S, P, 3) array of strips, which its LineStrip3DArrayLike omits
+        rr.LineStrips3D(np.swapaxes(ground, 0, 1), colors=[90, 90, 90], radii=0.2),  # pyright: ignore[reportArgumentType]
         static=True,
     )
     everyone = np.ones((T, nt), dtype=bool)
@@ -286,9 +290,10 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
     rec.send_columns(
         "world/links",
         indexes=[steps],
-        columns=rr.LineStrips3D.columns(strips=ends, colors=np.full((len(ends), 3), 110)).partition(
-            counts
-        ),
+        columns=rr.LineStrips3D.columns(
+            strips=ends,  # pyright: ignore[reportArgumentType] (strips as an (E, 2, 3) array)
+            colors=np.full((len(ends), 3), 110),
+        ).partition(counts),
     )
     in_view = trace.observed.any(axis=1).mean(axis=1)
     series = {
@@ -346,7 +351,8 @@ def _ellipses(cov: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 def _links(uavs: np.ndarray, alive: np.ndarray, comm_range: float):
     """Every step's radio links as two-point strips (all steps together) and their
     number per step; pairs from a k-d tree, kept by the radio model's own test."""
-    from scipy.spatial import cKDTree
+    # scipy's compiled k-d tree ships no type stubs; the class exists at run time
+    from scipy.spatial import cKDTree  # pyright: ignore[reportAttributeAccessIssue]
 
     ends, counts = [], []
     for k in range(uavs.shape[0]):
