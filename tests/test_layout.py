@@ -59,16 +59,25 @@ def modules(root: Path) -> dict[str, Path]:
     return out
 
 
-def imports(root: Path) -> list[tuple[str, str, int]]:
+def imports(root: Path, typing: bool = True) -> list[tuple[str, str, int]]:
     """(importer, imported, line) for every import of a module of the package in `root`,
-    anywhere in a module (at its top, in a function, under TYPE_CHECKING); ``from . import
-    x`` names the module x where there is one."""
+    anywhere in a module (at its top, in a function, and, if `typing`, under
+    ``if TYPE_CHECKING``); ``from . import x`` names the module x where there is one."""
     found = modules(root)
     package = root.name
     out = []
     for name, path in found.items():
         here = name if path.name == "__init__.py" else name.rpartition(".")[0]
-        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        tree = ast.parse(path.read_text(encoding="utf-8"))
+        hints = {
+            id(inner)
+            for node in ast.walk(tree)
+            if isinstance(node, ast.If) and ast.unparse(node.test).endswith("TYPE_CHECKING")
+            for inner in ast.walk(node)
+        }
+        for node in ast.walk(tree):
+            if not typing and id(node) in hints:
+                continue
             if isinstance(node, ast.Import):
                 targets = [a.name for a in node.names]
             elif isinstance(node, ast.ImportFrom):
@@ -112,9 +121,10 @@ def crossings(root: Path) -> list[str]:
 
 def cycles(root: Path) -> list[list[str]]:
     """The import cycles among the package's modules (strongly connected components of
-    more than one module), counting imports inside functions."""
+    more than one module), counting imports inside functions; not those only a type
+    checker reads (``if TYPE_CHECKING``), which never run."""
     graph: dict[str, set[str]] = {name: set() for name in modules(root)}
-    for a, b, _ in imports(root):
+    for a, b, _ in imports(root, typing=False):
         graph[a].add(b)
     index: dict[str, int] = {}
     low: dict[str, int] = {}
