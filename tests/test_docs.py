@@ -60,8 +60,102 @@ def test_the_site_builds_strictly_with_its_generated_pages(site):
     for command in ("run", "compare", "sweep", "reproduce", "export", "swarm"):
         assert f"Usage: uavtrack {command}" in cli
     api = (site / "reference" / "api" / "index.html").read_text()
-    assert "uavtrack.simulate" in api and "uavtrack.env.vector_env" in api
+    assert all(f'href="{page}/"' in api for page in API_PAGES)
     assert (site / "search" / "search_index.json").stat().st_size > 10_000
+
+
+API_PAGES = ("model", "simulation", "methods", "scenario", "forms", "harness")
+STAGES = ("world", "network", "faults", "radio", "sensing", "estimation", "fusion", "planning",
+          "assignment", "metrics", "gate", "plausibility", "flight")  # fmt: skip
+
+
+def api_blocks(page: str):
+    """(target, options text) of every ``:::`` block of an API page."""
+    source = (DOCS / "reference" / "api" / f"{page}.md").read_text()
+    return re.findall(r"^::: (\S+)\n((?:    .*\n)*)", source, flags=re.M)
+
+
+@pytest.mark.parametrize("page", API_PAGES)
+def test_every_object_an_api_page_names_renders_with_its_docstring(site, page):
+    # mkdocstrings renders nothing, silently, for a member a `members:` list misspells
+    import html as html_text
+
+    html = (site / "reference" / "api" / page / "index.html").read_text()
+    parts = re.split(r'<h\d id="([^"]+)" class="doc doc-heading">', html)
+    rendered = {
+        parts[i]: re.sub(r"\s+", " ", html_text.unescape(re.sub(r"<[^>]+>", " ", parts[i + 1])))
+        for i in range(1, len(parts), 2)
+    }  # id -> its heading and docstring as text
+    named = 0
+    for target, options in api_blocks(page):
+        wanted = [] if "show_root_heading: false" in options else [target]
+        members = re.search(r"members: \[(.+)\]", options)
+        if members:
+            wanted += [f"{target}.{m.strip()}" for m in members.group(1).split(",")]
+        for name in wanted:
+            assert name in rendered, f"{page}: {name} is not rendered"
+            heading, _, text = rendered[name].partition("¶")
+            assert name.rsplit(".", 1)[1] in heading and len(text.split()) >= 4, name
+            named += 1
+    assert named >= 20
+
+
+def docstrings(module: str, names: list[str]) -> str:
+    """The docstrings of `names` (functions, classes, Class.method, sub.Name) of a
+    uavtrack module and of the modules they are in, read from the source."""
+    import ast
+
+    def source(dotted: str):
+        base = ROOT / "src" / Path(*dotted.split("."))
+        path = base / "__init__.py" if base.is_dir() else base.with_suffix(".py")
+        return ast.parse(path.read_text()) if path.exists() else None
+
+    texts = [ast.get_docstring(source(module)) or ""]
+    for name in names:
+        *sub, obj = name.split(".")
+        path = module
+        while sub and source(f"{path}.{sub[0]}") is not None:  # sub.Name: a submodule's
+            path = f"{path}.{sub.pop(0)}"
+        tree = source(path)
+        texts.append(ast.get_docstring(tree) or "")
+        for node in [n for n in ast.walk(tree) if hasattr(n, "name")]:
+            if node.name == obj and (not sub or node in ast.walk(_named(tree, sub[0]))):
+                texts.append(ast.get_docstring(node) or "")
+    return "\n".join(texts)
+
+
+def _named(tree, name: str):
+    return next(n for n in tree.body if getattr(n, "name", None) == name)
+
+
+def equations(text: str) -> set[int]:
+    """The equation numbers a text cites: eq. (3), eqs. (2)-(4), eqs. 3 and 10-12, ..."""
+    found = set()
+    for run in re.findall(r"eqs?\.\s*((?:\(?\d+\)?(?:\s*(?:-|,|and)\s*)?)+)", text):
+        for token in re.sub(r"\band\b", ",", re.sub(r"[()]", "", run)).split(","):
+            ends = [int(x) for x in re.findall(r"\d+", token)]
+            if len(ends) == 2 and "-" in token:
+                found |= set(range(ends[0], ends[1] + 1))
+            else:
+                found |= set(ends)
+    return found
+
+
+def test_equations_cited_in_table_are_those_their_objects_docstrings_cite():
+    # the model page's tables (function -> equation) are written by hand: each equation
+    # they give must be one the docstrings of the named objects (or their module) cite
+    page = (DOCS / "reference" / "api" / "model.md").read_text()
+    sections = re.findall(r"^## `(uavtrack\.[\w.]+)`: .*?\{#(\w+)\}\n(.*?)(?=^## |\Z)", page,
+                          flags=re.M | re.S)  # fmt: skip
+    assert [anchor for _, anchor, _ in sections] == list(STAGES)  # Fig. 3's order
+    rows = 0
+    for module, _, body in sections:
+        for first, rest in re.findall(r"^\| ([^|]*`[^|]*) \| (.*) \|$", body, flags=re.M):
+            cited = equations(rest)
+            names = re.findall(r"`([\w.]+)`", first)
+            assert cited <= equations(docstrings(module, names)), (module, first, cited)
+            rows += bool(cited)
+    assert rows >= 20
 
 
 def test_a_broken_link_fails_the_build(tmp_path):
@@ -114,6 +208,20 @@ def test_the_tutorials_import_only_what_pip_install_brings(page):
                 assert name.split(".")[0] in allowed, f"{page} imports {name}"
 
 
+@pytest.mark.parametrize(
+    "page", ["api.md", "api/simulation.md", "api/methods.md", "api/scenario.md", "api/harness.md"]
+)
+def test_the_api_pages_code_runs(page, tmp_path, monkeypatch):
+    from uavtrack.methods import registry
+
+    monkeypatch.setattr(registry, "_REGISTERED", dict(registry._REGISTERED))  # `register`s
+    monkeypatch.chdir(tmp_path)  # files a page writes
+    blocks = python_blocks(f"reference/{page}")
+    assert blocks, page
+    for block in blocks:
+        exec(compile(block, page, "exec"), {"__name__": "__api_page__"})
+
+
 def docs_module(name: str):
     """A module of the docs folder (hooks, screenshot)."""
     sys.path.insert(0, str(DOCS))
@@ -140,11 +248,13 @@ def test_a_browser_draws_the_main_pages(site, tmp_path):
 @pytest.mark.parametrize(
     "page",
     ["getting-started/index.html", "tutorials/sweep/index.html", "reference/cli/index.html",
-     "reference/scenario/index.html", "reference/api/index.html"],
+     "reference/scenario/index.html", "reference/api/index.html",
+     "reference/api/model/index.html", "reference/api/simulation/index.html"],
 )  # fmt: skip
 def test_no_command_runs_past_its_block_and_no_field_name_breaks(site, page):
     # at 1280 pixels, as the browser lays the page out: the comment at the end of a long
     # command stays in view, and a dotted name in a table stays whole
+    assert (site / page).is_file(), page  # the browser finds nothing wrong on a missing page
     screenshot = docs_module("screenshot")
     if screenshot.chromium() is None:
         pytest.skip("no Chromium here (python docs/screenshot.py documents the check)")

@@ -722,7 +722,7 @@ def _terminate_as_interrupt() -> None:
 def os_error(exc: OSError) -> str:
     """An OSError as one line: what could not be done, where, and why.
 
-    Files are written through `files`, which names them in its errors; an error with no
+    Files are written through `_files`, which names them in its errors; an error with no
     file name is the standard output's when it came from writing it (an echo, the final
     flush), else said as it is."""
     reason = exc.strerror or str(exc)

@@ -1,8 +1,8 @@
-"""The paper's figures (Figs. 4-9) from a summary or a trace, with matplotlib.
+"""The paper's figures (Figs. 5-9) from a summary, with matplotlib.
 
 Figs. 5-7 are grouped bar charts with standard-deviation error bars, Figs. 8-9 curves
-with error bars, as in the paper; Fig. 4 is an animation written with matplotlib's
-Pillow writer (no ffmpeg). Every figure is written to a temporary file and renamed.
+with error bars, as in the paper (Fig. 4, the animation of a trace, is drawn by
+`uavtrack.viz.scene`). Every figure is written to a temporary file and renamed.
 """
 
 from __future__ import annotations

@@ -4,11 +4,12 @@ A UAV's messages make claims: where it is, where each target is and how fast it 
 how certain it is of that (a covariance P and its confidence gamma = 1 / trace P,
 eq. 22), how much it would gain from tracking each target (a bid, the sum over the
 horizon of det G, Algorithm 1). Some claims no honest UAV can make in a given run,
-whatever its faults; `Bounds` holds the limits and `reason` says which one a claim
-breaks. The limits are loose by design (an honest claim never comes near them): they
-keep a lying member to claims that are physically possible and that keep every
-receiver's arithmetic finite; telling a plausible lie from the truth is the work of
-`fusion.agree` (``robust.gate``).
+whatever its faults; `Bounds` holds the limits, and the agents' message rules
+(`agents.messages.Spec`) say which one a claim breaks. The limits are loose by design
+(an honest claim never comes near them): they keep a lying member to claims that are
+physically possible and that keep every receiver's arithmetic finite; telling a
+plausible lie from the truth is the work of the measurement gate (`gate`,
+``robust.gate``).
 
 * Positions: a UAV flies at most at its ground speed (airspeed plus wind, doubled for
   the autopilot), and an estimate moves at most at the estimate speed below; neither
