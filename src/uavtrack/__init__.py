@@ -105,11 +105,11 @@ class _Moved(importlib.abc.MetaPathFinder, importlib.abc.Loader):
             stacklevel=2,
         )
 
-        def find(attr: str):
+        def find(name: str):  # named as ModuleType.__getattr__'s parameter
             for home in homes:
-                if hasattr(home, attr):
-                    return getattr(home, attr)
-            raise AttributeError(f"module {module.__name__!r} has no attribute {attr!r}")
+                if hasattr(home, name):
+                    return getattr(home, name)
+            raise AttributeError(f"module {module.__name__!r} has no attribute {name!r}")
 
         module.__getattr__ = find
         module.__doc__ = f"Moved to {', '.join(h.__name__ for h in homes)}."

@@ -428,7 +428,7 @@ def perfect_radio(adjacency: np.ndarray, form: str = "auto") -> Radio:
     adj = network.without_self_loops(adjacency)
     # every field of FaultModel has a default, given to Field positionally, which
     # pyright's dataclass_transform does not read as one
-    model = FaultModel()  # pyright: ignore[reportCallIssue]
+    model = FaultModel()
     faults = Faults(model, np.zeros((adj.shape[0], 2), dtype=np.uint32), adj.shape[-1])
     alive = np.ones(adj.shape[:2], dtype=bool)
     return Radio(0, network.links(adj, form), alive, faults, RadioState())

@@ -22,9 +22,13 @@ CLOSE = ("mean", "cov", "bids")
 COUNTERS = ("rounds", "messages", "delivered", "late", "conflicts")
 
 
-def differences(a, b, atol: float = 1e-9, counters: bool = True) -> list[str]:
-    """What differs between traces a and b, in words (empty when they agree)."""
-    out = []
+def differences(a: object, b: object, atol: float = 1e-9, counters: bool = True) -> list[str]:
+    """What differs between traces a and b, in words (empty when they agree).
+
+    A trace is any object with some of the fields named above (a `simulation.Trace`, or
+    a part of one): a field either of them lacks is not compared.
+    """
+    out: list[str] = []
     names = EXACT + (COUNTERS if counters else ())
     for name in names:
         x, y = getattr(a, name, None), getattr(b, name, None)
@@ -50,7 +54,7 @@ def differences(a, b, atol: float = 1e-9, counters: bool = True) -> list[str]:
     return out
 
 
-def assert_same_trace(a, b, atol: float = 1e-9, counters: bool = True) -> None:
+def assert_same_trace(a: object, b: object, atol: float = 1e-9, counters: bool = True) -> None:
     """Raise AssertionError naming every field where traces a and b differ."""
     problems = differences(a, b, atol, counters)
     if problems:

@@ -439,7 +439,7 @@ def show(
             label = "decision time per cycle, the central node's for the whole team [ms of CPU]"
         table.add_row(escape(label), number(fmt, summary[key]))
     # FaultModel's defaults are given to Field positionally, which pyright does not read
-    if scenario.faults != type(scenario.faults)():  # pyright: ignore[reportCallIssue]
+    if scenario.faults != type(scenario.faults)():
         for key, label, fmt in FAULT_ROWS:
             table.add_row(escape(label), number(fmt, summary[key]))
     for label, value in rows or []:

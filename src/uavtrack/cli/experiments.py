@@ -7,7 +7,7 @@ from collections.abc import Sequence
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any, cast
+from typing import Annotated, Any
 
 import typer
 
@@ -374,8 +374,7 @@ def sweep(
         name: [parse_value(v, where=f"sweep value {name}") for v in given]
         for name, given in texts.items()
     }
-    # the sweep's functions only read the axes (a dict of lists is one of sequences)
-    axes = cast(dict[str, Sequence[Any]], sweep_axes(scenario, raw))
+    axes = sweep_axes(scenario, raw)
     names = chosen_methods(methods)
     plan = sweep_plan(scenario, axes, names, trials, chunk=10, seed=seed)  # every cell checked
     out = out or Path("results") / ("sweep-" + "-".join(axes))

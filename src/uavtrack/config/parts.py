@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 from numbers import Integral, Real
-from typing import Annotated, Any, Literal
+from typing import Annotated, Literal
 
 from pydantic import (
     BaseModel,
@@ -28,16 +28,20 @@ G = 9.81
 """Gravitational acceleration [m/s^2], eq. (1)."""
 
 
-def _integer(value: Any) -> Any:
+def _integer(value: object) -> object:
     """Integers of any kind (numpy's too) become int; anything else is left to fail."""
-    if isinstance(value, Integral) and not isinstance(value, bool):
+    if isinstance(value, bool):  # an Integral at run time, refused by the strict field
+        return value
+    if isinstance(value, Integral):
         return int(value)
     return value
 
 
-def _real(value: Any) -> Any:
+def _real(value: object) -> object:
     """Real numbers of any kind (ints, numpy floats) become float; bools and text fail."""
-    if isinstance(value, Real) and not isinstance(value, bool):
+    if isinstance(value, bool):  # a Real at run time, refused by the strict field
+        return value
+    if isinstance(value, Real):
         return float(value)
     return value
 
@@ -50,29 +54,39 @@ Float = Annotated[float, BeforeValidator(_real), Strict()]
 """A float field: ints are accepted, booleans and text are refused; inf and NaN too."""
 
 
-class _Part(BaseModel):
+class Part(BaseModel):
+    """The base of every part and of the scenario: unknown fields are refused, a model is
+    immutable (so hashable and shareable), defaults are validated as given values are,
+    and inf and NaN are refused."""
+
     model_config = ConfigDict(
         extra="forbid", frozen=True, validate_default=True, allow_inf_nan=False
     )
 
 
-class SensorModel(_Part):
+class SensorModel(Part):
     """Range-bearing sensor with a distance-dependent noise (eq. 2-4)."""
 
     k_d: Float = Field(
-        0.1056, gt=0, le=1000, description="range-noise scale [m], (0, 1000]; paper eq. (3), Sec. 7"
+        default=0.1056,
+        gt=0,
+        le=1000,
+        description="range-noise scale [m], (0, 1000]; paper eq. (3), Sec. 7",
     )
     k_r: Float = Field(
-        10.07,
+        default=10.07,
         ge=0,
         le=100,
         description="range-noise growth rate [-], [0, 100]; paper eq. (3), Sec. 7",
     )
     k_theta: Float = Field(
-        0.01, gt=0, le=1, description="bearing-noise scale [rad], (0, 1]; paper eq. (3), Sec. 7"
+        default=0.01,
+        gt=0,
+        le=1,
+        description="bearing-noise scale [rad], (0, 1]; paper eq. (3), Sec. 7",
     )
     half_fov_deg: Float = Field(
-        5.0,
+        default=5.0,
         gt=0,
         lt=90,
         description=(
@@ -90,12 +104,14 @@ MAX_ALTITUDE = 20_000.0
 """Highest flight altitude accepted [m] (above any fixed-wing UAV's ceiling)."""
 
 
-class UAVModel(_Part):
+class UAVModel(Part):
     """Fixed-wing UAVs at constant speed and altitude, bank-angle actions (eq. 1)."""
 
-    speed: Float = Field(15.0, gt=0, le=300, description="airspeed V [m/s], (0, 300]; paper Sec. 7")
+    speed: Float = Field(
+        default=15.0, gt=0, le=300, description="airspeed V [m/s], (0, 300]; paper Sec. 7"
+    )
     bank_angle_deg: Float = Field(
-        45.0,
+        default=45.0,
         gt=0,
         lt=90,
         description=(
@@ -105,7 +121,7 @@ class UAVModel(_Part):
         ),
     )
     altitude: Float = Field(
-        425.0,
+        default=425.0,
         gt=0,
         le=MAX_ALTITUDE,
         description=(
@@ -116,7 +132,7 @@ class UAVModel(_Part):
         ),
     )
     altitude_spacing: Float = Field(
-        5.0,
+        default=5.0,
         ge=-1000,
         le=1000,
         description=(
@@ -127,14 +143,14 @@ class UAVModel(_Part):
         ),
     )
     altitudes: tuple[Annotated[Float, Field(gt=0, le=MAX_ALTITUDE)], ...] | None = Field(
-        None,
+        default=None,
         description=(
             "explicit per-UAV altitudes [m], each in (0, 20000], overriding altitude and "
             "altitude_spacing; length n_uavs; not set by default"
         ),
     )
     start_spread: Float = Field(
-        20.0,
+        default=20.0,
         ge=0,
         le=100_000,
         description=(
@@ -143,7 +159,7 @@ class UAVModel(_Part):
         ),
     )
     dynamics: Literal["unicycle", "jsbsim"] = Field(
-        "unicycle",
+        default="unicycle",
         description=(
             "how the world flies a UAV [-], (unicycle, jsbsim); unicycle: the paper's eq. (1), "
             "the bank angle turns the heading at once; jsbsim: a JSBSim fixed-wing aircraft "
@@ -153,7 +169,7 @@ class UAVModel(_Part):
         ),
     )
     aircraft: str = Field(
-        "trackwing",
+        default="trackwing",
         min_length=1,
         max_length=200,
         description=(
@@ -163,7 +179,7 @@ class UAVModel(_Part):
         ),
     )
     jsbsim_rate_hz: Float = Field(
-        120.0,
+        default=120.0,
         ge=50,
         le=1000,
         description=(
@@ -174,11 +190,11 @@ class UAVModel(_Part):
     )
 
 
-class WindModel(_Part):
+class WindModel(Part):
     """Steady wind and JSBSim's turbulence, felt by the aircraft of uav.dynamics = jsbsim."""
 
     speed: Float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         le=50,
         description=(
@@ -187,7 +203,7 @@ class WindModel(_Part):
         ),
     )
     direction_deg: Float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         lt=360,
         description=(
@@ -196,7 +212,7 @@ class WindModel(_Part):
         ),
     )
     turbulence: Literal["none", "light", "moderate", "severe"] = Field(
-        "none",
+        default="none",
         description=(
             "beyond the paper: JSBSim's Dryden turbulence (MIL-F-8785C, Tustin form) at the "
             "intensities of "
@@ -212,13 +228,13 @@ class WindModel(_Part):
         return self.speed * math.sin(towards), self.speed * math.cos(towards)
 
 
-class ManoeuvreModel(_Part):
+class ManoeuvreModel(Part):
     """Manoeuvring targets (target.motion = "manoeuvring"), beyond the paper: each target
     flies segments of random length, each straight or a coordinated turn, at a new speed
     or stopping, with the white acceleration of eq. (15) on top."""
 
     interval: Float = Field(
-        8.0,
+        default=8.0,
         gt=0,
         le=1000,
         description=(
@@ -227,13 +243,13 @@ class ManoeuvreModel(_Part):
         ),
     )
     turn_probability: Float = Field(
-        0.5,
+        default=0.5,
         ge=0,
         le=1,
         description="probability that a segment is a turn [-], [0, 1]; assumed: half of them",
     )
     turn_rate_max_deg: Float = Field(
-        15.0,
+        default=15.0,
         ge=0,
         le=90,
         description=(
@@ -242,7 +258,7 @@ class ManoeuvreModel(_Part):
         ),
     )
     speed_max: Float = Field(
-        3.0,
+        default=3.0,
         gt=0,
         le=50,
         description=(
@@ -251,13 +267,13 @@ class ManoeuvreModel(_Part):
         ),
     )
     stop_probability: Float = Field(
-        0.15,
+        default=0.15,
         ge=0,
         le=1,
         description="probability that a segment is a stop [-], [0, 1]; assumed",
     )
     acceleration_max: Float = Field(
-        0.5,
+        default=0.5,
         gt=0,
         le=20,
         description=(
@@ -267,11 +283,11 @@ class ManoeuvreModel(_Part):
     )
 
 
-class TargetModel(_Part):
+class TargetModel(Part):
     """Ground targets: nearly constant velocity with white acceleration noise (eq. 13-15)."""
 
     sigma_1: Float = Field(
-        0.16,
+        default=0.16,
         ge=0,
         le=10,
         description=(
@@ -280,7 +296,7 @@ class TargetModel(_Part):
         ),
     )
     sigma_2: Float = Field(
-        0.16,
+        default=0.16,
         ge=0,
         le=10,
         description=(
@@ -289,7 +305,7 @@ class TargetModel(_Part):
         ),
     )
     initial_velocity_std: Float = Field(
-        1.0,
+        default=1.0,
         ge=0,
         le=50,
         description=(
@@ -298,7 +314,7 @@ class TargetModel(_Part):
         ),
     )
     motion: Literal["ncv", "manoeuvring"] = Field(
-        "ncv",
+        default="ncv",
         description=(
             "how targets move [-], (ncv, manoeuvring); ncv: the paper's nearly constant "
             "velocity (eq. 13); manoeuvring: beyond the paper, straight legs, coordinated "
@@ -309,7 +325,7 @@ class TargetModel(_Part):
         default_factory=ManoeuvreModel, description="manoeuvres (target.motion = manoeuvring)"
     )
     noise_form: Literal["acceleration", "printed"] = Field(
-        "acceleration",
+        default="acceleration",
         description=(
             "reading of eq. (15) [-]: 'acceleration' takes sigma as a white acceleration "
             "[m/s^2] (Q = sigma^2 [[dT^4/4, dT^3/2], [dT^3/2, dT^2]] per axis), 'printed' "
@@ -320,11 +336,11 @@ class TargetModel(_Part):
     )
 
 
-class TrackerModel(_Part):
+class TrackerModel(Part):
     """The local filter of each (UAV, target): the paper's Kalman filter or an IMM."""
 
     model: Literal["cv", "imm"] = Field(
-        "cv",
+        default="cv",
         description=(
             "the filter [-], (cv, imm); cv: the paper's nearly-constant-velocity Kalman filter "
             "(eq. 22-25); imm: beyond the paper, an interacting multiple model filter whose "
@@ -333,7 +349,7 @@ class TrackerModel(_Part):
         ),
     )
     manoeuvre_std: tuple[Annotated[Float, Field(gt=0, le=100)], ...] = Field(
-        (0.5, 2.3),
+        default=(0.5, 2.3),
         min_length=1,
         max_length=5,
         description=(
@@ -344,7 +360,7 @@ class TrackerModel(_Part):
         ),
     )
     turn_rates_deg: tuple[Annotated[Float, Field(gt=0, le=90)], ...] = Field(
-        (),
+        default=(),
         max_length=3,
         description=(
             "turn rates of further IMM modes [deg/s], each in (0, 90], at most 3: each adds "
@@ -354,7 +370,7 @@ class TrackerModel(_Part):
         ),
     )
     transition: tuple[tuple[Annotated[Float, Field(ge=0, le=1)], ...], ...] = Field(
-        ((0.95, 0.04, 0.01), (0.10, 0.85, 0.05), (0.30, 0.30, 0.40)),
+        default=((0.95, 0.04, 0.01), (0.10, 0.85, 0.05), (0.30, 0.30, 0.40)),
         description=(
             "IMM mode transition matrix [-], entries in [0, 1], each row summing to 1, one "
             "row and column per mode (the cv mode first); p_ij = P(mode j at k+1 | mode i "
@@ -377,11 +393,11 @@ class TrackerModel(_Part):
         return self
 
 
-class FusionModel(_Part):
+class FusionModel(Part):
     """How a UAV combines its estimate with its neighbours' (Algorithm 2, lines 15-25)."""
 
     rule: Literal["max_consensus", "covariance_intersection"] = Field(
-        "max_consensus",
+        default="max_consensus",
         description=(
             "the fusion rule of each consensus round [-], (max_consensus, "
             "covariance_intersection); max_consensus: the paper's eq. (27), adopt the most "
@@ -393,11 +409,11 @@ class FusionModel(_Part):
     )
 
 
-class EvaluationModel(_Part):
+class EvaluationModel(Part):
     """How the estimates are scored against the truth as point sets (not in the paper)."""
 
     ospa_cutoff: Float = Field(
-        20.0,
+        default=20.0,
         gt=0,
         le=100_000,
         description=(
@@ -407,18 +423,18 @@ class EvaluationModel(_Part):
         ),
     )
     ospa_order: Float = Field(
-        1.0,
+        default=1.0,
         ge=1,
         le=10,
         description="order p of OSPA and GOSPA [-], [1, 10]; assumed: 1, the mean error",
     )
 
 
-class EstimationModel(_Part):
+class EstimationModel(Part):
     """Initial belief shared by all UAVs (the paper does not say how filters start)."""
 
     initial_position_std: Float = Field(
-        5.0,
+        default=5.0,
         gt=0,
         le=10_000,
         description=(
@@ -427,7 +443,7 @@ class EstimationModel(_Part):
         ),
     )
     initial_velocity_std: Float = Field(
-        1.0,
+        default=1.0,
         gt=0,
         le=100,
         description=(
@@ -441,11 +457,11 @@ Bool = Annotated[bool, Strict()]
 """A boolean field: true or false only (not 1 or "yes")."""
 
 
-class PlannerModel(_Part):
+class PlannerModel(Part):
     """Receding-horizon action search (Algorithm 1, lines 1-4)."""
 
     horizon: Int = Field(
-        3,
+        default=3,
         ge=2,
         le=10,
         description=(
@@ -455,7 +471,7 @@ class PlannerModel(_Part):
         ),
     )
     discount: Float = Field(
-        1.0,
+        default=1.0,
         gt=0,
         le=1,
         description=(
@@ -464,7 +480,7 @@ class PlannerModel(_Part):
         ),
     )
     prune: Bool = Field(
-        True,
+        default=True,
         description=(
             "true or false; beyond the paper (Algorithm 1 scores every target; the "
             "decisions are the same): score only the bids an assignment can read (a UAV in "
@@ -475,7 +491,7 @@ class PlannerModel(_Part):
         ),
     )
     wind: Bool = Field(
-        False,
+        default=False,
         description=(
             "true or false; beyond the paper: plan with the steady wind (wind.speed and "
             "wind.direction_deg, as an autopilot's wind estimate gives it): eq. (1) flown in "
@@ -485,7 +501,7 @@ class PlannerModel(_Part):
     )
 
 
-class FaultModel(_Part):
+class FaultModel(Part):
     """Faults the paper leaves open (Sec. 8); every default means "no fault".
 
     Realised per trial from its own random stream (`uavtrack.faults`), the same for
@@ -493,7 +509,7 @@ class FaultModel(_Part):
     """
 
     loss: Float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         le=1,
         description=(
@@ -503,7 +519,7 @@ class FaultModel(_Part):
         ),
     )
     burst_length: Float = Field(
-        1.0,
+        default=1.0,
         ge=1,
         le=1000,
         description=(
@@ -514,7 +530,7 @@ class FaultModel(_Part):
         ),
     )
     delay: Int = Field(
-        0,
+        default=0,
         ge=0,
         le=50,
         description=(
@@ -523,7 +539,7 @@ class FaultModel(_Part):
         ),
     )
     round_budget: Int | None = Field(
-        None,
+        default=None,
         ge=1,
         le=1000,
         description=(
@@ -532,7 +548,7 @@ class FaultModel(_Part):
         ),
     )
     failure_rate: Float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         le=1,
         description=(
@@ -541,14 +557,14 @@ class FaultModel(_Part):
         ),
     )
     failures: tuple[tuple[Annotated[Int, Field(ge=0)], Annotated[Int, Field(ge=0)]], ...] = Field(
-        (),
+        default=(),
         description=(
             "explicit failures as [uav, step] pairs [-], uav in [0, n_uavs), step in [0, "
             "steps): the UAV is down from that step on; beyond the paper; none by default"
         ),
     )
     position_std: Float = Field(
-        0.0,
+        default=0.0,
         ge=0,
         le=1000,
         description=(
@@ -577,7 +593,7 @@ class FaultModel(_Part):
 
     @field_validator("failures", mode="after")
     @classmethod
-    def _sorted(cls, value: tuple) -> tuple:
+    def _sorted(cls, value: tuple[tuple[int, int], ...]) -> tuple[tuple[int, int], ...]:
         return tuple(sorted(value))  # one order: the same failures are the same scenario
 
     @model_validator(mode="after")
@@ -593,11 +609,11 @@ class FaultModel(_Part):
         return self
 
 
-class RobustModel(_Part):
+class RobustModel(Part):
     """Mechanisms against faults, beyond the paper; off by default (the paper as printed)."""
 
     extra_rounds: Int = Field(
-        0,
+        default=0,
         ge=0,
         le=100,
         description=(
@@ -606,7 +622,7 @@ class RobustModel(_Part):
         ),
     )
     stale: Bool = Field(
-        False,
+        default=False,
         description=(
             "true or false; beyond the paper: time-stamp consensus tuples and predict stale ones "
             "forward to "
@@ -616,7 +632,7 @@ class RobustModel(_Part):
         ),
     )
     position_noise: Bool = Field(
-        False,
+        default=False,
         description=(
             "true or false; beyond the paper: each UAV adds its own position-error variance "
             "(faults.position_std^2, as its GPS reports it) to the covariance R of every "
@@ -624,7 +640,7 @@ class RobustModel(_Part):
         ),
     )
     gate: Float | None = Field(
-        None,
+        default=None,
         ge=0.9,
         lt=1,
         description=(
@@ -640,7 +656,7 @@ class RobustModel(_Part):
         ),
     )
     gate_memory: Int = Field(
-        12,
+        default=12,
         ge=0,
         le=10_000_000,
         description=(

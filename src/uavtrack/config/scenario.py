@@ -8,6 +8,7 @@ import hashlib
 import json
 import math
 import re
+from collections.abc import Iterator
 from numbers import Integral
 from pathlib import Path
 from typing import Any
@@ -28,6 +29,7 @@ from .parts import (
     Float,
     FusionModel,
     Int,
+    Part,
     PlannerModel,
     RobustModel,
     SensorModel,
@@ -35,12 +37,11 @@ from .parts import (
     TrackerModel,
     UAVModel,
     WindModel,
-    _Part,
 )
 from .toml import describe_errors, dump_toml, read_toml, set_dotted
 
 
-class Scenario(_Part):
+class Scenario(Part):
     """Every parameter of one simulated mission.
 
     Defaults are the paper's Sec. 7.1 experiment (5 UAVs, 4 targets, r_C = 50 m,
@@ -48,16 +49,19 @@ class Scenario(_Part):
     """
 
     n_uavs: Int = Field(
-        5, ge=1, le=10_000, description="number of UAVs N^u, 1 to 10000; paper Sec. 7.1"
+        default=5, ge=1, le=10_000, description="number of UAVs N^u, 1 to 10000; paper Sec. 7.1"
     )
     n_targets: Int = Field(
-        4, ge=1, le=10_000, description="number of targets N^t, 1 to 10000; paper Sec. 7.1"
+        default=4, ge=1, le=10_000, description="number of targets N^t, 1 to 10000; paper Sec. 7.1"
     )
     steps: Int = Field(
-        500, ge=1, le=10_000_000, description="simulated decision cycles, 1 to 10^7; paper Sec. 7"
+        default=500,
+        ge=1,
+        le=10_000_000,
+        description="simulated decision cycles, 1 to 10^7; paper Sec. 7",
     )
     dt: Float = Field(
-        0.5,
+        default=0.5,
         gt=0,
         le=10,
         description=(
@@ -67,13 +71,13 @@ class Scenario(_Part):
         ),
     )
     comm_range: Float = Field(
-        50.0,
+        default=50.0,
         ge=0,
         le=100_000,
         description="communication range r_C, 3-D distance [m], [0, 100000]; paper Sec. 7.1",
     )
     field_size: Float = Field(
-        200.0,
+        default=200.0,
         gt=0,
         le=100_000,
         description=(
@@ -229,7 +233,7 @@ class Scenario(_Part):
         documentation's Performance page measures with it.
         """
         for name, value in (("n_uavs", n_uavs), ("n_targets", n_targets)):
-            if not isinstance(value, Integral) or isinstance(value, bool) or value < 1:
+            if isinstance(value, bool) or not isinstance(value, Integral) or value < 1:
                 raise ScenarioError(f"{name} must be a positive integer, got {value!r}")
         heights = self.altitudes()
         band = max(heights) - min(heights)
@@ -326,7 +330,7 @@ class Scenario(_Part):
         return list(_describe(self, ""))
 
 
-def _describe(model: BaseModel, prefix: str):
+def _describe(model: BaseModel, prefix: str) -> Iterator[tuple[str, Any, str]]:
     for name, info in type(model).model_fields.items():
         value = getattr(model, name)
         if isinstance(value, BaseModel):

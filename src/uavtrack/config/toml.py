@@ -5,8 +5,9 @@ the command line, and one-line messages for pydantic's validation errors.
 from __future__ import annotations
 
 import tomllib
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeGuard
 
 from pydantic import (
     ValidationError,
@@ -28,11 +29,21 @@ def read_toml(path: str | Path) -> dict[str, Any]:
         raise ScenarioError(f"config file {path} is not valid TOML: {exc}") from None
 
 
+def _is_table(value: object) -> TypeGuard[dict[str, Any]]:
+    """Whether `value` is a table: a TOML table's keys, as a scenario's, are text."""
+    return isinstance(value, dict)
+
+
+def _is_array(value: object) -> TypeGuard[Sequence[object]]:
+    """Whether `value` is written as a TOML array (a list, or a tuple of a frozen field)."""
+    return isinstance(value, list | tuple)
+
+
 def flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
     """A nested dict as ``{"a.b": value}`` (the dotted field names of a scenario)."""
     out: dict[str, Any] = {}
     for key, value in data.items():
-        if isinstance(value, dict):
+        if _is_table(value):
             out.update(flatten(value, f"{prefix}{key}."))
         else:
             out[f"{prefix}{key}"] = value
@@ -42,9 +53,9 @@ def flatten(data: dict[str, Any], prefix: str = "") -> dict[str, Any]:
 def set_dotted(data: dict[str, Any], dotted: str, value: Any) -> None:
     """Set ``data["a"]["b"] = value`` for ``dotted = "a.b"``, refusing unknown names."""
     keys = dotted.split(".")
-    node = data
+    node: object = data
     for depth, key in enumerate(keys):
-        if not isinstance(node, dict) or key not in node:
+        if not _is_table(node) or key not in node:
             where = ".".join(keys[: depth + 1])
             raise ScenarioError(f"unknown scenario field '{where}'{_did_you_mean(dotted, data)}")
         if depth == len(keys) - 1:
@@ -81,7 +92,7 @@ _PARAMS_HINT = " (uavtrack params lists every field)"
 def describe_errors(exc: ValidationError, fields: dict[str, Any] | None = None) -> str:
     """Pydantic errors as one line: ``field: problem (got value)``, joined by '; '. An
     unknown field is given the closest of `fields` (a scenario's nested dict), if any."""
-    parts = []
+    parts: list[str] = []
     for err in exc.errors():
         loc = ".".join(str(p) for p in err["loc"])
         if err["type"] == "extra_forbidden":
@@ -113,7 +124,7 @@ def parse_value(text: str, where: str = "value") -> Any:
 
 
 def dump_toml(
-    data: dict[str, Any], docs: dict[str, str] | None = None, unset: list[str] = ()
+    data: dict[str, Any], docs: dict[str, str] | None = None, unset: Sequence[str] = ()
 ) -> str:
     """Minimal TOML writer for the scenario's shape: scalars, lists, nested tables; with
     `docs` (dotted name -> description) each key gets its description as a comment, and
@@ -122,7 +133,7 @@ def dump_toml(
 
     def entry(prefix: str, key: str, value: Any) -> list[str]:
         name = prefix + key
-        lines = []
+        lines: list[str] = []
         if docs is not None and docs.get(name):
             lines += [f"# {part}" for part in textwrap.wrap(docs[name], 86)]
         lines.append(
@@ -133,15 +144,15 @@ def dump_toml(
     def keys(table: dict[str, Any], prefix: str) -> list[str]:
         missing = {n[len(prefix) :]: _UNSET for n in unset if n.startswith(prefix)}
         missing = {k: v for k, v in missing.items() if "." not in k and k not in table}
-        out = []
+        out: list[str] = []
         for key, value in {**table, **missing}.items():
             if not isinstance(value, dict):
                 out += entry(prefix, key, value)
         return out
 
     def tables(table: dict[str, Any], prefix: str) -> list[str]:
-        out = []
-        for key, value in ((k, v) for k, v in table.items() if isinstance(v, dict)):
+        out: list[str] = []
+        for key, value in ((k, v) for k, v in table.items() if _is_table(v)):
             name = prefix + key
             out += ["", f"[{name}]", *keys(value, f"{name}."), *tables(value, f"{name}.")]
         return out
@@ -152,13 +163,13 @@ def dump_toml(
 _UNSET = object()
 
 
-def _toml_value(value: Any) -> str:
+def _toml_value(value: object) -> str:
     if isinstance(value, bool):
         return "true" if value else "false"
     if isinstance(value, int | float):
         return repr(value)
     if isinstance(value, str):
         return '"' + value.replace("\\", "\\\\").replace('"', '\\"') + '"'
-    if isinstance(value, list | tuple):
+    if _is_array(value):
         return "[" + ", ".join(_toml_value(v) for v in value) + "]"
     raise TypeError(f"cannot write {type(value).__name__} to TOML")

@@ -10,7 +10,7 @@ from __future__ import annotations
 import itertools
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any
+from typing import Any, TypedDict
 
 import matplotlib
 
@@ -18,6 +18,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
 
 from .._files import replacing  # noqa: E402
 from ..metrics import rank_names  # noqa: E402
@@ -41,7 +42,7 @@ def _num(values) -> np.ndarray:
     return np.array([np.nan if v is None else v for v in np.atleast_1d(values)], dtype=float)
 
 
-def save(fig: plt.Figure, path: Path, dpi: int = 130) -> None:
+def save(fig: Figure, path: Path, dpi: int = 130) -> None:
     """Save a figure atomically."""
     try:
         with replacing(path) as tmp:
@@ -381,7 +382,16 @@ def sweep_figure(summary: dict[str, Any], path: Path) -> None:
     save(fig, path)
 
 
-SERIES_STYLE = {
+class _Style(TypedDict, total=False):
+    """How a series is drawn: matplotlib's line properties of that name."""
+
+    color: str
+    marker: str
+    ls: str
+    label: str
+
+
+SERIES_STYLE: dict[str, _Style] = {
     "distributed": {"color": COLORS["distributed"], "marker": "o", "label": "distributed (paper)"},
     "robust": {
         "color": "#9467bd",

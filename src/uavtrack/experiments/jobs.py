@@ -17,7 +17,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
-from collections.abc import Callable, Iterable, Sequence
+from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
 
@@ -143,7 +143,7 @@ def sweep_values(base: Scenario, field: str, values: Sequence[Any]) -> list[Any]
     return sweep_axes(base, {field: values})[field]
 
 
-def sweep_axes(base: Scenario, axes: dict[str, Sequence[Any]]) -> dict[str, list[Any]]:
+def sweep_axes(base: Scenario, axes: Mapping[str, Sequence[Any]]) -> dict[str, list[Any]]:
     """The values of each swept field as the scenario holds them (10 -> 10.0 for a float
     field), validated: one field's values one by one, a grid's cell by cell (a value may
     need another field's: ``n_uavs 3 uav.altitudes "[400, 410, 420]"``), each error naming
@@ -177,7 +177,7 @@ def sweep_axes(base: Scenario, axes: dict[str, Sequence[Any]]) -> dict[str, list
     return held
 
 
-def sweep_cells(axes: dict[str, Sequence[Any]]) -> list[dict[str, Any]]:
+def sweep_cells(axes: Mapping[str, Sequence[Any]]) -> list[dict[str, Any]]:
     """Every combination of the swept values, the last field varying fastest:
     ``{"a": [1, 2], "b": [0, 5]}`` -> ``[{a: 1, b: 0}, {a: 1, b: 5}, {a: 2, b: 0}, ...]``."""
     return [dict(zip(axes, combo, strict=True)) for combo in itertools.product(*axes.values())]
@@ -191,7 +191,7 @@ def cell_text(cell: dict[str, Any], shown: Callable[[Any], str] | None = None) -
 
 def sweep_plan(
     base: Scenario,
-    axes: dict[str, Sequence[Any]],
+    axes: Mapping[str, Sequence[Any]],
     methods: Sequence[str],
     trials: int,
     chunk: int = 10,
@@ -200,9 +200,9 @@ def sweep_plan(
     """One field over several values, or a grid of several fields (every combination):
     each method on the same trials in every cell. A cell the scenario refuses (values
     that cannot go together) is refused here, before any work."""
-    axes = sweep_axes(base, axes)
+    held = sweep_axes(base, axes)
     jobs, seen = [], {}
-    for cell in sweep_cells(axes):
+    for cell in sweep_cells(held):
         for m in methods:
             jobs += trial_jobs(
                 base, cell, m, trials, chunk, seed, origin=f"sweep cell {cell_text(cell)}"
@@ -242,7 +242,7 @@ def collect(jobs: Sequence[Job], results: dict[str, dict[str, Any]]) -> dict[tup
 def summarize_sweep(
     plan: dict[str, list[Job]],
     results: dict[str, dict],
-    axes: dict[str, Sequence[Any]],
+    axes: Mapping[str, Sequence[Any]],
     methods: Sequence[str],
 ) -> dict[str, Any]:
     """summary.json of a sweep: per cell (a combination of the swept values, in

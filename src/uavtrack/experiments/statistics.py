@@ -96,9 +96,13 @@ def summarize(metrics: dict[str, np.ndarray]) -> dict[str, object]:
     out: dict[str, object] = {"trials": int(len(metrics["observation_rate"]))}
     for name, values in metrics.items():
         mean, std = mean_std(values)
-        out[name] = {"mean": np.asarray(mean).tolist(), "std": np.asarray(std).tolist()}
+        entry: dict[str, object] = {
+            "mean": np.asarray(mean).tolist(),
+            "std": np.asarray(std).tolist(),
+        }
         if name in ("decision_time_ms", "decision_wall_ms"):
-            out[name]["trials"] = int(np.sum(~np.isnan(np.asarray(values, dtype=float))))
+            entry["trials"] = int(np.sum(~np.isnan(np.asarray(values, dtype=float))))
+        out[name] = entry
     return out
 
 

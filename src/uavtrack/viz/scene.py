@@ -16,7 +16,9 @@ import matplotlib.pyplot as plt  # noqa: E402
 import matplotlib.ticker  # noqa: E402
 import numpy as np  # noqa: E402
 from matplotlib import patheffects  # noqa: E402
-from matplotlib.patches import Circle, Ellipse  # noqa: E402
+from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: E402
+from matplotlib.figure import Figure  # noqa: E402
+from matplotlib.patches import Circle, Ellipse, Rectangle  # noqa: E402
 
 from .._files import replacing  # noqa: E402
 
@@ -50,20 +52,20 @@ def _scene(trace, scenario, title: str):
     ax.set_xlabel("x [m]")
     ax.set_ylabel("y [m]")
     ax.add_patch(
-        plt.Rectangle(
+        Rectangle(
             (0, 0), scenario.field_size, scenario.field_size, fill=False, ls=":", color="gray"
         )
     )
-    disks = [
-        ax.add_patch(Circle((0, 0), radius[i], color=colors[i], alpha=0.12)) for i in range(nu)
-    ]
-    links = ax.add_collection(
-        LineCollection([], colors="dimgray", linestyles="--", linewidths=1.0, zorder=1)
-    )
+    disks = [Circle((0, 0), radius[i], color=colors[i], alpha=0.12) for i in range(nu)]
+    for disk in disks:
+        ax.add_patch(disk)
+    links = LineCollection([], colors="dimgray", linestyles="--", linewidths=1.0, zorder=1)
+    ax.add_collection(links)
     ellipses = [
-        ax.add_patch(Ellipse((0, 0), 0, 0, fill=False, ls="--", color="black", lw=0.8))
-        for _ in range(nt)
+        Ellipse((0, 0), 0, 0, fill=False, ls="--", color="black", lw=0.8) for _ in range(nt)
     ]
+    for ellipse in ellipses:
+        ax.add_patch(ellipse)
     targets = ax.scatter(np.zeros(nt), np.zeros(nt), c="black", s=30, zorder=4)
     names = [
         ax.annotate(
@@ -183,17 +185,24 @@ def frame(trace, scenario, k: int, title: str = "") -> np.ndarray:
     try:
         draw(k)
         fig.set_dpi(100)
-        fig.canvas.draw()
-        return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+        return _rgb(fig)
     finally:
         plt.close(fig)
 
 
-def _drawn(fig, draw, k: int) -> np.ndarray:
+def _drawn(fig: Figure, draw: Callable[[int], None], k: int) -> np.ndarray:
     """Step k drawn into the figure, as an RGB array (H, W, 3)."""
     draw(k)
-    fig.canvas.draw()
-    return np.asarray(fig.canvas.buffer_rgba())[..., :3].copy()
+    return _rgb(fig)
+
+
+def _rgb(fig: Figure) -> np.ndarray:
+    """The figure rendered, as an RGB array (H, W, 3)."""
+    canvas = fig.canvas
+    # Agg, chosen above, or an interactive backend built on it: the canvases with pixels
+    assert isinstance(canvas, FigureCanvasAgg)
+    canvas.draw()
+    return np.asarray(canvas.buffer_rgba())[..., :3].copy()
 
 
 def write_gif(out, frames, fps: int, progress: Callable[[int], None] | None = None) -> int:
@@ -210,8 +219,8 @@ def write_gif(out, frames, fps: int, progress: Callable[[int], None] | None = No
         if count == 0:
             header, _ = GifImagePlugin.getheader(indexed, info={"loop": 0})
             out.write(b"".join(header))
-        local = {"include_color_table": True} if count else {}
-        for chunk in GifImagePlugin.getdata(indexed, duration=duration, **local):
+        chunks = GifImagePlugin.getdata(indexed, duration=duration, include_color_table=count > 0)
+        for chunk in chunks:
             out.write(chunk)
         count += 1
         if progress is not None:
