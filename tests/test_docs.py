@@ -50,6 +50,7 @@ def site(tmp_path_factory):
     return out
 
 
+@pytest.mark.integration
 def test_the_site_builds_strictly_with_its_generated_pages(site):
     fields = (site / "reference" / "scenario" / "index.html").read_text()
     import uavtrack
@@ -64,6 +65,7 @@ def test_the_site_builds_strictly_with_its_generated_pages(site):
     assert (site / "search" / "search_index.json").stat().st_size > 10_000
 
 
+@pytest.mark.integration
 def test_a_broken_link_fails_the_build(tmp_path):
     pytest.importorskip("mkdocs")
     import shutil
@@ -123,6 +125,7 @@ def docs_module(name: str):
         sys.path.remove(str(DOCS))
 
 
+@pytest.mark.integration
 def test_a_browser_draws_the_main_pages(site, tmp_path):
     screenshot = docs_module("screenshot")
     if screenshot.chromium() is None:
@@ -137,6 +140,7 @@ def test_a_browser_draws_the_main_pages(site, tmp_path):
         assert colours is not None and len(colours) > 50, shot  # text, figure, navigation
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "page",
     ["getting-started/index.html", "tutorials/sweep/index.html", "reference/cli/index.html",
