@@ -474,7 +474,7 @@ def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_t
     MemoryTransport(bus).announce(f"uavtrack/{run}/alive/4")
     link = MemoryTransport(bus)
     link.announce(f"uavtrack/{run}/alive/world")
-    world = WorldProgram(scenario, "distributed", 0, link, run, startup=10.0, keyring=ring)
+    world = WorldProgram(scenario, "distributed", 0, link, run, startup=3.0, keyring=ring)
     ended = []
 
     def program(me):
@@ -491,6 +491,6 @@ def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_t
         for thread in threads:
             thread.join(60)
     assert str(refused.value) == (
-        "program 4 did not start within 10 s; 0, 1, 2, 3 started and waited for them"
+        "program 4 did not start within 3 s; 0, 1, 2, 3 started and waited for them"
     )
     assert ended == ["world gone"] * 4
