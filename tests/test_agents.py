@@ -97,6 +97,7 @@ def zenoh_or_skip():
     pytest.importorskip("zenoh")
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "method,faults",
     [
@@ -117,6 +118,7 @@ def test_zenoh_swarm_of_processes_equals_run(method, faults):
     assert swarm.traffic.dropped == 0
 
 
+@pytest.mark.integration
 def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():
     zenoh_or_skip()
     scenario = uavtrack.Scenario(steps=5)
@@ -134,6 +136,7 @@ def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():
     assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "greedy", seed=1).trace)
 
 
+@pytest.mark.integration
 def test_two_swarms_at_once_do_not_hear_each_other():
     zenoh_or_skip()
     scenarios = [uavtrack.Scenario(steps=12), uavtrack.Scenario(steps=12, comm_range=80.0)]
@@ -343,8 +346,16 @@ def test_uavtrack_agent_bad_input_is_one_line(capsys, args, message):
         (["--transport", "pigeon"], "'pigeon' is not one of"),
         (["--listen", "tcp/127.0.0.1:7447"], "need --transport zenoh"),
         (["--tls-ca", "x.pem"], "need --transport zenoh"),
-        (["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"], "cannot connect to tcp/"),
-        (["--transport", "zenoh", "--listen", "tcp/no-such-host:x"], "cannot listen on"),
+        pytest.param(
+            ["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"],
+            "cannot connect to tcp/",
+            marks=pytest.mark.integration,
+        ),
+        pytest.param(
+            ["--transport", "zenoh", "--listen", "tcp/no-such-host:x"],
+            "cannot listen on",
+            marks=pytest.mark.integration,
+        ),
         (["--transport", "zenoh", "--listen", ""], "--listen is empty"),
         (["--transport", "zenoh", "--listen", "tls/127.0.0.1:0"], "a tls/ endpoint needs"),
         (["--transport", "zenoh", "--tls-ca", "__file__"], "needs all three of --tls-ca"),
@@ -365,6 +376,7 @@ def test_swarm_bad_input_is_one_line(capsys, tmp_path, args, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
+@pytest.mark.integration
 def test_swarm_port_in_use_is_refused(capsys):
     zenoh_or_skip()
     import socket
@@ -386,6 +398,7 @@ def test_swarm_port_in_use_is_refused(capsys):
     assert code == 2 and "Address already in use" in err
 
 
+@pytest.mark.integration
 def test_zenoh_logs_never_reach_the_json_on_stdout():
     zenoh_or_skip()
     # with RUST_LOG=debug, Zenoh logs every connection on file descriptor 1
@@ -402,6 +415,7 @@ def test_zenoh_logs_never_reach_the_json_on_stdout():
     assert "zenoh" in out.stderr.lower()  # the log went to stderr, where logs belong
 
 
+@pytest.mark.integration
 def test_ctrl_c_stops_every_program(tmp_path):
     zenoh_or_skip()
     proc = subprocess.Popen(
@@ -428,6 +442,7 @@ def test_ctrl_c_stops_every_program(tmp_path):
     assert wait_until(lambda: not any(alive(p) for p in programs), limit=30)
 
 
+@pytest.mark.integration
 def test_a_swarm_killed_while_starting_takes_its_programs_with_it():
     zenoh_or_skip()
     proc = subprocess.Popen(
@@ -469,7 +484,7 @@ def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_t
     MemoryTransport(bus).announce(f"uavtrack/{run}/alive/4")
     link = MemoryTransport(bus)
     link.announce(f"uavtrack/{run}/alive/world")
-    world = WorldProgram(scenario, "distributed", 0, link, run, startup=10.0, keyring=ring)
+    world = WorldProgram(scenario, "distributed", 0, link, run, startup=3.0, keyring=ring)
     ended = []
 
     def program(me):
@@ -486,6 +501,6 @@ def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_t
         for thread in threads:
             thread.join(60)
     assert str(refused.value) == (
-        "program 4 did not start within 10 s; 0, 1, 2, 3 started and waited for them"
+        "program 4 did not start within 3 s; 0, 1, 2, 3 started and waited for them"
     )
     assert ended == ["world gone"] * 4

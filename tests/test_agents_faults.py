@@ -24,6 +24,8 @@ from .processes import alive, children_of, wait_until
 
 pytest.importorskip("zenoh")
 
+pytestmark = pytest.mark.integration  # swarms of programs over Zenoh
+
 
 def program_pids():
     """This process's spawned programs by number (from their command lines)."""

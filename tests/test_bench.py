@@ -78,6 +78,7 @@ def test_mid_run_state_is_the_runs_state():
     assert np.array_equal(state.target[0], trace.assignment[4])
 
 
+@pytest.mark.integration
 def test_run_case_reports_its_memory_peak_beside_the_estimate():
     row = bench.run_case(12, 12, steps=5)
     assert row["unit"] == "step" and row["steps"] == 5

@@ -12,6 +12,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.integration  # the benchmark scripts run as commands
+
 ROOT = Path(__file__).resolve().parents[1]
 
 

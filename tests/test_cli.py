@@ -150,6 +150,7 @@ def test_params_lists_every_field(capsys, tmp_path):
     assert again == uavtrack.Scenario().with_overrides({"comm_range": 60.0})
 
 
+@pytest.mark.integration
 def test_console_script_exit_code():
     proc = subprocess.run(
         [sys.executable, "-m", "uavtrack.cli", "run", "--set", "planner.horizon=0"],
@@ -354,6 +355,7 @@ def handles(pid: int, signum: int, limit: float = 300.0) -> bool:
     return False
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "sent,code,word", [(signal.SIGINT, 130, "interrupted"), (signal.SIGTERM, 143, "terminated")]
 )
@@ -373,6 +375,7 @@ def test_ctrl_c_or_sigterm_on_run_says_so(tmp_path, sent, code, word):
     assert not any(tmp_path.iterdir())
 
 
+@pytest.mark.integration
 def test_stdout_to_a_full_device_fails_in_one_line():
     with open("/dev/full", "w") as full:
         proc = subprocess.run(
@@ -384,6 +387,7 @@ def test_stdout_to_a_full_device_fails_in_one_line():
     )
 
 
+@pytest.mark.integration
 def test_progress_bar_on_a_terminal(tmp_path):
     leader, follower = pty.openpty()
     proc = subprocess.run(

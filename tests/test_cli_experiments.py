@@ -30,6 +30,7 @@ def quick(tmp_path_factory):
     return out
 
 
+@pytest.mark.integration
 def test_reproduce_quick_writes_everything(quick):
     summary = json.loads((quick / "summary.json").read_text())
     assert set(summary) >= {"compare", "comm_range", "fov", "timing", "paired"}
@@ -57,6 +58,7 @@ def test_reproduce_quick_writes_everything(quick):
     assert "σ over (trial, step)" in report
 
 
+@pytest.mark.integration
 def test_reproduce_again_reuses_every_job(quick, capsys):
     before = (quick / "summary.json").read_text()
     code, out, _ = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--no-progress")
@@ -68,6 +70,7 @@ def test_reproduce_again_reuses_every_job(quick, capsys):
     )
 
 
+@pytest.mark.integration
 def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
     from uavtrack.experiments.reproduce import SENSITIVITY
 
@@ -104,6 +107,7 @@ def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
     assert not (quick / "sensitivity.png").exists()  # no chart left that the report lacks
 
 
+@pytest.mark.integration
 def test_a_base_value_equal_to_a_planned_one_is_reported(tmp_path, capsys):
     # dt = 1.0 is the first guess's, field_size = 300 a sensitivity value: their runs are
     # the default's, and the report says so rather than failing
@@ -120,6 +124,7 @@ def test_a_base_value_equal_to_a_planned_one_is_reported(tmp_path, capsys):
     assert high["value"] == 300 and high["rates"] == summary["sensitivity"]["base"]["rates"]
 
 
+@pytest.mark.integration
 def test_reproduce_refuses_a_different_scenario(quick, capsys):
     code, _, err = run_cli(capsys, "reproduce", "--quick", "--out", str(quick), "--set", "dt=1.0")
     assert code == 2 and "different scenario (dt 0.5, now 1.0)" in err
@@ -216,6 +221,7 @@ def test_a_grid_is_refused_before_any_work(tmp_path, capsys, tokens, message):
     assert code == 2 and message in err and err.count("\n") == 1 and not out.exists()
 
 
+@pytest.mark.integration
 def test_a_wrong_sweep_is_refused_before_the_experiment_modules_load():
     code = (
         "import sys\n"
@@ -353,6 +359,7 @@ def test_sweep_refuses_repeated_values_before_any_work(tmp_path, capsys, values,
     assert code == 2 and message in err and not out.exists()
 
 
+@pytest.mark.integration
 def test_one_trial_writes_valid_json_with_nulls(tmp_path, capsys):
     out = tmp_path / "one"
     code, _, err = run_cli(
@@ -433,6 +440,7 @@ def test_a_job_with_non_finite_results_fails_instead_of_being_saved(tmp_path, ca
     assert "metric observation_rate is not finite" in record["error"]
 
 
+@pytest.mark.integration
 def test_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
     pytest.importorskip("dask.distributed")
     code, _, err = run_cli(
@@ -442,6 +450,7 @@ def test_unreachable_dask_scheduler_is_one_line(tmp_path, capsys):
     assert "--address tcp://127.0.0.1:9: no Dask scheduler answers there" in err
 
 
+@pytest.mark.integration
 def test_workers_are_capped_at_the_cores(tmp_path, capsys):
     code, _, err = run_cli(capsys, *tiny_sweep(tmp_path / "s", "--workers", "1000"))
     assert code == 0 and "--workers 1000 capped at" in err
@@ -449,6 +458,7 @@ def test_workers_are_capped_at_the_cores(tmp_path, capsys):
     assert summary["settings"]["workers"] <= os.cpu_count()
 
 
+@pytest.mark.integration
 def test_workers_exit_with_a_killed_parent(tmp_path):
     proc = subprocess.Popen(
         [
@@ -484,6 +494,7 @@ def test_workers_exit_with_a_killed_parent(tmp_path):
     assert not any(alive(w) for w in workers)
 
 
+@pytest.mark.integration
 def test_reproduce_applies_set_steps(tmp_path, capsys):
     out = tmp_path / "r"
     code, _, err = run_cli(
@@ -538,6 +549,7 @@ def test_sweep_of_negative_values_and_messages_name_the_sweep(tmp_path, capsys):
     assert code == 2 and "put options before '--'" in err
 
 
+@pytest.mark.integration
 def test_robustness_writes_a_figure_per_fault_and_a_report(tmp_path, capsys):
     out = tmp_path / "r"
     code, stdout, err = run_cli(

@@ -50,6 +50,7 @@ def site(tmp_path_factory):
     return out
 
 
+@pytest.mark.integration
 def test_the_site_builds_strictly_with_its_generated_pages(site):
     fields = (site / "reference" / "scenario" / "index.html").read_text()
     import uavtrack
@@ -75,6 +76,7 @@ def api_blocks(page: str):
     return re.findall(r"^::: (\S+)\n((?:    .*\n)*)", source, flags=re.M)
 
 
+@pytest.mark.integration  # the site is built by mkdocs, a process
 @pytest.mark.parametrize("page", API_PAGES)
 def test_every_object_an_api_page_names_renders_with_its_docstring(site, page):
     # mkdocstrings renders nothing, silently, for a member a `members:` list misspells
@@ -158,6 +160,7 @@ def test_equations_cited_in_table_are_those_their_objects_docstrings_cite():
     assert rows >= 20
 
 
+@pytest.mark.integration
 def test_a_broken_link_fails_the_build(tmp_path):
     pytest.importorskip("mkdocs")
     import shutil
@@ -231,6 +234,7 @@ def docs_module(name: str):
         sys.path.remove(str(DOCS))
 
 
+@pytest.mark.integration
 def test_a_browser_draws_the_main_pages(site, tmp_path):
     screenshot = docs_module("screenshot")
     if screenshot.chromium() is None:
@@ -245,6 +249,7 @@ def test_a_browser_draws_the_main_pages(site, tmp_path):
         assert colours is not None and len(colours) > 50, shot  # text, figure, navigation
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "page",
     ["getting-started/index.html", "tutorials/sweep/index.html", "reference/cli/index.html",

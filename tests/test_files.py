@@ -78,6 +78,7 @@ def on_a_small_disk(folder, limit: int, *args, timeout: float = 300):
     return subprocess.run(command, cwd=folder, capture_output=True, text=True, timeout=timeout)
 
 
+@pytest.mark.integration
 def test_bytes_on_a_full_disk_fail_naming_the_file_and_leave_nothing(tmp_path):
     code = "from uavtrack import _files; _files.write_bytes('out.bin', bytes(100_000))"
     proc = on_a_small_disk(tmp_path, 40_000, "-c", code)

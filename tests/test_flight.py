@@ -42,6 +42,7 @@ def fly(scenario, aircraft, bank, seconds):
     return np.array(out)
 
 
+@pytest.mark.integration
 def test_trackwing_trims_at_the_scenario_speed_and_holds_it():
     alpha, elevator, throttle, theta = flight.trim(
         flight.model_path("trackwing"), 425.0, 15.0, 1 / 120
@@ -60,6 +61,7 @@ def test_trackwing_trims_at_the_scenario_speed_and_holds_it():
     assert abs(aircraft.bank()[0, 0]) < 1e-3
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("bank_deg", [45.0, -45.0, 30.0])
 def test_a_steady_coordinated_turn_turns_at_g_tan_phi_over_v(bank_deg):
     scenario, aircraft = fleet({"uav.bank_angle_deg": abs(bank_deg)})
@@ -76,6 +78,7 @@ def test_a_steady_coordinated_turn_turns_at_g_tan_phi_over_v(bank_deg):
     assert abs(aircraft.read("aero/beta-deg")[0, 0]) < 1.0  # coordinated: no sideslip
 
 
+@pytest.mark.integration
 def test_the_bank_is_reached_within_half_a_cycle_or_so():
     # the roll response from level to 45 deg: 63% of the step within 0.35 s, 95% within
     # 0.8 s (the documented roll times come from `uavtrack flight`, which measures them)
@@ -92,6 +95,7 @@ def test_the_bank_is_reached_within_half_a_cycle_or_so():
     assert bank.max() < 48  # no large overshoot
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize(
     "course, ground_speed",
     [(0.0, 20.0), (math.pi, 10.0), (math.pi / 2, math.sqrt(15**2 - 5**2))],
@@ -111,6 +115,7 @@ def test_the_wind_adds_to_the_airspeed_over_the_ground(course, ground_speed):
         assert crab == pytest.approx(math.asin(5 / 15), abs=0.02)
 
 
+@pytest.mark.integration
 def test_turbulence_is_seeded_by_the_trial_and_differs_between_uavs():
     scenario = Scenario(steps=20).with_overrides({**JSBSIM, "wind.turbulence": "moderate"})
     a = uavtrack.simulate(scenario, "distributed", seed=4)
@@ -123,6 +128,7 @@ def test_turbulence_is_seeded_by_the_trial_and_differs_between_uavs():
     assert not np.allclose(speeds[:, 0] - speeds[0, 0], speeds[:, 1] - speeds[0, 1])
 
 
+@pytest.mark.integration
 def test_a_trial_is_the_same_alone_and_in_a_batch():
     scenario = Scenario(steps=15).with_overrides({**JSBSIM, "wind.turbulence": "light"})
     seeds = [uavtrack.trial_seed(7, t) for t in range(2)]
@@ -145,6 +151,7 @@ def test_the_default_unicycle_flies_the_paper_model():
     assert np.array_equal(flown[~alive], state.uavs[~alive])  # a failed UAV stays down
 
 
+@pytest.mark.integration
 def test_jsbsim_flies_the_method_close_to_the_unicycle():
     # the same trial, the same decisions at first: the aircraft follows the unicycle's
     # path to within metres over the first cycles, and the team still tracks
@@ -157,6 +164,7 @@ def test_jsbsim_flies_the_method_close_to_the_unicycle():
     assert real.observation_rate > 0.4
 
 
+@pytest.mark.integration
 def test_jsbsim_writes_no_files(tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
     scenario = Scenario(steps=3).with_overrides(JSBSIM)
@@ -164,6 +172,7 @@ def test_jsbsim_writes_no_files(tmp_path, monkeypatch):
     assert os.listdir(tmp_path) == []
 
 
+@pytest.mark.integration
 def test_the_environment_flies_jsbsim_as_the_simulator_does():
     pytest.importorskip("pettingzoo")
     from uavtrack.env import parallel_env
@@ -176,6 +185,7 @@ def test_the_environment_flies_jsbsim_as_the_simulator_does():
     assert_same_trace(env.result().trace, uavtrack.simulate(scenario, seed=2).trace)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("method", ["distributed", "centralized"])
 def test_the_agent_form_flies_jsbsim_as_the_batch_does(method):
     pytest.importorskip("msgspec")
@@ -199,9 +209,15 @@ def test_the_agent_form_flies_jsbsim_as_the_batch_does(method):
         ({**JSBSIM, "wind.turbulence": "gale"}, "wind.turbulence: Input should be 'none'"),
         ({"uav.dynamics": "6dof"}, "uav.dynamics: Input should be 'unicycle' or 'jsbsim'"),
         ({**JSBSIM, "uav.aircraft": "nosuch"}, "uav.aircraft 'nosuch' is neither"),
-        ({**JSBSIM, "uav.aircraft": "c172x"}, "has no uavtrack autopilot"),
+        pytest.param(
+            {**JSBSIM, "uav.aircraft": "c172x"},
+            "has no uavtrack autopilot",
+            marks=pytest.mark.integration,
+        ),
         ({**JSBSIM, "uav.jsbsim_rate_hz": 10.0}, "uav.jsbsim_rate_hz: Input should be greater"),
-        ({**JSBSIM, "uav.speed": 4.0}, "cannot fly level at 4 m/s"),
+        pytest.param(
+            {**JSBSIM, "uav.speed": 4.0}, "cannot fly level at 4 m/s", marks=pytest.mark.integration
+        ),
         ({**JSBSIM, "wind.speed": 15.0}, "wind.speed 15 m/s must be below uav.speed 15 m/s"),
     ],
 )
@@ -236,6 +252,7 @@ def run_cli(capsys, *args):
     return code, out, err
 
 
+@pytest.mark.integration
 def test_run_flies_jsbsim_with_one_setting(capsys):
     import json
 
@@ -252,7 +269,11 @@ def test_run_flies_jsbsim_with_one_setting(capsys):
     "args, message",
     [
         (("run", "--set", "wind.speed=5"), "wind needs uav.dynamics = jsbsim"),
-        (("run", "--set", "uav.dynamics=jsbsim", "--set", "uav.aircraft=c172x"), "autopilot"),
+        pytest.param(
+            ("run", "--set", "uav.dynamics=jsbsim", "--set", "uav.aircraft=c172x"),
+            "autopilot",
+            marks=pytest.mark.integration,
+        ),
         (("compare", "--set", "uav.dynamics=jsbsim", "--set", "wind.turbulence=2"), "turbulence"),
         (("flight", "--quick", "--set", "uav.dynamics=jsbsim"), "flight sets uav.dynamics"),
         (("flight", "--quick", "--set", "planner.wind=true"), "do not set planner.wind"),
@@ -269,6 +290,7 @@ def test_bad_flight_input_on_the_command_line_is_one_line(capsys, tmp_path, args
     assert not (tmp_path / "f").exists()
 
 
+@pytest.mark.integration
 def test_flight_writes_its_report_and_figure(tmp_path, capsys):
     import json
 
@@ -295,6 +317,7 @@ def test_flight_writes_its_report_and_figure(tmp_path, capsys):
         assert im.size[0] > 1000
 
 
+@pytest.mark.integration
 def test_a_users_own_aircraft_folder_flies(tmp_path):
     import shutil
 
@@ -313,6 +336,7 @@ def test_a_users_own_aircraft_folder_flies(tmp_path):
     assert uavtrack.simulate(scenario, seed=0).trace.uavs.shape == (6, 5, 5)
 
 
+@pytest.mark.integration
 def test_the_wind_aware_planner_changes_nothing_without_wind():
     scenario = Scenario(steps=15)
     aware = scenario.with_overrides({"planner.wind": True})
@@ -362,6 +386,7 @@ def test_an_aircraft_file_declaring_an_entity_is_refused_in_one_line(capsys, tmp
     assert "not part of any model" not in out + err
 
 
+@pytest.mark.integration
 def test_a_model_jsbsim_cannot_parse_is_refused_in_one_line(tmp_path, monkeypatch):
     # past uavtrack's own reading of the XML, JSBSim's parse error is one line too
     folder, _ = entity_folder(tmp_path, "autopilot")

@@ -312,7 +312,7 @@ def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, ho
         send(self, k, parts, to)
 
     monkeypatch.setattr(agent.AgentRadio, "send", faulty)
-    scenario = uavtrack.Scenario(steps=4)  # a refused message costs its receivers a deadline
+    scenario = uavtrack.Scenario(steps=2)  # a refused message costs its receivers a deadline
     swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.2)
     assert swarm.traffic.lost == {}
     assert swarm.traffic.drops.get(ATTACKS[how], 0) > 0, swarm.traffic.drops
@@ -512,7 +512,7 @@ def test_what_a_member_sends_beyond_the_rule_is_counted_in_the_swarm_json(monkey
         send(self, k, parts, to)
 
     monkeypatch.setattr(agent.AgentRadio, "send", zero_covariance)
-    args = ["swarm", "--transport", "memory", "--steps", "4", "--deadline", "0.3", "--json"]
+    args = ["swarm", "--transport", "memory", "--steps", "2", "--deadline", "0.3", "--json"]
     assert cli.main(args) == 0
     swarm = json.loads(capsys.readouterr().out)["swarm"]
     assert swarm["dropped_by_reason"]["covariance not positive definite"] > 0

@@ -202,6 +202,7 @@ def test_the_defaults_are_the_papers_tracker():
     assert np.array_equal(imm.mean, state.mean) and np.allclose(imm.cov, state.cov)
 
 
+@pytest.mark.integration
 def test_uavtrack_trackers_writes_its_table_and_figure(tmp_path, capsys):
     import json
 

@@ -297,6 +297,7 @@ SWEEP = ("sweep", "planner.horizon", 2, "--trials", 1, "--set", "steps=5", "--no
          "--workers", 1)  # fmt: skip
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("out", ["run.nc", "tables"])
 def test_a_full_disk_during_export_is_one_line_and_leaves_nothing(tmp_path, saved, out):
     folder = tmp_path / "small"

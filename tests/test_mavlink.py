@@ -203,6 +203,7 @@ def fly_banks(vehicle, frame, dt, start, banks):
         assert uavs[0, 0, 4] == pytest.approx(expected[4], abs=1e-3)
 
 
+@pytest.mark.integration
 def test_the_pilot_flies_a_vehicle_over_mavlink_as_the_unicycle_would():
     frame, dt = LocalFrame(47.4, 8.5), 0.5
     start = np.array([100.0, 50.0, 425.0, 15.0, 0.3])
@@ -216,6 +217,7 @@ def test_the_pilot_flies_a_vehicle_over_mavlink_as_the_unicycle_would():
         assert all(in_mode for in_mode, _ in vehicle_side.flown)
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("dt", [0.5, 1.0])
 def test_px4_takes_offboard_and_keeps_it_through_the_run(dt):
     frame = LocalFrame(47.4, 8.5)
@@ -237,6 +239,7 @@ def test_px4_takes_offboard_and_keeps_it_through_the_run(dt):
         assert vehicle_side.mode == HOLD and not vehicle.stream.is_alive()
 
 
+@pytest.mark.integration
 def test_px4_refusing_offboard_fails_the_connection_in_one_line():
     frame, start = LocalFrame(), np.array([0.0, 0.0, 425.0, 15.0, 0.0])
     # a vehicle wanting a longer stream than the vehicle's lead-in gives it
@@ -249,6 +252,7 @@ def test_px4_refusing_offboard_fails_the_connection_in_one_line():
         assert not vehicle.stream.is_alive()  # the failed connection stopped its stream
 
 
+@pytest.mark.integration
 def test_a_silent_vehicle_fails_the_cycle_after_its_deadline():
     vehicle = Vehicle(f"udpout:127.0.0.1:{free_udp_port()}")
     try:

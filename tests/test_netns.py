@@ -61,6 +61,7 @@ def reach(network, host: int, port: int = 9000) -> bool:
                            probe], timeout=60).returncode == 0  # fmt: skip
 
 
+@pytest.mark.integration
 def test_the_harness_joins_the_hosts_and_cuts_them_silently(network):
     listen = (
         "import socket\n"
@@ -97,6 +98,7 @@ def test_without_root_or_iproute2_the_harness_says_why(monkeypatch):
     assert netns.unavailable() == "the ip command (iproute2) is not installed"
 
 
+@pytest.mark.integration
 def test_namespaces_left_by_a_killed_harness_are_swept(network):
     dead = subprocess.Popen([sys.executable, "-c", ""])
     dead.wait()  # a pid no process holds now
@@ -169,6 +171,7 @@ def all_ran(programs, steps: int) -> None:
         assert code == 0 and f"ran {steps} of {steps} cycles" in said, (i, code, said)
 
 
+@pytest.mark.integration
 def test_a_swarm_across_hosts_equals_the_simulator(network, tmp_path):
     steps = 20
     result, trace, programs, _ = across(network, tmp_path, steps, realtime=False)
@@ -214,6 +217,7 @@ def check_cut(result, trace, programs, steps, at):
     return lost
 
 
+@pytest.mark.integration
 def test_one_uav_cut_for_5_s_stays_a_member_and_the_run_ends(network, tmp_path):
     steps = 20
     act = cut_for([host(1)])
@@ -221,6 +225,7 @@ def test_one_uav_cut_for_5_s_stays_a_member_and_the_run_ends(network, tmp_path):
     check_cut(result, trace, programs, steps, act.begun)
 
 
+@pytest.mark.integration
 def test_the_world_cut_from_half_the_swarm_for_5_s_loses_nobody(network, tmp_path):
     steps = 20
     act = cut_for([host(1), host(2)], between=0)  # the world's host from UAVs 1 and 2
@@ -228,6 +233,7 @@ def test_the_world_cut_from_half_the_swarm_for_5_s_loses_nobody(network, tmp_pat
     check_cut(result, trace, programs, steps, act.begun)
 
 
+@pytest.mark.integration
 def test_a_link_flapping_every_second_loses_nobody_silently(network, tmp_path):
     # ten flaps (10 s) mid-run: on an idle machine nobody is lost; on a loaded one TCP's
     # backed-off retransmissions can keep the flapping host silent past the lease, and the
@@ -269,6 +275,7 @@ def lease() -> float:
 
 
 @pytest.mark.slow
+@pytest.mark.integration
 def test_a_uav_cut_past_the_lease_is_lost_from_that_cycle_and_stays_out(network, tmp_path):
     # long enough that the world runs on after the cut is restored: the program comes
     # back to a run that no longer counts it, and ends when the world does
@@ -299,6 +306,7 @@ def partitions(*args: str, cwd=None) -> subprocess.CompletedProcess:
     )  # fmt: skip
 
 
+@pytest.mark.integration
 def test_the_partitions_benchmark_refuses_a_bad_out_before_any_run(tmp_path):
     (tmp_path / "taken").mkdir()
     done = partitions("--out", str(tmp_path / "taken"))
@@ -307,6 +315,7 @@ def test_the_partitions_benchmark_refuses_a_bad_out_before_any_run(tmp_path):
 
 
 @pytest.mark.slow
+@pytest.mark.integration
 def test_the_partitions_benchmark_measures_every_case(network, tmp_path):
     out = tmp_path / "partitions.json"
     done = partitions("--seeds", "1", "--steps", "30", "--out", str(out))

@@ -8,6 +8,8 @@ from pathlib import Path
 
 import pytest
 
+pytestmark = pytest.mark.integration  # plugins installed with pip, used by commands
+
 EXAMPLE = Path(__file__).parents[1] / "examples" / "custom_method.py"
 
 PYPROJECT = """\

@@ -121,6 +121,7 @@ def stamp_of(message) -> int:
     return message.header.stamp.sec * 10**9 + message.header.stamp.nanosec
 
 
+@pytest.mark.integration
 def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics(live):
     import zenoh.ext as ze
 
@@ -167,6 +168,7 @@ def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics(live):
     assert len(set(ids)) == len(ids)
 
 
+@pytest.mark.integration
 def test_the_world_publishes_the_simulated_clock(live):
     """/clock (use_sim_time's clock) reads k dt at step k, in order, each step once, each
     before the UAVs' samples stamped with it: the stamps' clock."""
@@ -183,6 +185,7 @@ def test_the_world_publishes_the_simulated_clock(live):
         assert clocks[k][0] < at
 
 
+@pytest.mark.integration
 def test_tf_carries_each_uavs_pose(live):
     """Each UAV's /tf message is map -> uav_i at its pose, stamped like the pose."""
     _, events, _, _ = live
@@ -204,6 +207,7 @@ def test_tf_carries_each_uavs_pose(live):
     assert not poses and frames == 4 * STEPS + FAILS_AT
 
 
+@pytest.mark.integration
 def test_the_live_roll_banks_the_way_the_uav_turns_in_rep103(live):
     """A positive roll (REP-103: right wing down) on every step whose heading then
     decreases (a right turn in east-north-up), a negative one where it increases; yaw
@@ -227,6 +231,7 @@ def test_the_live_roll_banks_the_way_the_uav_turns_in_rep103(live):
     assert turning > 5
 
 
+@pytest.mark.integration
 def test_a_failed_uavs_node_leaves_the_ros2_graph_when_it_fails(live):
     """UAV 1 fails at step 3: its node and publisher tokens are dropped while the others
     still fly (before UAV 0's pose of the last step, eight paced cycles later), not when

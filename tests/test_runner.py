@@ -100,6 +100,7 @@ def collect(store, jobs):
     return {j.key: without_timing(store.load(j)) for j in jobs}
 
 
+@pytest.mark.integration
 def test_same_results_with_any_number_of_workers(tmp_path):
     jobs = small_jobs()
     one = runner.Store(tmp_path / "one", manifest())
@@ -109,6 +110,7 @@ def test_same_results_with_any_number_of_workers(tmp_path):
     assert collect(one, jobs) == collect(two, jobs)
 
 
+@pytest.mark.integration
 def test_dask_local_cluster_gives_the_local_results(tmp_path):
     pytest.importorskip("dask.distributed")
     jobs = small_jobs(trials=2, chunk=1)
@@ -124,6 +126,7 @@ def test_code_hash_is_stable():
     assert len(runner.code_hash()) == 16
 
 
+@pytest.mark.integration
 def test_fault_realisations_do_not_depend_on_the_workers(tmp_path):
     scenario = uavtrack.Scenario(steps=25).with_overrides(
         {"faults.loss": 0.3, "faults.failure_rate": 0.01, "faults.position_std": 2.0}

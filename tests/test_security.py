@@ -547,8 +547,8 @@ def test_a_faulty_member_is_dropped_by_reason_and_never_crashes_the_others(monke
 
     monkeypatch.setattr(agent.UavAgent, "cycle", faulty_cycle)
     monkeypatch.setattr(agent.AgentRadio, "send", faulty_send)
-    scenario = uavtrack.Scenario(steps=10, comm_range=80.0)
-    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.3)
+    scenario = uavtrack.Scenario(steps=6, comm_range=80.0)
+    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.1)
     drops = swarm.traffic.drops
     assert drops["action or target out of range"] == 1
     assert drops["wrong shape or type"] > 0

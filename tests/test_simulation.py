@@ -346,6 +346,7 @@ def test_set_up_inside_a_timed_stage_is_left_out():
     assert 0 <= cpu < 0.005 and 0 <= wall < 0.05
 
 
+@pytest.mark.integration
 def test_no_decision_time_holds_a_module_loaded_on_first_use():
     code = (
         "import sys, uavtrack\n"
@@ -358,6 +359,7 @@ def test_no_decision_time_holds_a_module_loaded_on_first_use():
     assert float(out.stdout) < 100.0  # loading scipy.optimize alone takes about 500 ms of CPU
 
 
+@pytest.mark.integration
 def test_set_up_in_one_thread_is_not_left_out_of_another():
     """In the in-memory swarm every UAV is a thread: each loads the solver on first use."""
     code = (
@@ -377,6 +379,7 @@ def test_set_up_in_one_thread_is_not_left_out_of_another():
     assert float(out.stdout) >= 0.0
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("signum", ["SIGINT", "SIGTERM"])
 def test_set_up_is_not_interrupted_half_way_and_the_interrupt_still_comes(signum):
     """A Ctrl-C during `import scipy.optimize` could end it with ImportError: initialization

@@ -9,6 +9,8 @@ import pytest
 
 from uavtrack import _process
 
+pytestmark = pytest.mark.integration  # each probe is a fresh interpreter
+
 PROBE = (
     "import json, sys\n"
     "{before}"

@@ -114,6 +114,7 @@ def cli(*args, display=False):
     )
 
 
+@pytest.mark.integration
 def test_run_writes_a_recording_and_refuses_bad_names(tmp_path):
     out = cli("run", "--set", "steps=15", "--rerun", str(tmp_path / "a.rrd"), "--json")
     assert out.returncode == 0 and "Rerun recording written" in out.stderr
@@ -125,6 +126,7 @@ def test_run_writes_a_recording_and_refuses_bad_names(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["a.rrd"]
 
 
+@pytest.mark.integration
 def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
     out = cli("run", "--set", "steps=5", "--rerun", "--json")  # --json is not the file
     assert out.returncode == 2 and out.stdout == ""  # refused before any work
@@ -132,6 +134,7 @@ def test_run_rerun_without_a_file_needs_a_display_and_says_so(tmp_path):
     assert "needs a display" in out.stderr and "--rerun FILE.rrd" in out.stderr
 
 
+@pytest.mark.integration
 @pytest.mark.parametrize("room", [20_000, 40_000])
 def test_a_recording_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, room):
     proc = on_a_small_disk(
@@ -142,6 +145,7 @@ def test_a_recording_on_a_full_disk_is_one_line_and_leaves_nothing(tmp_path, roo
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.integration
 def test_a_recording_with_rerun_turned_off_is_refused_in_one_line(tmp_path):
     out = subprocess.run(
         [sys.executable, "-m", "uavtrack.cli", "run", "--steps", "3", "--rerun", "x.rrd"],
@@ -174,6 +178,7 @@ def test_each_metric_has_a_view_on_its_own_scale(tmp_path):
     assert ranges == {series["metrics/observation_rate"]: [0.0, 1.0]}  # a share: [0, 1]
 
 
+@pytest.mark.integration
 def test_the_viz_extra_reads_a_recording_back(tmp_path):
     import tomllib
     from pathlib import Path
