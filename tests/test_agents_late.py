@@ -163,10 +163,10 @@ def test_a_uav_waits_for_its_download_while_the_node_waits_for_the_uploads(monke
 
     work = agent.central_node
 
-    def slow(got, heard, reported, setting, k):
+    def slow(got, heard, reported, setting, k, clock=None):
         if k == 2:
             time.sleep(1.4)
-        return work(got, heard, reported, setting, k)
+        return work(got, heard, reported, setting, k, clock)
 
     monkeypatch.setattr(agent, "central_node", slow)
     scenario = uavtrack.Scenario(steps=4)

@@ -440,7 +440,8 @@ class UavAgent:
         if rows.size == 1:
             target = int(assignment.greedy(bids))
         else:
-            target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
+            solve = None if self.method.built_in_solve else self.method.solve
+            target = assignment.local(view[rows], int(np.searchsorted(rows, me)), solve, timing)
         return target, timing.since(start), (sent, delivered)
 
     # ------------------------------------------------------------ centralized
@@ -567,7 +568,7 @@ class CentralAgent:
             else:  # every upload arrives, but one that was late
                 sent = n if n > 1 else 0
                 delivered = int(heard.sum()) if n > 1 else 0
-            down, targets = central_node(got, heard, reported, s, k)
+            down, targets = central_node(got, heard, reported, s, k, timing)
         if s.delay > 0:
             for i in np.flatnonzero(alive):
                 more = self.radio.transmitted(k, "download", 1, 0, to=int(i))

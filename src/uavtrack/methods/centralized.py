@@ -64,7 +64,7 @@ class Centralized(Method):
                 delivered += up_ok.sum(axis=1)
             start = timing.start()
             down, down_target = central_node(
-                {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
+                {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k, timing
             )
             seconds += timing.since(start) / B
         radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
@@ -88,7 +88,7 @@ class Centralized(Method):
         B, n, _ = bids.shape
         none = np.zeros(B, dtype=np.int64)
         if not inputs.setting.faulty:
-            target, seconds = assignment.centralized(bids)
+            target, seconds = assignment.centralized(bids, clock=timing)
             return Assigned(target, np.repeat(seconds[:, None], n, axis=1), none, none)
         # the node's target if its download arrived, else the previous one, else the own best
         target = fused.target if fused.target is not None else np.full((B, n), -1)
@@ -109,7 +109,12 @@ def nothing_heard(B: int, n: int, m: int) -> dict[str, np.ndarray]:
 
 
 def central_node(
-    got: dict, heard: np.ndarray, uavs: np.ndarray, setting: Setting, k: int
+    got: dict,
+    heard: np.ndarray,
+    uavs: np.ndarray,
+    setting: Setting,
+    k: int,
+    clock: assignment.Clock | None = None,
 ) -> tuple[dict, np.ndarray]:
     """The central node's work on the uploads it received.
 
@@ -119,7 +124,8 @@ def central_node(
     ``robust.stale``; bids of every UAV heard from, planned from its reported state; one
     global assignment over them. Returns the download of every UAV (the fused tuples,
     (B, N, M, ...), confidence -inf where the node heard nobody) and its target (B, N),
-    -1 for a UAV not heard from.
+    -1 for a UAV not heard from. clock: the caller's, on whose set-up a first load of
+    the exact solver is counted (`assignment.load_solver`); it is read for nothing else.
     """
     B, n, m = got["gamma"].shape
     if setting.stale:
@@ -132,7 +138,7 @@ def central_node(
     t, i = np.nonzero(heard)
     if t.size:
         value[t, i] = setting.plan(uavs[t, i][None], central["mean"][t][None])[0][0]
-    targets, _ = assignment.centralized(value, heard)
+    targets, _ = assignment.centralized(value, heard, clock)
     anyone = heard.any(axis=1)
     down = nothing_heard(B, n, m)
     for key, value in central.items():

@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import assignment, fusion
+from .. import assignment, fusion, timing
 from .base import Assigned, Fused, Held, Inputs, Method, Setting
 
 
@@ -80,7 +80,7 @@ class Distributed(Method):
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
         solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
-        target, seconds = assignment.auction(view, members, solve)
+        target, seconds = assignment.auction(view, members, solve, timing)
         return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
 
 
