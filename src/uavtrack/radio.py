@@ -15,8 +15,9 @@ of cycle k arrives in round r of cycle k over the links of k.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -53,6 +54,40 @@ class RadioState:
 
     history: tuple[Sent, ...] = ()
     bad: np.ndarray | None = None
+
+
+Count = tuple[Any, Any]
+"""Messages (sent, delivered): per trial (B,) arrays in the batch, ints in an agent."""
+
+
+def counted(
+    delay: int, when_sent: Callable[[], Iterable[Count]], arrived: Iterable[Count]
+) -> Count:
+    """The messages a cycle counts of its protocols, (sent, delivered): the one rule of
+    every method, in the batch and in the agents.
+
+    Without delay (d = 0) the messages sent in a round are read in that round, and are
+    counted where they arrive: sent, one per link into a receiver taking part in the
+    round (what was offered to it); delivered, those the fault realisation does not lose
+    (what arrived). `arrived` gives these per round or protocol (`fusion.count` of a
+    batch inbox, an agent's `Inbox.sent` and `Inbox.delivered`, an upload's or a
+    download's senders alive and those whose message came).
+
+    With delay d > 0 what is read now was sent d cycles ago, and whether a message sent
+    now will be read is not known yet (the run may end first): the messages are counted
+    when sent, each transmission of this cycle over its links, delivered those the fault
+    realisation does not lose. `when_sent()` gives these (`Radio.transmitted`,
+    `Radio.transmitted_central`, `AgentRadio.transmitted`); it is called only with delay.
+
+    Returns the sums of the pairs that apply ((0, 0) for none).
+    """
+    pairs = list(when_sent()) if delay > 0 else list(arrived)
+    if not pairs:
+        return 0, 0
+    sent, delivered = pairs[0]
+    for more in pairs[1:]:
+        sent, delivered = sent + more[0], delivered + more[1]
+    return sent, delivered
 
 
 class Radio:

@@ -46,6 +46,7 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
+from ..radio import counted
 from ..robust import gate
 from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
@@ -290,7 +291,8 @@ class UavAgent:
         }
         self.largest = 1
         stopped = rounds = None  # R, and the consensus rounds once D_i is known
-        depth = sent = delivered = r = 0
+        depth = r = 0
+        arrived = []  # (sent, delivered) of each round's inbox
         flood_final = consensus_final = False
         while True:
             r += 1
@@ -316,22 +318,26 @@ class UavAgent:
                 inbox = self.radio.receive(k, "flood", r)
                 known, depth, stopped = self._flood(inbox, known, r)
                 if inbox is not None:
-                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
+                    arrived.append((inbox.sent, inbox.delivered))
                 if stopped is not None:
                     rounds = depth + s.extra_rounds
                     rounds = rounds if s.budget is None else min(rounds, s.budget)
             if rounds is None or r <= rounds:
                 inbox = self.radio.receive(k, "consensus", r)
                 if inbox is not None:
-                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
+                    arrived.append((inbox.sent, inbox.delivered))
                     offered = {q: self._plausible(t) for q, t in inbox.contents.items()}
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
-        if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
-            flood = self.radio.transmitted(k, "flood", stopped)
-            tuples = self.radio.transmitted(k, "consensus", rounds)
-            sent, delivered = flood[0] + tuples[0], flood[1] + tuples[1]
+        sent, delivered = counted(
+            s.delay,
+            lambda: (
+                self.radio.transmitted(k, "flood", stopped),
+                self.radio.transmitted(k, "consensus", rounds),
+            ),
+            arrived,
+        )
         return state["mean"], state["cov"], rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
@@ -406,12 +412,11 @@ class UavAgent:
             ],
         )
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
-        if s.delay > 0:  # counted when sent, as the fusion's
-            counts = [self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")]
-            sent, delivered = (sum(c[i] for c in counts) for i in (0, 1))
-        else:
-            sent = sum(a.sent for a in (beacon, inbox) if a is not None)
-            delivered = sum(a.delivered for a in (beacon, inbox) if a is not None)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")),
+            ((a.sent, a.delivered) for a in (beacon, inbox) if a is not None),
+        )
         if inbox is None:  # nothing has arrived yet: alone
             members, view = np.zeros(n, dtype=bool), np.broadcast_to(bids, (n, self.m)).copy()
         else:
@@ -452,7 +457,7 @@ class UavAgent:
         estimates, rounds, messages sent and delivered, and the target sent (-1: none).
         Without the central node (lost), the UAV keeps its own estimates and its last
         target."""
-        s, m = self.setting, self.m
+        s, m, one = self.setting, self.m, int(self.n > 1)
         tuples = {
             "gamma": estimation.confidence(cov),
             "mean": mean,
@@ -462,11 +467,19 @@ class UavAgent:
         }
         if self.radio.central[k]:
             self.radio.send(k, [part("upload", 0, tuples)], to=self.n)
-        # with delay, this UAV counts its upload when sent (the central node its downloads)
-        upload = self.radio.transmitted(k, "upload", 1, 0, to=self.n) if s.delay else None
         down, arrived, target = self._download(k)
+        # as `radio.counted`: this UAV counts the download offered to it and whether it
+        # came, or with delay its upload when sent (the central node the uploads, or its
+        # downloads); fault-free a UAV alone exchanges nothing, as in `methods.Centralized`
+        offered = []
+        if down is not None:
+            mine = int(self.radio.alive[k - self.radio.delay][self.me]) if s.faulty else one
+            offered.append((mine, mine * int(arrived[0, 0])))
+        sent, delivered = counted(
+            s.delay, lambda: [self.radio.transmitted(k, "upload", 1, 0, to=self.n)], offered
+        )
         if down is None:  # nothing sent yet
-            return mean, cov, 1, *(upload or (0, 0)), -1
+            return mean, cov, 1, sent, delivered, -1
         mean, cov = (
             x[0, 0]
             for x in take_download(
@@ -474,12 +487,7 @@ class UavAgent:
             )
         )
         if not s.faulty:  # the download arrived, or was late (counted in `_download`)
-            one = int(self.n > 1)
-            return mean, cov, one, one, one * int(arrived[0, 0]), target
-        sent, delivered = upload or (
-            int(self.radio.alive[k - self.radio.delay][self.me]),
-            int(arrived[0, 0]),
-        )
+            return mean, cov, one, sent, delivered, target
         return mean, cov, 1, sent, delivered, target if arrived[0, 0] else -1
 
     def _download(self, k: int):
@@ -529,7 +537,7 @@ class CentralAgent:
         s, n, m = self.setting, self.n, self.m
         alive = tick["alive"]
         self.radio.begin(k, np.zeros(n, dtype=bool), alive)
-        sent = delivered = 0
+        offered = []  # the uploads offered to the node and those that came
         start = timing.start()
         sent_at = k - self.radio.delay
         down, targets = nothing_heard(1, n, m), np.full((1, n), -1, dtype=np.int64)
@@ -561,18 +569,20 @@ class CentralAgent:
                 for name in got:
                     got[name][0, q] = content[name]
                 reported[0, q] = content["uav"]
-            if s.delay > 0:
-                pass  # counted when sent: the downloads below
-            elif s.faulty:
-                sent, delivered = int(alive_then.sum()), int(heard.sum())
-            else:  # every upload arrives, but one that was late
-                sent = n if n > 1 else 0
-                delivered = int(heard.sum()) if n > 1 else 0
+            if s.faulty:
+                offered.append((int(alive_then.sum()), int(heard.sum())))
+            else:  # every upload arrives, but one that was late; a UAV alone sends none
+                one = int(n > 1)
+                offered.append((n * one, int(heard.sum()) * one))
             down, targets = central_node(got, heard, reported, s, k, timing)
-        if s.delay > 0:
-            for i in np.flatnonzero(alive):
-                more = self.radio.transmitted(k, "download", 1, 0, to=int(i))
-                sent, delivered = sent + more[0], delivered + more[1]
+        sent, delivered = counted(  # with delay: the downloads, when sent
+            s.delay,
+            lambda: [
+                self.radio.transmitted(k, "download", 1, 0, to=int(i))
+                for i in np.flatnonzero(alive)
+            ],
+            offered,
+        )
         for i in np.flatnonzero(alive):  # each living UAV its download
             content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
             content["target"] = np.array(targets[0, i], dtype=np.int64)

@@ -12,7 +12,7 @@ from typing import ClassVar
 import numpy as np
 
 from .. import fusion
-from ..radio import Radio
+from ..radio import Radio, counted
 from ..robust import gate
 
 
@@ -160,14 +160,11 @@ def consensus(inputs: Inputs) -> Fused:
         out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
         mean, cov = out.tuples["mean"], out.tuples["cov"]
         gamma = None
-    if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
-        flood, tuples_ = (
-            radio.transmitted("flood", depth.ran),
-            radio.transmitted("consensus", rounds),
-        )
-        sent, delivered = flood[0] + tuples_[0], flood[1] + tuples_[1]
-    else:
-        sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
+    sent, delivered = counted(
+        s.delay,
+        lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
+        ((depth.sent, depth.delivered), (out.sent, out.delivered)),
+    )
     return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest, gamma=gamma)
 
 

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import assignment, fusion, timing
+from ..radio import counted
 from ..robust import gate
 from .base import Assigned, Fused, Inputs, Method, Setting
 
@@ -50,38 +51,33 @@ class Centralized(Method):
         tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
         radio.send("upload", {**tuples, "uavs": inputs.believed, "alive": inputs.alive})
         upload, up_ok = radio.receive_central("upload")
-        sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
+        arrived = []  # (sent, delivered) of the uploads and downloads that arrive now
         seconds = np.zeros((B, n, 2))
-        if s.delay > 0:  # counted when sent: uploads now, downloads below
-            up = radio.transmitted_central("upload")
-            sent, delivered = sent + up[0], delivered + up[1]
         if upload is None:
             down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
         else:
             up_ok = up_ok & upload["alive"]
-            if s.delay == 0:
-                sent += upload["alive"].sum(axis=1)
-                delivered += up_ok.sum(axis=1)
+            arrived.append((upload["alive"].sum(axis=1), up_ok.sum(axis=1)))
             start = timing.start()
             down, down_target = central_node(
                 {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k, timing
             )
             seconds += timing.since(start) / B
         radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
-        if s.delay > 0:
-            down_sent = radio.transmitted_central("download")
-            sent, delivered = sent + down_sent[0], delivered + down_sent[1]
         download, down_ok = radio.receive_central("download")
         mean, cov = inputs.mean, inputs.cov
         target = None
         if download is not None:
             down_ok = down_ok & inputs.alive
-            if s.delay == 0:
-                sent += download["alive"].sum(axis=1)
-                delivered += down_ok.sum(axis=1)
+            arrived.append((download["alive"].sum(axis=1), down_ok.sum(axis=1)))
             mean, cov = take_download(mean, cov, download, down_ok, s, k, inputs.measured)
             target = np.where(down_ok, download["target"], -1)
         rounds = np.where(inputs.alive, 1, 0)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (radio.transmitted_central(p) for p in ("upload", "download")),
+            arrived,
+        )
         return Fused(mean, cov, rounds, sent, delivered, seconds, target)
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
