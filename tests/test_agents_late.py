@@ -332,7 +332,9 @@ class NoTokens(MemoryTransport):
 def test_a_token_gone_just_after_a_stop_is_not_believed_until_sessions_can_open_again(ago):
     stops = Stops()
     stops.saw(15.0, time.monotonic() - ago)
-    box = Mailbox(Gate("r", WORLD, 3, None), transport=NoTokens(), stops=stops)
+    box = Mailbox(
+        Gate(run="r", me=WORLD, programs=3, credential=None), transport=NoTokens(), stops=stops
+    )
     box.heard.add(1)
     box.lost("uavtrack/r/alive/1")
     gone = box.wait(lambda: box.is_gone(1), time.monotonic() + 2.0)

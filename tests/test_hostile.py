@@ -120,22 +120,32 @@ def forged(run: str, k: int, me: int, n: int, m: int) -> list:
     flags = Array.of(np.ones(n, dtype=bool))
     nothing = Array.of(np.zeros((0, 2)))
     return [
-        Sense(VERSION, run, k, 0, believed, Array.of(np.zeros(m, bool)), nothing, flags, flags),
+        Sense(
+            version=VERSION,
+            run=run,
+            k=k,
+            uav=0,
+            believed=believed,
+            observed=Array.of(np.zeros(m, bool)),
+            z=nothing,
+            links=flags,
+            alive=flags,
+        ),
         Tick(VERSION, run, k, flags),
         Hello(
-            VERSION,
-            run,
-            "{}",
-            "distributed",
-            Array.of(np.zeros(2, np.uint32)),
-            Array.of(np.zeros((m, 4))),
-            Array.of(np.eye(4)),
-            1.0,
-            True,
-            [b"k" * 32] * (n + 1),
+            version=VERSION,
+            run=run,
+            scenario="{}",
+            method="distributed",
+            key=Array.of(np.zeros(2, np.uint32)),
+            prior_mean=Array.of(np.zeros((m, 4))),
+            prior_cov=Array.of(np.eye(4)),
+            deadline=1.0,
+            authenticated=True,
+            publics=[b"k" * 32] * (n + 1),
         ),  # fmt: skip
         Ready(VERSION, run, me),
-        Lost(VERSION, run, k, (me + 1) % n, "forged"),
+        Lost(version=VERSION, run=run, k=k, program=(me + 1) % n, reason="forged"),
     ]
 
 
@@ -381,7 +391,7 @@ def receiver(scenario, me=0, method="distributed"):
     from uavtrack.faults import Faults
 
     n, m = scenario.n_uavs, scenario.n_targets
-    gate_ = Gate("r", me, n, None)
+    gate_ = Gate(run="r", me=me, programs=n, credential=None)
     link = Link(MemoryTransport(Bus()), gate_)
     mailbox = Mailbox(gate_, Spec.of(scenario, False))
     faults = Faults(scenario.faults, np.zeros((1, 2), dtype=np.uint32), n)
@@ -490,7 +500,13 @@ def test_whatever_the_rule_admits_the_receivers_use_without_error(overrides, dat
 
 def consensus_message(content: dict, k: int, sender: int) -> Radio:
     wire = {name: Array.of(value) for name, value in content.items()}
-    return Radio(VERSION, "r", k, sender, [messages.Part("consensus", 1, -1, wire)])
+    return Radio(
+        version=VERSION,
+        run="r",
+        k=k,
+        sender=sender,
+        parts=[messages.Part("consensus", 1, -1, wire)],
+    )
 
 
 def test_what_a_member_sends_beyond_the_rule_is_counted_in_the_swarm_json(monkeypatch, capsys):

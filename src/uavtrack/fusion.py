@@ -249,7 +249,7 @@ def pick(own: dict, offered: dict, best: np.ndarray, rows: tuple | None = None) 
 # ------------------------------------------------------------------ the drivers
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Depth:
     """Outcome of the D_i protocol: depth (B, N) rounds learned; sent and delivered (B,)
     messages (one per link into a receiver still running, per round); largest (B, N):
@@ -312,7 +312,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = budget
             break
     radio.send("flood", {"known": known})  # the final sets, for later rounds (with delay)
-    return Depth(depth, sent, delivered, largest, ran)
+    return Depth(depth=depth, sent=sent, delivered=delivered, largest=largest, ran=ran)
 
 
 def count(inbox, receiving: np.ndarray, sent: np.ndarray, delivered: np.ndarray):

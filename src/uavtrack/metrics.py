@@ -115,7 +115,7 @@ def team_best(mean: np.ndarray, cov: np.ndarray, alive: np.ndarray):
     )
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Tally:
     """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets), fed
     one `simulation.Cycle` at a time.

@@ -66,7 +66,9 @@ def radio_links(
         parts.append((np.full(receiver.size, b), receiver, sender))
     trial, receiver, sender = (np.concatenate(x) for x in zip(*parts, strict=True))
     order = np.lexsort((sender, receiver, trial))
-    return Links(B, n, None, trial[order], receiver[order], sender[order])
+    return Links(
+        batch=B, n=n, dense=None, trial=trial[order], receiver=receiver[order], sender=sender[order]
+    )
 
 
 def complete(n: int, batch: tuple[int, ...] = ()) -> np.ndarray:
@@ -96,7 +98,7 @@ SPARSE_FROM = 24
 """Team size from which `links` chooses edge lists over N x N arrays."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Links:
     """Who hears whom: directed links of B graphs of N nodes, self-links included.
 
@@ -153,7 +155,12 @@ class Links:
             return self
         keep = receivers[self.trial, self.receiver]
         return Links(
-            self.batch, self.n, None, self.trial[keep], self.receiver[keep], self.sender[keep]
+            batch=self.batch,
+            n=self.n,
+            dense=None,
+            trial=self.trial[keep],
+            receiver=self.receiver[keep],
+            sender=self.sender[keep],
         )
 
     @cached_property
@@ -186,10 +193,15 @@ class Links:
         if self.edges:
             keep = mask | self.own
             return Links(
-                self.batch, self.n, None, self.trial[keep], self.receiver[keep], self.sender[keep]
+                batch=self.batch,
+                n=self.n,
+                dense=None,
+                trial=self.trial[keep],
+                receiver=self.receiver[keep],
+                sender=self.sender[keep],
             )
         eye = np.eye(self.n, dtype=bool)
-        return Links(self.batch, self.n, self.dense & (mask | eye))
+        return Links(batch=self.batch, n=self.n, dense=self.dense & (mask | eye))
 
     def incoming(self) -> np.ndarray:
         """Links into each receiver from others, (B, N) int."""
@@ -225,6 +237,6 @@ def links(adjacency: np.ndarray, form: str = "auto") -> Links:
     B, n = adjacency.shape[0], adjacency.shape[-1]
     full = closed(adjacency)
     if form == "dense" or (form == "auto" and n < SPARSE_FROM):
-        return Links(B, n, full)
+        return Links(batch=B, n=n, dense=full)
     b, i, q = np.nonzero(full)  # sorted by (trial, receiver), self-links included
-    return Links(B, n, None, b, i, q)
+    return Links(batch=B, n=n, dense=None, trial=b, receiver=i, sender=q)

@@ -25,7 +25,7 @@ from .faults import Faults
 from .network import Links
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Sent:
     """What the UAVs sent in one cycle: its links, link states, and each protocol's rounds."""
 
@@ -97,7 +97,7 @@ class Radio:
         self, k: int, links: Links, alive: np.ndarray, faults: Faults, state: RadioState
     ) -> None:
         self.k, self.faults, self.delay = k, faults, faults.model.delay
-        self.now = Sent(k, links, faults.link_states(k, state.bad), alive)
+        self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
         self.history = state.history
 
     def send(self, protocol: str, content: dict[str, np.ndarray]) -> None:

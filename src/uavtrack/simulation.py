@@ -78,7 +78,7 @@ class Constants:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Context:
     """What a run fixes: the scenario, the method, derived constants, the fault
     realisation of its trials and the methods' settings."""
@@ -109,7 +109,7 @@ class Context:
             rule=scenario.fusion.rule,
             gate=None if robust.gate is None else gate.threshold(robust.gate),
         )
-        return cls(scenario, method, const, faults, setting)
+        return cls(scenario=scenario, method=method, const=const, faults=faults, setting=setting)
 
 
 def _plan(
@@ -161,7 +161,7 @@ def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable:
     return forward
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class State:
     """What persists between cycles, for B trials, all at step k.
 
@@ -193,7 +193,7 @@ def _record(shape: str, doc: str, dtype: type = np.float64):
     return field(metadata={"shape": shape, "doc": doc, "dtype": dtype})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Cycle:
     """What one cycle decided and measured, for B trials: each field is (B, *shape).
 
@@ -277,7 +277,7 @@ Trace = make_dataclass(
 )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Pending:
     """A cycle up to its decision: what every UAV knows after sensing, filtering and
     fusion, its bids, the method's assignment and the action it would fly. `finish`
@@ -318,17 +318,17 @@ def decide(
     belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, observed, z, R)
     mean, cov = belief[:2]
     inputs = Inputs(
-        k,
-        radio,
-        mean,
-        cov,
-        estimation.confidence(cov),
-        believed,
-        alive,
-        state.target,
-        state.held,
-        ctx.setting,
-        measured(state, observed, z, R, ctx),
+        k=k,
+        radio=radio,
+        mean=mean,
+        cov=cov,
+        gamma=estimation.confidence(cov),
+        believed=believed,
+        alive=alive,
+        previous=state.target,
+        held=state.held,
+        setting=ctx.setting,
+        measured=measured(state, observed, z, R, ctx),
     )
     fused = method.fuse(inputs)
     if not plan:
@@ -340,7 +340,18 @@ def decide(
     chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
     own = np.where(alive, chosen, STRAIGHT)
     return Pending(
-        k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds, belief
+        k=k,
+        uavs=uavs,
+        believed=believed,
+        alive=alive,
+        observed=observed,
+        radio=radio,
+        fused=fused,
+        bids=bids,
+        assigned=assigned,
+        own=own,
+        plan_seconds=plan_seconds,
+        belief=belief,
     )
 
 
@@ -357,13 +368,25 @@ def _unplanned(state, believed, alive, observed, radio, fused, belief) -> Pendin
     B, Nu = alive.shape
     nothing = np.zeros(B, dtype=np.int64)
     keep = np.where(alive, state.target, -1)
-    assigned = Assigned(keep, np.zeros((B, Nu)), nothing, nothing, state.held)
+    assigned = Assigned(
+        target=keep, seconds=np.zeros((B, Nu)), sent=nothing, delivered=nothing, held=state.held
+    )
     bids = np.full(keep.shape + (state.mean.shape[2],), np.nan)
     own = np.full((B, Nu), STRAIGHT)
     return Pending(
-        state.k, state.uavs, believed, alive, observed, radio, fused, bids, assigned, own,
-        np.zeros(2), belief,
-    )  # fmt: skip
+        k=state.k,
+        uavs=state.uavs,
+        believed=believed,
+        alive=alive,
+        observed=observed,
+        radio=radio,
+        fused=fused,
+        bids=bids,
+        assigned=assigned,
+        own=own,
+        plan_seconds=np.zeros(2),
+        belief=belief,
+    )
 
 
 def finish(
@@ -422,17 +445,17 @@ def finish(
     )
     mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov)
     new = State(
-        pending.k + 1,
-        new_uavs,
-        mean,
-        cov,
-        alive,
-        np.where(target >= 0, target, state.target),
-        pending.radio.close(),
-        assigned.held,
-        state.flight,
-        modes,
-        None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
+        k=pending.k + 1,
+        uavs=new_uavs,
+        mean=mean,
+        cov=cov,
+        alive=alive,
+        target=np.where(target >= 0, target, state.target),
+        radio=pending.radio.close(),
+        held=assigned.held,
+        flight=state.flight,
+        modes=modes,
+        seen=None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
     )
     return new, cycle
 
@@ -532,16 +555,16 @@ def initial_state(
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
     mean, cov, modes = tracker.start(mean, cov)
     state = State(
-        0,
-        uavs,
-        mean,
-        cov,
-        np.ones((B, Nu), dtype=bool),
-        np.full((B, Nu), -1, dtype=np.int64),
-        RadioState(),
-        held,
-        pilot,
-        modes,
+        k=0,
+        uavs=uavs,
+        mean=mean,
+        cov=cov,
+        alive=np.ones((B, Nu), dtype=bool),
+        target=np.full((B, Nu), -1, dtype=np.int64),
+        radio=RadioState(),
+        held=held,
+        flight=pilot,
+        modes=modes,
     )
     return state, trajectory, list(sensor_rngs)
 
@@ -584,9 +607,9 @@ def run(
     state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     tally = Tally(
-        B,
-        Nu,
-        Nt,
+        batch=B,
+        n_uavs=Nu,
+        n_targets=Nt,
         timed=B == 1,
         cutoff=scenario.evaluation.ospa_cutoff,
         order=scenario.evaluation.ospa_order,
@@ -704,7 +727,7 @@ def _size(n: float) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Result:
     """One trial: the paper's metric, the estimation quality, costs, and the trace.
 

@@ -95,7 +95,7 @@ class AgentRadio:
     def send(self, k: int, parts: list[Part], to=None) -> None:
         """One message of these parts to each UAV in range at cycle k (or to `to`)."""
         receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
-        body = encode(Radio(VERSION, self.run, k, self.me, parts))
+        body = encode(Radio(version=VERSION, run=self.run, k=k, sender=self.me, parts=parts))
         for q in receivers:
             if q != self.me:
                 self.link.send_body(int(q), body)
@@ -248,20 +248,22 @@ class UavAgent:
             target, solve_seconds, more = self.auction(k, bids, alive)
         action = int(best[target])
         self.target = target
+        cpu, wall = (1e3 * (plan_seconds + solve_seconds)).tolist()
         report = Report(
-            VERSION,
-            self.run,
-            k,
-            self.me,
-            action,
-            target,
-            packed({"x": fused_mean})["x"],
-            packed({"x": fused_cov})["x"],
-            packed({"x": bids})["x"],
-            int(rounds),
-            int(sent + more[0]),
-            int(delivered + more[1]),
-            *(1e3 * (plan_seconds + solve_seconds)).tolist(),  # CPU, wall
+            version=VERSION,
+            run=self.run,
+            k=k,
+            uav=self.me,
+            action=action,
+            target=target,
+            mean=packed({"x": fused_mean})["x"],
+            cov=packed({"x": fused_cov})["x"],
+            bids=packed({"x": bids})["x"],
+            rounds=int(rounds),
+            sent=int(sent + more[0]),
+            delivered=int(delivered + more[1]),
+            decision_ms=cpu,
+            decision_wall_ms=wall,
             late=dict(self.radio.late),
         )
         self.mean, self.cov, self.modes = tracker.close(*belief, fused_mean, fused_cov)
@@ -353,7 +355,9 @@ class UavAgent:
         offered = np.stack([known if q == self.me else inbox.contents[q]["known"] for q in ids])
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, ids.index(self.me), :] = True
-        grown = fusion.flood(offered[None], offered[None], network.Links(1, len(ids), dense))
+        grown = fusion.flood(
+            offered[None], offered[None], network.Links(batch=1, n=len(ids), dense=dense)
+        )
         grown = grown[0, ids.index(self.me)]
         if not (grown != known).any():
             return known, r - 1, r
@@ -375,7 +379,7 @@ class UavAgent:
         }
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, where, :] = True
-        links = network.Links(1, len(ids), dense)
+        links = network.Links(batch=1, n=len(ids), dense=dense)
         admitted = None
         if self.setting.gate is not None:  # every row measured as this UAV (its row is kept)
             mine, rows = self.measured, (1, len(ids))
@@ -590,6 +594,7 @@ class CentralAgent:
         cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(
-            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, cpu, wall,
-            late=dict(self.radio.late),
+            version=VERSION, run=self.run, k=k, uav=n, action=-1, target=-1,
+            mean=empty, cov=empty, bids=empty, rounds=0, sent=sent, delivered=delivered,
+            decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
         )  # fmt: skip

@@ -16,7 +16,7 @@ from ..radio import Radio, counted
 from ..robust import gate
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Setting:
     """What a run fixes for the methods: robustness options and the fault settings.
 
@@ -53,7 +53,7 @@ class Held:
     stamp: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Inputs:
     """What a method sees in one cycle for B trials: the radio, each UAV's local
     estimates after its filter (mean (B, N, M, 4), cov (B, N, M, 4, 4), gamma (B, N, M)),
@@ -75,7 +75,7 @@ class Inputs:
     measured: gate.Measured | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fused:
     """Each UAV's fused estimates (mean, cov), the rounds it ran (B, N), messages sent
     and delivered (B,), seconds of central work (B, N, 2; CPU, wall), for the centralized
@@ -93,7 +93,7 @@ class Fused:
     gamma: np.ndarray | None = None  # 1 / trace(cov), when the fusion already has it
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Assigned:
     """Targets (B, N) (-1 for a failed UAV), seconds of each UAV's assignment (B, N, 2):
     CPU and wall (`timing`; a method's own (B, N) stands for both), messages sent and
@@ -165,7 +165,15 @@ def consensus(inputs: Inputs) -> Fused:
         lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
         ((depth.sent, depth.delivered), (out.sent, out.delivered)),
     )
-    return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest, gamma=gamma)
+    return Fused(
+        mean=mean,
+        cov=cov,
+        rounds=rounds,
+        sent=sent,
+        delivered=delivered,
+        largest=depth.largest,
+        gamma=gamma,
+    )
 
 
 def gated(inputs: Inputs):

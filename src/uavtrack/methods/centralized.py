@@ -40,7 +40,7 @@ class Centralized(Method):
             use = gate.agreeing(mean, cov, measured, s.gate, (inputs.mean, inputs.cov))
             mean = np.where(use[..., None], mean, inputs.mean)
             cov = np.where(use[..., None, None], cov, inputs.cov)
-        return Fused(mean, cov, rounds, messages, messages.copy())
+        return Fused(mean=mean, cov=cov, rounds=rounds, sent=messages, delivered=messages.copy())
 
     @staticmethod
     def _over_links(inputs: Inputs) -> Fused:
@@ -78,20 +78,33 @@ class Centralized(Method):
             lambda: (radio.transmitted_central(p) for p in ("upload", "download")),
             arrived,
         )
-        return Fused(mean, cov, rounds, sent, delivered, seconds, target)
+        return Fused(
+            mean=mean,
+            cov=cov,
+            rounds=rounds,
+            sent=sent,
+            delivered=delivered,
+            seconds=seconds,
+            target=target,
+        )
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         B, n, _ = bids.shape
         none = np.zeros(B, dtype=np.int64)
         if not inputs.setting.faulty:
             target, seconds = assignment.centralized(bids, clock=timing)
-            return Assigned(target, np.repeat(seconds[:, None], n, axis=1), none, none)
+            return Assigned(
+                target=target,
+                seconds=np.repeat(seconds[:, None], n, axis=1),
+                sent=none,
+                delivered=none,
+            )
         # the node's target if its download arrived, else the previous one, else the own best
         target = fused.target if fused.target is not None else np.full((B, n), -1)
         target = np.where(target >= 0, target, inputs.previous)
         target = np.where(target >= 0, target, assignment.greedy(bids))
         target = np.where(inputs.alive, target, -1)
-        return Assigned(target, fused.seconds, none, none)
+        return Assigned(target=target, seconds=fused.seconds, sent=none, delivered=none)
 
 
 def nothing_heard(B: int, n: int, m: int) -> dict[str, np.ndarray]:

@@ -78,7 +78,13 @@ class Distributed(Method):
             members = members & alive[:, :, None] & alive[:, None, :]
         solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
         target, seconds = assignment.auction(view, members, solve, timing)
-        return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
+        return Assigned(
+            target=np.where(alive, target, -1),
+            seconds=seconds,
+            sent=sent,
+            delivered=delivered,
+            held=held,
+        )
 
 
 def bid_view(
