@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import uavtrack
-from uavtrack import estimation
+from uavtrack import estimation, fusion
 from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.messages import (
     VERSION,
@@ -487,13 +487,13 @@ def test_whatever_the_rule_admits_the_receivers_use_without_error(overrides, dat
             parts = spec.radio(consensus_message(content, k, q), k)
             if isinstance(parts, str):  # only what the rule admits reaches a receiver
                 continue
-            checked[q] = agent._plausible(parts[0][3])
+            checked[q] = fusion.Estimates.of(agent._plausible(parts[0][3]))
             if agent.setting.stale:
                 checked[q] = agent.setting.forward(checked[q], k)
-        state = agent._adopt(own, checked)
-        assert np.isfinite(state["mean"]).all() and np.isfinite(state["cov"]).all()
+        state = agent._adopt(fusion.Estimates.of(own), checked)
+        assert np.isfinite(state.mean).all() and np.isfinite(state.cov).all()
         bids, _ = agent.setting.plan(
-            np.array([[[100.0, 100.0, 425.0, 15.0, 0.0]]]), state["mean"][None, None]
+            np.array([[[100.0, 100.0, 425.0, 15.0, 0.0]]]), state.mean[None, None]
         )
         assert np.isfinite(bids).all() and (bids >= 0).all()
 

@@ -77,16 +77,18 @@ def test_a_round_is_the_same_in_the_dense_and_the_edge_form(rng):
 
     def tuples():
         cov = np.stack([spd(rng) for _ in range(B * n * m)]).reshape(B, n, m, 4, 4)
-        return {"mean": rng.normal(size=(B, n, m, 4)), "cov": cov, "stamp": np.zeros((B, n, m))}
+        return fusion.Estimates(
+            mean=rng.normal(size=(B, n, m, 4)), cov=cov, stamp=np.zeros((B, n, m))
+        )
 
     own, offered = tuples(), tuples()  # with delay: what was offered is not the current one
     dense = fusion.intersect_round(own, offered, network.links(adjacency, "dense"))
     edges = fusion.intersect_round(own, offered, network.links(adjacency, "edges"))
     for name in ("mean", "cov", "gamma"):
-        assert np.allclose(dense[name], edges[name], rtol=1e-10, atol=1e-12)
+        assert np.allclose(getattr(dense, name), getattr(edges, name), rtol=1e-10, atol=1e-12)
     # receiver 0 of trial 0: the n-way intersection of its own and its neighbours' offers
     heard = np.flatnonzero(adjacency[0, 0])
-    mean = np.stack([own["mean"][0, 0] if q == 0 else offered["mean"][0, q] for q in heard], 1)
-    cov = np.stack([own["cov"][0, 0] if q == 0 else offered["cov"][0, q] for q in heard], 1)
+    mean = np.stack([own.mean[0, 0] if q == 0 else offered.mean[0, q] for q in heard], 1)
+    cov = np.stack([own.cov[0, 0] if q == 0 else offered.cov[0, q] for q in heard], 1)
     x, P = fusion.intersect(mean, cov, fusion.fast_weights(cov, np.ones(mean.shape[:2], bool)))
-    assert np.allclose(dense["mean"][0, 0], x) and np.allclose(dense["cov"][0, 0], P)
+    assert np.allclose(dense.mean[0, 0], x) and np.allclose(dense.cov[0, 0], P)

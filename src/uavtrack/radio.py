@@ -33,16 +33,17 @@ class Sent:
     links: Links
     bad: np.ndarray | None
     alive: np.ndarray
-    rounds: dict[str, list[dict[str, np.ndarray]]] = field(default_factory=dict)
+    rounds: dict[str, list[Any]] = field(default_factory=dict)
 
 
 class Inbox(NamedTuple):
-    """One round's arrivals: the senders' content (arrays (B, N, ...) as sent), the links
+    """One round's arrivals: the senders' content (as sent: arrays (B, N, ...) by name, in
+    a dict or a record such as `fusion.Estimates`), the links
     the messages travelled (`network.Links`, before losses: what was sent) and those
     that delivered them (after losses). Self-links are always present: a UAV's own
     current state is always at hand."""
 
-    content: dict[str, np.ndarray]
+    content: Any
     links: Links
     delivered: Links
 
@@ -100,8 +101,9 @@ class Radio:
         self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
         self.history = state.history
 
-    def send(self, protocol: str, content: dict[str, np.ndarray]) -> None:
-        """Every UAV transmits `content` (arrays (B, N, ...)) in the next round of `protocol`."""
+    def send(self, protocol: str, content: Any) -> None:
+        """Every UAV transmits `content` (arrays (B, N, ...) by name, in a dict or a record)
+        in the next round of `protocol`."""
         self.now.rounds.setdefault(protocol, []).append(content)
 
     def _sent(self) -> Sent | None:

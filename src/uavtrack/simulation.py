@@ -14,14 +14,14 @@ derived from it.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, fields, make_dataclass
+from dataclasses import dataclass, field, fields, make_dataclass, replace
 from functools import cache
 from numbers import Integral
 from typing import Any
 
 import numpy as np
 
-from . import _process, estimation, flight, network, planning, sensing, timing, world
+from . import _process, estimation, flight, fusion, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
@@ -146,17 +146,16 @@ def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable:
             An, Qn = A @ An, A @ Qn @ A.T + Q
         return An, Qn
 
-    def forward(tuples: dict, k: int) -> dict:
-        lag = k - tuples["stamp"]
-        mean, cov = tuples["mean"].copy(), tuples["cov"].copy()
+    def forward(tuples: fusion.Estimates, k: int) -> fusion.Estimates:
+        lag = k - tuples.stamp
+        mean, cov = tuples.mean.copy(), tuples.cov.copy()
         for n in np.unique(lag[lag > 0]):
             at = lag == n
             An, Qn = power(int(n))
             mean[at] = mean[at] @ An.T
             cov[at] = An @ cov[at] @ An.T + Qn
-        out = dict(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k))
-        out["gamma"] = np.where(np.isfinite(tuples["gamma"]), estimation.confidence(cov), -np.inf)
-        return out
+        gamma = np.where(np.isfinite(tuples.gamma), estimation.confidence(cov), -np.inf)
+        return replace(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k), gamma=gamma)
 
     return forward
 

@@ -284,13 +284,13 @@ class UavAgent:
         s = self.setting
         known = np.zeros(self.n, dtype=bool)
         known[self.me] = True
-        state = {  # per target: confidence, estimate, its time stamp and whose it is
-            "gamma": estimation.confidence(cov),
-            "mean": mean,
-            "cov": cov,
-            "stamp": np.full(self.m, k, dtype=np.int64),
-            "origin": np.full(self.m, self.me, dtype=np.int64),
-        }
+        state = fusion.Estimates(  # per target: confidence, estimate, stamp and whose it is
+            gamma=estimation.confidence(cov),
+            mean=mean,
+            cov=cov,
+            stamp=np.full(self.m, k, dtype=np.int64),
+            origin=np.full(self.m, self.me, dtype=np.int64),
+        )
         self.largest = 1
         stopped = rounds = None  # R, and the consensus rounds once D_i is known
         depth = r = 0
@@ -305,12 +305,12 @@ class UavAgent:
                 parts.append(part("flood", r, {"known": known}, final=r))
                 flood_final = True
             if rounds is None or r <= rounds:
-                parts.append(part("consensus", r, state))
+                parts.append(part("consensus", r, dict(state.items())))
             elif not consensus_final:
                 if rounds + 1 < r:  # rounds = R - 1: the tuple of round R was the final one
                     parts.append(part("consensus", r, None, final=rounds + 1))
                 else:
-                    parts.append(part("consensus", r, state, final=r))
+                    parts.append(part("consensus", r, dict(state.items()), final=r))
                 consensus_final = True
             if parts:
                 self.radio.send(k, parts)
@@ -328,7 +328,10 @@ class UavAgent:
                 inbox = self.radio.receive(k, "consensus", r)
                 if inbox is not None:
                     arrived.append((inbox.sent, inbox.delivered))
-                    offered = {q: self._plausible(t) for q, t in inbox.contents.items()}
+                    offered = {
+                        q: fusion.Estimates.of(self._plausible(t))
+                        for q, t in inbox.contents.items()
+                    }
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
@@ -340,7 +343,7 @@ class UavAgent:
             ),
             arrived,
         )
-        return state["mean"], state["cov"], rounds, sent, delivered
+        return state.mean, state.cov, rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
         """Round r of the D_i protocol (`fusion.learn_depth`) from this UAV's side: its
@@ -366,17 +369,21 @@ class UavAgent:
             return grown, budget, r
         return grown, r, None
 
-    def _adopt(self, state: dict, offered: dict[int, dict]) -> dict:
+    def _adopt(
+        self, state: fusion.Estimates, offered: dict[int, fusion.Estimates]
+    ) -> fusion.Estimates:
         """eq. (27) for this UAV: `fusion.adopt` over its closed neighbourhood in index
         order (itself with its current tuple), then `fusion.pick`; or, with
         ``fusion.rule`` = covariance_intersection, `fusion.intersect_round` over it.
         With ``robust.gate`` only what agrees with its measurements (`gate.admitted`)."""
         ids = sorted({self.me, *offered})
         where = ids.index(self.me)
-        candidates = {
-            name: np.stack([state[name] if q == self.me else offered[q][name] for q in ids])[None]
-            for name in state
-        }
+
+        def stacked(name: str, mine: np.ndarray) -> np.ndarray:  # (1, members, M, ...)
+            rows = [mine if q == self.me else getattr(offered[q], name) for q in ids]
+            return np.stack(rows)[None]
+
+        candidates = fusion.Estimates(**{name: stacked(name, v) for name, v in state.items()})
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, where, :] = True
         links = network.Links(batch=1, n=len(ids), dense=dense)
@@ -389,15 +396,15 @@ class UavAgent:
                     for x in (mine.observed, mine.z, mine.R, mine.recent)
                 )
             )
-            estimates = (candidates["mean"], candidates["cov"])
+            estimates = (candidates.mean, candidates.cov)
             admitted = gate.admitted(links, estimates, estimates, measured, self.setting.gate)
         if self.setting.rule == "covariance_intersection":
             picked = fusion.intersect_round(candidates, candidates, links, admitted)
         else:
-            gamma = candidates["gamma"]
+            gamma = candidates.gamma
             best = fusion.adopt(gamma, gamma, links, admitted)
             picked = fusion.pick(candidates, candidates, best)
-        return {name: value[0, where] for name, value in picked.items()}
+        return picked.map(lambda value: value[0, where])
 
     def _plausible(self, content: dict) -> dict:
         return plausible(self.spec, self.mailbox, content)
@@ -519,7 +526,7 @@ class UavAgent:
         if content is None:
             return nothing_heard(1, 1, self.m), np.zeros((1, 1), dtype=bool), -1
         content = self._plausible(content)
-        down = {name: content[name][None, None] for name in ("gamma", "mean", "cov", "stamp")}
+        down = fusion.Estimates.of(content).map(lambda value: value[None, None])
         return down, np.ones((1, 1), dtype=bool), int(content["target"])
 
 
@@ -578,7 +585,7 @@ class CentralAgent:
             else:  # every upload arrives, but one that was late; a UAV alone sends none
                 one = int(n > 1)
                 offered.append((n * one, int(heard.sum()) * one))
-            down, targets = central_node(got, heard, reported, s, k, timing)
+            down, targets = central_node(fusion.Estimates(**got), heard, reported, s, k, timing)
         sent, delivered = counted(  # with delay: the downloads, when sent
             s.delay,
             lambda: [
@@ -588,7 +595,7 @@ class CentralAgent:
             offered,
         )
         for i in np.flatnonzero(alive):  # each living UAV its download
-            content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
+            content = dict(down.map(lambda value, i=i: value[0, i]).items())
             content["target"] = np.array(targets[0, i], dtype=np.int64)
             self.radio.send(k, [part("download", 0, content)], to=int(i))
         cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits

@@ -20,8 +20,8 @@ from ..robust import gate
 class Setting:
     """What a run fixes for the methods: robustness options and the fault settings.
 
-    forward(tuples, k): tuples (dict of (B, N, M, ...) arrays with "mean", "cov",
-    "stamp") predicted forward to step k, with their confidence "gamma" recomputed.
+    forward(tuples, k): tuples (`fusion.Estimates` with mean, cov and stamp) predicted
+    forward to step k, with their confidence gamma recomputed.
     plan(uavs, mean, top=None): bids (B, N, M) and first actions of UAVs at `uavs`
     (B, N, 5) with fused estimates `mean` (B, N, M, 4), as `planning.plan` under the
     scenario (top: how many best bids each UAV needs, None: all). prune: whether a
@@ -148,17 +148,21 @@ def consensus(inputs: Inputs) -> Fused:
         rounds = np.minimum(rounds, s.budget)
     admit = gated(inputs)
     if s.delay == 0 and s.rule == "max_consensus":
-        tuples = {"gamma": inputs.gamma, "source": fusion.identity(inputs.gamma.shape)}
+        tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
         out = fusion.consensus(radio, tuples, rounds, admit=admit)
-        source = out.tuples["source"]
+        source = out.tuples.source
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
-        gamma = out.tuples["gamma"]  # travelled with the source: confidence(cov) exactly
+        gamma = out.tuples.gamma  # travelled with the source: confidence(cov) exactly
     else:
-        stamp = np.full(inputs.gamma.shape, inputs.k)
-        tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
+        tuples = fusion.Estimates(
+            gamma=inputs.gamma,
+            mean=inputs.mean,
+            cov=inputs.cov,
+            stamp=np.full(inputs.gamma.shape, inputs.k),
+        )
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
-        mean, cov = out.tuples["mean"], out.tuples["cov"]
+        mean, cov = out.tuples.mean, out.tuples.cov
         gamma = None
     sent, delivered = counted(
         s.delay,
@@ -179,19 +183,19 @@ def consensus(inputs: Inputs) -> Fused:
 def gated(inputs: Inputs):
     """The consensus's admit(own, offered, links) under the measurement gate
     (``robust.gate``, `gate.admitted`), or None without it. Tuples that travel as the
-    index of the UAV whose estimate they are ("source") are looked up in the local
-    estimates."""
+    index of the UAV whose estimate they are (`fusion.Estimates.source`) are looked up
+    in the local estimates."""
     s, measured = inputs.setting, inputs.measured
     if s.gate is None or measured is None:
         return None
 
-    def estimates(tuples: dict) -> tuple[np.ndarray, np.ndarray]:
-        if "source" in tuples:
-            source = tuples["source"]
+    def estimates(tuples: fusion.Estimates) -> tuple[np.ndarray, np.ndarray]:
+        if tuples.source is not None:
+            source = tuples.source
             return fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
-        return tuples["mean"], tuples["cov"]
+        return tuples.mean, tuples.cov
 
-    def admit(own: dict, offered: dict, links) -> np.ndarray:
+    def admit(own: fusion.Estimates, offered: fusion.Estimates, links) -> np.ndarray:
         return gate.admitted(links, estimates(own), estimates(offered), measured, s.gate)
 
     return admit
