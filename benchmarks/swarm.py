@@ -114,10 +114,17 @@ def gate_costs(repeat: int = 2000) -> dict:
         "stamp": np.zeros(m, dtype=np.int64),
         "origin": np.zeros(m, dtype=np.int64),
     }
-    body = encode(Radio(VERSION, "0123456789ab", 0, 0, [part("consensus", 1, state)]))
+    body = encode(
+        Radio(
+            version=VERSION, run="0123456789ab", k=0, sender=0, parts=[part("consensus", 1, state)]
+        )
+    )
     ring = Keyring("0123456789ab", 2)
-    sender, receiver = Gate("0123456789ab", 0, 2, ring.credential(0)), None
-    receiver = Gate("0123456789ab", 1, 2, ring.credential(1))
+    sender, receiver = (
+        Gate(run="0123456789ab", me=0, programs=2, credential=ring.credential(0)),
+        None,
+    )
+    receiver = Gate(run="0123456789ab", me=1, programs=2, credential=ring.credential(1))
     for gate in (sender, receiver):
         gate.learn(ring.public())
     start = time.perf_counter()

@@ -176,7 +176,7 @@ def test_a_stopped_program_does_not_blame_others_for_its_own_stop(monkeypatch):
 
     clock = {"now": 100.0}
     monkeypatch.setattr(transport.time, "monotonic", lambda: clock["now"])
-    box = Mailbox(Gate("r", WORLD, 1, None))
+    box = Mailbox(Gate(run="r", me=WORLD, programs=1, credential=None))
     arrived = {"yes": False}
     calls = []
     phase = {"stopped": True}

@@ -163,10 +163,10 @@ def test_a_uav_waits_for_its_download_while_the_node_waits_for_the_uploads(monke
 
     work = agent.central_node
 
-    def slow(got, heard, reported, setting, k):
+    def slow(got, heard, reported, setting, k, clock=None):
         if k == 2:
             time.sleep(1.4)
-        return work(got, heard, reported, setting, k)
+        return work(got, heard, reported, setting, k, clock)
 
     monkeypatch.setattr(agent, "central_node", slow)
     scenario = uavtrack.Scenario(steps=4)
@@ -332,7 +332,9 @@ class NoTokens(MemoryTransport):
 def test_a_token_gone_just_after_a_stop_is_not_believed_until_sessions_can_open_again(ago):
     stops = Stops()
     stops.saw(15.0, time.monotonic() - ago)
-    box = Mailbox(Gate("r", WORLD, 3, None), transport=NoTokens(), stops=stops)
+    box = Mailbox(
+        Gate(run="r", me=WORLD, programs=3, credential=None), transport=NoTokens(), stops=stops
+    )
     box.heard.add(1)
     box.lost("uavtrack/r/alive/1")
     gone = box.wait(lambda: box.is_gone(1), time.monotonic() + 2.0)

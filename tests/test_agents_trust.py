@@ -75,11 +75,11 @@ class Stranger:
         ring = Keyring(run, n)  # keys of its own: the right run, no member's
         out = []
         for p in range(n):
-            gate = Gate(run, p, n, ring.credential(p))
+            gate = Gate(run=run, me=p, programs=n, credential=ring.credential(p))
             gate.learn(ring.public())
             out.append((inbox_key(run, WORLD), gate.seal(WORLD, encode(Ready(VERSION, run, p)))))
             heard = part("presence", 0, {"heard": np.ones(n, dtype=bool)})
-            body = encode(Radio(VERSION, run, -1, p, [heard]))
+            body = encode(Radio(version=VERSION, run=run, k=-1, sender=p, parts=[heard]))
             out += [(inbox_key(run, q), gate.seal(q, body)) for q in range(n) if q != p]
         return out
 

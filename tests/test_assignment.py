@@ -229,3 +229,68 @@ def test_centralized_equals_one_solve_per_trial(n, m, levels, seed):
             if rows.size:
                 expected[rows] = assignment._solve(bids[b, rows])
             assert np.array_equal(target[b], expected)
+
+
+def test_assignment_and_planning_read_no_clock():
+    """Timing belongs to the caller: the maths imports neither `time` nor `timing`."""
+    import ast
+    from pathlib import Path
+
+    import uavtrack
+
+    root = Path(uavtrack.__file__).parent
+    for module in ("assignment.py", "planning.py"):
+        imported = set()
+        for node in ast.walk(ast.parse((root / module).read_text())):
+            if isinstance(node, ast.Import):
+                imported |= {alias.name.split(".")[-1] for alias in node.names}
+            elif isinstance(node, ast.ImportFrom):
+                imported.add((node.module or "").split(".")[-1])
+                imported |= {alias.name for alias in node.names}
+        assert not imported & {"time", "timing"}, (module, imported & {"time", "timing"})
+
+
+class Recording:
+    """`timing` with a count of the set-ups entered."""
+
+    def __init__(self):
+        from uavtrack import timing
+
+        self.timing, self.set_ups = timing, 0
+
+    def start(self):
+        return self.timing.start()
+
+    def since(self, mark):
+        return self.timing.since(mark)
+
+    def set_up(self):
+        self.set_ups += 1
+        return self.timing.set_up()
+
+
+def test_the_drivers_time_on_the_callers_clock_and_without_one_give_zeros(monkeypatch):
+    from uavtrack import timing
+
+    rng = np.random.default_rng(3)
+    bids = rng.integers(0, 3, (10, 5, 4)).astype(float)  # ties: the exact solver decides
+    members = rng.random((10, 5, 5)) < 0.6
+    members |= members.transpose(0, 2, 1)
+    for together in (assignment.TOGETHER, 1):
+        monkeypatch.setattr(assignment, "TOGETHER", together)
+        timed, seconds = assignment.auction(bids, members, clock=timing)
+        untimed, zeros = assignment.auction(bids, members, clock=None)
+        assert np.array_equal(timed, untimed)
+        assert seconds.shape == zeros.shape == (10, 5, 2)
+        assert (seconds >= 0).all() and seconds.sum() > 0 and not zeros.any()
+        timed, seconds = assignment.centralized(bids, clock=timing)
+        untimed, zeros = assignment.centralized(bids)
+        assert np.array_equal(timed, untimed) and seconds.sum() > 0 and not zeros.any()
+    for me in range(5):
+        mine = assignment.local(bids[0], me, clock=None)
+        assert mine == assignment.local(bids[0], me, clock=timing)
+    # the exact solver's first load is set-up on the caller's clock, no decision's time
+    monkeypatch.setattr(assignment, "_SOLVER", [])
+    clock = Recording()
+    assignment.auction(bids, members, clock=clock)
+    assert clock.set_ups == 1 and len(assignment._SOLVER) == 1

@@ -1,9 +1,12 @@
+from dataclasses import replace
+
 import networkx as nx
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
+import uavtrack
 from uavtrack import fusion, network
 
 
@@ -271,19 +274,22 @@ def test_adopt_and_intersect_with_a_mask_agree_in_both_forms(seed):
     adj = adj | np.swapaxes(adj, 1, 2)
     dense, edges = network.links(adj, "dense"), network.links(adj, "edges")
     cov = spd(rng, (B, n, m))
-    tuples = {"mean": rng.normal(size=(B, n, m, 4)) * 3, "cov": cov}
-    tuples["gamma"] = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
+    tuples = fusion.Estimates(
+        mean=rng.normal(size=(B, n, m, 4)) * 3,
+        cov=cov,
+        gamma=1.0 / np.trace(cov, axis1=-2, axis2=-1),
+    )
     observed = rng.random((B, n, m)) < 0.6
     z = rng.normal(size=(B, n, m, 2)) * 3
     R = np.broadcast_to(np.eye(2), (B, n, m, 2, 2)).copy()
     measured = gate.Measured(observed, z, R, rng.random((B, n, m)) < 0.5)
-    estimates = (tuples["mean"], tuples["cov"])
+    estimates = (tuples.mean, tuples.cov)
     masks = [gate.admitted(links, estimates, estimates, measured, 2.0) for links in (dense, edges)]
     t, i, q = edges.pairs()
     assert np.array_equal(masks[0][t, i, q], masks[1])
     assert not masks[0].all() and masks[0].any()  # the gate bites in both directions
     a = [
-        fusion.adopt(tuples["gamma"], tuples["gamma"], lk, mk)
+        fusion.adopt(tuples.gamma, tuples.gamma, lk, mk)
         for lk, mk in zip((dense, edges), masks, strict=True)
     ]
     assert np.array_equal(a[0], a[1])
@@ -296,7 +302,7 @@ def test_adopt_and_intersect_with_a_mask_agree_in_both_forms(seed):
         for lk, mk in zip((dense, edges), masks, strict=True)
     ]
     for name in ("mean", "cov"):
-        assert np.allclose(ci[0][name], ci[1][name], rtol=1e-9, atol=1e-12)
+        assert np.allclose(getattr(ci[0], name), getattr(ci[1], name), rtol=1e-9, atol=1e-12)
 
 
 def test_adopt_without_an_admitted_candidate_keeps_its_own():
@@ -319,12 +325,38 @@ def test_an_estimate_of_no_confidence_takes_no_part_in_intersection(rng):
     cov = spd(rng, (1, 3, 1))
     mean = rng.normal(size=(1, 3, 1, 4))
     gamma = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
-    tuples = {"mean": mean, "cov": cov, "gamma": gamma}
-    silenced = dict(tuples, gamma=np.where(np.arange(3)[None, :, None] == 2, -np.inf, gamma))
+    tuples = fusion.Estimates(mean=mean, cov=cov, gamma=gamma)
+    silenced = replace(tuples, gamma=np.where(np.arange(3)[None, :, None] == 2, -np.inf, gamma))
     links = network.links(adj, "dense")
     fused = fusion.intersect_round(tuples, silenced, links)
     pair = network.links(adj[:, :2, :2], "dense")
-    two = {k: v[:, :2] for k, v in tuples.items()}
+    two = tuples.map(lambda v: v[:, :2])
     expected = fusion.intersect_round(two, two, pair)
-    assert np.allclose(fused["mean"][:, :2], expected["mean"], rtol=1e-12)
-    assert np.allclose(fused["cov"][:, :2], expected["cov"], rtol=1e-12)
+    assert np.allclose(fused.mean[:, :2], expected.mean, rtol=1e-12)
+    assert np.allclose(fused.cov[:, :2], expected.cov, rtol=1e-12)
+
+
+def test_consensus_tuples_are_a_record_whose_fields_travel_together():
+    # two UAVs linked, one target: UAV 1's tuple is the more confident, and UAV 0 adopts
+    # all of it (confidence, estimate, stamp), not the confidence alone
+    own = fusion.Estimates(
+        gamma=np.array([[[1.0], [3.0]]]),
+        mean=np.array([[[[1.0, 2.0, 0.0, 0.0]], [[7.0, 8.0, 0.0, 0.0]]]]),
+        stamp=np.array([[[4], [5]]]),
+    )
+    links = network.links(np.ones((1, 2, 2), dtype=bool), "dense")
+    picked = fusion.pick(own, own, fusion.adopt(own.gamma, own.gamma, links))
+    assert isinstance(picked, fusion.Estimates) and picked.cov is None
+    assert picked.gamma[0, :, 0].tolist() == [3.0, 3.0]
+    assert picked.mean[0, :, 0, :2].tolist() == [[7.0, 8.0], [7.0, 8.0]]
+    assert picked.stamp[0, :, 0].tolist() == [5, 5]
+    # a message's content in, the same content out: the tuple fields by name, in the
+    # order of an agent's consensus message (`agents.messages.Spec`); other entries left
+    from uavtrack.agents.messages import Spec
+
+    scenario = uavtrack.Scenario(n_targets=1)
+    names = list(Spec.of(scenario, False).contents("consensus"))
+    content = {name: np.zeros(1, dtype=np.int64) for name in names}
+    assert [name for name, _ in fusion.Estimates.of(content).items()] == names
+    download = {name: np.zeros(1) for name in ("gamma", "mean", "cov", "stamp", "target")}
+    assert [name for name, _ in fusion.Estimates.of(download).items()][-1] == "stamp"

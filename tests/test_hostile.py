@@ -14,7 +14,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import uavtrack
-from uavtrack import estimation
+from uavtrack import estimation, fusion
 from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.messages import (
     VERSION,
@@ -120,22 +120,32 @@ def forged(run: str, k: int, me: int, n: int, m: int) -> list:
     flags = Array.of(np.ones(n, dtype=bool))
     nothing = Array.of(np.zeros((0, 2)))
     return [
-        Sense(VERSION, run, k, 0, believed, Array.of(np.zeros(m, bool)), nothing, flags, flags),
+        Sense(
+            version=VERSION,
+            run=run,
+            k=k,
+            uav=0,
+            believed=believed,
+            observed=Array.of(np.zeros(m, bool)),
+            z=nothing,
+            links=flags,
+            alive=flags,
+        ),
         Tick(VERSION, run, k, flags),
         Hello(
-            VERSION,
-            run,
-            "{}",
-            "distributed",
-            Array.of(np.zeros(2, np.uint32)),
-            Array.of(np.zeros((m, 4))),
-            Array.of(np.eye(4)),
-            1.0,
-            True,
-            [b"k" * 32] * (n + 1),
+            version=VERSION,
+            run=run,
+            scenario="{}",
+            method="distributed",
+            key=Array.of(np.zeros(2, np.uint32)),
+            prior_mean=Array.of(np.zeros((m, 4))),
+            prior_cov=Array.of(np.eye(4)),
+            deadline=1.0,
+            authenticated=True,
+            publics=[b"k" * 32] * (n + 1),
         ),  # fmt: skip
         Ready(VERSION, run, me),
-        Lost(VERSION, run, k, (me + 1) % n, "forged"),
+        Lost(version=VERSION, run=run, k=k, program=(me + 1) % n, reason="forged"),
     ]
 
 
@@ -381,7 +391,7 @@ def receiver(scenario, me=0, method="distributed"):
     from uavtrack.faults import Faults
 
     n, m = scenario.n_uavs, scenario.n_targets
-    gate_ = Gate("r", me, n, None)
+    gate_ = Gate(run="r", me=me, programs=n, credential=None)
     link = Link(MemoryTransport(Bus()), gate_)
     mailbox = Mailbox(gate_, Spec.of(scenario, False))
     faults = Faults(scenario.faults, np.zeros((1, 2), dtype=np.uint32), n)
@@ -477,20 +487,26 @@ def test_whatever_the_rule_admits_the_receivers_use_without_error(overrides, dat
             parts = spec.radio(consensus_message(content, k, q), k)
             if isinstance(parts, str):  # only what the rule admits reaches a receiver
                 continue
-            checked[q] = agent._plausible(parts[0][3])
+            checked[q] = fusion.Estimates.of(agent._plausible(parts[0][3]))
             if agent.setting.stale:
                 checked[q] = agent.setting.forward(checked[q], k)
-        state = agent._adopt(own, checked)
-        assert np.isfinite(state["mean"]).all() and np.isfinite(state["cov"]).all()
+        state = agent._adopt(fusion.Estimates.of(own), checked)
+        assert np.isfinite(state.mean).all() and np.isfinite(state.cov).all()
         bids, _ = agent.setting.plan(
-            np.array([[[100.0, 100.0, 425.0, 15.0, 0.0]]]), state["mean"][None, None]
+            np.array([[[100.0, 100.0, 425.0, 15.0, 0.0]]]), state.mean[None, None]
         )
         assert np.isfinite(bids).all() and (bids >= 0).all()
 
 
 def consensus_message(content: dict, k: int, sender: int) -> Radio:
     wire = {name: Array.of(value) for name, value in content.items()}
-    return Radio(VERSION, "r", k, sender, [messages.Part("consensus", 1, -1, wire)])
+    return Radio(
+        version=VERSION,
+        run="r",
+        k=k,
+        sender=sender,
+        parts=[messages.Part("consensus", 1, -1, wire)],
+    )
 
 
 def test_what_a_member_sends_beyond_the_rule_is_counted_in_the_swarm_json(monkeypatch, capsys):

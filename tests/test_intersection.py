@@ -77,19 +77,21 @@ def test_a_round_is_the_same_in_the_dense_and_the_edge_form(rng):
 
     def tuples():
         cov = np.stack([spd(rng) for _ in range(B * n * m)]).reshape(B, n, m, 4, 4)
-        return {"mean": rng.normal(size=(B, n, m, 4)), "cov": cov, "stamp": np.zeros((B, n, m))}
+        return fusion.Estimates(
+            mean=rng.normal(size=(B, n, m, 4)), cov=cov, stamp=np.zeros((B, n, m))
+        )
 
     own, offered = tuples(), tuples()  # with delay: what was offered is not the current one
     dense = fusion.intersect_round(own, offered, network.links(adjacency, "dense"))
     edges = fusion.intersect_round(own, offered, network.links(adjacency, "edges"))
     for name in ("mean", "cov", "gamma"):
-        assert np.allclose(dense[name], edges[name], rtol=1e-10, atol=1e-12)
+        assert np.allclose(getattr(dense, name), getattr(edges, name), rtol=1e-10, atol=1e-12)
     # receiver 0 of trial 0: the n-way intersection of its own and its neighbours' offers
     heard = np.flatnonzero(adjacency[0, 0])
-    mean = np.stack([own["mean"][0, 0] if q == 0 else offered["mean"][0, q] for q in heard], 1)
-    cov = np.stack([own["cov"][0, 0] if q == 0 else offered["cov"][0, q] for q in heard], 1)
+    mean = np.stack([own.mean[0, 0] if q == 0 else offered.mean[0, q] for q in heard], 1)
+    cov = np.stack([own.cov[0, 0] if q == 0 else offered.cov[0, q] for q in heard], 1)
     x, P = fusion.intersect(mean, cov, fusion.fast_weights(cov, np.ones(mean.shape[:2], bool)))
-    assert np.allclose(dense["mean"][0, 0], x) and np.allclose(dense["cov"][0, 0], P)
+    assert np.allclose(dense.mean[0, 0], x) and np.allclose(dense.cov[0, 0], P)
 
 
 @pytest.mark.parametrize("form", ["dense", "edges"])
@@ -100,9 +102,9 @@ def test_a_round_of_tuples_without_confidence_fuses_only_what_is_admitted(rng, f
     B, n, m = 1, 4, 2
     links = network.links(np.ones((B, n, n), dtype=bool), form)
     cov = np.stack([spd(rng) for _ in range(B * n * m)]).reshape(B, n, m, 4, 4)
-    own = {"mean": rng.normal(size=(B, n, m, 4)), "cov": cov}
+    own = fusion.Estimates(mean=rng.normal(size=(B, n, m, 4)), cov=cov)
     t, i, q = links.pairs()
     admitted = np.broadcast_to((i == q)[..., None], np.broadcast(t, i, q).shape + (m,))
     out = fusion.intersect_round(own, own, links, admitted)  # each admits only its own
-    assert np.allclose(out["mean"], own["mean"], rtol=1e-10, atol=1e-12)
-    assert np.allclose(out["cov"], own["cov"], rtol=1e-10, atol=1e-12)
+    assert np.allclose(out.mean, own.mean, rtol=1e-10, atol=1e-12)
+    assert np.allclose(out.cov, own.cov, rtol=1e-10, atol=1e-12)

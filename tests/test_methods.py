@@ -154,12 +154,12 @@ def test_a_download_its_measurement_contradicts_is_not_taken():
     ).setting
     own_mean = np.zeros((1, 1, 3, 4))
     own_cov = np.broadcast_to(np.eye(4), (1, 1, 3, 4, 4)).copy()
-    got = {
-        "gamma": np.full((1, 1, 3), 0.25),
-        "mean": np.zeros((1, 1, 3, 4)) + [[[[30.0, 0, 0, 0], [1.0, 0, 0, 0], [50.0, 0, 0, 0]]]],
-        "cov": own_cov.copy(),
-        "stamp": np.zeros((1, 1, 3), dtype=np.int64),
-    }
+    got = fusion.Estimates(
+        gamma=np.full((1, 1, 3), 0.25),
+        mean=np.zeros((1, 1, 3, 4)) + [[[[30.0, 0, 0, 0], [1.0, 0, 0, 0], [50.0, 0, 0, 0]]]],
+        cov=own_cov.copy(),
+        stamp=np.zeros((1, 1, 3), dtype=np.int64),
+    )
     z = np.array([[0.0, 0.0], [1.5, 0.0]])  # targets 0 and 1, in nonzero order
     observed = np.array([[[True, True, False]]])
     recent = gate.recent(np.array([[[0, 0, 0]]]), 20, 8, (1, 1, 3))

@@ -111,7 +111,9 @@ def tuples(m=4, k=3):
 
 def consensus(content, k=3, sender=1):
     wire = {name: Array.of(value) for name, value in content.items()}
-    return Radio(VERSION, "r", k, sender, [Part("consensus", 1, -1, wire)])
+    return Radio(
+        version=VERSION, run="r", k=k, sender=sender, parts=[Part("consensus", 1, -1, wire)]
+    )
 
 
 def changed(name, fix):
@@ -166,7 +168,7 @@ def test_a_tuple_beyond_the_plausibility_bounds_is_not_used_and_counted():
 
 def bids_message(bids, k=3):
     wire = {"bids": Array.of(np.asarray(bids, dtype=float)), "stamp": Array.of(np.array(k))}
-    return Radio(VERSION, "r", k, 1, [Part("bids", 0, -1, wire)])
+    return Radio(version=VERSION, run="r", k=k, sender=1, parts=[Part("bids", 0, -1, wire)])
 
 
 def test_bids_are_within_the_fisher_bound_and_nan_only_where_the_run_prunes():

@@ -1,8 +1,8 @@
 import numpy as np
 
-from uavtrack import faults, network
+from uavtrack import faults, fusion, network
 from uavtrack.config import FaultModel
-from uavtrack.radio import Radio, RadioState
+from uavtrack.radio import Radio, RadioState, counted
 
 
 def path_links(n=3):
@@ -57,3 +57,38 @@ def test_lost_messages_are_not_delivered_but_self_links_stay():
     radio.send("upload", {"x": np.zeros((1, 3))})
     content, delivered = radio.receive_central("upload")
     assert not delivered.any()
+
+
+def never():
+    raise AssertionError("this side of the count does not apply")
+
+
+def test_messages_count_where_they_arrive_without_delay_and_when_sent_with_it():
+    # the rule alone: one side applies, its pairs summed
+    arrived = [(np.array([3, 1]), np.array([2, 1])), (np.array([4, 0]), np.array([4, 0]))]
+    sent, delivered = counted(0, never, arrived)
+    assert sent.tolist() == [7, 1] and delivered.tolist() == [6, 1]
+    assert counted(2, lambda: [(5, 4), (1, 1)], (never() for _ in range(1))) == (6, 5)
+    assert counted(0, never, []) == (0, 0)
+
+    # on the path 0 - 1 - 2, UAV 1 alone still receiving, every message lost: without
+    # delay the two messages into UAV 1 were sent and none delivered
+    receiving = np.array([[False, True, False]])
+    alive = np.ones((1, 3), dtype=bool)
+    for loss, expected in ((0.0, (2, 2)), (1.0, (2, 0))):
+        radio = Radio(0, path_links(), alive, realisation(loss=loss), RadioState())
+        radio.send("flood", {"known": np.zeros((1, 3, 3), dtype=bool)})
+        inbox = radio.receive("flood", 1)
+        zero = np.zeros(1, dtype=np.int64)
+        pairs = [fusion.count(inbox, receiving, zero, zero)]
+        assert tuple(int(x[0]) for x in counted(0, never, pairs)) == expected
+
+    # with delay 1 nothing arrives in cycle 0, yet what is sent now counts: UAV 0 runs
+    # one round over one link, UAV 1 two rounds over two links, UAV 2 none
+    rounds = np.array([[1, 2, 0]])
+    for loss, expected in ((0.0, (5, 5)), (1.0, (5, 0))):
+        radio = Radio(0, path_links(), alive, realisation(delay=1, loss=loss), RadioState())
+        radio.send("flood", {"known": np.zeros((1, 3, 3), dtype=bool)})
+        assert radio.receive("flood", 1) is None
+        sent, delivered = counted(1, lambda r=radio: [r.transmitted("flood", rounds)], [])
+        assert (int(sent[0]), int(delivered[0])) == expected

@@ -209,8 +209,32 @@ def test_a_long_label_makes_a_short_unique_file_name():
     from uavtrack.experiments.jobs import Job
 
     long = ",".join(f"tracker.transition=[{i}]" * 3 for i in range(20))
-    a = Job("trials", long, "distributed", Scenario(), 0, 25, 0)
-    b = Job("trials", long + "x", "distributed", Scenario(), 0, 25, 0)
+    a = Job(
+        kind="trials",
+        label=long,
+        method="distributed",
+        scenario=Scenario(),
+        first=0,
+        count=25,
+        seed=0,
+    )
+    b = Job(
+        kind="trials",
+        label=long + "x",
+        method="distributed",
+        scenario=Scenario(),
+        first=0,
+        count=25,
+        seed=0,
+    )
     assert len(a.key) < 200 and a.key != b.key
-    short = Job("trials", "comm_range=10", "greedy", Scenario(), 25, 25, 0)
+    short = Job(
+        kind="trials",
+        label="comm_range=10",
+        method="greedy",
+        scenario=Scenario(),
+        first=25,
+        count=25,
+        seed=0,
+    )
     assert short.key == "trials__comm_range=10__greedy__t025-049"  # as it always was

@@ -26,7 +26,7 @@ def gates(programs=3):
     world = ring.gate()
     out = []
     for p in range(programs):
-        gate = Gate(RUN, p, programs, ring.credential(p))
+        gate = Gate(run=RUN, me=p, programs=programs, credential=ring.credential(p))
         gate.learn(ring.public())
         out.append(gate)
     return ring, world, out
@@ -46,13 +46,15 @@ def test_one_member_cannot_speak_as_another():
     _, _, (g0, g1, g2) = gates()
     # program 2 holds its own key only: a message it makes in 0's name does not open at 1
     forged = msgspec.msgpack.decode(g2.seal(1, b"bids"), type=Envelope)
-    as_zero = msgspec.msgpack.encode(Envelope(0, 1, forged.seq, b"bids", forged.tag))
+    as_zero = msgspec.msgpack.encode(
+        Envelope(sender=0, receiver=1, seq=forged.seq, body=b"bids", tag=forged.tag)
+    )
     assert g1.open(as_zero) == "not authentic"
     # nor does a tag moved onto another body, or onto another sequence number
     genuine = msgspec.msgpack.decode(g0.seal(1, b"bids"), type=Envelope)
     for envelope in (
-        Envelope(0, 1, genuine.seq, b"other bids", genuine.tag),
-        Envelope(0, 1, genuine.seq + 1, genuine.body, genuine.tag),
+        Envelope(sender=0, receiver=1, seq=genuine.seq, body=b"other bids", tag=genuine.tag),
+        Envelope(sender=0, receiver=1, seq=genuine.seq + 1, body=genuine.body, tag=genuine.tag),
     ):
         assert g1.open(msgspec.msgpack.encode(envelope)) == "not authentic"
     assert g1.drops == {"not authentic": 3}
@@ -61,7 +63,7 @@ def test_one_member_cannot_speak_as_another():
 def test_a_stranger_with_keys_of_its_own_is_not_heard():
     _, _, (g0, g1, _) = gates()
     stranger = Keyring(RUN, 3)  # the same run id, other keys
-    intruder = Gate(RUN, 0, 3, stranger.credential(0))
+    intruder = Gate(run=RUN, me=0, programs=3, credential=stranger.credential(0))
     intruder.learn(stranger.public())
     assert g1.open(intruder.seal(1, b"consensus")) == "not authentic"
     hello = stranger.gate().seal(EVERYONE, b"hello")
@@ -74,7 +76,9 @@ def test_only_the_world_signs_a_broadcast():
     # a program claiming to be the world, or broadcasting in its own name
     envelope = msgspec.msgpack.decode(g0.seal(1, b"hello"), type=Envelope)
     for sender in (WORLD, 0):
-        forged = Envelope(sender, EVERYONE, envelope.seq, b"hello", envelope.tag)
+        forged = Envelope(
+            sender=sender, receiver=EVERYONE, seq=envelope.seq, body=b"hello", tag=envelope.tag
+        )
         assert g1.open(msgspec.msgpack.encode(forged)) in ("not authentic", "unknown sender")
 
 
@@ -85,9 +89,18 @@ def test_malformed_and_unknown_envelopes_are_dropped_by_reason():
         (b"", "malformed"),
         (b"\x93garbage", "malformed"),
         (good[:-3], "malformed"),
-        (msgspec.msgpack.encode(Envelope(7, 1, 1, b"x", b"")), "unknown sender"),
-        (msgspec.msgpack.encode(Envelope(1, 1, 1, b"x", b"")), "unknown sender"),
-        (msgspec.msgpack.encode(Envelope(0, 1, -5, b"x", b"")), "malformed"),
+        (
+            msgspec.msgpack.encode(Envelope(sender=7, receiver=1, seq=1, body=b"x", tag=b"")),
+            "unknown sender",
+        ),
+        (
+            msgspec.msgpack.encode(Envelope(sender=1, receiver=1, seq=1, body=b"x", tag=b"")),
+            "unknown sender",
+        ),
+        (
+            msgspec.msgpack.encode(Envelope(sender=0, receiver=1, seq=-5, body=b"x", tag=b"")),
+            "malformed",
+        ),
     ):
         assert g1.open(payload) == reason
 
@@ -167,7 +180,7 @@ def spec(n=3, m=2):
 
 
 def radio(parts, k=0, sender=1):
-    return Radio(VERSION, RUN, k, sender, parts)
+    return Radio(version=VERSION, run=RUN, k=k, sender=sender, parts=parts)
 
 
 def test_radio_parts_of_the_wrong_shape_type_value_round_or_cycle_are_refused():
@@ -279,19 +292,27 @@ def test_what_comes_before_the_hello_is_bounded_in_bytes_and_its_drops_counted()
     # before the Hello nothing can be opened, so a program keeps what comes, unverified:
     # whatever a stranger sends, in whatever names, it keeps at most a few MB
     ring, _, (g0, g1, _) = gates()
-    box = Mailbox(Gate(RUN, 1, 0, ring.credential(1)))
+    box = Mailbox(Gate(run=RUN, me=1, programs=0, credential=ring.credential(1)))
 
     def kept():
         return sum(len(p) for queue in box._early.values() for p in queue)
 
     junk = b"\x00" * (1 << 20)
     for sender in range(12):  # 12 MB of large messages, each in another's name
-        box.handler("k", msgspec.msgpack.encode(Envelope(sender, 1, 1, junk, b"")))
+        box.handler(
+            "k",
+            msgspec.msgpack.encode(Envelope(sender=sender, receiver=1, seq=1, body=junk, tag=b"")),
+        )
     assert kept() == 0 and box.drops == {"too large before the run's keys": 12}
     body = b"\x00" * 60_000  # under a sender's share: 200 senders' worth is 12 MB
     for sender in range(200):
         for seq in (1, 2):
-            box.handler("k", msgspec.msgpack.encode(Envelope(sender, 1, seq, body, b"")))
+            box.handler(
+                "k",
+                msgspec.msgpack.encode(
+                    Envelope(sender=sender, receiver=1, seq=seq, body=body, tag=b"")
+                ),
+            )
     assert 3 << 20 < kept() <= 4 << 20  # 4 MB in all
     assert all(len(queue) == 1 for queue in box._early.values())  # one 60 kB each
     assert box.drops["over the buffer before the run's keys"] > 200  # of 400
@@ -435,7 +456,13 @@ def decode_any(payload):
 def forge(envelope, message, seq_offset=10**6, **change):
     """The message changed, in a new envelope that claims the same sender (no valid tag)."""
     body = encode(msgspec.structs.replace(message, **change))
-    forged = Envelope(envelope.sender, envelope.receiver, envelope.seq + seq_offset, body, b"")
+    forged = Envelope(
+        sender=envelope.sender,
+        receiver=envelope.receiver,
+        seq=envelope.seq + seq_offset,
+        body=body,
+        tag=b"",
+    )
     return msgspec.msgpack.encode(forged)
 
 
@@ -512,7 +539,13 @@ def test_malformed_payloads_on_every_key_change_nothing():
         junk = [b"\xc1not msgpack", payload[: len(payload) // 2]]
         if envelope is not None:
             seq = envelope.seq + 7
-            bad = Envelope(envelope.sender, envelope.receiver, seq, b"\x93xyz", b"")
+            bad = Envelope(
+                sender=envelope.sender,
+                receiver=envelope.receiver,
+                seq=seq,
+                body=b"\x93xyz",
+                tag=b"",
+            )
             junk.append(msgspec.msgpack.encode(bad))
         return [(key, j) for j in junk]
 

@@ -368,7 +368,7 @@ def test_set_up_in_one_thread_is_not_left_out_of_another():
         "out = []\n"
         "def uav():\n"
         "    mark = timing.start()\n"
-        "    assignment.load_solver()\n"
+        "    assignment.load_solver(timing)\n"
         "    out.append(timing.since(mark))\n"
         "threads = [threading.Thread(target=uav) for _ in range(3)]\n"
         "for t in threads: t.start()\n"

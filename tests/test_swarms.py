@@ -16,8 +16,8 @@ def dense(monkeypatch):
     """The code as it was before the reductions: dense radio and flooding, every bid
     scored, every auction over all targets."""
     monkeypatch.setattr(network, "SPARSE_FROM", 10**9)
-    monkeypatch.setattr(assignment, "_solve", dense_solve)
-    monkeypatch.setattr(assignment, "_restricted", lambda bids, best: dense_solve(bids))
+    monkeypatch.setattr(assignment, "_solve", lambda bids, clock=None: dense_solve(bids))
+    monkeypatch.setattr(assignment, "_restricted", lambda bids, best, clock=None: dense_solve(bids))
 
 
 @settings(max_examples=8, deadline=None)

@@ -6,9 +6,12 @@ and keeps its own row (`local`). When the neighbourhood has more UAVs than targe
 the assignment is repeated on the UAVs left over until each has a target (Remark 2).
 Ties break deterministically toward lower indices.
 
-`neighbourhood` is the driver that runs every UAV's rule for a batch of trials: UAVs
-that see the same problem (the same members with the same bids) share one solve, and
-the driver measures how long each solve takes; the rules themselves never time.
+`auction` is the driver that runs every UAV's rule for a batch of trials (`neighbourhood`
+on a plain graph): UAVs that see the same problem (the same members with the same bids)
+share one solve, and the driver measures how long each solve takes on the clock its
+caller hands it (`Clock`; the simulator and the agents pass `uavtrack.timing`). The
+module reads no clock of its own: timing belongs to the caller, and without a clock the
+seconds are zeros.
 Problems of the same size are solved together (`solve_many`): small ones by
 enumerating every assignment as arrays, with the exact solver for the rest and for
 every problem whose optimum is not unique by a clear margin, so the answers are those
@@ -28,20 +31,49 @@ from __future__ import annotations
 import itertools
 import math
 from collections.abc import Callable
+from contextlib import AbstractContextManager, nullcontext
 from functools import cache
+from typing import Any, Protocol
 
 import numpy as np
 
-from . import timing
+
+class Clock(Protocol):
+    """The clock a caller times the solves on: the `uavtrack.timing` module is one.
+
+    start() marks both clocks; since(mark) is the seconds since, (2,) [CPU, wall];
+    set_up() is a context whose work (here: loading scipy's solver on first use) is left
+    out of `since`, being no decision's time."""
+
+    def start(self) -> Any: ...
+
+    def since(self, mark: Any) -> np.ndarray: ...
+
+    def set_up(self) -> AbstractContextManager[None]: ...
 
 
-def linear_sum_assignment(
-    cost: np.ndarray, maximize: bool = False
-) -> tuple[np.ndarray, np.ndarray]:
+class _NoClock:
+    """No clock at all: nothing is read, every duration is zero."""
+
+    def start(self) -> None:
+        return None
+
+    def since(self, mark: Any) -> np.ndarray:
+        return np.zeros(2)
+
+    def set_up(self) -> AbstractContextManager[None]:
+        return nullcontext()
+
+
+NO_CLOCK = _NoClock()
+"""The clock of a caller that passes none: the solves' seconds are zeros."""
+
+
+def linear_sum_assignment(cost: np.ndarray, maximize: bool = False, clock: Clock | None = None):
     """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
     second to load, and batches of trials solve their problems by `solve_many`, without
     it unless bids tie."""
-    return load_solver()(cost, maximize=maximize)
+    return load_solver(clock)(cost, maximize=maximize)
 
 
 Solver = Callable[[np.ndarray], np.ndarray]
@@ -50,20 +82,17 @@ Solver = Callable[[np.ndarray], np.ndarray]
 _SOLVER: list[Callable[..., tuple[np.ndarray, np.ndarray]]] = []
 
 
-def load_solver() -> Callable[..., tuple[np.ndarray, np.ndarray]]:
+def load_solver(clock: Clock | None = None) -> Callable:
     """scipy's `linear_sum_assignment`, importing `scipy.optimize` on first use; the
-    import is set-up, not a decision's time (`timing.set_up`)."""
+    import is set-up on the caller's `clock` (`Clock.set_up`), not a decision's time."""
     if not _SOLVER:
-        with timing.set_up():
-            # scipy ships no type stubs; pyright reads its Python source
-            from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
-                linear_sum_assignment as solve,
-            )
+        with (NO_CLOCK if clock is None else clock).set_up():
+            from scipy.optimize import linear_sum_assignment as solve
         _SOLVER.append(solve)
     return _SOLVER[0]
 
 
-def hungarian(bids: np.ndarray) -> np.ndarray:
+def hungarian(bids: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     """Assignment of rows (UAVs) to columns (targets) maximising the total bid, Remark 2.
 
     bids: (n, m), finite, or NaN for a bid that was not scored because it is below the
@@ -83,18 +112,27 @@ def hungarian(bids: np.ndarray) -> np.ndarray:
     B_i is the n largest bids of row i, ties to the lower column, so the restricted
     problem, and the choice among tied optima, depends only on the bids at or above
     each row's n-th best.
+
+    clock: the caller's (`Clock`), on whose set-up a first load of scipy's solver is
+    counted; it is read for nothing else.
     """
     bids = np.asarray(bids, dtype=float)
     if bids.ndim != 2:
         raise ValueError(f"bids must be (n, m), got shape {bids.shape}")
     _check(bids)
-    return _solve(bids)
+    return _solve(bids, clock)
 
 
-def local(bids: np.ndarray, me: int, solve: Solver | None = None) -> int:
+def local(
+    bids: np.ndarray, me: int, solve: Callable | None = None, clock: Clock | None = None
+) -> int:
     """One UAV's auction (Algorithm 1 lines 5-9): its target from the bids of its closed
-    neighbourhood, (n, m) with its own row at `me` and the others in index order."""
-    return int((solve or hungarian)(bids)[me])
+    neighbourhood, (n, m) with its own row at `me` and the others in index order.
+    solve: the neighbourhood problem's solver (default `hungarian`, with `clock` for the
+    set-up of its first load)."""
+    if solve is None:
+        return int(hungarian(bids, clock)[me])
+    return int(solve(bids)[me])
 
 
 def able(bids: np.ndarray, members: np.ndarray, me: int) -> np.ndarray:
@@ -146,7 +184,7 @@ def ranked(bids: np.ndarray, count: int) -> np.ndarray:
     return out
 
 
-def _restricted(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
+def _restricted(bids: np.ndarray, best: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     """The problem over rows (n, m) restricted to each row's n best columns `best`
     (n, n), solved (`hungarian`'s exchange argument). Returns (n,) columns.
 
@@ -162,19 +200,19 @@ def _restricted(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
     columns, position = np.unique(best, return_inverse=True)
     problem = np.full((n, columns.size), -np.inf)
     problem[np.arange(n)[:, None], position.reshape(best.shape)] = values
-    return columns[linear_sum_assignment(problem, maximize=True)[1]]
+    return columns[linear_sum_assignment(problem, maximize=True, clock=clock)[1]]
 
 
-def _solve(bids: np.ndarray) -> np.ndarray:
+def _solve(bids: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     n, m = bids.shape
     if n < m:  # one round, over each row's n best columns (the exchange argument)
-        return _restricted(bids, ranked(bids, n))
+        return _restricted(bids, ranked(bids, n), clock)
     if np.isnan(bids).any():
         raise ValueError(f"{n} rows and {m} columns: every bid must be scored (not NaN)")
     choice = np.empty(n, dtype=np.int64)
     left = np.arange(n)
     while left.size:
-        rows, cols = linear_sum_assignment(bids[left], maximize=True)
+        rows, cols = linear_sum_assignment(bids[left], maximize=True, clock=clock)
         choice[left[rows]] = cols
         keep = np.ones(left.size, dtype=bool)
         keep[rows] = False
@@ -198,7 +236,9 @@ exact solver's rounding, so the solver would find the same one. Otherwise (a tie
 near-tie) the problem goes to the exact solver, which breaks the tie its own way."""
 
 
-def solve_many(bids: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
+def solve_many(
+    bids: np.ndarray, best: np.ndarray | None = None, clock: Clock | None = None
+) -> np.ndarray:
     """`hungarian` of each problem of a stack, the same answers, ties included.
 
     bids: (Q, k, m) problems of k rows each; best: (Q, k, k) each row's k best columns
@@ -206,23 +246,23 @@ def solve_many(bids: np.ndarray, best: np.ndarray | None = None) -> np.ndarray:
     Small problems are solved for the whole stack at once by enumeration; a problem
     whose optimum is not unique by `MARGIN`, or is too large to enumerate, is solved
     alone by the exact solver (`_solve`), as is one with unscored bids where every bid
-    is needed (which raises as `hungarian` does).
+    is needed (which raises as `hungarian` does). clock: as `hungarian`'s.
     """
     Q, k, m = bids.shape
     if k < m:
         if best is None:
             best = ranked(bids.reshape(Q * k, m), k).reshape(Q, k, k)
-        return _restricted_many(bids, best)
+        return _restricted_many(bids, best, clock)
     out = np.empty((Q, k), dtype=np.int64)
     scored = ~np.isnan(bids).any(axis=(1, 2))
     for q in np.flatnonzero(~scored):
-        out[q] = _solve(bids[q])  # raises: every bid is needed here
+        out[q] = _solve(bids[q], clock)  # raises: every bid is needed here
     if scored.any():
-        out[scored] = _rounds_many(bids[scored])
+        out[scored] = _rounds_many(bids[scored], clock)
     return out
 
 
-def _restricted_many(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
+def _restricted_many(bids: np.ndarray, best: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     """`_restricted` of each problem: (Q, k, m) bids, (Q, k, k) each row's k best."""
     Q, k, _ = best.shape
     if k == 1:
@@ -252,25 +292,25 @@ def _restricted_many(bids: np.ndarray, best: np.ndarray) -> np.ndarray:
         out[done] = cols[unique, pick[unique]]
         rest = rest[~unique]
     for q in np.concatenate([rest, alone]):
-        out[q] = _restricted(bids[q], best[q])
+        out[q] = _restricted(bids[q], best[q], clock)
     return out
 
 
-def _rounds_many(bids: np.ndarray) -> np.ndarray:
+def _rounds_many(bids: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     """`_solve`'s rounds (k >= m, every bid scored) for each problem of (Q, k, m)."""
     Q, k, _ = bids.shape
     choice = np.empty((Q, k), dtype=np.int64)
     left = np.broadcast_to(np.arange(k), (Q, k))
     while left.shape[1]:
         sub = np.take_along_axis(bids, left[:, :, None], axis=1)
-        cols = _lsa_many(sub)  # (Q, r), -1 for a row left for the next round
+        cols = _lsa_many(sub, clock)  # (Q, r), -1 for a row left for the next round
         np.put_along_axis(choice, left, cols, axis=1)
         # every problem leaves the same number of rows (min(r, m) are assigned a round)
         left = left[cols < 0].reshape(Q, -1)
     return choice
 
 
-def _lsa_many(bids: np.ndarray) -> np.ndarray:
+def _lsa_many(bids: np.ndarray, clock: Clock | None = None) -> np.ndarray:
     """One `linear_sum_assignment(maximize=True)` of each problem of (Q, r, c), every bid
     finite: (Q, r) the column of each row, -1 for a row left out (r > c)."""
     Q, r, c = bids.shape
@@ -291,7 +331,7 @@ def _lsa_many(bids: np.ndarray) -> np.ndarray:
             out[done[:, None], perm[pick[done]]] = np.arange(c)
         todo = np.flatnonzero(~unique)
     for q in todo:
-        rows, cols = linear_sum_assignment(bids[q], maximize=True)
+        rows, cols = linear_sum_assignment(bids[q], maximize=True, clock=clock)
         out[q, rows] = cols
     return out
 
@@ -342,7 +382,10 @@ def neighbourhood(
 
 
 def auction(
-    bids: np.ndarray, members: np.ndarray, solve: Solver | None = None
+    bids: np.ndarray,
+    members: np.ndarray,
+    solve: Callable | None = None,
+    clock: Clock | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every UAV's `local` rule over the members of its closed neighbourhood, for B trials.
 
@@ -352,11 +395,13 @@ def auction(
     receiver, sender], the UAVs in each receiver's auction; a receiver is always a
     member of its own. solve: the neighbourhood problem's solver (default `hungarian`).
 
-    Returns (target (B, N), seconds (B, N, 2)): the time of the solve each UAV needed,
-    CPU and wall (`timing`), charged to every UAV that shares it, as each would solve it
-    on its own processor (problems solved together share their time).
+    Returns (target (B, N), seconds (B, N, 2)): the time of the solve each UAV needed on
+    the caller's `clock`, CPU and wall (zeros without one), charged to every UAV that
+    shares it, as each would solve it on its own processor (problems solved together
+    share their time).
     A UAV alone takes its best bid (the lowest target on ties, as the solver does).
     """
+    clock = NO_CLOCK if clock is None else clock
     solve = solve or _solve
     if solve is hungarian:
         solve = _solve  # the same, without checking every problem again
@@ -364,10 +409,10 @@ def auction(
     B, n = members.shape[:2]
     views = bids.ndim == 4
     own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
-    start = timing.start()
+    start = clock.start()
     out = greedy(own)
     seconds = np.empty(out.shape + (2,))
-    seconds[...] = timing.since(start) / max(out.size, 1)
+    seconds[...] = clock.since(start) / max(out.size, 1)
     idx = np.arange(n)
     members = members.copy()
     members[:, idx, idx] = True
@@ -389,12 +434,12 @@ def auction(
         # the built-in solver reads each member's k best bids only: rank every bidder's
         # once, as many as the largest problem needs (`ranked` keeps the order of each
         # shorter prefix), and charge the ranking to the problems by their members
-        start = timing.start()
+        start = clock.start()
         problem, member = np.nonzero(rows[first])
         bidders = np.unique(b[first][problem] * n + member)
         lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
         lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
-        share = timing.since(start) / bidders.size
+        share = clock.since(start) / bidders.size
     if solve is _solve:  # problems of one size together (`solve_many`) when many
         for width in np.unique(size):
             group = np.flatnonzero(size == width)
@@ -402,18 +447,18 @@ def auction(
                 for u in group:
                     k = first[u]
                     problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-                    start = timing.start()
+                    start = clock.start()
                     if lists is not None and width < m:
                         who = np.flatnonzero(rows[k]) + n * b[k]
-                        solved = _restricted(problem, lists[who, :width])
+                        solved = _restricted(problem, lists[who, :width], clock)
                     else:
-                        solved = _solve(problem)
-                    cost[u] = timing.since(start) + share * width
+                        solved = _solve(problem, clock)
+                    cost[u] = clock.since(start) + share * width
                     choice[u, :width] = solved
                 continue
             k = first[group]
             who = np.nonzero(rows[k])[1].reshape(-1, width)  # members, in index order
-            start = timing.start()
+            start = clock.start()
             if views:
                 problem = bids[b[k][:, None], i[k][:, None], who]
             else:
@@ -421,14 +466,14 @@ def auction(
             best = None
             if lists is not None and width < m:
                 best = lists[who + n * b[k][:, None], :width]
-            choice[group, :width] = solve_many(problem, best)
-            cost[group] = timing.since(start) / group.size + share * width
+            choice[group, :width] = solve_many(problem, best, clock)
+            cost[group] = clock.since(start) / group.size + share * width
     else:
         for u, k in enumerate(first):  # a method's own solver: one call per problem
             problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-            start = timing.start()
+            start = clock.start()
             solved = solve(problem)
-            cost[u] = timing.since(start)
+            cost[u] = clock.since(start)
             choice[u, : solved.size] = solved
     out[b, i] = choice[which, row]
     seconds[b, i] = cost[which]
@@ -466,14 +511,15 @@ def _distinct(
 
 
 def centralized(
-    bids: np.ndarray, members: np.ndarray | None = None
+    bids: np.ndarray, members: np.ndarray | None = None, clock: Clock | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """One global assignment per trial over the member UAVs (all by default).
 
     bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
-    out; seconds (B, 2) of each trial's solve, CPU and wall, the solve of trials with as
-    many members shared among them).
+    out; seconds (B, 2) of each trial's solve on the caller's `clock`, CPU and wall
+    (zeros without one), the solve of trials with as many members shared among them).
     """
+    clock = NO_CLOCK if clock is None else clock
     B, n, _ = bids.shape
     members = np.ones((B, n), dtype=bool) if members is None else members
     _check(bids[members])
@@ -485,14 +531,14 @@ def centralized(
         if trials.size < TOGETHER:  # a few: each alone
             for b in trials:
                 rows = np.flatnonzero(members[b])
-                start = timing.start()
-                out[b, rows] = _solve(bids[b, rows])
-                seconds[b] = timing.since(start)
+                start = clock.start()
+                out[b, rows] = _solve(bids[b, rows], clock)
+                seconds[b] = clock.since(start)
             continue
         who = np.nonzero(members[trials])[1].reshape(-1, size)
-        start = timing.start()
-        out[trials[:, None], who] = solve_many(bids[trials[:, None], who])
-        seconds[trials] = timing.since(start) / trials.size
+        start = clock.start()
+        out[trials[:, None], who] = solve_many(bids[trials[:, None], who], clock=clock)
+        seconds[trials] = clock.since(start) / trials.size
     return out, seconds
 
 

@@ -309,7 +309,7 @@ def imm_update(modes: Modes, observed: np.ndarray, z: np.ndarray, R: np.ndarray)
     return Modes(mean, cov, prob)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Tracker:
     """The local filter of a run, as the cycle uses it: the paper's Kalman filter
     (`transition_matrix` None) or an IMM whose first mode is that filter.
@@ -337,17 +337,17 @@ class Tracker:
         `config.TrackerModel`."""
         A, Q = transition(dt), process_noise(dt, *sigma)
         if tracker.model == "cv":
-            return cls(A, Q)
+            return cls(A=A, Q=Q)
         extra = [process_noise(dt, s, s) for s in tracker.manoeuvre_std]
         rates = [r for rate in tracker.turn_rates_deg for r in (rate, -rate)]
         motions = [A] * (1 + len(extra)) + [turn_transition(dt, np.radians(r)) for r in rates]
         noises = [Q, *extra] + [Q] * len(rates)
         return cls(
-            A,
-            Q,
-            np.array(tracker.transition, dtype=float),
-            np.stack(noises),
-            np.stack(motions) if rates else None,  # None: every mode moves with A
+            A=A,
+            Q=Q,
+            transition_matrix=np.array(tracker.transition, dtype=float),
+            mode_Q=np.stack(noises),
+            mode_A=np.stack(motions) if rates else None,  # None: every mode moves with A
         )
 
     def start(self, mean: np.ndarray, cov: np.ndarray) -> Belief:

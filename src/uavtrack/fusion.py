@@ -35,8 +35,8 @@ a plain graph with a perfect radio. All functions broadcast over a leading trial
 
 from __future__ import annotations
 
-from collections.abc import Callable
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass, fields
 
 import numpy as np
 
@@ -46,6 +46,48 @@ from .radio import Inbox, Radio, RadioState
 
 Tuples = dict[str, np.ndarray]
 """The tuples the UAVs exchange: field name -> (B, N, M, ...) array."""
+
+# ------------------------------------------------------------------ the tuples
+
+
+@dataclass(frozen=True, kw_only=True)
+class Estimates:
+    """The consensus tuples: per (UAV, target), the estimate a UAV holds and what travels
+    with it. Leading axes (B, N, M) [trial, UAV, target] in the batch, (M,) in an agent
+    (a stack of candidates (1, n, M) while it adopts); a field is None where an exchange
+    does not carry it.
+
+    gamma: (B, N, M) the confidence 1 / trace P (eq. 22); -inf: no estimate.
+    mean: (B, N, M, 4) the estimate [m, m/s], when tuples travel by value.
+    cov: (B, N, M, 4, 4) its covariance P.
+    stamp: (B, N, M) int, the step the estimate is of (with delay, an earlier cycle's).
+    source: (B, N, M) int, the UAV whose local estimate it is: without delay the tuples
+    travel as this index, the estimate looked up where it is needed (`gather`).
+    origin: (B, N, M) int, the same sent by value with an agent's tuple
+    (`agents.messages.Spec`).
+    """
+
+    gamma: np.ndarray | None = None
+    mean: np.ndarray | None = None
+    cov: np.ndarray | None = None
+    stamp: np.ndarray | None = None
+    source: np.ndarray | None = None
+    origin: np.ndarray | None = None
+
+    def items(self) -> list[tuple[str, np.ndarray]]:
+        """The fields carried, (name, array), in the order above (that of a message's
+        content)."""
+        return [(f.name, v) for f in fields(self) if (v := getattr(self, f.name)) is not None]
+
+    def map(self, f: Callable[[np.ndarray], np.ndarray]) -> Estimates:
+        """`f` of every field carried."""
+        return Estimates(**{name: f(value) for name, value in self.items()})
+
+    @classmethod
+    def of(cls, content: Mapping[str, np.ndarray]) -> Estimates:
+        """The tuple fields of a message's content (its other entries left out)."""
+        return cls(**{f.name: content[f.name] for f in fields(cls) if f.name in content})
+
 
 # ------------------------------------------------------------------ the rules
 
@@ -149,30 +191,33 @@ def fast_weights(cov: np.ndarray, present: np.ndarray) -> np.ndarray:
 
 
 def intersect_round(
-    own: Tuples, offered: Tuples, delivered: network.Links, admitted: np.ndarray | None = None
-) -> Tuples:
+    own: Estimates,
+    offered: Estimates,
+    delivered: network.Links,
+    admitted: np.ndarray | None = None,
+) -> Estimates:
     """One round of covariance intersection for every receiver (`fusion.rule` =
     covariance_intersection, beside `adopt`): per target, the receiver's own current
     estimate and the estimates delivered to it, fused by `intersect` with the weights of
     `fast_weights` (each proportional to its confidence 1 / trace P).
 
-    own, offered: tuples {"mean": (B, N, M, 4), "cov": (B, N, M, 4, 4), ...}; other
-    fields keep the receiver's own. An estimate of confidence -inf (none) or not
-    `admitted` (`gate.admitted`, in the layout of `delivered`; None: all) takes no part.
-    Returns the receivers' new tuples, "gamma" the confidence of the fused covariance.
+    own, offered: `Estimates` with mean and cov; other fields keep the receiver's own.
+    An estimate of confidence -inf (none) or not `admitted` (`gate.admitted`, in the
+    layout of `delivered`; None: all) takes no part.
+    Returns the receivers' new tuples, gamma the confidence of the fused covariance.
     A receiver that heard nobody, or has nothing to fuse, keeps its own.
     """
     from .estimation import confidence
 
-    out = dict(own)
+    out = dict(own.items())
     usable = _usable(offered, own, delivered, admitted)
     if delivered.edges:  # one segment per receiver, its self-link included
         t, i, q = delivered.edge_list
         if not t.size:
-            return out
+            return own
         is_own = delivered.own[:, None]
-        mean = np.where(is_own[..., None], own["mean"][t, i], offered["mean"][t, q])
-        cov = np.where(is_own[..., None, None], own["cov"][t, i], offered["cov"][t, q])
+        mean = np.where(is_own[..., None], own.mean[t, i], offered.mean[t, q])
+        cov = np.where(is_own[..., None, None], own.cov[t, i], offered.cov[t, q])
         weight = 1.0 / np.trace(cov, axis1=-2, axis2=-1)  # (E, M)
         if usable is not None:
             weight = np.where(usable, weight, 0.0)
@@ -190,43 +235,41 @@ def intersect_round(
         heads = delivered.heads
         mean_out = np.einsum("smij,smj->smi", fused, fused_vector)
         if nothing.any():
-            mean_out = np.where(nothing[..., None], own["mean"][heads], mean_out)
-            fused = np.where(nothing[..., None, None], own["cov"][heads], fused)
-        out["mean"], out["cov"] = own["mean"].copy(), own["cov"].copy()
+            mean_out = np.where(nothing[..., None], own.mean[heads], mean_out)
+            fused = np.where(nothing[..., None, None], own.cov[heads], fused)
+        out["mean"], out["cov"] = own.mean.copy(), own.cov.copy()
         out["mean"][heads] = mean_out
         out["cov"][heads] = fused
     else:
-        n = own["mean"].shape[1]
+        B, n = own.mean.shape[:2]
         idx = np.arange(n)
         # candidates [trial, receiver, sender, target]: what each sender offered, and
         # on the diagonal the receiver's own current estimate
-        mean = np.repeat(offered["mean"][:, None], n, axis=1)
-        cov = np.repeat(offered["cov"][:, None], n, axis=1)
-        mean[:, idx, idx], cov[:, idx, idx] = own["mean"], own["cov"]
-        present = np.broadcast_to(delivered.matrix[..., None], mean.shape[:-1])
-        nothing = None  # (B, N, M): the receivers with nothing usable keep their own
+        mean = np.repeat(offered.mean[:, None], n, axis=1)
+        cov = np.repeat(offered.cov[:, None], n, axis=1)
+        mean[:, idx, idx], cov[:, idx, idx] = own.mean, own.cov
+        present = np.broadcast_to(delivered.dense[..., None], mean.shape[:-1])
         if usable is not None:
             present = present & usable
             nothing = ~np.any(present, axis=2)
             present = present | (nothing[:, :, None] & np.eye(n, dtype=bool)[..., None])
         mean, cov, present = (np.moveaxis(x, 2, 3) for x in (mean, cov, present))
         out["mean"], out["cov"] = intersect(mean, cov, fast_weights(cov, present))
-        if nothing is not None and nothing.any():  # exactly its own
-            out["mean"] = np.where(nothing[..., None], own["mean"], out["mean"])
-            out["cov"] = np.where(nothing[..., None, None], own["cov"], out["cov"])
+        if usable is not None and nothing.any():  # exactly its own
+            out["mean"] = np.where(nothing[..., None], own.mean, out["mean"])
+            out["cov"] = np.where(nothing[..., None, None], own.cov, out["cov"])
     out["gamma"] = confidence(out["cov"])
-    return out
+    return Estimates(**out)
 
 
 def _usable(
-    offered: Tuples, own: Tuples, delivered: network.Links, admitted: np.ndarray | None
+    offered: Estimates, own: Estimates, delivered: network.Links, admitted
 ) -> np.ndarray | None:
     """Which candidate estimates may take part, in the layout of `delivered` (None:
-    all): admitted, and of finite confidence (tuples without "gamma": all finite)."""
-    gamma, mine = offered.get("gamma"), own.get("gamma")
-    if gamma is None or mine is None:
-        return admitted
-    if admitted is None and np.isfinite(gamma).all() and np.isfinite(mine).all():
+    all): admitted, and of finite confidence."""
+    gamma, mine = offered.gamma, own.gamma
+    finite = gamma is None or (np.isfinite(gamma).all() and np.isfinite(mine).all())
+    if admitted is None and finite:
         return None
     t, i, q = delivered.pairs()
     if delivered.edges:
@@ -238,11 +281,8 @@ def _usable(
 
 
 def pick(
-    own: Tuples,
-    offered: Tuples,
-    best: np.ndarray,
-    rows: tuple[np.ndarray, np.ndarray] | None = None,
-) -> Tuples:
+    own: Estimates, offered: Estimates, best: np.ndarray, rows: tuple | None = None
+) -> Estimates:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
     offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
     arrays of the only receivers whose choice may differ from their own (None: all)."""
@@ -257,20 +297,20 @@ def pick(
         b = b[:, None]
     out: Tuples = {}
     for name, value in own.items():
-        chosen = offered[name][b, best, j]
+        chosen = getattr(offered, name)[b, best, j]
         mask = keep.reshape(keep.shape + (1,) * (chosen.ndim - keep.ndim))
         if rows is None:
             out[name] = np.where(mask, value, chosen)
         else:
             out[name] = value.copy()
             out[name][rows] = np.where(mask, value[rows], chosen)
-    return out
+    return Estimates(**out)
 
 
 # ------------------------------------------------------------------ the drivers
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Depth:
     """Outcome of the D_i protocol: depth (B, N) rounds learned; sent and delivered (B,)
     messages (one per link into a receiver still running, per round); largest (B, N):
@@ -333,7 +373,7 @@ def learn_depth(radio: Radio, running: np.ndarray, budget: int | None = None) ->
             depth[running] = budget
             break
     radio.send("flood", {"known": known})  # the final sets, for later rounds (with delay)
-    return Depth(depth, sent, delivered, largest, ran)
+    return Depth(depth=depth, sent=sent, delivered=delivered, largest=largest, ran=ran)
 
 
 def count(
@@ -350,17 +390,17 @@ def count(
 
 @dataclass(frozen=True)
 class Outcome:
-    """Outcome of the consensus rounds: tuples (dict of (B, N, M, ...) arrays), sent and
+    """Outcome of the consensus rounds: the tuples each UAV holds (`Estimates`), sent and
     delivered (B,) messages."""
 
-    tuples: Tuples
+    tuples: Estimates
     sent: np.ndarray
     delivered: np.ndarray
 
 
 def consensus(
     radio: Radio,
-    tuples: Tuples,
+    tuples: Estimates,
     rounds: np.ndarray,
     score: Callable[[Tuples], np.ndarray] | None = None,
     receive: Callable[[Tuples], Tuples] | None = None,
@@ -373,15 +413,15 @@ def consensus(
     per target, the tuple of highest confidence among its own and those delivered to it
     (`adopt`); UAVs past their rounds keep their tuple and keep transmitting.
 
-    tuples: {"gamma": (B, N, M) confidence, ...}: any fields travel with the tuple
-    (an index of the UAV whose estimate it is, or the estimate itself). score(tuples)
-    gives the confidences compared (default tuples["gamma"]); receive(tuples) turns
-    what arrives into what is compared and adopted (default: as it is). rule
+    tuples: `Estimates` with gamma, (B, N, M) confidence; its other fields travel with
+    the tuple (the index of the UAV whose estimate it is, or the estimate itself).
+    score(tuples) gives the confidences compared (default tuples.gamma); receive(tuples)
+    turns what arrives into what is compared and adopted (default: as it is). rule
     "covariance_intersection" fuses instead (`intersect_round`; the tuples then carry
-    "mean" and "cov"). admit(own, offered, links): which offered tuples each receiver
+    mean and cov). admit(own, offered, links): which offered tuples each receiver
     may adopt (`gate.admitted`; None: all).
     """
-    score = score or (lambda t: t["gamma"])
+    score = score or (lambda t: t.gamma)
     B, n = rounds.shape
     if rule not in ("max_consensus", "covariance_intersection"):
         raise ValueError(f"unknown fusion rule {rule!r}")
@@ -401,12 +441,16 @@ def consensus(
                 tuples = intersect_round(tuples, offered, links, admitted)
             else:
                 fused = intersect_round(tuples, offered, links, admitted)
-                tuples = {
-                    name: np.where(
-                        active.reshape(active.shape + (1,) * (value.ndim - 2)), fused[name], value
-                    )
-                    for name, value in tuples.items()
-                }
+                tuples = Estimates(
+                    **{
+                        name: np.where(
+                            active.reshape(active.shape + (1,) * (value.ndim - 2)),
+                            getattr(fused, name),
+                            value,
+                        )
+                        for name, value in tuples.items()
+                    }
+                )
             continue
         best = adopt(score(tuples), score(offered), links, admitted)
         if links.edges:  # only the active receivers have links: only their rows change
@@ -415,7 +459,7 @@ def consensus(
             best = np.where(active[..., None], best, np.arange(n)[:, None])
             tuples = pick(tuples, offered, best)
     radio.send("consensus", tuples)  # the final tuples, for later rounds (with delay)
-    return Outcome(tuples, sent, delivered)
+    return Outcome(tuples=tuples, sent=sent, delivered=delivered)
 
 
 # ------------------------------------------------------------------ on a plain graph
@@ -474,8 +518,10 @@ def consensus_rounds(
     radio = perfect_radio(_flat(adjacency, confidence), form)
     n, m = confidence.shape[-2:]
     gamma = confidence.reshape(-1, n, m)
-    out = consensus(radio, {"gamma": gamma, "source": identity(gamma.shape)}, rounds.reshape(-1, n))
-    return out.tuples["source"].reshape(confidence.shape)
+    out = consensus(
+        radio, Estimates(gamma=gamma, source=identity(gamma.shape)), rounds.reshape(-1, n)
+    )
+    return out.tuples.source.reshape(confidence.shape)
 
 
 @dataclass(frozen=True)
@@ -503,10 +549,10 @@ def fuse(confidence: np.ndarray, adjacency: np.ndarray, form: str = "auto") -> C
     n, m = confidence.shape[-2:]
     gamma = confidence.reshape(-1, n, m)
     depth = learn_depth(radio, np.ones(gamma.shape[:2], dtype=bool))
-    out = consensus(radio, {"gamma": gamma, "source": identity(gamma.shape)}, depth.depth)
+    out = consensus(radio, Estimates(gamma=gamma, source=identity(gamma.shape)), depth.depth)
     lead = adjacency.shape[:-2]
     return Consensus(
-        out.tuples["source"].reshape(confidence.shape),
+        out.tuples.source.reshape(confidence.shape),
         depth.depth.reshape(lead + (n,)),
         out.sent.reshape(lead),
         depth.sent.reshape(lead),

@@ -132,7 +132,7 @@ def team_best(
 _Mask = np.ndarray | None
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Tally:
     """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets), fed
     one `simulation.Cycle` at a time.

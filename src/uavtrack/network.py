@@ -77,7 +77,9 @@ def radio_links(
         parts.append((np.full(receiver.size, b), receiver, sender))
     trial, receiver, sender = (np.concatenate(x) for x in zip(*parts, strict=True))
     order = np.lexsort((sender, receiver, trial))
-    return Links(B, n, None, trial[order], receiver[order], sender[order])
+    return Links(
+        batch=B, n=n, dense=None, trial=trial[order], receiver=receiver[order], sender=sender[order]
+    )
 
 
 def complete(n: int, batch: tuple[int, ...] = ()) -> np.ndarray:
@@ -107,7 +109,7 @@ SPARSE_FROM = 24
 """Team size from which `links` chooses edge lists over N x N arrays."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Links:
     """Who hears whom: directed links of B graphs of N nodes, self-links included.
 
@@ -178,9 +180,15 @@ class Links:
         whose rules run on every receiver at once, is returned as it is."""
         if not self.edges or receivers.all():
             return self
-        trial, receiver, sender = self.edge_list
-        keep = receivers[trial, receiver]
-        return Links(self.batch, self.n, None, trial[keep], receiver[keep], sender[keep])
+        keep = receivers[self.trial, self.receiver]
+        return Links(
+            batch=self.batch,
+            n=self.n,
+            dense=None,
+            trial=self.trial[keep],
+            receiver=self.receiver[keep],
+            sender=self.sender[keep],
+        )
 
     @cached_property
     def own(self) -> np.ndarray:
@@ -213,9 +221,16 @@ class Links:
         if self.edges:
             trial, receiver, sender = self.edge_list
             keep = mask | self.own
-            return Links(self.batch, self.n, None, trial[keep], receiver[keep], sender[keep])
+            return Links(
+                batch=self.batch,
+                n=self.n,
+                dense=None,
+                trial=self.trial[keep],
+                receiver=self.receiver[keep],
+                sender=self.sender[keep],
+            )
         eye = np.eye(self.n, dtype=bool)
-        return Links(self.batch, self.n, self.matrix & (mask | eye))
+        return Links(batch=self.batch, n=self.n, dense=self.dense & (mask | eye))
 
     def incoming(self) -> np.ndarray:
         """Links into each receiver from others, (B, N) int."""
@@ -252,6 +267,6 @@ def links(adjacency: np.ndarray, form: str = "auto") -> Links:
     B, n = adjacency.shape[0], adjacency.shape[-1]
     full = closed(adjacency)
     if form == "dense" or (form == "auto" and n < SPARSE_FROM):
-        return Links(B, n, full)
+        return Links(batch=B, n=n, dense=full)
     b, i, q = np.nonzero(full)  # sorted by (trial, receiver), self-links included
-    return Links(B, n, None, b, i, q)
+    return Links(batch=B, n=n, dense=None, trial=b, receiver=i, sender=q)

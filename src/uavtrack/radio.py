@@ -23,8 +23,9 @@ of cycle k arrives in round r of cycle k over the links of k.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
-from typing import NamedTuple
+from typing import Any, NamedTuple
 
 import numpy as np
 
@@ -32,7 +33,7 @@ from .faults import Faults
 from .network import Links
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Sent:
     """What the UAVs sent in one cycle: its links, link states, and each protocol's rounds."""
 
@@ -40,16 +41,17 @@ class Sent:
     links: Links
     bad: np.ndarray | None
     alive: np.ndarray
-    rounds: dict[str, list[dict[str, np.ndarray]]] = field(default_factory=dict)
+    rounds: dict[str, list[Any]] = field(default_factory=dict)
 
 
 class Inbox(NamedTuple):
-    """One round's arrivals: the senders' content (arrays (B, N, ...) as sent), the links
+    """One round's arrivals: the senders' content (as sent: arrays (B, N, ...) by name, in
+    a dict or a record such as `fusion.Estimates`), the links
     the messages travelled (`network.Links`, before losses: what was sent) and those
     that delivered them (after losses). Self-links are always present: a UAV's own
     current state is always at hand."""
 
-    content: dict[str, np.ndarray]
+    content: Any
     links: Links
     delivered: Links
 
@@ -63,6 +65,40 @@ class RadioState:
     bad: np.ndarray | None = None
 
 
+Count = tuple[Any, Any]
+"""Messages (sent, delivered): per trial (B,) arrays in the batch, ints in an agent."""
+
+
+def counted(
+    delay: int, when_sent: Callable[[], Iterable[Count]], arrived: Iterable[Count]
+) -> Count:
+    """The messages a cycle counts of its protocols, (sent, delivered): the one rule of
+    every method, in the batch and in the agents.
+
+    Without delay (d = 0) the messages sent in a round are read in that round, and are
+    counted where they arrive: sent, one per link into a receiver taking part in the
+    round (what was offered to it); delivered, those the fault realisation does not lose
+    (what arrived). `arrived` gives these per round or protocol (`fusion.count` of a
+    batch inbox, an agent's `Inbox.sent` and `Inbox.delivered`, an upload's or a
+    download's senders alive and those whose message came).
+
+    With delay d > 0 what is read now was sent d cycles ago, and whether a message sent
+    now will be read is not known yet (the run may end first): the messages are counted
+    when sent, each transmission of this cycle over its links, delivered those the fault
+    realisation does not lose. `when_sent()` gives these (`Radio.transmitted`,
+    `Radio.transmitted_central`, `AgentRadio.transmitted`); it is called only with delay.
+
+    Returns the sums of the pairs that apply ((0, 0) for none).
+    """
+    pairs = list(when_sent()) if delay > 0 else list(arrived)
+    if not pairs:
+        return 0, 0
+    sent, delivered = pairs[0]
+    for more in pairs[1:]:
+        sent, delivered = sent + more[0], delivered + more[1]
+    return sent, delivered
+
+
 class Radio:
     """One cycle of the radio for a batch of trials."""
 
@@ -70,11 +106,12 @@ class Radio:
         self, k: int, links: Links, alive: np.ndarray, faults: Faults, state: RadioState
     ) -> None:
         self.k, self.faults, self.delay = k, faults, faults.model.delay
-        self.now = Sent(k, links, faults.link_states(k, state.bad), alive)
+        self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
         self.history = state.history
 
-    def send(self, protocol: str, content: dict[str, np.ndarray]) -> None:
-        """Every UAV transmits `content` (arrays (B, N, ...)) in the next round of `protocol`."""
+    def send(self, protocol: str, content: Any) -> None:
+        """Every UAV transmits `content` (arrays (B, N, ...) by name, in a dict or a record)
+        in the next round of `protocol`."""
         self.now.rounds.setdefault(protocol, []).append(content)
 
     def _sent(self) -> Sent | None:

@@ -22,14 +22,14 @@ derived from it.
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
-from dataclasses import dataclass, field, fields, make_dataclass
+from dataclasses import dataclass, field, fields, make_dataclass, replace
 from functools import cache
 from numbers import Integral
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from . import _process, estimation, flight, network, planning, sensing, timing, world
+from . import _process, estimation, flight, fusion, network, planning, sensing, timing, world
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
@@ -88,7 +88,7 @@ class Constants:
         )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Context:
     """What a run fixes: the scenario, the method, derived constants, the fault
     realisation of its trials and the methods' settings."""
@@ -119,7 +119,7 @@ class Context:
             rule=scenario.fusion.rule,
             gate=None if robust.gate is None else gate.threshold(robust.gate),
         )
-        return cls(scenario, method, const, faults, setting)
+        return cls(scenario=scenario, method=method, const=const, faults=faults, setting=setting)
 
 
 def _plan(
@@ -156,22 +156,21 @@ def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable[[Tuples, int
             An, Qn = A @ An, A @ Qn @ A.T + Q
         return An, Qn
 
-    def forward(tuples: Tuples, k: int) -> Tuples:
-        lag = k - tuples["stamp"]
-        mean, cov = tuples["mean"].copy(), tuples["cov"].copy()
+    def forward(tuples: fusion.Estimates, k: int) -> fusion.Estimates:
+        lag = k - tuples.stamp
+        mean, cov = tuples.mean.copy(), tuples.cov.copy()
         for n in np.unique(lag[lag > 0]):
             at = lag == n
             An, Qn = power(int(n))
             mean[at] = mean[at] @ An.T
             cov[at] = An @ cov[at] @ An.T + Qn
-        out = dict(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k))
-        out["gamma"] = np.where(np.isfinite(tuples["gamma"]), estimation.confidence(cov), -np.inf)
-        return out
+        gamma = np.where(np.isfinite(tuples.gamma), estimation.confidence(cov), -np.inf)
+        return replace(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k), gamma=gamma)
 
     return forward
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class State:
     """What persists between cycles, for B trials, all at step k.
 
@@ -203,7 +202,7 @@ def _record(shape: str, doc: str, dtype: type = np.float64):
     return field(metadata={"shape": shape, "doc": doc, "dtype": dtype})
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Cycle:
     """What one cycle decided and measured, for B trials: each field is (B, *shape).
 
@@ -295,7 +294,7 @@ else:
     )
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Pending:
     """A cycle up to its decision: what every UAV knows after sensing, filtering and
     fusion, its bids, the method's assignment and the action it would fly. `finish`
@@ -336,17 +335,17 @@ def decide(
     belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, observed, z, R)
     mean, cov = belief[:2]
     inputs = Inputs(
-        k,
-        radio,
-        mean,
-        cov,
-        estimation.confidence(cov),
-        believed,
-        alive,
-        state.target,
-        state.held,
-        ctx.setting,
-        measured(state, observed, z, R, ctx),
+        k=k,
+        radio=radio,
+        mean=mean,
+        cov=cov,
+        gamma=estimation.confidence(cov),
+        believed=believed,
+        alive=alive,
+        previous=state.target,
+        held=state.held,
+        setting=ctx.setting,
+        measured=measured(state, observed, z, R, ctx),
     )
     fused = method.fuse(inputs)
     if not plan:
@@ -358,7 +357,18 @@ def decide(
     chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
     own = np.where(alive, chosen, STRAIGHT)
     return Pending(
-        k, uavs, believed, alive, observed, radio, fused, bids, assigned, own, plan_seconds, belief
+        k=k,
+        uavs=uavs,
+        believed=believed,
+        alive=alive,
+        observed=observed,
+        radio=radio,
+        fused=fused,
+        bids=bids,
+        assigned=assigned,
+        own=own,
+        plan_seconds=plan_seconds,
+        belief=belief,
     )
 
 
@@ -385,13 +395,25 @@ def _unplanned(
     B, Nu = alive.shape
     nothing = np.zeros(B, dtype=np.int64)
     keep = np.where(alive, state.target, -1)
-    assigned = Assigned(keep, np.zeros((B, Nu)), nothing, nothing, state.held)
+    assigned = Assigned(
+        target=keep, seconds=np.zeros((B, Nu)), sent=nothing, delivered=nothing, held=state.held
+    )
     bids = np.full(keep.shape + (state.mean.shape[2],), np.nan)
     own = np.full((B, Nu), STRAIGHT)
     return Pending(
-        state.k, state.uavs, believed, alive, observed, radio, fused, bids, assigned, own,
-        np.zeros(2), belief,
-    )  # fmt: skip
+        k=state.k,
+        uavs=state.uavs,
+        believed=believed,
+        alive=alive,
+        observed=observed,
+        radio=radio,
+        fused=fused,
+        bids=bids,
+        assigned=assigned,
+        own=own,
+        plan_seconds=np.zeros(2),
+        belief=belief,
+    )
 
 
 def finish(
@@ -450,17 +472,17 @@ def finish(
     )
     mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov)
     new = State(
-        pending.k + 1,
-        new_uavs,
-        mean,
-        cov,
-        alive,
-        np.where(target >= 0, target, state.target),
-        pending.radio.close(),
-        assigned.held,
-        state.flight,
-        modes,
-        None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
+        k=pending.k + 1,
+        uavs=new_uavs,
+        mean=mean,
+        cov=cov,
+        alive=alive,
+        target=np.where(target >= 0, target, state.target),
+        radio=pending.radio.close(),
+        held=assigned.held,
+        flight=state.flight,
+        modes=modes,
+        seen=None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
     )
     return new, cycle
 
@@ -560,16 +582,16 @@ def initial_state(
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
     mean, cov, modes = tracker.start(mean, cov)
     state = State(
-        0,
-        uavs,
-        mean,
-        cov,
-        np.ones((B, Nu), dtype=bool),
-        np.full((B, Nu), -1, dtype=np.int64),
-        RadioState(),
-        held,
-        pilot,
-        modes,
+        k=0,
+        uavs=uavs,
+        mean=mean,
+        cov=cov,
+        alive=np.ones((B, Nu), dtype=bool),
+        target=np.full((B, Nu), -1, dtype=np.int64),
+        radio=RadioState(),
+        held=held,
+        flight=pilot,
+        modes=modes,
     )
     return state, trajectory, list(sensor_rngs)
 
@@ -613,9 +635,9 @@ def run(
     state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     tally = Tally(
-        B,
-        Nu,
-        Nt,
+        batch=B,
+        n_uavs=Nu,
+        n_targets=Nt,
         timed=B == 1,
         cutoff=scenario.evaluation.ospa_cutoff,
         order=scenario.evaluation.ospa_order,
@@ -733,7 +755,7 @@ def _size(n: float) -> str:
     return f"{n / 2**30:.1f} GiB" if n >= 2**30 else f"{n / 2**20:.0f} MiB"
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Result:
     """One trial: the paper's metric, the estimation quality, costs, and the trace.
 

@@ -46,6 +46,7 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
+from ..radio import counted
 from ..robust import gate
 from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
@@ -94,7 +95,7 @@ class AgentRadio:
     def send(self, k: int, parts: list[Part], to=None) -> None:
         """One message of these parts to each UAV in range at cycle k (or to `to`)."""
         receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
-        body = encode(Radio(VERSION, self.run, k, self.me, parts))
+        body = encode(Radio(version=VERSION, run=self.run, k=k, sender=self.me, parts=parts))
         for q in receivers:
             if q != self.me:
                 self.link.send_body(int(q), body)
@@ -248,20 +249,22 @@ class UavAgent:
             target, solve_seconds, more = self.auction(k, bids, alive)
         action = int(best[target])
         self.target = target
+        cpu, wall = (1e3 * (plan_seconds + solve_seconds)).tolist()
         report = Report(
-            VERSION,
-            self.run,
-            k,
-            self.me,
-            action,
-            target,
-            packed({"x": fused_mean})["x"],
-            packed({"x": fused_cov})["x"],
-            packed({"x": bids})["x"],
-            int(rounds),
-            int(sent + more[0]),
-            int(delivered + more[1]),
-            *(1e3 * (plan_seconds + solve_seconds)).tolist(),  # CPU, wall
+            version=VERSION,
+            run=self.run,
+            k=k,
+            uav=self.me,
+            action=action,
+            target=target,
+            mean=packed({"x": fused_mean})["x"],
+            cov=packed({"x": fused_cov})["x"],
+            bids=packed({"x": bids})["x"],
+            rounds=int(rounds),
+            sent=int(sent + more[0]),
+            delivered=int(delivered + more[1]),
+            decision_ms=cpu,
+            decision_wall_ms=wall,
             late=dict(self.radio.late),
         )
         self.mean, self.cov, self.modes = tracker.close(*belief, fused_mean, fused_cov)
@@ -282,16 +285,17 @@ class UavAgent:
         s = self.setting
         known = np.zeros(self.n, dtype=bool)
         known[self.me] = True
-        state = {  # per target: confidence, estimate, its time stamp and whose it is
-            "gamma": estimation.confidence(cov),
-            "mean": mean,
-            "cov": cov,
-            "stamp": np.full(self.m, k, dtype=np.int64),
-            "origin": np.full(self.m, self.me, dtype=np.int64),
-        }
+        state = fusion.Estimates(  # per target: confidence, estimate, stamp and whose it is
+            gamma=estimation.confidence(cov),
+            mean=mean,
+            cov=cov,
+            stamp=np.full(self.m, k, dtype=np.int64),
+            origin=np.full(self.m, self.me, dtype=np.int64),
+        )
         self.largest = 1
         stopped = rounds = None  # R, and the consensus rounds once D_i is known
-        depth = sent = delivered = r = 0
+        depth = r = 0
+        arrived = []  # (sent, delivered) of each round's inbox
         flood_final = consensus_final = False
         while True:
             r += 1
@@ -302,12 +306,12 @@ class UavAgent:
                 parts.append(part("flood", r, {"known": known}, final=r))
                 flood_final = True
             if rounds is None or r <= rounds:
-                parts.append(part("consensus", r, state))
+                parts.append(part("consensus", r, dict(state.items())))
             elif not consensus_final:
                 if rounds + 1 < r:  # rounds = R - 1: the tuple of round R was the final one
                     parts.append(part("consensus", r, None, final=rounds + 1))
                 else:
-                    parts.append(part("consensus", r, state, final=r))
+                    parts.append(part("consensus", r, dict(state.items()), final=r))
                 consensus_final = True
             if parts:
                 self.radio.send(k, parts)
@@ -317,25 +321,30 @@ class UavAgent:
                 inbox = self.radio.receive(k, "flood", r)
                 known, depth, stopped = self._flood(inbox, known, r)
                 if inbox is not None:
-                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
+                    arrived.append((inbox.sent, inbox.delivered))
                 if stopped is not None:
                     rounds = depth + s.extra_rounds
                     rounds = rounds if s.budget is None else min(rounds, s.budget)
             if rounds is None or r <= rounds:
                 inbox = self.radio.receive(k, "consensus", r)
                 if inbox is not None:
-                    sent, delivered = sent + inbox.sent, delivered + inbox.delivered
-                    offered = {q: self._plausible(t) for q, t in inbox.contents.items()}
+                    arrived.append((inbox.sent, inbox.delivered))
+                    offered = {
+                        q: fusion.Estimates.of(self._plausible(t))
+                        for q, t in inbox.contents.items()
+                    }
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
-        # the loop ends once both protocols sent their final round: D_i is known
-        assert stopped is not None and rounds is not None
-        if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
-            flood = self.radio.transmitted(k, "flood", stopped)
-            tuples = self.radio.transmitted(k, "consensus", rounds)
-            sent, delivered = flood[0] + tuples[0], flood[1] + tuples[1]
-        return state["mean"], state["cov"], rounds, sent, delivered
+        sent, delivered = counted(
+            s.delay,
+            lambda: (
+                self.radio.transmitted(k, "flood", stopped),
+                self.radio.transmitted(k, "consensus", rounds),
+            ),
+            arrived,
+        )
+        return state.mean, state.cov, rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
         """Round r of the D_i protocol (`fusion.learn_depth`) from this UAV's side: its
@@ -350,7 +359,9 @@ class UavAgent:
         offered = np.stack([known if q == self.me else inbox.contents[q]["known"] for q in ids])
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, ids.index(self.me), :] = True
-        grown = fusion.flood(offered[None], offered[None], network.Links(1, len(ids), dense))
+        grown = fusion.flood(
+            offered[None], offered[None], network.Links(batch=1, n=len(ids), dense=dense)
+        )
         grown = grown[0, ids.index(self.me)]
         if not (grown != known).any():
             return known, r - 1, r
@@ -359,20 +370,24 @@ class UavAgent:
             return grown, budget, r
         return grown, r, None
 
-    def _adopt(self, state: dict, offered: dict[int, dict]) -> dict:
+    def _adopt(
+        self, state: fusion.Estimates, offered: dict[int, fusion.Estimates]
+    ) -> fusion.Estimates:
         """eq. (27) for this UAV: `fusion.adopt` over its closed neighbourhood in index
         order (itself with its current tuple), then `fusion.pick`; or, with
         ``fusion.rule`` = covariance_intersection, `fusion.intersect_round` over it.
         With ``robust.gate`` only what agrees with its measurements (`gate.admitted`)."""
         ids = sorted({self.me, *offered})
         where = ids.index(self.me)
-        candidates = {
-            name: np.stack([state[name] if q == self.me else offered[q][name] for q in ids])[None]
-            for name in state
-        }
+
+        def stacked(name: str, mine: np.ndarray) -> np.ndarray:  # (1, members, M, ...)
+            rows = [mine if q == self.me else getattr(offered[q], name) for q in ids]
+            return np.stack(rows)[None]
+
+        candidates = fusion.Estimates(**{name: stacked(name, v) for name, v in state.items()})
         dense = np.eye(len(ids), dtype=bool)[None]
         dense[0, where, :] = True
-        links = network.Links(1, len(ids), dense)
+        links = network.Links(batch=1, n=len(ids), dense=dense)
         admitted = None
         if self.setting.gate is not None:  # every row measured as this UAV (its row is kept)
             mine, rows = self.measured, (1, len(ids))
@@ -383,15 +398,15 @@ class UavAgent:
                     for x in (mine.observed, mine.z, mine.R, mine.recent)
                 )
             )
-            estimates = (candidates["mean"], candidates["cov"])
+            estimates = (candidates.mean, candidates.cov)
             admitted = gate.admitted(links, estimates, estimates, measured, self.setting.gate)
         if self.setting.rule == "covariance_intersection":
             picked = fusion.intersect_round(candidates, candidates, links, admitted)
         else:
-            gamma = candidates["gamma"]
+            gamma = candidates.gamma
             best = fusion.adopt(gamma, gamma, links, admitted)
             picked = fusion.pick(candidates, candidates, best)
-        return {name: value[0, where] for name, value in picked.items()}
+        return picked.map(lambda value: value[0, where])
 
     def _plausible(self, content: dict) -> dict:
         return plausible(self.spec, self.mailbox, content)
@@ -410,12 +425,11 @@ class UavAgent:
             ],
         )
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
-        if s.delay > 0:  # counted when sent, as the fusion's
-            counts = [self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")]
-            sent, delivered = (sum(c[i] for c in counts) for i in (0, 1))
-        else:
-            sent = sum(a.sent for a in (beacon, inbox) if a is not None)
-            delivered = sum(a.delivered for a in (beacon, inbox) if a is not None)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")),
+            ((a.sent, a.delivered) for a in (beacon, inbox) if a is not None),
+        )
         if inbox is None:  # nothing has arrived yet: alone
             members, view = np.zeros(n, dtype=bool), np.broadcast_to(bids, (n, self.m)).copy()
         else:
@@ -444,8 +458,8 @@ class UavAgent:
         if rows.size == 1:
             target = int(assignment.greedy(bids))
         else:
-            assert isinstance(self.method, Distributed)  # the one kind of method that auctions
-            target = assignment.local(view[rows], int(np.searchsorted(rows, me)), self.method.solve)
+            solve = None if self.method.built_in_solve else self.method.solve
+            target = assignment.local(view[rows], int(np.searchsorted(rows, me)), solve, timing)
         return target, timing.since(start), (sent, delivered)
 
     # ------------------------------------------------------------ centralized
@@ -456,7 +470,7 @@ class UavAgent:
         estimates, rounds, messages sent and delivered, and the target sent (-1: none).
         Without the central node (lost), the UAV keeps its own estimates and its last
         target."""
-        s, m = self.setting, self.m
+        s, m, one = self.setting, self.m, int(self.n > 1)
         tuples = {
             "gamma": estimation.confidence(cov),
             "mean": mean,
@@ -466,11 +480,19 @@ class UavAgent:
         }
         if self.radio.central[k]:
             self.radio.send(k, [part("upload", 0, tuples)], to=self.n)
-        # with delay, this UAV counts its upload when sent (the central node its downloads)
-        upload = self.radio.transmitted(k, "upload", 1, 0, to=self.n) if s.delay else None
         down, arrived, target = self._download(k)
-        if down is None or arrived is None:  # nothing sent yet
-            return mean, cov, 1, *(upload or (0, 0)), -1
+        # as `radio.counted`: this UAV counts the download offered to it and whether it
+        # came, or with delay its upload when sent (the central node the uploads, or its
+        # downloads); fault-free a UAV alone exchanges nothing, as in `methods.Centralized`
+        offered = []
+        if down is not None:
+            mine = int(self.radio.alive[k - self.radio.delay][self.me]) if s.faulty else one
+            offered.append((mine, mine * int(arrived[0, 0])))
+        sent, delivered = counted(
+            s.delay, lambda: [self.radio.transmitted(k, "upload", 1, 0, to=self.n)], offered
+        )
+        if down is None:  # nothing sent yet
+            return mean, cov, 1, sent, delivered, -1
         mean, cov = (
             x[0, 0]
             for x in take_download(
@@ -478,12 +500,7 @@ class UavAgent:
             )
         )
         if not s.faulty:  # the download arrived, or was late (counted in `_download`)
-            one = int(self.n > 1)
-            return mean, cov, one, one, one * int(arrived[0, 0]), target
-        sent, delivered = upload or (
-            int(self.radio.alive[k - self.radio.delay][self.me]),
-            int(arrived[0, 0]),
-        )
+            return mean, cov, one, sent, delivered, target
         return mean, cov, 1, sent, delivered, target if arrived[0, 0] else -1
 
     def _download(self, k: int):
@@ -511,7 +528,7 @@ class UavAgent:
         if content is None:
             return nothing_heard(1, 1, self.m), np.zeros((1, 1), dtype=bool), -1
         content = self._plausible(content)
-        down = {name: content[name][None, None] for name in ("gamma", "mean", "cov", "stamp")}
+        down = fusion.Estimates.of(content).map(lambda value: value[None, None])
         return down, np.ones((1, 1), dtype=bool), int(content["target"])
 
 
@@ -533,7 +550,7 @@ class CentralAgent:
         s, n, m = self.setting, self.n, self.m
         alive = tick["alive"]
         self.radio.begin(k, np.zeros(n, dtype=bool), alive)
-        sent = delivered = 0
+        offered = []  # the uploads offered to the node and those that came
         start = timing.start()
         sent_at = k - self.radio.delay
         down, targets = nothing_heard(1, n, m), np.full((1, n), -1, dtype=np.int64)
@@ -565,25 +582,28 @@ class CentralAgent:
                 for name in got:
                     got[name][0, q] = content[name]
                 reported[0, q] = content["uav"]
-            if s.delay > 0:
-                pass  # counted when sent: the downloads below
-            elif s.faulty:
-                sent, delivered = int(alive_then.sum()), int(heard.sum())
-            else:  # every upload arrives, but one that was late
-                sent = n if n > 1 else 0
-                delivered = int(heard.sum()) if n > 1 else 0
-            down, targets = central_node(got, heard, reported, s, k)
-        if s.delay > 0:
-            for i in np.flatnonzero(alive):
-                more = self.radio.transmitted(k, "download", 1, 0, to=int(i))
-                sent, delivered = sent + more[0], delivered + more[1]
+            if s.faulty:
+                offered.append((int(alive_then.sum()), int(heard.sum())))
+            else:  # every upload arrives, but one that was late; a UAV alone sends none
+                one = int(n > 1)
+                offered.append((n * one, int(heard.sum()) * one))
+            down, targets = central_node(fusion.Estimates(**got), heard, reported, s, k, timing)
+        sent, delivered = counted(  # with delay: the downloads, when sent
+            s.delay,
+            lambda: [
+                self.radio.transmitted(k, "download", 1, 0, to=int(i))
+                for i in np.flatnonzero(alive)
+            ],
+            offered,
+        )
         for i in np.flatnonzero(alive):  # each living UAV its download
-            content = {name: down[name][0, i] for name in ("gamma", "mean", "cov", "stamp")}
+            content = dict(down.map(lambda value, i=i: value[0, i]).items())
             content["target"] = np.array(targets[0, i], dtype=np.int64)
             self.radio.send(k, [part("download", 0, content)], to=int(i))
         cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(
-            VERSION, self.run, k, n, -1, -1, empty, empty, empty, 0, sent, delivered, cpu, wall,
-            late=dict(self.radio.late),
+            version=VERSION, run=self.run, k=k, uav=n, action=-1, target=-1,
+            mean=empty, cov=empty, bids=empty, rounds=0, sent=sent, delivered=delivered,
+            decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
         )  # fmt: skip

@@ -63,7 +63,7 @@ class Array(msgspec.Struct, array_like=True, frozen=True):
         return np.frombuffer(self.data, dtype=dtype).reshape(self.shape)
 
 
-class Hello(msgspec.Struct, tag="hello", frozen=True):
+class Hello(msgspec.Struct, tag="hello", frozen=True, kw_only=True):
     """The run: its scenario (JSON), method, the trial's fault key, every UAV's prior
     (mean (Nt, 4) and covariance (4, 4)), the deadline of a round [s], whether its
     messages are authenticated and the programs' X25519 public keys (the world's last),
@@ -85,7 +85,7 @@ class Hello(msgspec.Struct, tag="hello", frozen=True):
     members: list[int] = []
 
 
-class Sense(msgspec.Struct, tag="sense", frozen=True):
+class Sense(msgspec.Struct, tag="sense", frozen=True, kw_only=True):
     """One cycle for one UAV: its believed state (5,), which targets it observes (Nt,)
     and their range-bearing measurements (K, 2), who it can hear this cycle (N,) bool,
     who is alive (N,) bool, and whether the central node is (centralized method).
@@ -120,7 +120,7 @@ class Ready(msgspec.Struct, tag="ready", frozen=True):
     program: int
 
 
-class Report(msgspec.Struct, tag="report", frozen=True):
+class Report(msgspec.Struct, tag="report", frozen=True, kw_only=True):
     """A UAV's decision of one cycle and what the trace records of it (the central
     node's report has empty arrays, action and target -1)."""
 
@@ -145,7 +145,7 @@ class Report(msgspec.Struct, tag="report", frozen=True):
     late: dict[str, int] = {}  # messages of this cycle that missed it, by protocol
 
 
-class Lost(msgspec.Struct, tag="lost", frozen=True):
+class Lost(msgspec.Struct, tag="lost", frozen=True, kw_only=True):
     """The world no longer counts this program, from step k, and why (one line): it
     missed the cycle's deadline, or its session ended. Not a failure of the fault model."""
 
@@ -167,7 +167,7 @@ class Part(msgspec.Struct, array_like=True, frozen=True):
     content: dict[str, Array] | None
 
 
-class Radio(msgspec.Struct, tag="radio", frozen=True):
+class Radio(msgspec.Struct, tag="radio", frozen=True, kw_only=True):
     """What a program sends one receiver in one round of cycle k: a part per protocol."""
 
     version: int
@@ -230,7 +230,7 @@ DOMAINS = {
 run's numbers are `plausibility.Bounds`."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Spec:
     """What the messages of one run may hold: n UAVs, m targets, `programs` programs
     (the central node is number n), `actions` bank angles, rounds up to `rounds`, the

@@ -32,7 +32,7 @@ should it ask again for the last report): longer than a world stopped past the Z
 lease takes to hear its programs again once it runs."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Served:
     """How a program ended: the cycles it ran of the run's `steps`, and why it stopped:
     "done" (every step), "failed" (the world said this UAV failed, at step `at`),
@@ -78,7 +78,7 @@ def serve(
     pose, transform and estimates as ROS 2 topics in rmw_zenoh's conventions
     (`io.ros2.UavNode`; Zenoh transport only)."""
     k_ = keys(run)
-    gate = Gate(run, me, 0, credential)
+    gate = Gate(run=run, me=me, programs=0, credential=credential)
     mailbox = Mailbox(gate, None, transport)
     transport.subscribe(inbox_key(run, me), mailbox.handler)
     transport.watch(f"{k_['alive']}world", mailbox.lost)
@@ -86,23 +86,36 @@ def serve(
     hello, others = _hello(transport, mailbox, run, wait if first is None else first)
     if hello is None:
         if others:
-            return Served(0, 0, "other run", others=tuple(sorted(others)))
+            return Served(ran=0, steps=0, end="other run", others=tuple(sorted(others)))
         end = "not authentic" if gate.drops.get("not authentic") else "no world"
-        return Served(0, 0, end)
+        return Served(ran=0, steps=0, end=end)
     scenario = Scenario.from_dict(json.loads(hello.scenario), origin="the world's scenario")
     n = scenario.n_uavs
     central = get(hello.method).central
     programs = n + int(central)
     if hello.authenticated and credential is None:
-        return Served(0, scenario.steps, "needs key", programs=programs, central=central)
+        return Served(
+            ran=0, steps=scenario.steps, end="needs key", programs=programs, central=central
+        )
     if me >= programs:
-        return Served(0, scenario.steps, "not in run", programs=programs, central=central)
-    if hello.authenticated and credential is not None and not _holds(credential, hello.publics, me):
-        return Served(0, scenario.steps, "wrong key", programs=programs, central=central)
+        return Served(
+            ran=0, steps=scenario.steps, end="not in run", programs=programs, central=central
+        )
+    if hello.authenticated and not _holds(credential, hello.publics, me):
+        return Served(
+            ran=0, steps=scenario.steps, end="wrong key", programs=programs, central=central
+        )
     if me in hello.members:  # the world's word, signed: not a token anyone can make
-        return Served(0, scenario.steps, "taken", programs=programs, central=central)
+        return Served(ran=0, steps=scenario.steps, end="taken", programs=programs, central=central)
     if hello.step >= 0:
-        return Served(0, scenario.steps, "under way", hello.step, programs, central)
+        return Served(
+            ran=0,
+            steps=scenario.steps,
+            end="under way",
+            at=hello.step,
+            programs=programs,
+            central=central,
+        )
     gate.programs = programs
     if central and me < n:  # without its central node a UAV waits for no download
         transport.watch(f"{k_['alive']}{n}", mailbox.lost)
@@ -143,7 +156,9 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
     k_ = keys(run)
     transport.announce(f"{k_['alive']}{me}")
     if not meet(link, mailbox, me, programs, wait):
-        return Served(0, scenario.steps, "world gone", 0, programs, central)
+        return Served(
+            ran=0, steps=scenario.steps, end="world gone", at=0, programs=programs, central=central
+        )
     link.send(WORLD, Ready(VERSION, run, me))
     first_ = ("tick", 0) if me == n else ("sense", 0)
     limit = time.monotonic() + wait
@@ -192,7 +207,9 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
     if end == "done" and last is not None:  # stay until the world is done: closing at
         # once could lose the last report in flight, or leave the world asking for it
         answering(link, mailbox, last, (kind, last.k), lambda: False, LINGER)
-    return Served(ran, scenario.steps, end, at, programs, central, why=why)
+    return Served(
+        ran=ran, steps=scenario.steps, end=end, at=at, programs=programs, central=central, why=why
+    )
 
 
 def answering(link: Link, mailbox: Mailbox, last, asked, ready, seconds: float) -> None:
@@ -258,7 +275,15 @@ def _presence(link: Link, mailbox: Mailbox, me: int, programs: int, world: bool 
                 heard[q] = True
                 acknowledged[q] = bool(content["heard"][me])
     heard[me] = acknowledged[me] = True
-    body = encode(Radio(VERSION, link.run, -1, me, [part("presence", 0, {"heard": heard})]))
+    body = encode(
+        Radio(
+            version=VERSION,
+            run=link.run,
+            k=-1,
+            sender=me,
+            parts=[part("presence", 0, {"heard": heard})],
+        )
+    )
     for q in np.flatnonzero(~acknowledged):
         link.send_body(int(q), body)
     hello = mailbox.inbox.get(("hello",))

@@ -59,7 +59,7 @@ _PERSON = b"uavtrack-mac-v1"
 _SIGNED = b"uavtrack-hello-v1|"
 
 
-class Envelope(msgspec.Struct, array_like=True, frozen=True):
+class Envelope(msgspec.Struct, array_like=True, frozen=True, kw_only=True):
     """A message on the wire: who sent it to whom, its sequence number, the encoded
     message (`messages`), and its tag (keyed hash, Ed25519 signature for a broadcast,
     empty when the swarm does not authenticate)."""
@@ -226,7 +226,12 @@ class Keyring:
 
     def gate(self) -> Gate:
         """The world's gate."""
-        gate = Gate(self.run, WORLD, self.programs, self.credential(self.programs))
+        gate = Gate(
+            run=self.run,
+            me=WORLD,
+            programs=self.programs,
+            credential=self.credential(self.programs),
+        )
         gate.learn(self.public())
         gate.signing = self.signing
         return gate
@@ -254,7 +259,7 @@ class Window:
         return True
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Gate:
     """One program's side of authentication: it seals what the program sends and opens
     what it receives (see the module docstring).
@@ -327,7 +332,7 @@ class Gate:
                 tag = self.signing.sign(_SIGNED + f"{self.run}|{seq}|".encode() + body)
             else:
                 tag = self._mac(self._key(self.me, receiver), self.me, receiver, seq, body)
-        return _encode(Envelope(self.me, receiver, seq, body, tag))
+        return _encode(Envelope(sender=self.me, receiver=receiver, seq=seq, body=body, tag=tag))
 
     def open(self, payload: bytes) -> tuple[int, bytes] | str:
         """(sender, body) of an envelope meant for this program and authentic, or the

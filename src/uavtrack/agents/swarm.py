@@ -77,7 +77,7 @@ def world_endpoint(listen: str | None, tls: bool = False) -> str:
         raise UsageError(f"cannot listen on {listen}: {exc.strerror or exc}") from None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Options:
     """How a swarm runs (see `run_swarm`)."""
 
@@ -149,19 +149,19 @@ def run_swarm(
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
     options = Options(
-        deadline,
-        listen,
-        tuple(connect),
-        spawn,
-        realtime,
-        trace,
-        progress,
-        startup if startup is not None else 30.0 + 4.0 * len(programs),
-        announce,
-        sign,
-        keys,
-        zenoh or ZenohOptions(),
-        ros2,
+        deadline=deadline,
+        listen=listen,
+        connect=tuple(connect),
+        spawn=spawn,
+        realtime=realtime,
+        trace=trace,
+        progress=progress,
+        startup=startup if startup is not None else 30.0 + 4.0 * len(programs),
+        announce=announce,
+        sign=sign,
+        keys=keys,
+        zenoh=zenoh or ZenohOptions(),
+        ros2=ros2,
     )
     keyring = Keyring(run, len(programs)) if sign else None
     go = _in_memory if transport == "memory" else _over_zenoh

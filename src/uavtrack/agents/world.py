@@ -46,7 +46,7 @@ from .stops import STOPS
 from .transport import ANY_JOIN, LEASE, REJOIN, Link, Mailbox, Transport, inbox_key, keys
 
 
-@dataclass
+@dataclass(kw_only=True)
 class Traffic:
     """What a swarm run cost and what happened to its programs.
 
@@ -112,7 +112,11 @@ class WorldProgram:
         self.seeds = [np.random.SeedSequence(seed)]
         self.ctx = simulation.Context.of(scenario, self.method, self.seeds)
         programs = len(self.programs)
-        gate = keyring.gate() if keyring is not None else Gate(run, WORLD, programs, None)
+        gate = (
+            keyring.gate()
+            if keyring is not None
+            else Gate(run=run, me=WORLD, programs=programs, credential=None)
+        )
         self.link = Link(transport, gate)
         self.spec = Spec.of(scenario, self.method.central)
         self.stops = STOPS.watch()  # a stop of the world is not its programs' fault
@@ -151,18 +155,18 @@ class WorldProgram:
         assert self.prior is not None  # set by run_trial before the first Hello
         prior_mean, prior_cov = self.prior
         message = Hello(
-            VERSION,
-            self.run,
-            self.scenario.model_dump_json(),
-            self.method.name,
-            Array.of(self.ctx.faults.key[0]),
-            Array.of(prior_mean),
-            Array.of(prior_cov),
-            self.deadline,
-            self.link.gate.authenticates,
-            self.keyring.public() if self.keyring is not None else [],
-            self.step,
-            sorted(self.members),
+            version=VERSION,
+            run=self.run,
+            scenario=self.scenario.model_dump_json(),
+            method=self.method.name,
+            key=Array.of(self.ctx.faults.key[0]),
+            prior_mean=Array.of(prior_mean),
+            prior_cov=Array.of(prior_cov),
+            deadline=self.deadline,
+            authenticated=self.link.gate.authenticates,
+            publics=self.keyring.public() if self.keyring is not None else [],
+            step=self.step,
+            members=sorted(self.members),
         )
         self.link.hello(message)
 
@@ -207,7 +211,12 @@ class WorldProgram:
         self.wait_ready()
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
         tally = Tally(
-            1, Nu, Nt, timed=True, cutoff=s.evaluation.ospa_cutoff, order=s.evaluation.ospa_order
+            batch=1,
+            n_uavs=Nu,
+            n_targets=Nt,
+            timed=True,
+            cutoff=s.evaluation.ospa_cutoff,
+            order=s.evaluation.ospa_order,
         )
         recorder = simulation.Recorder(T, timed=True) if trace else None
         told = np.ones(Nu, dtype=bool)  # the UAVs sent a Sense last cycle
@@ -287,7 +296,7 @@ class WorldProgram:
     def _tell(self, i: int) -> None:
         """Tell lost program i why it is lost."""
         k, why = self.traffic.lost[i], self.traffic.why[i]
-        self.link.send(i, Lost(VERSION, self.run, k, i, why))
+        self.link.send(i, Lost(version=VERSION, run=self.run, k=k, program=i, reason=why))
 
     def _tell_lost(self) -> None:
         """Every lost program hears why again, once a cycle: one out of reach when it was
@@ -316,16 +325,16 @@ class WorldProgram:
         self.asked = {}
         for i in np.flatnonzero(told):
             message = Sense(
-                VERSION,
-                self.run,
-                k,
-                int(i),
-                Array.of(believed[i]),
-                Array.of(observed[i]),
-                Array.of(z[rows == i]),
-                Array.of(graph[i]),
-                alive_array,
-                self.central_alive,
+                version=VERSION,
+                run=self.run,
+                k=k,
+                uav=int(i),
+                believed=Array.of(believed[i]),
+                observed=Array.of(observed[i]),
+                z=Array.of(z[rows == i]),
+                links=Array.of(graph[i]),
+                alive=alive_array,
+                central=self.central_alive,
             )
             self.link.send(int(i), message)
             self.asked[int(i)] = message

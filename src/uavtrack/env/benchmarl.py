@@ -53,7 +53,7 @@ from .vector import vector_env
 GROUP = "agents"
 
 
-@dataclass
+@dataclass(kw_only=True)
 class TaskConfig:
     """The settings of the uavtrack task (see the module)."""
 

@@ -56,7 +56,12 @@ class Episodes:
         if record:
             e = s.evaluation
             self.tally = Tally(
-                B, s.n_uavs, s.n_targets, timed=B == 1, cutoff=e.ospa_cutoff, order=e.ospa_order
+                batch=B,
+                n_uavs=s.n_uavs,
+                n_targets=s.n_targets,
+                timed=B == 1,
+                cutoff=e.ospa_cutoff,
+                order=e.ospa_order,
             )
             self.recorder = Recorder(s.steps, timed=B == 1)
         self.pending: Pending | None = self._decide()
@@ -108,12 +113,29 @@ class Episodes:
         p = self.pending
         if p is not None:
             links = graph(p.uavs, p.alive, self.scenario)
-            return View(p.k, p.believed, p.uavs, p.fused.mean, p.fused.cov, links, p.alive,
-                        p.observed)  # fmt: skip
+            return View(
+                k=p.k,
+                believed=p.believed,
+                uavs=p.uavs,
+                mean=p.fused.mean,
+                cov=p.fused.cov,
+                links=links,
+                alive=p.alive,
+                observed=p.observed,
+            )
         s = self.state
         links = graph(s.uavs, s.alive, self.scenario)
         observed = np.zeros(s.mean.shape[:3], dtype=bool)
-        return View(s.k, s.uavs, s.uavs, s.mean, s.cov, links, s.alive, observed)
+        return View(
+            k=s.k,
+            believed=s.uavs,
+            uavs=s.uavs,
+            mean=s.mean,
+            cov=s.cov,
+            links=links,
+            alive=s.alive,
+            observed=observed,
+        )
 
     def observation_rate(self) -> np.ndarray:
         """(B,) the observation rate of each trial over the steps flown."""

@@ -47,7 +47,7 @@ NEIGHBOUR = ("present", "cos_bearing", "sin_bearing", "distance", "cos_heading",
 TARGET_STATE = ("present", "x", "y", "vx", "vy", "log_sigma", "seen")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class View:
     """One cycle of B trials as the environment shows it.
 

@@ -28,7 +28,7 @@ from ..simulation import run, trial_seed
 from .statistics import describe, paired
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Job:
     """A chunk of trials (or of timing runs) of one scenario with one method."""
 
@@ -123,7 +123,15 @@ def trial_jobs(
     scenario = base.with_overrides(overrides, origin=origin)
     label = label_of(difference(base, scenario))  # equal scenarios, equal labels (label_for)
     return [
-        Job("trials", label, method, scenario, first, min(chunk, trials - first), seed)
+        Job(
+            kind="trials",
+            label=label,
+            method=method,
+            scenario=scenario,
+            first=first,
+            count=min(chunk, trials - first),
+            seed=seed,
+        )
         for first in range(0, trials, chunk)
     ]
 

@@ -59,7 +59,7 @@ ABOVE_GREEDY = 0.05
 """"Distributed well above greedy": distributed − greedy ≥ 0.05 (the paper's gap is 0.137)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Profile:
     """The size of a reproduction of Section 7."""
 
@@ -119,13 +119,13 @@ def reproduce_plan(
         for m in METHOD_NAMES:
             plan["timing"].append(
                 Job(
-                    "timing",
-                    label_of({"n_uavs": nu, "n_targets": nt}),
-                    m,
-                    scenario,
-                    0,
-                    profile.timing_trials,
-                    seed,
+                    kind="timing",
+                    label=label_of({"n_uavs": nu, "n_targets": nt}),
+                    method=m,
+                    scenario=scenario,
+                    first=0,
+                    count=profile.timing_trials,
+                    seed=seed,
                 )
             )
     if sensitivity:

@@ -42,7 +42,7 @@ MECHANISMS = {
 SERIES = ("distributed", "robust", "centralized", "greedy")
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fault:
     """One fault of the standard set: a field swept over levels, with fixed settings.
 
@@ -61,52 +61,52 @@ class Fault:
 
 FAULTS = (
     Fault(
-        "loss",
-        "faults.loss",
-        (0.0, 0.1, 0.2, 0.3, 0.5, 0.7),
-        {},
-        0.5,
-        "message loss probability (independent)",
+        name="loss",
+        field="faults.loss",
+        levels=(0.0, 0.1, 0.2, 0.3, 0.5, 0.7),
+        fixed={},
+        ablation=0.5,
+        xlabel="message loss probability (independent)",
     ),
     Fault(
-        "burst",
-        "faults.burst_length",
-        (1.0, 2.0, 5.0, 10.0, 20.0),
-        {"faults.loss": 0.3},
-        10.0,
-        "mean burst length [cycles] at 30% loss",
+        name="burst",
+        field="faults.burst_length",
+        levels=(1.0, 2.0, 5.0, 10.0, 20.0),
+        fixed={"faults.loss": 0.3},
+        ablation=10.0,
+        xlabel="mean burst length [cycles] at 30% loss",
     ),
     Fault(
-        "delay",
-        "faults.delay",
-        (0, 1, 2, 4, 8),
-        {},
-        2,
-        "message delay [cycles]",
+        name="delay",
+        field="faults.delay",
+        levels=(0, 1, 2, 4, 8),
+        fixed={},
+        ablation=2,
+        xlabel="message delay [cycles]",
     ),
     Fault(
-        "round_budget",
-        "faults.round_budget",
-        (None, 3, 2, 1),
-        {},
-        1,
-        "consensus rounds per cycle (none: unlimited)",
+        name="round_budget",
+        field="faults.round_budget",
+        levels=(None, 3, 2, 1),
+        fixed={},
+        ablation=1,
+        xlabel="consensus rounds per cycle (none: unlimited)",
     ),
     Fault(
-        "failure_rate",
-        "faults.failure_rate",
-        (0.0, 0.0001, 0.0004, 0.001, 0.002),
-        {},
-        0.001,
-        "UAV failure probability per UAV and cycle",
+        name="failure_rate",
+        field="faults.failure_rate",
+        levels=(0.0, 0.0001, 0.0004, 0.001, 0.002),
+        fixed={},
+        ablation=0.001,
+        xlabel="UAV failure probability per UAV and cycle",
     ),
     Fault(
-        "position_std",
-        "faults.position_std",
-        (0.0, 1.0, 2.0, 5.0, 10.0),
-        {},
-        5.0,
-        "UAV position error, std per axis [m]",
+        name="position_std",
+        field="faults.position_std",
+        levels=(0.0, 1.0, 2.0, 5.0, 10.0),
+        fixed={},
+        ablation=5.0,
+        xlabel="UAV position error, std per axis [m]",
     ),
 )
 
@@ -124,7 +124,14 @@ class Profile:
     def quick(cls) -> Profile:
         """A smoke-test profile: a few short trials, three levels per fault."""
         short = tuple(
-            Fault(f.name, f.field, f.levels[:1] + f.levels[2:4], f.fixed, f.ablation, f.xlabel)
+            Fault(
+                name=f.name,
+                field=f.field,
+                levels=f.levels[:1] + f.levels[2:4],
+                fixed=f.fixed,
+                ablation=f.ablation,
+                xlabel=f.xlabel,
+            )
             for f in FAULTS
         )
         return cls(trials=4, steps=60, chunk=4, faults=short)

@@ -167,7 +167,7 @@ def _read_text(view: memoryview) -> tuple[str, memoryview]:
     return bytes(view[i : i + n]).decode(), view[i + n :]
 
 
-@dataclass
+@dataclass(kw_only=True)
 class _Publisher:
     key: str
     token: str
@@ -197,7 +197,7 @@ class Node:
             key = topic_key(domain, topic, msgtype)
             self.tokens.append(session.liveliness().declare_token(token))
             handle = session.declare_publisher(key)
-            self.publishers[topic] = _Publisher(key, token, gid(token), handle=handle)
+            self.publishers[topic] = _Publisher(key=key, token=token, gid=gid(token), handle=handle)
 
     def put(self, topic: str, message) -> None:
         """Put `message` on `topic`, its attachment stamped with the wall clock [ns]."""

@@ -55,7 +55,7 @@ class TraceVersionWarning(UserWarning):
     """A trace of this format written by another uavtrack version (read as it is)."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class TraceFile:
     """A trace read back with what made it; `version` is the uavtrack version that
     wrote it ("unknown" for a file that does not say)."""
@@ -129,7 +129,9 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
         )
     trace = Trace(**{n: arrays[n] for n in names})
     seed = int(arrays["seed"]) if "seed" in arrays else None
-    return TraceFile(trace, scenario, str(arrays["method"]), seed, version)
+    return TraceFile(
+        trace=trace, scenario=scenario, method=str(arrays["method"]), seed=seed, version=version
+    )
 
 
 def _check_format(path: Path, entry: np.ndarray | None, version: str) -> int:
@@ -194,7 +196,9 @@ def load(
     if isinstance(source, Trace):
         if scenario is None:
             raise UsageError("a bare Trace needs its scenario: give the Result, or the scenario")
-        return TraceFile(source, scenario, method or "", seed, __version__)
+        return TraceFile(
+            trace=source, scenario=scenario, method=method or "", seed=seed, version=__version__
+        )
     if (scenario, method, seed) != (None, None, None):
         raise UsageError("scenario, method and seed go with a bare Trace; this source has its own")
     if isinstance(source, TraceFile):
@@ -202,7 +206,13 @@ def load(
     if isinstance(source, Result):
         if source.trace is None:
             raise UsageError("this result holds no trace: simulate(..., trace=True)")
-        return TraceFile(source.trace, source.scenario, source.method, source.seed, __version__)
+        return TraceFile(
+            trace=source.trace,
+            scenario=source.scenario,
+            method=source.method,
+            seed=source.seed,
+            version=__version__,
+        )
     if isinstance(source, str | os.PathLike):
         return read(source)
     raise UsageError(

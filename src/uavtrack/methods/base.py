@@ -12,16 +12,16 @@ from typing import ClassVar
 import numpy as np
 
 from .. import fusion
-from ..radio import Radio
+from ..radio import Radio, counted
 from ..robust import gate
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Setting:
     """What a run fixes for the methods: robustness options and the fault settings.
 
-    forward(tuples, k): tuples (dict of (B, N, M, ...) arrays with "mean", "cov",
-    "stamp") predicted forward to step k, with their confidence "gamma" recomputed.
+    forward(tuples, k): tuples (`fusion.Estimates` with mean, cov and stamp) predicted
+    forward to step k, with their confidence gamma recomputed.
     plan(uavs, mean, top=None): bids (B, N, M) and first actions of UAVs at `uavs`
     (B, N, 5) with fused estimates `mean` (B, N, M, 4), as `planning.plan` under the
     scenario (top: how many best bids each UAV needs, None: all). prune: whether a
@@ -53,7 +53,7 @@ class Held:
     stamp: np.ndarray
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Inputs:
     """What a method sees in one cycle for B trials: the radio, each UAV's local
     estimates after its filter (mean (B, N, M, 4), cov (B, N, M, 4, 4), gamma (B, N, M)),
@@ -75,7 +75,7 @@ class Inputs:
     measured: gate.Measured | None = None
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Fused:
     """Each UAV's fused estimates (mean, cov), the rounds it ran (B, N), messages sent
     and delivered (B,), seconds of central work (B, N, 2; CPU, wall), for the centralized
@@ -93,7 +93,7 @@ class Fused:
     gamma: np.ndarray | None = None  # 1 / trace(cov), when the fusion already has it
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Assigned:
     """Targets (B, N) (-1 for a failed UAV), seconds of each UAV's assignment (B, N, 2):
     CPU and wall (`timing`; a method's own (B, N) stands for both), messages sent and
@@ -148,45 +148,54 @@ def consensus(inputs: Inputs) -> Fused:
         rounds = np.minimum(rounds, s.budget)
     admit = gated(inputs)
     if s.delay == 0 and s.rule == "max_consensus":
-        tuples = {"gamma": inputs.gamma, "source": fusion.identity(inputs.gamma.shape)}
+        tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
         out = fusion.consensus(radio, tuples, rounds, admit=admit)
-        source = out.tuples["source"]
+        source = out.tuples.source
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
-        gamma = out.tuples["gamma"]  # travelled with the source: confidence(cov) exactly
+        gamma = out.tuples.gamma  # travelled with the source: confidence(cov) exactly
     else:
-        stamp = np.full(inputs.gamma.shape, inputs.k)
-        tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
+        tuples = fusion.Estimates(
+            gamma=inputs.gamma,
+            mean=inputs.mean,
+            cov=inputs.cov,
+            stamp=np.full(inputs.gamma.shape, inputs.k),
+        )
         receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
-        mean, cov = out.tuples["mean"], out.tuples["cov"]
+        mean, cov = out.tuples.mean, out.tuples.cov
         gamma = None
-    if s.delay > 0:  # counted when sent: what is read d cycles later is not known yet
-        flood, tuples_ = (
-            radio.transmitted("flood", depth.ran),
-            radio.transmitted("consensus", rounds),
-        )
-        sent, delivered = flood[0] + tuples_[0], flood[1] + tuples_[1]
-    else:
-        sent, delivered = depth.sent + out.sent, depth.delivered + out.delivered
-    return Fused(mean, cov, rounds, sent, delivered, largest=depth.largest, gamma=gamma)
+    sent, delivered = counted(
+        s.delay,
+        lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
+        ((depth.sent, depth.delivered), (out.sent, out.delivered)),
+    )
+    return Fused(
+        mean=mean,
+        cov=cov,
+        rounds=rounds,
+        sent=sent,
+        delivered=delivered,
+        largest=depth.largest,
+        gamma=gamma,
+    )
 
 
 def gated(inputs: Inputs):
     """The consensus's admit(own, offered, links) under the measurement gate
     (``robust.gate``, `gate.admitted`), or None without it. Tuples that travel as the
-    index of the UAV whose estimate they are ("source") are looked up in the local
-    estimates."""
+    index of the UAV whose estimate they are (`fusion.Estimates.source`) are looked up
+    in the local estimates."""
     s, measured = inputs.setting, inputs.measured
     if s.gate is None or measured is None:
         return None
 
-    def estimates(tuples: dict) -> tuple[np.ndarray, np.ndarray]:
-        if "source" in tuples:
-            source = tuples["source"]
+    def estimates(tuples: fusion.Estimates) -> tuple[np.ndarray, np.ndarray]:
+        if tuples.source is not None:
+            source = tuples.source
             return fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
-        return tuples["mean"], tuples["cov"]
+        return tuples.mean, tuples.cov
 
-    def admit(own: dict, offered: dict, links) -> np.ndarray:
+    def admit(own: fusion.Estimates, offered: fusion.Estimates, links) -> np.ndarray:
         return gate.admitted(links, estimates(own), estimates(offered), measured, s.gate)
 
     return admit

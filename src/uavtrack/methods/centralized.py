@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import assignment, fusion, timing
+from ..radio import counted
 from ..robust import gate
 from .base import Assigned, Fused, Inputs, Method, Setting
 
@@ -39,115 +40,136 @@ class Centralized(Method):
             use = gate.agreeing(mean, cov, measured, s.gate, (inputs.mean, inputs.cov))
             mean = np.where(use[..., None], mean, inputs.mean)
             cov = np.where(use[..., None, None], cov, inputs.cov)
-        return Fused(mean, cov, rounds, messages, messages.copy())
+        return Fused(mean=mean, cov=cov, rounds=rounds, sent=messages, delivered=messages.copy())
 
     @staticmethod
     def _over_links(inputs: Inputs) -> Fused:
         """Uploads, the central node's work, downloads, with faults."""
         s, radio, k = inputs.setting, inputs.radio, inputs.k
         B, n, m = inputs.gamma.shape
-        stamp = np.full((B, n, m), k)
-        tuples = {"gamma": inputs.gamma, "mean": inputs.mean, "cov": inputs.cov, "stamp": stamp}
-        radio.send("upload", {**tuples, "uavs": inputs.believed, "alive": inputs.alive})
+        tuples = fusion.Estimates(
+            gamma=inputs.gamma, mean=inputs.mean, cov=inputs.cov, stamp=np.full((B, n, m), k)
+        )
+        radio.send("upload", {"estimates": tuples, "uavs": inputs.believed, "alive": inputs.alive})
         upload, up_ok = radio.receive_central("upload")
-        sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
+        arrived = []  # (sent, delivered) of the uploads and downloads that arrive now
         seconds = np.zeros((B, n, 2))
-        if s.delay > 0:  # counted when sent: uploads now, downloads below
-            up = radio.transmitted_central("upload")
-            sent, delivered = sent + up[0], delivered + up[1]
         if upload is None:
             down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
         else:
             up_ok = up_ok & upload["alive"]
-            if s.delay == 0:
-                sent += upload["alive"].sum(axis=1)
-                delivered += up_ok.sum(axis=1)
+            arrived.append((upload["alive"].sum(axis=1), up_ok.sum(axis=1)))
             start = timing.start()
             down, down_target = central_node(
-                {key: upload[key] for key in tuples}, up_ok, upload["uavs"], s, k
+                upload["estimates"], up_ok, upload["uavs"], s, k, timing
             )
             seconds += timing.since(start) / B
-        radio.send("download", {**down, "target": down_target, "alive": inputs.alive})
-        if s.delay > 0:
-            down_sent = radio.transmitted_central("download")
-            sent, delivered = sent + down_sent[0], delivered + down_sent[1]
+        radio.send("download", {"estimates": down, "target": down_target, "alive": inputs.alive})
         download, down_ok = radio.receive_central("download")
         mean, cov = inputs.mean, inputs.cov
         target = None
         if download is not None:
             down_ok = down_ok & inputs.alive
-            if s.delay == 0:
-                sent += download["alive"].sum(axis=1)
-                delivered += down_ok.sum(axis=1)
-            mean, cov = take_download(mean, cov, download, down_ok, s, k, inputs.measured)
+            arrived.append((download["alive"].sum(axis=1), down_ok.sum(axis=1)))
+            mean, cov = take_download(
+                mean, cov, download["estimates"], down_ok, s, k, inputs.measured
+            )
             target = np.where(down_ok, download["target"], -1)
         rounds = np.where(inputs.alive, 1, 0)
-        return Fused(mean, cov, rounds, sent, delivered, seconds, target)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (radio.transmitted_central(p) for p in ("upload", "download")),
+            arrived,
+        )
+        return Fused(
+            mean=mean,
+            cov=cov,
+            rounds=rounds,
+            sent=sent,
+            delivered=delivered,
+            seconds=seconds,
+            target=target,
+        )
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         B, n, _ = bids.shape
         none = np.zeros(B, dtype=np.int64)
         if not inputs.setting.faulty:
-            target, seconds = assignment.centralized(bids)
-            return Assigned(target, np.repeat(seconds[:, None], n, axis=1), none, none)
+            target, seconds = assignment.centralized(bids, clock=timing)
+            return Assigned(
+                target=target,
+                seconds=np.repeat(seconds[:, None], n, axis=1),
+                sent=none,
+                delivered=none,
+            )
         # the node's target if its download arrived, else the previous one, else the own best
         target = fused.target if fused.target is not None else np.full((B, n), -1)
         target = np.where(target >= 0, target, inputs.previous)
         target = np.where(target >= 0, target, assignment.greedy(bids))
         target = np.where(inputs.alive, target, -1)
-        return Assigned(target, fused.seconds, none, none)
+        return Assigned(target=target, seconds=fused.seconds, sent=none, delivered=none)
 
 
-def nothing_heard(B: int, n: int, m: int) -> dict[str, np.ndarray]:
+def nothing_heard(B: int, n: int, m: int) -> fusion.Estimates:
     """A download that carries no estimate (confidence -inf): the node heard nobody."""
-    return {
-        "gamma": np.full((B, n, m), -np.inf),
-        "mean": np.zeros((B, n, m, 4)),
-        "cov": np.zeros((B, n, m, 4, 4)),
-        "stamp": np.zeros((B, n, m), dtype=np.int64),
-    }
+    return fusion.Estimates(
+        gamma=np.full((B, n, m), -np.inf),
+        mean=np.zeros((B, n, m, 4)),
+        cov=np.zeros((B, n, m, 4, 4)),
+        stamp=np.zeros((B, n, m), dtype=np.int64),
+    )
 
 
 def central_node(
-    got: dict, heard: np.ndarray, uavs: np.ndarray, setting: Setting, k: int
-) -> tuple[dict, np.ndarray]:
+    got: fusion.Estimates,
+    heard: np.ndarray,
+    uavs: np.ndarray,
+    setting: Setting,
+    k: int,
+    clock: assignment.Clock | None = None,
+) -> tuple[fusion.Estimates, np.ndarray]:
     """The central node's work on the uploads it received.
 
-    got: the uploaded tuples (B, N, M, ...) ("gamma", "mean", "cov", "stamp"); heard
+    got: the uploaded tuples (B, N, M, ...) (gamma, mean, cov, stamp); heard
     (B, N): whose upload arrived; uavs (B, N, 5): the states they reported. Per target
     the most confident uploaded estimate (ties to the lowest UAV), predicted forward with
     ``robust.stale``; bids of every UAV heard from, planned from its reported state; one
     global assignment over them. Returns the download of every UAV (the fused tuples,
     (B, N, M, ...), confidence -inf where the node heard nobody) and its target (B, N),
-    -1 for a UAV not heard from.
+    -1 for a UAV not heard from. clock: the caller's, on whose set-up a first load of
+    the exact solver is counted (`assignment.load_solver`); it is read for nothing else.
     """
-    B, n, m = got["gamma"].shape
+    B, n, m = got.gamma.shape
     if setting.stale:
         got = setting.forward(got, k)
-    score = np.where(heard[..., None], got["gamma"], -np.inf)
+    score = np.where(heard[..., None], got.gamma, -np.inf)
     best = np.argmax(score, axis=1)  # per target, the most confident uploader
     b, j = np.arange(B)[:, None], np.arange(m)
-    central = {key: value[b, best, j] for key, value in got.items()}  # (B, M, ...)
+    central = got.map(lambda value: value[b, best, j])  # (B, M, ...)
     value = np.zeros((B, n, m))  # bids of the UAVs heard from, planned from their reports
     t, i = np.nonzero(heard)
     if t.size:
-        value[t, i] = setting.plan(uavs[t, i][None], central["mean"][t][None])[0][0]
-    targets, _ = assignment.centralized(value, heard)
+        value[t, i] = setting.plan(uavs[t, i][None], central.mean[t][None])[0][0]
+    targets, _ = assignment.centralized(value, heard, clock)
     anyone = heard.any(axis=1)
-    down = nothing_heard(B, n, m)
-    for key, value in central.items():
-        down[key] = np.where(
-            anyone.reshape((B,) + (1,) * value.ndim),
-            np.repeat(value[:, None], n, axis=1),
-            down[key],
-        )
+    empty = nothing_heard(B, n, m)
+    down = fusion.Estimates(
+        **{
+            key: np.where(
+                anyone.reshape((B,) + (1,) * value.ndim),
+                np.repeat(value[:, None], n, axis=1),
+                getattr(empty, key),
+            )
+            for key, value in central.items()
+        }
+    )
     return down, np.where(anyone[:, None], targets, -1)
 
 
 def take_download(
     mean: np.ndarray,
     cov: np.ndarray,
-    got: dict,
+    got: fusion.Estimates,
     arrived: np.ndarray,
     setting: Setting,
     k: int,
@@ -156,14 +178,14 @@ def take_download(
     """A UAV's estimates after the central node's download: the downloaded tuple of each
     target where it arrived and carries one (predicted forward with ``robust.stale``)
     and, with ``robust.gate``, agrees with the UAV's measurement (`gate.agreeing`), its
-    own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); arrived (B, N)."""
-    got = {key: got[key] for key in ("gamma", "mean", "cov", "stamp")}
+    own otherwise. mean (B, N, M, 4), cov (B, N, M, 4, 4); got: the downloaded tuples
+    (gamma, mean, cov, stamp); arrived (B, N)."""
     if setting.stale:
         got = setting.forward(got, k)
-    use = arrived[..., None] & np.isfinite(got["gamma"])  # (B, N, M)
+    use = arrived[..., None] & np.isfinite(got.gamma)  # (B, N, M)
     if setting.gate is not None and measured is not None:
-        use &= gate.agreeing(got["mean"], got["cov"], measured, setting.gate, (mean, cov))
+        use &= gate.agreeing(got.mean, got.cov, measured, setting.gate, (mean, cov))
     return (
-        np.where(use[..., None], got["mean"], mean),
-        np.where(use[..., None, None], got["cov"], cov),
+        np.where(use[..., None], got.mean, mean),
+        np.where(use[..., None, None], got.cov, cov),
     )

@@ -8,7 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import assignment, fusion
+from .. import assignment, fusion, timing
+from ..radio import counted
 from .base import Assigned, Fused, Held, Inputs, Method, Setting
 
 
@@ -43,17 +44,13 @@ class Distributed(Method):
         radio.send("beacon", {})
         radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
-        sent = np.zeros(B, dtype=np.int64)
-        delivered = np.zeros(B, dtype=np.int64)
-        everyone = np.ones((B, n), dtype=bool)
-        if s.delay > 0:  # counted when sent, as the fusion's
-            once = inputs.alive.astype(np.int64)
-            for protocol in ("beacon", "bids"):
-                more = radio.transmitted(protocol, once, first=0)
-                sent, delivered = sent + more[0], delivered + more[1]
-        for arrived in (beacon, inbox) if s.delay == 0 else ():
-            if arrived is not None:
-                sent, delivered = fusion.count(arrived, everyone, sent, delivered)
+        zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, n), dtype=bool)
+        once = inputs.alive.astype(np.int64)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (radio.transmitted(p, once, first=0) for p in ("beacon", "bids")),
+            (fusion.count(a, everyone, zero, zero) for a in (beacon, inbox) if a is not None),
+        )
         alive = inputs.alive
         idx = np.arange(n)
         held = inputs.held
@@ -80,8 +77,14 @@ class Distributed(Method):
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
         solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
-        target, seconds = assignment.auction(view, members, solve)
-        return Assigned(np.where(alive, target, -1), seconds, sent, delivered, held)
+        target, seconds = assignment.auction(view, members, solve, timing)
+        return Assigned(
+            target=np.where(alive, target, -1),
+            seconds=seconds,
+            sent=sent,
+            delivered=delivered,
+            held=held,
+        )
 
 
 def bid_view(

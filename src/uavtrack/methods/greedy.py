@@ -27,4 +27,6 @@ class Greedy(Method):
         seconds = np.empty(out.shape + (2,))
         seconds[...] = timing.since(start) / out.size
         none = np.zeros(bids.shape[0], dtype=np.int64)
-        return Assigned(np.where(inputs.alive, out, -1), seconds, none, none)
+        return Assigned(
+            target=np.where(inputs.alive, out, -1), seconds=seconds, sent=none, delivered=none
+        )

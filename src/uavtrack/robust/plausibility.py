@@ -64,7 +64,7 @@ RICCATI_STEPS = 20_000
 has not settled by then (no process noise) gives floor 0: positive definite only."""
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Bounds:
     """Limits of an honest claim in one run (see the module docstring).
 
