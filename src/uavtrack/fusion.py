@@ -268,8 +268,9 @@ def _usable(
     """Which candidate estimates may take part, in the layout of `delivered` (None:
     all): admitted, and of finite confidence."""
     gamma, mine = offered.gamma, own.gamma
-    finite = gamma is None or (np.isfinite(gamma).all() and np.isfinite(mine).all())
-    if admitted is None and finite:
+    if gamma is None or mine is None:  # tuples without confidence (all finite, then)
+        return admitted
+    if admitted is None and np.isfinite(gamma).all() and np.isfinite(mine).all():
         return None
     t, i, q = delivered.pairs()
     if delivered.edges:
