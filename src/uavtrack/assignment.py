@@ -69,7 +69,9 @@ NO_CLOCK = _NoClock()
 """The clock of a caller that passes none: the solves' seconds are zeros."""
 
 
-def linear_sum_assignment(cost: np.ndarray, maximize: bool = False, clock: Clock | None = None):
+def linear_sum_assignment(
+    cost: np.ndarray, maximize: bool = False, clock: Clock | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
     second to load, and batches of trials solve their problems by `solve_many`, without
     it unless bids tie."""
@@ -82,12 +84,15 @@ Solver = Callable[[np.ndarray], np.ndarray]
 _SOLVER: list[Callable[..., tuple[np.ndarray, np.ndarray]]] = []
 
 
-def load_solver(clock: Clock | None = None) -> Callable:
+def load_solver(clock: Clock | None = None) -> Callable[..., tuple[np.ndarray, np.ndarray]]:
     """scipy's `linear_sum_assignment`, importing `scipy.optimize` on first use; the
     import is set-up on the caller's `clock` (`Clock.set_up`), not a decision's time."""
     if not _SOLVER:
         with (NO_CLOCK if clock is None else clock).set_up():
-            from scipy.optimize import linear_sum_assignment as solve
+            # scipy ships no type stubs; pyright reads its Python source
+            from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
+                linear_sum_assignment as solve,
+            )
         _SOLVER.append(solve)
     return _SOLVER[0]
 
@@ -124,7 +129,7 @@ def hungarian(bids: np.ndarray, clock: Clock | None = None) -> np.ndarray:
 
 
 def local(
-    bids: np.ndarray, me: int, solve: Callable | None = None, clock: Clock | None = None
+    bids: np.ndarray, me: int, solve: Solver | None = None, clock: Clock | None = None
 ) -> int:
     """One UAV's auction (Algorithm 1 lines 5-9): its target from the bids of its closed
     neighbourhood, (n, m) with its own row at `me` and the others in index order.
@@ -384,7 +389,7 @@ def neighbourhood(
 def auction(
     bids: np.ndarray,
     members: np.ndarray,
-    solve: Callable | None = None,
+    solve: Solver | None = None,
     clock: Clock | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every UAV's `local` rule over the members of its closed neighbourhood, for B trials.

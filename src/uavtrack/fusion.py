@@ -44,9 +44,6 @@ from . import network
 from .faults import Faults
 from .radio import Inbox, Radio, RadioState
 
-Tuples = dict[str, np.ndarray]
-"""The tuples the UAVs exchange: field name -> (B, N, M, ...) array."""
-
 # ------------------------------------------------------------------ the tuples
 
 
@@ -87,6 +84,16 @@ class Estimates:
     def of(cls, content: Mapping[str, np.ndarray]) -> Estimates:
         """The tuple fields of a message's content (its other entries left out)."""
         return cls(**{f.name: content[f.name] for f in fields(cls) if f.name in content})
+
+
+def required(value: np.ndarray | None, name: str) -> np.ndarray:
+    """A field of `Estimates` that the exchange at hand carries (`name` for the error):
+    tuples by value carry mean and cov, tuples by index their source, and so on. A
+    record without it is a caller's mistake, reported here rather than as an operation
+    on None further on."""
+    if value is None:
+        raise ValueError(f"the consensus tuples carry no {name}")
+    return value
 
 
 # ------------------------------------------------------------------ the rules
@@ -211,13 +218,15 @@ def intersect_round(
 
     out = dict(own.items())
     usable = _usable(offered, own, delivered, admitted)
+    own_mean, own_cov = required(own.mean, "mean"), required(own.cov, "cov")
+    offered_mean, offered_cov = required(offered.mean, "mean"), required(offered.cov, "cov")
     if delivered.edges:  # one segment per receiver, its self-link included
         t, i, q = delivered.edge_list
         if not t.size:
             return own
         is_own = delivered.own[:, None]
-        mean = np.where(is_own[..., None], own.mean[t, i], offered.mean[t, q])
-        cov = np.where(is_own[..., None, None], own.cov[t, i], offered.cov[t, q])
+        mean = np.where(is_own[..., None], own_mean[t, i], offered_mean[t, q])
+        cov = np.where(is_own[..., None, None], own_cov[t, i], offered_cov[t, q])
         weight = 1.0 / np.trace(cov, axis1=-2, axis2=-1)  # (E, M)
         if usable is not None:
             weight = np.where(usable, weight, 0.0)
@@ -235,35 +244,36 @@ def intersect_round(
         heads = delivered.heads
         mean_out = np.einsum("smij,smj->smi", fused, fused_vector)
         if nothing.any():
-            mean_out = np.where(nothing[..., None], own.mean[heads], mean_out)
-            fused = np.where(nothing[..., None, None], own.cov[heads], fused)
-        out["mean"], out["cov"] = own.mean.copy(), own.cov.copy()
+            mean_out = np.where(nothing[..., None], own_mean[heads], mean_out)
+            fused = np.where(nothing[..., None, None], own_cov[heads], fused)
+        out["mean"], out["cov"] = own_mean.copy(), own_cov.copy()
         out["mean"][heads] = mean_out
         out["cov"][heads] = fused
     else:
-        B, n = own.mean.shape[:2]
+        n = own_mean.shape[1]
         idx = np.arange(n)
         # candidates [trial, receiver, sender, target]: what each sender offered, and
         # on the diagonal the receiver's own current estimate
-        mean = np.repeat(offered.mean[:, None], n, axis=1)
-        cov = np.repeat(offered.cov[:, None], n, axis=1)
-        mean[:, idx, idx], cov[:, idx, idx] = own.mean, own.cov
-        present = np.broadcast_to(delivered.dense[..., None], mean.shape[:-1])
+        mean = np.repeat(offered_mean[:, None], n, axis=1)
+        cov = np.repeat(offered_cov[:, None], n, axis=1)
+        mean[:, idx, idx], cov[:, idx, idx] = own_mean, own_cov
+        present = np.broadcast_to(delivered.matrix[..., None], mean.shape[:-1])
+        nothing = None  # with every candidate usable, none is left without
         if usable is not None:
             present = present & usable
             nothing = ~np.any(present, axis=2)
             present = present | (nothing[:, :, None] & np.eye(n, dtype=bool)[..., None])
         mean, cov, present = (np.moveaxis(x, 2, 3) for x in (mean, cov, present))
         out["mean"], out["cov"] = intersect(mean, cov, fast_weights(cov, present))
-        if usable is not None and nothing.any():  # exactly its own
-            out["mean"] = np.where(nothing[..., None], own.mean, out["mean"])
-            out["cov"] = np.where(nothing[..., None, None], own.cov, out["cov"])
+        if nothing is not None and nothing.any():  # exactly its own
+            out["mean"] = np.where(nothing[..., None], own_mean, out["mean"])
+            out["cov"] = np.where(nothing[..., None, None], own_cov, out["cov"])
     out["gamma"] = confidence(out["cov"])
     return Estimates(**out)
 
 
 def _usable(
-    offered: Estimates, own: Estimates, delivered: network.Links, admitted
+    offered: Estimates, own: Estimates, delivered: network.Links, admitted: np.ndarray | None
 ) -> np.ndarray | None:
     """Which candidate estimates may take part, in the layout of `delivered` (None:
     all): admitted, and of finite confidence."""
@@ -282,7 +292,10 @@ def _usable(
 
 
 def pick(
-    own: Estimates, offered: Estimates, best: np.ndarray, rows: tuple | None = None
+    own: Estimates,
+    offered: Estimates,
+    best: np.ndarray,
+    rows: tuple[np.ndarray, np.ndarray] | None = None,
 ) -> Estimates:
     """The tuples the receivers adopt: field by field, own[i] where best is i, else
     offered[best]. Fields are arrays (B, N, M, ...). rows: the (trial, receiver) index
@@ -296,7 +309,7 @@ def pick(
         b, i = rows
         best, keep = best[b, i], best[b, i] == i[:, None]  # (R, M)
         b = b[:, None]
-    out: Tuples = {}
+    out: dict[str, np.ndarray] = {}
     for name, value in own.items():
         chosen = getattr(offered, name)[b, best, j]
         mask = keep.reshape(keep.shape + (1,) * (chosen.ndim - keep.ndim))
@@ -403,10 +416,10 @@ def consensus(
     radio: Radio,
     tuples: Estimates,
     rounds: np.ndarray,
-    score: Callable[[Tuples], np.ndarray] | None = None,
-    receive: Callable[[Tuples], Tuples] | None = None,
+    score: Callable[[Estimates], np.ndarray] | None = None,
+    receive: Callable[[Estimates], Estimates] | None = None,
     rule: str = "max_consensus",
-    admit: Callable[[Tuples, Tuples, network.Links], np.ndarray] | None = None,
+    admit: Callable[[Estimates, Estimates, network.Links], np.ndarray] | None = None,
 ) -> Outcome:
     """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
 
@@ -422,7 +435,7 @@ def consensus(
     mean and cov). admit(own, offered, links): which offered tuples each receiver
     may adopt (`gate.admitted`; None: all).
     """
-    score = score or (lambda t: t.gamma)
+    score = score or (lambda t: required(t.gamma, "gamma"))
     B, n = rounds.shape
     if rule not in ("max_consensus", "covariance_intersection"):
         raise ValueError(f"unknown fusion rule {rule!r}")
@@ -433,7 +446,7 @@ def consensus(
         active = rounds >= r
         if inbox is None:
             continue
-        offered = inbox.content if receive is None else receive(inbox.content)
+        offered: Estimates = inbox.content if receive is None else receive(inbox.content)
         sent, delivered = count(inbox, active, sent, delivered)
         links = inbox.delivered.into(active)
         admitted = None if admit is None else admit(tuples, offered, links)
@@ -522,7 +535,7 @@ def consensus_rounds(
     out = consensus(
         radio, Estimates(gamma=gamma, source=identity(gamma.shape)), rounds.reshape(-1, n)
     )
-    return out.tuples.source.reshape(confidence.shape)
+    return required(out.tuples.source, "source").reshape(confidence.shape)
 
 
 @dataclass(frozen=True)
@@ -553,7 +566,7 @@ def fuse(confidence: np.ndarray, adjacency: np.ndarray, form: str = "auto") -> C
     out = consensus(radio, Estimates(gamma=gamma, source=identity(gamma.shape)), depth.depth)
     lead = adjacency.shape[:-2]
     return Consensus(
-        out.tuples.source.reshape(confidence.shape),
+        required(out.tuples.source, "source").reshape(confidence.shape),
         depth.depth.reshape(lead + (n,)),
         out.sent.reshape(lead),
         depth.sent.reshape(lead),

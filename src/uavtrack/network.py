@@ -180,14 +180,15 @@ class Links:
         whose rules run on every receiver at once, is returned as it is."""
         if not self.edges or receivers.all():
             return self
-        keep = receivers[self.trial, self.receiver]
+        trial, receiver, sender = self.edge_list
+        keep = receivers[trial, receiver]
         return Links(
             batch=self.batch,
             n=self.n,
             dense=None,
-            trial=self.trial[keep],
-            receiver=self.receiver[keep],
-            sender=self.sender[keep],
+            trial=trial[keep],
+            receiver=receiver[keep],
+            sender=sender[keep],
         )
 
     @cached_property
@@ -225,12 +226,12 @@ class Links:
                 batch=self.batch,
                 n=self.n,
                 dense=None,
-                trial=self.trial[keep],
-                receiver=self.receiver[keep],
-                sender=self.sender[keep],
+                trial=trial[keep],
+                receiver=receiver[keep],
+                sender=sender[keep],
             )
         eye = np.eye(self.n, dtype=bool)
-        return Links(batch=self.batch, n=self.n, dense=self.dense & (mask | eye))
+        return Links(batch=self.batch, n=self.n, dense=self.matrix & (mask | eye))
 
     def incoming(self) -> np.ndarray:
         """Links into each receiver from others, (B, N) int."""

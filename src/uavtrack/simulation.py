@@ -33,7 +33,6 @@ from . import _process, estimation, flight, fusion, network, planning, sensing, 
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
-from .fusion import Tuples
 from .methods import Assigned, Held, Inputs, Method, Setting, get
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
@@ -144,7 +143,9 @@ def _plan(
     return p.value, p.action
 
 
-def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable[[Tuples, int], Tuples]:
+def _forward(
+    dt: float, sigma_1: float, sigma_2: float
+) -> Callable[[fusion.Estimates, int], fusion.Estimates]:
     """forward(tuples, k): time-stamped tuples predicted to step k (eq. 23 applied
     k - stamp times), their confidence recomputed (eq. 22)."""
     A, Q = estimation.transition(dt), estimation.process_noise(dt, sigma_1, sigma_2)
@@ -157,14 +158,16 @@ def _forward(dt: float, sigma_1: float, sigma_2: float) -> Callable[[Tuples, int
         return An, Qn
 
     def forward(tuples: fusion.Estimates, k: int) -> fusion.Estimates:
-        lag = k - tuples.stamp
-        mean, cov = tuples.mean.copy(), tuples.cov.copy()
+        lag = k - fusion.required(tuples.stamp, "stamp")
+        mean = fusion.required(tuples.mean, "mean").copy()
+        cov = fusion.required(tuples.cov, "cov").copy()
         for n in np.unique(lag[lag > 0]):
             at = lag == n
             An, Qn = power(int(n))
             mean[at] = mean[at] @ An.T
             cov[at] = An @ cov[at] @ An.T + Qn
-        gamma = np.where(np.isfinite(tuples.gamma), estimation.confidence(cov), -np.inf)
+        finite = np.isfinite(fusion.required(tuples.gamma, "gamma"))
+        gamma = np.where(finite, estimation.confidence(cov), -np.inf)
         return replace(tuples, mean=mean, cov=cov, stamp=np.full(lag.shape, k), gamma=gamma)
 
     return forward

@@ -11,7 +11,7 @@ from typing import ClassVar
 
 import numpy as np
 
-from .. import fusion
+from .. import fusion, network
 from ..radio import Radio, counted
 from ..robust import gate
 
@@ -37,8 +37,8 @@ class Setting:
     budget: int | None
     extra_rounds: int
     stale: bool
-    forward: Callable
-    plan: Callable
+    forward: Callable[[fusion.Estimates, int], fusion.Estimates]
+    plan: Callable[..., tuple[np.ndarray, ...]]
     prune: bool = False
     rule: str = "max_consensus"
     gate: float | None = None
@@ -150,7 +150,7 @@ def consensus(inputs: Inputs) -> Fused:
     if s.delay == 0 and s.rule == "max_consensus":
         tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
         out = fusion.consensus(radio, tuples, rounds, admit=admit)
-        source = out.tuples.source
+        source = fusion.required(out.tuples.source, "source")
         mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
         gamma = out.tuples.gamma  # travelled with the source: confidence(cov) exactly
     else:
@@ -160,9 +160,13 @@ def consensus(inputs: Inputs) -> Fused:
             cov=inputs.cov,
             stamp=np.full(inputs.gamma.shape, inputs.k),
         )
-        receive = (lambda t: s.forward(t, inputs.k)) if s.stale else None
+
+        def forward(t: fusion.Estimates) -> fusion.Estimates:  # to this cycle's step
+            return s.forward(t, inputs.k)
+
+        receive = forward if s.stale else None
         out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
-        mean, cov = out.tuples.mean, out.tuples.cov
+        mean, cov = fusion.required(out.tuples.mean, "mean"), fusion.required(out.tuples.cov, "cov")
         gamma = None
     sent, delivered = counted(
         s.delay,
@@ -180,22 +184,27 @@ def consensus(inputs: Inputs) -> Fused:
     )
 
 
-def gated(inputs: Inputs):
+Admit = Callable[[fusion.Estimates, fusion.Estimates, network.Links], np.ndarray]
+"""admit(own, offered, links): which offered tuples each receiver may adopt, in the
+layout of `links` (`fusion.consensus`)."""
+
+
+def gated(inputs: Inputs) -> Admit | None:
     """The consensus's admit(own, offered, links) under the measurement gate
     (``robust.gate``, `gate.admitted`), or None without it. Tuples that travel as the
     index of the UAV whose estimate they are (`fusion.Estimates.source`) are looked up
     in the local estimates."""
-    s, measured = inputs.setting, inputs.measured
-    if s.gate is None or measured is None:
+    threshold, measured = inputs.setting.gate, inputs.measured
+    if threshold is None or measured is None:
         return None
 
     def estimates(tuples: fusion.Estimates) -> tuple[np.ndarray, np.ndarray]:
         if tuples.source is not None:
             source = tuples.source
             return fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
-        return tuples.mean, tuples.cov
+        return fusion.required(tuples.mean, "mean"), fusion.required(tuples.cov, "cov")
 
-    def admit(own: fusion.Estimates, offered: fusion.Estimates, links) -> np.ndarray:
-        return gate.admitted(links, estimates(own), estimates(offered), measured, s.gate)
+    def admit(own: fusion.Estimates, offered: fusion.Estimates, links: network.Links) -> np.ndarray:
+        return gate.admitted(links, estimates(own), estimates(offered), measured, threshold)
 
     return admit

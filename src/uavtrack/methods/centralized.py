@@ -6,6 +6,14 @@ leaves the UAV out of the central fusion and assignment; a lost download leaves 
 its own estimates and its previous target.
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown; constant redefinition, as matrices keep the
+# paper's capital names (A, P, R) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+# pyright: reportConstantRedefinition=false
+
 from __future__ import annotations
 
 import numpy as np
@@ -52,7 +60,9 @@ class Centralized(Method):
         )
         radio.send("upload", {"estimates": tuples, "uavs": inputs.believed, "alive": inputs.alive})
         upload, up_ok = radio.receive_central("upload")
-        arrived = []  # (sent, delivered) of the uploads and downloads that arrive now
+        arrived: list[
+            tuple[np.ndarray, np.ndarray]
+        ] = []  # (sent, delivered) of the uploads and downloads that arrive now
         seconds = np.zeros((B, n, 2))
         if upload is None:
             down, down_target = nothing_heard(B, n, m), np.full((B, n), -1, dtype=np.int64)
@@ -107,6 +117,7 @@ class Centralized(Method):
         target = np.where(target >= 0, target, inputs.previous)
         target = np.where(target >= 0, target, assignment.greedy(bids))
         target = np.where(inputs.alive, target, -1)
+        assert fused.seconds is not None, "the fusion under faults times the central node"
         return Assigned(target=target, seconds=fused.seconds, sent=none, delivered=none)
 
 
@@ -139,28 +150,29 @@ def central_node(
     -1 for a UAV not heard from. clock: the caller's, on whose set-up a first load of
     the exact solver is counted (`assignment.load_solver`); it is read for nothing else.
     """
-    B, n, m = got.gamma.shape
+    B, n, m = fusion.required(got.gamma, "gamma").shape
     if setting.stale:
         got = setting.forward(got, k)
-    score = np.where(heard[..., None], got.gamma, -np.inf)
+    score = np.where(heard[..., None], fusion.required(got.gamma, "gamma"), -np.inf)
     best = np.argmax(score, axis=1)  # per target, the most confident uploader
     b, j = np.arange(B)[:, None], np.arange(m)
     central = got.map(lambda value: value[b, best, j])  # (B, M, ...)
     value = np.zeros((B, n, m))  # bids of the UAVs heard from, planned from their reports
     t, i = np.nonzero(heard)
     if t.size:
-        value[t, i] = setting.plan(uavs[t, i][None], central.mean[t][None])[0][0]
+        mean = fusion.required(central.mean, "mean")
+        value[t, i] = setting.plan(uavs[t, i][None], mean[t][None])[0][0]
     targets, _ = assignment.centralized(value, heard, clock)
-    anyone = heard.any(axis=1)
+    anyone = np.any(heard, axis=1)  # (B,): numpy's stubs type the method as maybe a scalar
     empty = nothing_heard(B, n, m)
     down = fusion.Estimates(
         **{
             key: np.where(
-                anyone.reshape((B,) + (1,) * value.ndim),
-                np.repeat(value[:, None], n, axis=1),
+                anyone.reshape((B,) + (1,) * array.ndim),
+                np.repeat(array[:, None], n, axis=1),
                 getattr(empty, key),
             )
-            for key, value in central.items()
+            for key, array in central.items()
         }
     )
     return down, np.where(anyone[:, None], targets, -1)
@@ -182,10 +194,11 @@ def take_download(
     (gamma, mean, cov, stamp); arrived (B, N)."""
     if setting.stale:
         got = setting.forward(got, k)
-    use = arrived[..., None] & np.isfinite(got.gamma)  # (B, N, M)
+    got_mean, got_cov = fusion.required(got.mean, "mean"), fusion.required(got.cov, "cov")
+    use = arrived[..., None] & np.isfinite(fusion.required(got.gamma, "gamma"))  # (B, N, M)
     if setting.gate is not None and measured is not None:
-        use &= gate.agreeing(got.mean, got.cov, measured, setting.gate, (mean, cov))
+        use &= gate.agreeing(got_mean, got_cov, measured, setting.gate, (mean, cov))
     return (
-        np.where(use[..., None], got.mean, mean),
-        np.where(use[..., None, None], got.cov, cov),
+        np.where(use[..., None], got_mean, mean),
+        np.where(use[..., None, None], got_cov, cov),
     )
