@@ -336,6 +336,8 @@ class UavAgent:
                     if s.stale:
                         offered = {q: s.forward(t, k) for q, t in offered.items()}
                     state = self._adopt(state, offered)
+        # the loop ends once D_i is known (it stopped) and the consensus rounds are done
+        assert stopped is not None and rounds is not None
         sent, delivered = counted(
             s.delay,
             lambda: (
@@ -344,7 +346,8 @@ class UavAgent:
             ),
             arrived,
         )
-        return state.mean, state.cov, rounds, sent, delivered
+        mean, cov = fusion.required(state.mean, "mean"), fusion.required(state.cov, "cov")
+        return mean, cov, rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
         """Round r of the D_i protocol (`fusion.learn_depth`) from this UAV's side: its
@@ -398,12 +401,15 @@ class UavAgent:
                     for x in (mine.observed, mine.z, mine.R, mine.recent)
                 )
             )
-            estimates = (candidates.mean, candidates.cov)
+            estimates = (
+                fusion.required(candidates.mean, "mean"),
+                fusion.required(candidates.cov, "cov"),
+            )
             admitted = gate.admitted(links, estimates, estimates, measured, self.setting.gate)
         if self.setting.rule == "covariance_intersection":
             picked = fusion.intersect_round(candidates, candidates, links, admitted)
         else:
-            gamma = candidates.gamma
+            gamma = fusion.required(candidates.gamma, "gamma")
             best = fusion.adopt(gamma, gamma, links, admitted)
             picked = fusion.pick(candidates, candidates, best)
         return picked.map(lambda value: value[0, where])
@@ -458,7 +464,9 @@ class UavAgent:
         if rows.size == 1:
             target = int(assignment.greedy(bids))
         else:
-            solve = None if self.method.built_in_solve else self.method.solve
+            method = self.method  # neither central nor greedy (`cycle`): a Distributed
+            assert isinstance(method, Distributed), "the auction is Distributed's"
+            solve = None if method.built_in_solve else method.solve
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), solve, timing)
         return target, timing.since(start), (sent, delivered)
 
@@ -480,19 +488,20 @@ class UavAgent:
         }
         if self.radio.central[k]:
             self.radio.send(k, [part("upload", 0, tuples)], to=self.n)
-        down, arrived, target = self._download(k)
+        download = self._download(k)
         # as `radio.counted`: this UAV counts the download offered to it and whether it
         # came, or with delay its upload when sent (the central node the uploads, or its
         # downloads); fault-free a UAV alone exchanges nothing, as in `methods.Centralized`
         offered = []
-        if down is not None:
+        if download is not None:
             mine = int(self.radio.alive[k - self.radio.delay][self.me]) if s.faulty else one
-            offered.append((mine, mine * int(arrived[0, 0])))
+            offered.append((mine, mine * int(download[1][0, 0])))
         sent, delivered = counted(
             s.delay, lambda: [self.radio.transmitted(k, "upload", 1, 0, to=self.n)], offered
         )
-        if down is None:  # nothing sent yet
+        if download is None:  # nothing sent yet
             return mean, cov, 1, sent, delivered, -1
+        down, arrived, target = download
         mean, cov = (
             x[0, 0]
             for x in take_download(
@@ -503,13 +512,13 @@ class UavAgent:
             return mean, cov, one, sent, delivered, target
         return mean, cov, 1, sent, delivered, target if arrived[0, 0] else -1
 
-    def _download(self, k: int):
+    def _download(self, k: int) -> tuple[fusion.Estimates, np.ndarray, int] | None:
         """The central node's download sent `delay` cycles ago: this UAV's tuples (1, 1,
-        M, ...), whether it arrived (1, 1), and the target it names; (None, None, -1)
-        before any was sent."""
+        M, ...), whether it arrived (1, 1), and the target it names; None before any was
+        sent."""
         sent_at = k - self.radio.delay
         if sent_at < 0:
-            return None, None, -1
+            return None
         mailbox, central = self.mailbox, self.n
         lost = bool(self.radio.lost(sent_at, "download", 0, np.array(central), self.me))
         expect = bool(self.radio.alive[sent_at][self.me]) and not lost

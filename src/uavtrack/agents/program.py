@@ -101,7 +101,7 @@ def serve(
         return Served(
             ran=0, steps=scenario.steps, end="not in run", programs=programs, central=central
         )
-    if hello.authenticated and not _holds(credential, hello.publics, me):
+    if hello.authenticated and credential is not None and not _holds(credential, hello.publics, me):
         return Served(
             ran=0, steps=scenario.steps, end="wrong key", programs=programs, central=central
         )
