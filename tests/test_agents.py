@@ -20,6 +20,8 @@ from uavtrack.testing import assert_same_trace
 
 from .processes import alive, children_of, wait_until
 
+pytestmark = pytest.mark.integration  # the agent form against real deadlines
+
 pytest.importorskip("msgspec")
 
 FAULTS = [
@@ -97,7 +99,6 @@ def zenoh_or_skip():
     pytest.importorskip("zenoh")
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize(
     "method,faults",
     [
@@ -118,7 +119,6 @@ def test_zenoh_swarm_of_processes_equals_run(method, faults):
     assert swarm.traffic.dropped == 0
 
 
-@pytest.mark.integration
 def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():
     zenoh_or_skip()
     scenario = uavtrack.Scenario(steps=5)
@@ -136,7 +136,6 @@ def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():
     assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "greedy", seed=1).trace)
 
 
-@pytest.mark.integration
 def test_two_swarms_at_once_do_not_hear_each_other():
     zenoh_or_skip()
     scenarios = [uavtrack.Scenario(steps=12), uavtrack.Scenario(steps=12, comm_range=80.0)]
@@ -349,12 +348,10 @@ def test_uavtrack_agent_bad_input_is_one_line(capsys, args, message):
         pytest.param(
             ["--transport", "zenoh", "--connect", "tcp/127.0.0.1:1"],
             "cannot connect to tcp/",
-            marks=pytest.mark.integration,
         ),
         pytest.param(
             ["--transport", "zenoh", "--listen", "tcp/no-such-host:x"],
             "cannot listen on",
-            marks=pytest.mark.integration,
         ),
         (["--transport", "zenoh", "--listen", ""], "--listen is empty"),
         (["--transport", "zenoh", "--listen", "tls/127.0.0.1:0"], "a tls/ endpoint needs"),
@@ -376,7 +373,6 @@ def test_swarm_bad_input_is_one_line(capsys, tmp_path, args, message):
     assert code == 2 and message in err and err.count("\n") == 1
 
 
-@pytest.mark.integration
 def test_swarm_port_in_use_is_refused(capsys):
     zenoh_or_skip()
     import socket
@@ -398,7 +394,6 @@ def test_swarm_port_in_use_is_refused(capsys):
     assert code == 2 and "Address already in use" in err
 
 
-@pytest.mark.integration
 def test_zenoh_logs_never_reach_the_json_on_stdout():
     zenoh_or_skip()
     # with RUST_LOG=debug, Zenoh logs every connection on file descriptor 1
@@ -415,7 +410,6 @@ def test_zenoh_logs_never_reach_the_json_on_stdout():
     assert "zenoh" in out.stderr.lower()  # the log went to stderr, where logs belong
 
 
-@pytest.mark.integration
 def test_ctrl_c_stops_every_program(tmp_path):
     zenoh_or_skip()
     proc = subprocess.Popen(
@@ -442,7 +436,6 @@ def test_ctrl_c_stops_every_program(tmp_path):
     assert wait_until(lambda: not any(alive(p) for p in programs), limit=30)
 
 
-@pytest.mark.integration
 def test_a_swarm_killed_while_starting_takes_its_programs_with_it():
     zenoh_or_skip()
     proc = subprocess.Popen(

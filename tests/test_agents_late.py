@@ -37,6 +37,8 @@ from uavtrack.agents.transport import REJOIN, Bus, Link, Mailbox, MemoryTranspor
 from uavtrack.faults import PROTOCOLS
 from uavtrack.testing import differences
 
+pytestmark = pytest.mark.integration  # the agent form against real deadlines
+
 ROOT = Path(__file__).resolve().parents[1]
 
 
@@ -408,7 +410,6 @@ def equal_until_counted(swarm, reference) -> int | None:
     return min(counted, default=None)
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize("method", ["centralized", "distributed"])
 def test_under_load_a_swarm_equals_the_simulator_or_counts_what_was_late(method):
     # four busy processes beside six programs and the world on this machine, and a
@@ -422,7 +423,6 @@ def test_under_load_a_swarm_equals_the_simulator_or_counts_what_was_late(method)
             equal_until_counted(swarm, reference)
 
 
-@pytest.mark.integration
 def test_a_world_stopped_for_15_s_mid_run_loses_no_program(tmp_path):
     # the world (the process of uavtrack swarm) stopped past the Zenoh lease once it has
     # run 10 cycles, then continued: every program is still a member at the end

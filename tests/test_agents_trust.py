@@ -16,6 +16,8 @@ from uavtrack.testing import assert_same_trace
 from .processes import wait_until
 from .test_agents_faults import make_certificates, tls_options
 
+pytestmark = pytest.mark.integration  # the agent form against real deadlines
+
 pytest.importorskip("zenoh")
 pytest.importorskip("cryptography")
 
@@ -105,7 +107,6 @@ class Stranger:
             token.undeclare()
 
 
-@pytest.mark.integration
 @pytest.mark.parametrize(
     "mode,when,method",
     [
@@ -150,7 +151,6 @@ def test_a_stranger_making_or_dropping_tokens_neither_stops_nor_changes_a_run(mo
     assert swarm.traffic.drops.get("not authentic", 0) >= 1  # its Ready, at least
 
 
-@pytest.mark.integration
 def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_place(tmp_path):
     # over TLS, with --no-spawn: a program started with a copy of program 0's key file
     # whose secret is not 0's is told that its key is not 0's (exit 2); a stranger
@@ -277,7 +277,6 @@ def tls_args(files):
     return ["--tls-ca", files["ca"], "--tls-cert", files["cert"], "--tls-key", files["key"]]
 
 
-@pytest.mark.integration
 def test_tls_files_with_a_clear_endpoint_are_refused_in_one_line(tmp_path, capsys):
     # the files secure tls/ links only: with a tcp/ endpoint the swarm would run in clear
     from uavtrack.errors import UsageError

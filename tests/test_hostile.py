@@ -248,6 +248,7 @@ RUNS = {
 }
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("method,me", list(RUNS), ids=lambda x: str(x))
 def test_every_kind_field_and_bad_value_from_a_member_stops_no_honest_program(
     monkeypatch, method, me
@@ -304,6 +305,7 @@ ATTACKS = {
 }
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("how", list(ATTACKS))
 def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, how):
     from uavtrack.agents import agent
@@ -342,6 +344,7 @@ def lying_member():
     return runpy.run_path(str(path), run_name="lying_member")
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_a_member_lying_within_the_bounds_takes_the_team_over_unless_the_gate_is_on():
     example = lying_member()
     base = uavtrack.Scenario(steps=60)
@@ -353,6 +356,7 @@ def test_a_member_lying_within_the_bounds_takes_the_team_over_unless_the_gate_is
     assert guarded.mean() >= example["honest_rates"](gated, 2).mean() - 0.05
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
 @pytest.mark.parametrize(
     "overrides",
@@ -450,6 +454,7 @@ def admitted_tuples(draw, bounds, m=3, k=4):
 SCENARIO = uavtrack.Scenario(n_targets=3, steps=40)
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize(
     "overrides",
     [
@@ -509,6 +514,7 @@ def consensus_message(content: dict, k: int, sender: int) -> Radio:
     )
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_what_a_member_sends_beyond_the_rule_is_counted_in_the_swarm_json(monkeypatch, capsys):
     import json
 

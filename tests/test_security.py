@@ -327,6 +327,7 @@ def test_what_comes_before_the_hello_is_bounded_in_bytes_and_its_drops_counted()
     assert box.content(-1, "presence", 0, 0) is not None
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_a_token_is_a_hint_about_programs_heard_and_an_authentic_word_takes_it_back():
     ring, _, (g0, g1, _) = gates()
     bus = Bus()
@@ -354,6 +355,7 @@ def test_a_token_is_a_hint_about_programs_heard_and_an_authentic_word_takes_it_b
     assert not box.is_gone(0)
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_tokens_that_come_and_go_without_end_never_hold_a_wait_past_its_deadline():
     _, _, (g0, g1, _) = gates()
     bus = Bus()
@@ -497,6 +499,7 @@ def forgeries(key, payload):
     return out
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_a_strangers_forgeries_change_nothing_and_are_counted():
     scenario = uavtrack.Scenario(steps=12)
     swarm, intruder = attacked_swarm(forgeries, scenario)
@@ -516,6 +519,7 @@ def test_without_signing_the_same_forgeries_take_the_swarm_over():
     assert swarm.result.observation_rate < reference.observation_rate
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_replayed_messages_are_dropped_and_change_nothing():
     scenario = uavtrack.Scenario(steps=10)
     heard = []
@@ -531,6 +535,7 @@ def test_replayed_messages_are_dropped_and_change_nothing():
     assert set(swarm.traffic.drops) <= {"replayed", "outside the window of cycles"}
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_malformed_payloads_on_every_key_change_nothing():
     scenario = uavtrack.Scenario(steps=8)
 
@@ -555,6 +560,7 @@ def test_malformed_payloads_on_every_key_change_nothing():
     assert swarm.traffic.drops["malformed"] > 50
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_a_faulty_member_is_dropped_by_reason_and_never_crashes_the_others(monkeypatch):
     # UAV 2 reports a bank angle that does not exist at step 4, UAV 1 sends consensus
     # tuples of the wrong shape: the world and the neighbours drop them and go on
@@ -591,6 +597,7 @@ def test_a_faulty_member_is_dropped_by_reason_and_never_crashes_the_others(monke
     assert np.isfinite(swarm.result.ospa) and np.isfinite(swarm.result.rmse)
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 def test_a_forged_liveliness_token_loses_no_healthy_uav():
     scenario = uavtrack.Scenario(steps=10)
     done = {}

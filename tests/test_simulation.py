@@ -213,6 +213,7 @@ def test_progress_is_called_once_per_step(short):
     assert calls == list(range(1, short.steps + 1))
 
 
+@pytest.mark.integration  # a large run's memory peak, measured
 @pytest.mark.parametrize(
     "fields,batch,trace",
     [
