@@ -38,9 +38,9 @@ from ..errors import install_hint
 
 try:
     import yaml  # BenchMARL's own task files are YAML (PyYAML comes with its hydra-core)
-    from benchmarl.environments import Task, TaskClass
-    from torchrl.data import Composite
-    from torchrl.envs import EnvBase
+    from benchmarl.environments import Task, TaskClass  # pyright: ignore[reportMissingImports]  (the learn extra)
+    from torchrl.data import Composite  # pyright: ignore[reportMissingImports]  (the learn extra)
+    from torchrl.envs import EnvBase  # pyright: ignore[reportMissingImports]  (the learn extra)
 except ImportError as exc:  # an optional extra
     raise ImportError(
         f"uavtrack.env.benchmarl needs benchmarl: {install_hint('learn')} ({exc})"

@@ -30,7 +30,7 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
     """`vector` as a Stable-Baselines3 VecEnv (see the module). The first reset starts
     trials `seed`, `seed` + 1, ... (None: fresh entropy, or what ``.seed()`` set)."""
     try:
-        from stable_baselines3.common.vec_env import VecEnv
+        from stable_baselines3.common.vec_env import VecEnv  # pyright: ignore[reportMissingImports]  (the learn extra)
     except ImportError as exc:
         raise ImportError(
             f"sb3_vec_env needs stable-baselines3: {install_hint('learn')} ({exc})"
@@ -97,10 +97,10 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
 def torchrl_env(vector: VectorEnv, seed: int | None = None):
     """`vector` as a TorchRL EnvBase of batch size [num_envs] (see the module)."""
     try:
-        import torch
-        from tensordict import TensorDict
-        from torchrl.data import Bounded, Categorical, Composite, Unbounded
-        from torchrl.envs import EnvBase
+        import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+        from tensordict import TensorDict  # pyright: ignore[reportMissingImports]  (the learn extra)
+        from torchrl.data import Bounded, Categorical, Composite, Unbounded  # pyright: ignore[reportMissingImports]  (the learn extra)
+        from torchrl.envs import EnvBase  # pyright: ignore[reportMissingImports]  (the learn extra)
     except ImportError as exc:
         raise ImportError(f"torchrl_env needs torchrl: {install_hint('learn')} ({exc})") from None
     if vector.spaces.form != "box":
