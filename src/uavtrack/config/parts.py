@@ -94,10 +94,36 @@ class SensorModel(Part):
         ),
     )
 
+    detection_probability: Float = Field(
+        default=1.0,
+        gt=0,
+        le=1,
+        description=(
+            "probability P_D that a target inside the observation disk is detected in a scan "
+            "[-], (0, 1]; 1: the paper's ideal sensor; each (UAV, target, scan) is drawn from "
+            "the trial's own detection stream, so the paper's draws are the same at any value"
+        ),
+    )
+    clutter_rate: Float = Field(
+        default=0.0,
+        ge=0,
+        le=1000,
+        description=(
+            "mean number of false measurements per UAV and scan [-], [0, 1000]; 0: the paper's "
+            "sensor; a Poisson count, uniform over the observation disk and converted through "
+            "the same range-bearing noise model (eq. 2-12)"
+        ),
+    )
+
     @property
     def alpha(self) -> float:
         """Half field of view [rad]."""
         return math.radians(self.half_fov_deg)
+
+    @property
+    def ideal(self) -> bool:
+        """Whether every target in view is detected and nothing false is seen (the paper)."""
+        return self.detection_probability == 1.0 and self.clutter_rate == 0.0
 
 
 MAX_ALTITUDE = 20_000.0
@@ -377,6 +403,84 @@ class TrackerModel(Part):
             "at k); assumed: a manoeuvre lasts several cycles, a jump one or two"
         ),
     )
+
+    association: Literal["known", "gnn", "jpda"] = Field(
+        default="known",
+        description=(
+            "how measurements meet tracks [-], (known, gnn, jpda); known: the paper's, each "
+            "measurement arrives labelled with its target and each UAV keeps one filter per "
+            "target; gnn and jpda: beyond the paper, a UAV receives an unlabelled set of "
+            "measurements and keeps up to tracker.max_tracks tracks, global nearest neighbour "
+            "(the exact assignment of the gated measurements) or joint probabilistic data "
+            "association (exact joint events per cluster of gated tracks)"
+        ),
+    )
+    max_tracks: Int = Field(
+        default=0,
+        ge=0,
+        le=1000,
+        description=(
+            "track slots per UAV with gnn or jpda [-], 0 to 1000; 0: twice n_targets plus 4; "
+            "assumed: room for every target, a false track per target and a few more"
+        ),
+    )
+    gate_probability: Float = Field(
+        default=0.99,
+        gt=0,
+        lt=1,
+        description=(
+            "gate probability P_G [-], (0, 1): a measurement may meet a track when its "
+            "squared innovation distance is below the chi-square(2) quantile of P_G; the same "
+            "quantile of chi-square(4) gates track-to-track association; assumed: 0.99, "
+            "the usual choice (Stone Soup's examples, Bar-Shalom)"
+        ),
+    )
+    confirm: tuple[Annotated[Int, Field(ge=1, le=20)], Annotated[Int, Field(ge=1, le=20)]] = (
+        Field(
+            default=(2, 3),
+            description=(
+                "M-of-N confirmation (M, N) [scans], each 1 to 20, M <= N: a tentative track is "
+                "confirmed when it met a measurement in M of its first N scans in view, and "
+                "deleted when it can no longer; assumed: 2 of 3, the common choice, which a "
+                "single clutter point (below 0.01 per gate at the default clutter) seldom meets"
+            ),
+        )
+    )
+    delete_misses: Int = Field(
+        default=5,
+        ge=1,
+        le=1000,
+        description=(
+            "a confirmed track is deleted after this many consecutive scans in view without "
+            "a measurement [scans], 1 to 1000; assumed: 5 misses happen with probability "
+            "1e-5 at P_D = 0.9 on a target that is there"
+        ),
+    )
+    delete_std: Float = Field(
+        default=100.0,
+        gt=0,
+        le=100_000,
+        description=(
+            "a track whose position std sqrt(trace of its position covariance) exceeds this "
+            "is deleted [m], (0, 100000]; assumed: half the field, where the estimate no "
+            "longer says where to look"
+        ),
+    )
+    birth_velocity_std: Float = Field(
+        default=2.0,
+        gt=0,
+        le=100,
+        description=(
+            "velocity std of a track born from one measurement [m/s], (0, 100]; assumed: "
+            "twice the targets' initial velocity spread, broad enough for any target"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _confirm_order(self) -> TrackerModel:
+        if self.confirm[0] > self.confirm[1]:
+            raise ValueError(f"confirm {self.confirm}: M must not exceed N")
+        return self
 
     @model_validator(mode="after")
     def _square(self) -> TrackerModel:

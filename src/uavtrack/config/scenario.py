@@ -210,6 +210,12 @@ class Scenario(Part):
             and (f.round_budget is None or f.round_budget >= 2)
         )
 
+    @property
+    def track_slots(self) -> int:
+        """Track slots K per UAV with unknown association (``tracker.max_tracks``, whose 0
+        means twice n_targets plus 4)."""
+        return self.tracker.max_tracks or 2 * self.n_targets + 4
+
     def acceleration_std(self) -> tuple[float, float]:
         """Std of the targets' white acceleration per axis [m/s^2], as eq. (15) is read
         (`target.noise_form`): sigma itself, or sigma / dT for the printed matrix, whose
