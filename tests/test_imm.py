@@ -223,10 +223,13 @@ def test_uavtrack_trackers_writes_its_table_and_figure(tmp_path, capsys):
         for name, row in rows.items():
             low, high = row["nees_band"]
             assert low < 4 < high  # the band of a consistent estimator's mean NEES
+            assert 0 <= row["nees_inside"]["mean"] <= 1 and row["nees_median"]["mean"] > 0
             if name != "cv + max_consensus":  # paired on the same trials
                 diff = row["against_paper"]["rmse_best"]["mean"]
                 assert diff == pytest.approx(row["rmse_best"]["mean"] - paper["rmse_best"]["mean"])
-    assert "| imm + covariance_intersection |" in (out / "report.md").read_text()
+    report = (out / "report.md").read_text()
+    assert "| imm + covariance_intersection |" in report
+    assert "| NEES median | NEES inside 95% |" in report
     with Image.open(out / "trackers.png") as im:
         assert im.size[0] > 1000
     code = cli.main(

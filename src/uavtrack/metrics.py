@@ -61,7 +61,22 @@ METRICS: dict[str, tuple[str, str]] = {
         "NEES of every UAV's fused estimate over the 4-D state (4 when consistent), "
         "stale estimates included",
     ),
+    "nees_median": (
+        "",
+        "median of the same NEES samples (3.36 when consistent: the median of chi-square(4)), "
+        "read from a histogram of 400 log-spaced bins per decade: within 0.3 %",
+    ),
+    "nees_inside": (
+        "",
+        "fraction of the same NEES samples inside the 95 % interval of chi-square(4), "
+        "[0.484, 11.14] (0.95 when consistent)",
+    ),
     "nees_best": ("", "NEES of the team's best estimate (4 when consistent)"),
+    "nees_best_median": ("", "median of the team's best estimate's NEES, as nees_median"),
+    "nees_best_inside": (
+        "",
+        "fraction of the team's best estimate's NEES inside the 95 % interval, as nees_inside",
+    ),
     "ospa": (
         "m",
         "OSPA distance (cut-off evaluation.ospa_cutoff, order evaluation.ospa_order) between "
@@ -129,6 +144,101 @@ def team_best(
     )
 
 
+NEES_BINS_PER_DECADE = 400
+"""Resolution of `NeesSpread`'s histogram: a median read from it is within a factor
+10^(1 / (2 x 400)) = 1.0029 of the samples' median."""
+NEES_DECADES = (-6, 10)
+"""The histogram's range, 10^-6 to 10^10; samples outside it count in a bin below or above."""
+
+
+@cache
+def nees_interval(dim: int = 4, level: float = 0.95) -> tuple[float, float]:
+    """The central `level` interval of chi-square(dim), where the NEES of a consistent
+    estimate of a dim-D state falls with probability `level`: [chi2.ppf((1 - level) / 2,
+    dim), chi2.ppf((1 + level) / 2, dim)], [0.484, 11.14] for the 4-D state at 95 %."""
+    # scipy.special, not scipy.stats: a run has loaded the first, not the second
+    from scipy.special import chdtri  # pyright: ignore[reportMissingTypeStubs]
+
+    tail = (1.0 - level) / 2.0
+    return float(chdtri(dim, 1.0 - tail)), float(chdtri(dim, tail))
+
+
+@dataclass
+class NeesSpread:
+    """The distribution of NEES samples of each of B trials, in memory that no number of
+    samples changes: a histogram for the median and exact counts for the fraction inside
+    the 95 % chi-square(4) interval (`nees_interval`).
+
+    The histogram has `NEES_BINS_PER_DECADE` log-spaced bins per decade over
+    10^-6 .. 10^10 and a bin on each side for samples outside (NaN counts above). The
+    median is the mean of the geometric centres of the bins of the two middle samples
+    (of the one when their number is odd), so it is within a factor 10^(1/800) = 1.0029
+    of numpy's median (the mean of the two middle samples) whenever that lies in the
+    range; outside, it is the range's edge.
+    """
+
+    batch: int
+    counts: np.ndarray = field(init=False)  # (B, bins + 2)
+    inside: np.ndarray = field(init=False)  # (B,)
+
+    def __post_init__(self) -> None:
+        low, high = NEES_DECADES
+        self.counts = np.zeros((self.batch, (high - low) * NEES_BINS_PER_DECADE + 2), np.int64)
+        self.inside = np.zeros(self.batch, np.int64)
+
+    def add(self, q: np.ndarray, counted: np.ndarray | None = None) -> None:
+        """Add the samples q (B, ...) of each trial, those where `counted` (broadcast to q)."""
+        q = np.asarray(q, dtype=float)
+        if counted is not None:
+            counted = np.broadcast_to(np.asarray(counted, dtype=bool), q.shape)
+            counted = counted.reshape(self.batch, -1)
+        q = q.reshape(self.batch, -1)
+        width = self.counts.shape[1]
+        # in place: a team of 1000 UAVs and 1000 targets gives 10^6 samples a step
+        k = np.maximum(q, 0.0)  # a sample <= 0 (rounding of a tiny one) falls below
+        with np.errstate(divide="ignore"):
+            np.log10(k, out=k)
+        k -= NEES_DECADES[0]
+        k *= NEES_BINS_PER_DECADE
+        np.floor(k, out=k)
+        np.nan_to_num(k, copy=False, nan=width, neginf=-1.0, posinf=width)  # NaN: above
+        np.clip(k, -1, width - 2, out=k)
+        index = k.astype(np.intp)
+        index += 1 + width * np.arange(self.batch)[:, None]
+        low, high = nees_interval()
+        inside = (q >= low) & (q <= high)
+        if counted is not None:
+            index, inside = index[counted], inside & counted
+        self.counts += np.bincount(index.ravel(), minlength=self.counts.size).reshape(
+            self.counts.shape
+        )
+        self.inside += inside.sum(axis=1)
+
+    @property
+    def samples(self) -> np.ndarray:
+        """Samples added per trial, (B,)."""
+        return self.counts.sum(axis=1)
+
+    def median(self) -> np.ndarray:
+        """Median of each trial's samples (B,), NaN for a trial without any."""
+        n = self.samples
+        cum = np.cumsum(self.counts, axis=1)
+        low, high = NEES_DECADES
+        # bin 0 is below the range, the last above it: their values are the edges
+        centre = low + (np.arange(self.counts.shape[1]) - 0.5) / NEES_BINS_PER_DECADE
+        centre = 10.0 ** np.clip(centre, low, high)
+        value = np.zeros(self.batch)
+        for rank in ((n - 1) // 2, n // 2):  # 0-based ranks of the two middle samples
+            at = (cum <= rank[:, None]).sum(axis=1)  # the first bin holding more than rank
+            value += centre[np.minimum(at, len(centre) - 1)] / 2
+        return np.where(n > 0, value, np.nan)
+
+    def inside_fraction(self) -> np.ndarray:
+        """Fraction of each trial's samples inside the 95 % interval (B,), NaN without any."""
+        n = self.samples
+        return np.where(n > 0, self.inside / np.maximum(n, 1), np.nan)
+
+
 _Mask = np.ndarray | None
 
 
@@ -139,8 +249,9 @@ class Tally:
 
     Failed UAVs count in nothing: their estimates leave the RMSE and NEES, their rounds
     the mean. NEES is computed in blocks of steps covering about 4000 filters: few
-    numpy calls, and the block stays in cache. Decision times are kept only when
-    `timed` (one trial alone); otherwise they are NaN.
+    numpy calls, and the block stays in cache; beside its sum, its distribution (median,
+    fraction inside the 95 % interval) is kept in a `NeesSpread` per kind. Decision
+    times are kept only when `timed` (one trial alone); otherwise they are NaN.
     """
 
     batch: int
@@ -152,6 +263,7 @@ class Tally:
     steps: int = 0
     observed: np.ndarray = field(init=False)
     sums: dict[str, np.ndarray] = field(init=False)
+    spread: dict[str, NeesSpread] = field(init=False)  # nees, nees_best
     # per step: mean, cov, best_mean, best_cov, truth, alive (None: everyone)
     _pending: list[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray, _Mask]] = (
         field(init=False, repr=False)
@@ -166,6 +278,7 @@ class Tally:
             "in_view_sq", "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
         )  # fmt: skip
         self.sums = {name: np.zeros(self.batch) for name in names}
+        self.spread = {name: NeesSpread(self.batch) for name in ("nees", "nees_best")}
         self.failed = np.zeros(self.batch)
         self._pending = []
         self._block = int(np.clip(4096 // (self.batch * self.n_uavs * self.n_targets), 1, 64))
@@ -260,12 +373,17 @@ class Tally:
             q = nees(mean, cov, truth[:, :, None])  # (S, B, Nu, Nt)
             alive = np.stack([np.ones(q.shape[1:3], dtype=bool) if m is None else m for m in masks])
             self._sets(mean, best_mean, truth, alive)
+            best = nees(best_mean, best_cov, truth)  # (S, B, Nt)
+            trials_first = (np.moveaxis(q, 1, 0), np.moveaxis(best, 1, 0))
             if any(m is not None for m in masks):
-                q = np.where(alive[..., None], q, 0.0)
                 anyone = np.any(alive, axis=2)  # (S, B)
-                best = np.where(anyone[..., None], nees(best_mean, best_cov, truth), 0.0)
+                self.spread["nees"].add(trials_first[0], np.moveaxis(alive, 1, 0)[..., None])
+                self.spread["nees_best"].add(trials_first[1], anyone.T[..., None])
+                q = np.where(alive[..., None], q, 0.0)
+                best = np.where(anyone[..., None], best, 0.0)
             else:
-                best = nees(best_mean, best_cov, truth)
+                self.spread["nees"].add(trials_first[0])
+                self.spread["nees_best"].add(trials_first[1])
             self.sums["nees"] += q.sum(axis=(0, 2, 3))
             self.sums["nees_best"] += best.sum(axis=(0, 2))
             self._pending = []
@@ -312,7 +430,11 @@ class Tally:
             "rmse": np.sqrt(s["squared_error"] / pairs),
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,
+            "nees_median": self.spread["nees"].median(),
+            "nees_inside": self.spread["nees"].inside_fraction(),
             "nees_best": s["nees_best"] / targets,
+            "nees_best_median": self.spread["nees_best"].median(),
+            "nees_best_inside": self.spread["nees_best"].inside_fraction(),
             **self._set_summary(),
             "rounds": s["rounds"] / np.where(s["alive"] > 0, s["alive"], np.nan),
             "messages": s["messages"] / self.steps,
@@ -398,7 +520,7 @@ def ospa_and_gospa(
     the cut distances to the power p over matchings of min(m, n) pairs."""
     if not 0 < alpha <= 2:
         raise ValueError(f"alpha must be in (0, 2], got {alpha}")
-    cost, m, n = _cut_costs(X, Y, c, p)
+    cost, m, n = cut_costs(X, Y, c, p)
     total, local, paired = _optimal(cost, c**p)
     big = max(m, n)
     if big:
@@ -413,7 +535,7 @@ def ospa_and_gospa(
     return _scalar(spread), GOSPA(*(_scalar(v) for v in (distance, local, missed, false)))
 
 
-def _cut_costs(X: ArrayLike, Y: ArrayLike, c: float, p: float) -> tuple[np.ndarray, int, int]:
+def cut_costs(X: ArrayLike, Y: ArrayLike, c: float, p: float) -> tuple[np.ndarray, int, int]:
     """min(|x - y|, c)^p for every pair, (..., m, n), with the set sizes."""
     if not (np.isfinite(c) and c > 0):
         raise ValueError(f"the cut-off c must be a positive number, got {c}")
@@ -435,17 +557,18 @@ def _cut_costs(X: ArrayLike, Y: ArrayLike, c: float, p: float) -> tuple[np.ndarr
     return np.minimum(dist, c) ** p, X.shape[-2], Y.shape[-2]
 
 
-def _optimal(cost: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per leading index, for the matching of min(m, n) pairs of least total cost: the
-    total, the part of the pairs closer than the cut, and how many those are."""
+def matching(cost: np.ndarray) -> np.ndarray:
+    """A matching of min(m, n) pairs of least total cost, per leading index of the costs
+    (..., m, n): the column matched to each row (..., m), -1 for a row left out (m > n).
+
+    Square problems up to `SMALL_SETS` try every matching at once (the first of equal
+    ones); the others are `scipy.optimize.linear_sum_assignment`'s, one per index.
+    """
     shape, (m, n) = cost.shape[:-2], cost.shape[-2:]
-    if 0 < m == n <= SMALL_SETS:  # every matching at once: no loop over the leading axes
+    if 0 < m == n <= SMALL_SETS:  # no loop over the leading axes
         chosen = cost[..., np.arange(n), _permutations(n)]  # (..., n!, n)
-        best = np.argmin(chosen.sum(axis=-1), axis=-1)[..., None, None]
-        chosen = np.take_along_axis(chosen, best, axis=-2)[..., 0, :]
-        close = chosen < cut
-        return chosen.sum(axis=-1), np.where(close, chosen, 0.0).sum(axis=-1), close.sum(-1)
-    total, local, paired = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+        return _permutations(n)[np.argmin(chosen.sum(axis=-1), axis=-1)]
+    match = np.full(shape + (m,), -1, dtype=np.intp)
     if m and n:
         # loaded when first needed; scipy ships no type stubs, pyright reads its source
         from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
@@ -453,8 +576,25 @@ def _optimal(cost: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray, np.n
         )
 
         for index in np.ndindex(shape):
-            C = cost[index]
-            chosen = C[linear_sum_assignment(C)]
+            rows, cols = linear_sum_assignment(cost[index])
+            match[index][rows] = cols
+    return match
+
+
+def _optimal(cost: np.ndarray, cut: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per leading index, for the `matching` of min(m, n) pairs of least total cost: the
+    total, the part of the pairs closer than the cut, and how many those are."""
+    shape, (m, n) = cost.shape[:-2], cost.shape[-2:]
+    match = matching(cost)
+    if 0 < m == n <= SMALL_SETS:
+        chosen = np.take_along_axis(cost, match[..., None], axis=-1)[..., 0]
+        close = chosen < cut
+        return chosen.sum(axis=-1), np.where(close, chosen, 0.0).sum(axis=-1), close.sum(-1)
+    total, local, paired = np.zeros(shape), np.zeros(shape), np.zeros(shape)
+    if m and n:
+        for index in np.ndindex(shape):
+            rows = np.flatnonzero(match[index] >= 0)  # in order, as the pairs were summed
+            chosen = cost[index][rows, match[index][rows]]
             close = chosen < cut
             total[index], local[index], paired[index] = (
                 chosen.sum(),

@@ -764,7 +764,9 @@ class Result:
 
     The metrics are those of `metrics.METRICS` (units and meaning there):
     observation_rate (Sec. 7); per_target (Nt,); rmse and nees over every UAV's fused
-    estimate; rmse_best and nees_best of the team's best estimate; rounds: mean D_i per
+    estimate; rmse_best and nees_best of the team's best estimate; nees_median,
+    nees_inside and their _best twins: the median of the same NEES samples and the
+    fraction inside the 95 % chi-square(4) interval; rounds: mean D_i per
     UAV and step; messages and delivered per step; conflicts per step; failed: UAVs
     failed by the end; decision_time_ms (CPU) and decision_wall_ms per UAV and cycle.
     """
@@ -778,7 +780,11 @@ class Result:
     rmse: float
     rmse_best: float
     nees: float
+    nees_median: float
+    nees_inside: float
     nees_best: float
+    nees_best_median: float
+    nees_best_inside: float
     ospa: float
     ospa_best: float
     gospa: float

@@ -225,6 +225,8 @@ RUN_ROWS = (
     ("rmse", "position RMSE, every UAV's estimate [m]", "{:.2f}"),
     ("nees_best", "NEES, team's best estimate (4 if consistent)", "{:.2f}"),
     ("nees", "NEES, every UAV's estimate (4 if consistent)", "{:.2f}"),
+    ("nees_median", "NEES median, every UAV's estimate (3.36 if consistent)", "{:.2f}"),
+    ("nees_inside", "NEES inside its 95% interval, every UAV's (0.95 if consistent)", "{:.3f}"),
     ("ospa_best", "OSPA, team's best estimates [m]", "{:.2f}"),
     ("ospa", "OSPA, every UAV's estimates [m]", "{:.2f}"),
     ("gospa_best", "GOSPA, team's best estimates [m]", "{:.2f}"),

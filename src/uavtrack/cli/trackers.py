@@ -75,7 +75,8 @@ def _print(summary: dict, out: Path, info: dict) -> None:
     from rich.table import Table
 
     table = Table(title="trackers (distributed, mean over trials)")
-    for col in ("motion", "tracker", "rate", "RMSE best", "NEES", "NEES best", "OSPA all"):
+    columns = ("motion", "tracker", "rate", "RMSE best", "NEES", "median", "inside 95%")
+    for col in (*columns, "NEES best", "OSPA all"):
         table.add_column(col, justify="left" if col in ("motion", "tracker") else "right")
     for motion, rows in summary["motions"].items():
         for k, (tracker, r) in enumerate(rows.items()):
@@ -85,6 +86,8 @@ def _print(summary: dict, out: Path, info: dict) -> None:
                 f"{r['mean']:.3f}",
                 f"{r['rmse_best']['mean']:.2f}",
                 f"{r['nees']['mean']:.2f}",
+                f"{r['nees_median']['mean']:.2f}",
+                f"{r['nees_inside']['mean']:.3f}",
                 f"{r['nees_best']['mean']:.2f}",
                 f"{r['ospa']['mean']:.2f}",
             )

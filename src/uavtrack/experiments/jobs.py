@@ -75,7 +75,8 @@ def run_job(job: Job) -> dict[str, Any]:
 
 UNDEFINED_ALLOWED = (
     "rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms", "decision_wall_ms",
-    "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
+    "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best", "nees_median",
+    "nees_inside", "nees_best_median", "nees_best_inside",
 )  # fmt: skip
 """Metrics that may be NaN: nothing to average (every UAV failed), or not measured."""
 

@@ -1,0 +1,386 @@
+"""Tracks scored against the truth: GOSPA and its parts, track switches and
+fragmentations, false tracks, the time to confirm a new target, SIAP completeness,
+ambiguity and spuriousness, and the NEES of the tracks that follow a target.
+
+A row (P rows) is one UAV of one trial: its confirmed tracks are scored against the
+trial's targets, and a trial's value is the mean over its rows. Per step a row gives the
+true positions X (P, Nt, 2) with `present` (P, Nt), and its track positions Y (P, K, 2),
+`labels` (P, K) and `confirmed` (P, K); only present truths and confirmed tracks take
+part. Two associations of tracks with truths serve, each the one its metrics are
+defined with:
+
+* **the GOSPA assignment** (Rahmathullah, Garcia-Fernandez and Svensson 2017, alpha = 2):
+  the one-to-one assignment of least GOSPA cost; a track assigned to a truth closer than
+  the cut-off c is *matched* to it. GOSPA, false tracks, switches, fragmentations, the
+  time to confirm and the NEES read it.
+* **the SIAP association** (Votruba et al. 2001, as Stone Soup's ``TrackToTruth`` with
+  ``consec_pairs_confirm = consec_misses_end = 1``): each track to its nearest truth
+  closer than a threshold, so that several tracks may follow one truth, which the
+  ambiguity counts.
+
+Against Stone Soup: GOSPA, its parts and its assignment are those of ``GOSPAMetric``
+(same c and p, alpha = 2) without its switching term (``switching_penalty`` = 0; switches
+are counted apart here); completeness, ambiguity and spuriousness are ``SIAPMetrics``'s
+values over the steps with the association above. Its ``TrackToTruth`` by default asks 3
+steps in a row to start an association and 2 to end one, and keeps an association across
+the steps a track is absent; here each step stands alone, as that associator does at
+1 and 1 for tracks that exist at every step of their life (confirmed tracks do: a slot is
+confirmed from its confirmation to its deletion).
+"""
+
+# Strict typing less the rules metrics.py turns off, for the same reasons: numpy resolves
+# calls with arguments of shape tuple[Any, ...] to Unknown; point sets keep their capital
+# names (X, Y) when rebound.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportConstantRedefinition=false
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..estimation import nees
+from ..metrics import GOSPA, NeesSpread, cut_costs, matching, mean_std
+
+TRACK_METRICS: dict[str, tuple[str, str]] = {
+    "gospa": ("m", "GOSPA distance (alpha = 2) of the row's confirmed tracks, mean per step"),
+    "gospa_localisation": ("m^p", "its localisation part (p-th power), mean per step"),
+    "gospa_missed": ("m^p", "its missed part, c^p / 2 per unmatched truth, mean per step"),
+    "gospa_false": ("m^p", "its false part, c^p / 2 per unmatched track, mean per step"),
+    "switches": ("", "track switches per target and 100 steps (CLEAR MOT mismatches)"),
+    "fragmentations": ("", "fragmentations per target and 100 steps, losses while in view"),
+    "false_tracks": ("", "confirmed tracks matched to no truth, per step"),
+    "false_tracks_per_target": ("", "the same per present target and step"),
+    "time_to_confirm": ("steps", "steps from a new target's first sight to its first match"),
+    "never_confirmed": ("", "fraction of the timed targets not matched by the end"),
+    "siap_completeness": ("", "fraction of the truths with a SIAP-associated track"),
+    "siap_ambiguity": ("", "SIAP-associated tracks per truth that has one (1 is ideal)"),
+    "siap_spuriousness": ("", "fraction of the confirmed tracks associated with no truth"),
+    "nees": ("", "mean NEES of the confirmed tracks matched to a truth (4 when consistent)"),
+    "nees_median": ("", "its median, as metrics.NeesSpread reads it (3.36 when consistent)"),
+    "nees_inside": ("", "its fraction inside the 95 % chi-square(4) interval (0.95)"),
+}
+"""`TrackScore.summary`'s metrics: name -> (unit, meaning); see the functions for the
+definitions."""
+
+
+def gospa_assignment(
+    X: np.ndarray,
+    present: np.ndarray,
+    Y: np.ndarray,
+    confirmed: np.ndarray,
+    c: float,
+    p: float = 1.0,
+) -> tuple[np.ndarray, GOSPA]:
+    """The GOSPA assignment of confirmed tracks Y (..., K, 2) to present truths X (..., Nt, 2)
+    and the GOSPA distance with its parts (each (...)), alpha = 2.
+
+    GOSPA^p = min over assignments gamma of sum over (i, j) in gamma of d_ij^p
+    + c^p / 2 (m + n - 2 |gamma|) (m present truths, n confirmed tracks, pairs closer than
+    c): localisation + missed + false, the parts of `uavtrack.metrics.gospa`. It is solved
+    as one square assignment of size max(Nt, K) (`metrics.matching`) whose costs are
+    min(d, c)^p between a truth and a track, c^p / 2 between either and a place holder
+    (an absent truth, an unconfirmed slot, the padding) and 0 between place holders: a
+    truth and a track c or more apart cost c^p, the same as both left alone, so the least
+    cost is GOSPA^p. Returns `assigned` (..., Nt), the slot matched to each truth (closer
+    than c; -1 for none), and the GOSPA record.
+    """
+    present, confirmed = np.asarray(present, dtype=bool), np.asarray(confirmed, dtype=bool)
+    # absent truths and unconfirmed slots may hold anything: give them a finite place
+    X = np.where(present[..., None], X, 0.0)
+    Y = np.where(confirmed[..., None], Y, 0.0)
+    cost, Nt, K = cut_costs(X, Y, c, p)  # (..., Nt, K): min(d, c)^p
+    half, N = c**p / 2, max(Nt, K)
+    truth, track = present[..., :, None], confirmed[..., None, :]
+    full = np.zeros(cost.shape[:-2] + (N, N))
+    full[..., :Nt, :K] = np.where(truth & track, cost, np.where(truth ^ track, half, 0.0))
+    full[..., Nt:, :K] = np.where(track, half, 0.0)
+    full[..., :Nt, K:] = np.where(truth, half, 0.0)
+    # a truth given the padding reads column K, an unconfirmed stand-in
+    slot = np.minimum(matching(full)[..., :Nt], K)  # (..., Nt)
+    cost = np.concatenate([cost, np.full(cost.shape[:-1] + (1,), c**p)], axis=-1)
+    confirmed_ = np.concatenate([confirmed, np.zeros(confirmed.shape[:-1] + (1,), bool)], -1)
+    pair = np.take_along_axis(cost, slot[..., None], axis=-1)[..., 0]
+    matched = present & np.take_along_axis(confirmed_, slot, axis=-1) & (pair < c**p)
+    q = matched.sum(axis=-1)
+    local = np.where(matched, pair, 0.0).sum(axis=-1)
+    missed = half * (present.sum(axis=-1) - q)
+    false = half * (confirmed.sum(axis=-1) - q)
+    distance = (local + missed + false) ** (1.0 / p)
+    return np.where(matched, slot, -1), GOSPA(distance, local, missed, false)
+
+
+def nearest_truth(
+    X: np.ndarray, present: np.ndarray, Y: np.ndarray, confirmed: np.ndarray, threshold: float
+) -> np.ndarray:
+    """The SIAP association: for each confirmed track Y (..., K, 2), the index of the
+    nearest present truth X (..., Nt, 2) closer than `threshold` (strictly, as Stone Soup's
+    ``TrackToTruth``; the lowest index on ties), -1 for none. Returns (..., K)."""
+    X = np.where(present[..., None], X, 0.0)  # what absent ones hold does not matter
+    Y = np.where(confirmed[..., None], Y, 0.0)
+    diff = Y[..., :, None, :] - X[..., None, :, :]
+    d = np.sqrt(np.einsum("...k,...k->...", diff, diff))  # (..., K, Nt)
+    d = np.where(confirmed[..., :, None] & present[..., None, :], d, np.inf)
+    if d.shape[-1] == 0:  # no truth at all
+        return np.full(d.shape[:-1], -1, dtype=np.intp)
+    nearest = np.argmin(d, axis=-1)
+    close = np.take_along_axis(d, nearest[..., None], axis=-1)[..., 0] < threshold
+    return np.where(close, nearest, -1)
+
+
+def siap_counts(
+    nearest: np.ndarray, present: np.ndarray, confirmed: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """SIAP's counts at one step from the association `nearest` (..., K) (Votruba et al.
+    2001; Stone Soup's ``SIAPMetrics``): J truths, JT truths with an associated track,
+    N confirmed tracks, NA associated tracks, each (...). Over steps, completeness is
+    sum JT / sum J, ambiguity sum NA / sum JT and spuriousness (sum N - sum NA) / sum N."""
+    Nt = present.shape[-1]
+    followed = (nearest[..., :, None] == np.arange(Nt)).any(axis=-2) & present
+    return (
+        present.sum(axis=-1),
+        followed.sum(axis=-1),
+        confirmed.sum(axis=-1),
+        ((nearest >= 0) & confirmed).sum(axis=-1),
+    )
+
+
+def label_changes(
+    label: np.ndarray,
+    last: np.ndarray,
+    was_matched: np.ndarray,
+    present: np.ndarray,
+    in_view: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray]:
+    """Switches and fragmentations of each target at one step, (..., Nt) booleans.
+
+    `label` is the label of the track matched to each target now (-1: none), `last` the
+    label last matched to it at any earlier step (-1: never), `was_matched` whether it
+    was matched at the previous step.
+
+    * A **switch** (a mismatch of CLEAR MOT, Bernardin and Stiefelhagen 2008, as
+      py-motmetrics counts it): the target is matched to a label other than the one last
+      matched to it, however many steps ago.
+    * A **fragmentation**: the target was matched at the previous step and is not now,
+      while present and in view of the row's UAV. It is MOT's "tracked to untracked"
+      transition (Li, Huang and Nevatia 2009), counted when it happens, resumed or not,
+      and only where the UAV could see the target (a target lost out of view is not
+      a tracking failure of the UAV).
+    """
+    now = label >= 0
+    switch = now & (last >= 0) & (label != last)
+    fragment = was_matched & ~now & present & in_view
+    return switch, fragment
+
+
+def confirm_clock(
+    k: int,
+    start: np.ndarray,
+    settled: np.ndarray,
+    matched: np.ndarray,
+    present: np.ndarray,
+    in_view: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """One step of the time to confirm a new target, per (row, target).
+
+    A target is *new* to a row from the first step k0 at which it is present, in view of
+    the row's UAV and not matched to a confirmed track; its time to confirm is k1 - k0
+    [steps], k1 the first step after k0 at which a confirmed track is matched to it
+    (whether or not it is still in view). Each target is timed at most once per row: one
+    matched before it was ever new (a track the row holds already, from its team) is not
+    new and gives no time. A clock still running at the end is a target never confirmed:
+    it gives no time, and `TrackScore` counts it in `never_confirmed`.
+
+    `start` (..., Nt) is the step its clock started (-1: not running), `settled` whether
+    it was timed or known. Returns the new start, the new settled, and the times
+    (..., Nt) of the clocks stopped at step k (-1 elsewhere).
+    """
+    stop = (start >= 0) & matched
+    time = np.where(stop, k - start, -1)
+    known = ~settled & (start < 0) & matched
+    begin = ~settled & (start < 0) & present & in_view & ~matched
+    settled = settled | stop | known
+    start = np.where(stop, -1, np.where(begin, k, start))
+    return start, settled, time
+
+
+def matched_nees(
+    assigned: np.ndarray, mean: np.ndarray, cov: np.ndarray, states: np.ndarray
+) -> np.ndarray:
+    """NEES (`estimation.nees`, over the 4-D state) of the track matched to each truth:
+    means (..., K, 4), covariances (..., K, 4, 4), true states (..., Nt, 4); (..., Nt),
+    NaN where no track is matched."""
+    matched = assigned >= 0
+    slot = np.where(matched, assigned, 0)
+    m = np.take_along_axis(mean, slot[..., None], axis=-2)
+    P = np.take_along_axis(cov, slot[..., None, None], axis=-3)
+    # an unmatched slot may hold anything: score a harmless stand-in and drop it
+    m = np.where(matched[..., None], m, states)
+    P = np.where(matched[..., None, None], P, np.eye(4))
+    return np.where(matched, nees(m, P, states), np.nan)
+
+
+_SUMS = (
+    "steps", "targets", "gospa", "localisation", "missed", "false", "switches",
+    "fragmentations", "false_tracks", "J", "JT", "N", "NA", "confirm_time", "confirmed",
+)  # fmt: skip
+
+
+@dataclass(kw_only=True)
+class TrackScore:
+    """Running scores of the confirmed tracks of B trials of `rows` UAVs each (P = B x rows
+    rows, a trial's rows consecutive), fed one step at a time, like `metrics.Tally`.
+
+    Each row sums over the steps it is alive (a failed UAV's row stops where it failed;
+    a confirm clock it left running counts as never confirmed); `summary` turns the sums
+    into the row's values, then averages each over the trial's rows where it is defined
+    (NaN when none is):
+
+    * gospa and its parts: means per step; false_tracks: confirmed tracks matched to no
+      truth per step (gospa_false / (c^p / 2)), false_tracks_per_target: per present
+      target and step;
+    * switches and fragmentations (`label_changes`): 100 x count / target-steps (present
+      targets summed over the steps), per target and 100 steps;
+    * time_to_confirm (`confirm_clock`): the mean of the row's times [steps];
+      never_confirmed: the fraction of its clocks still running at the end;
+    * siap_*: from the counts of `siap_counts` summed over the steps (Stone Soup's
+      values over a time range); where Stone Soup reports 0 or 1 for an empty
+      denominator (no truth, no track), they are NaN here.
+
+    The NEES (`matched_nees`) is pooled over the trial's matched pairs instead: it is a
+    distribution, its median and inside fraction (`metrics.NeesSpread`) those of all its
+    samples. `threshold` (SIAP) defaults to the GOSPA cut-off `cutoff`; `order` is p.
+
+    Cost per step: one square assignment of max(Nt, K) per row (milliseconds for 250
+    rows of 12 slots); a team of thousands of targets would want a sparse assignment.
+    """
+
+    batch: int
+    rows: int
+    n_targets: int
+    cutoff: float = 20.0
+    order: float = 1.0
+    threshold: float | None = None
+    steps: int = 0
+    sums: dict[str, np.ndarray] = field(init=False)
+    spread: NeesSpread = field(init=False)
+    _nees: np.ndarray = field(init=False, repr=False)  # (2, B): sum, count
+    _state: dict[str, np.ndarray] = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        P, Nt = self.batch * self.rows, self.n_targets
+        self.sums = {name: np.zeros(P) for name in _SUMS}
+        self.spread = NeesSpread(self.batch)
+        self._nees = np.zeros((2, self.batch))
+        self._state = {
+            "last": np.full((P, Nt), -1, np.int64),  # label last matched
+            "was": np.zeros((P, Nt), bool),  # matched at the previous step
+            "start": np.full((P, Nt), -1, np.int64),  # confirm clock
+            "settled": np.zeros((P, Nt), bool),
+        }
+
+    def add(
+        self,
+        *,
+        truth: np.ndarray,
+        tracks: np.ndarray,
+        labels: np.ndarray,
+        confirmed: np.ndarray,
+        in_view: np.ndarray,
+        present: np.ndarray | None = None,
+        alive: np.ndarray | None = None,
+        mean: np.ndarray | None = None,
+        cov: np.ndarray | None = None,
+        states: np.ndarray | None = None,
+    ) -> None:
+        """Add one step: truth (P, Nt, 2), tracks (P, K, 2), labels (P, K) int, confirmed
+        (P, K), in_view (P, Nt) (the target inside the row's UAV's observation disk),
+        present (P, Nt) (default: every target), alive (P,) (default: every row); for the
+        NEES the tracks' mean (P, K, 4) and cov (P, K, 4, 4) and the true states (P, Nt, 4).
+        """
+        P, Nt = self.batch * self.rows, self.n_targets
+        if np.shape(truth) != (P, Nt, 2) or np.shape(in_view) != (P, Nt):
+            raise ValueError(
+                f"truth must be (P, Nt, 2) and in_view (P, Nt) with P = {P}, Nt = {Nt}; got "
+                f"{np.shape(truth)} and {np.shape(in_view)}"
+            )
+        K = np.shape(tracks)[1] if np.ndim(tracks) == 3 else -1
+        if np.shape(tracks) != (P, K, 2) or not np.shape(labels) == np.shape(confirmed) == (P, K):
+            raise ValueError(
+                f"tracks must be (P, K, 2), labels and confirmed (P, K) with P = {P}; got "
+                f"{np.shape(tracks)}, {np.shape(labels)} and {np.shape(confirmed)}"
+            )
+        present = np.ones((P, Nt), bool) if present is None else np.asarray(present, bool)
+        alive = np.ones(P, bool) if alive is None else np.asarray(alive, bool)
+        # a failed UAV holds no track (its slots may hold NaN)
+        confirmed = np.asarray(confirmed, bool) & alive[:, None]
+        in_view = np.asarray(in_view, bool)
+        s, st = self.sums, self._state
+        assigned, g = gospa_assignment(truth, present, tracks, confirmed, self.cutoff, self.order)
+        matched = assigned >= 0
+        label = np.where(matched, np.take_along_axis(labels, np.maximum(assigned, 0), 1), -1)
+        switch, fragment = label_changes(label, st["last"], st["was"], present, in_view)
+        start, settled, time = confirm_clock(
+            self.steps, st["start"], st["settled"], matched, present, in_view
+        )
+        threshold = self.cutoff if self.threshold is None else self.threshold
+        J, JT, N, NA = siap_counts(
+            nearest_truth(truth, present, tracks, confirmed, threshold), present, confirmed
+        )
+        step = {
+            "steps": 1, "targets": present.sum(axis=1), "gospa": g.distance,
+            "localisation": g.localisation, "missed": g.missed, "false": g.false,
+            "switches": switch.sum(axis=1), "fragmentations": fragment.sum(axis=1),
+            "false_tracks": confirmed.sum(axis=1) - matched.sum(axis=1),
+            "J": J, "JT": JT, "N": N, "NA": NA,
+            "confirm_time": np.where(time >= 0, time, 0).sum(axis=1),
+            "confirmed": (time >= 0).sum(axis=1),
+        }  # fmt: skip
+        for name, value in step.items():
+            s[name] += np.where(alive, value, 0)
+        # a failed UAV's row keeps what it had
+        keep = alive[:, None]
+        st["last"] = np.where(keep & matched, label, st["last"])
+        st["was"] = np.where(keep, matched, st["was"])
+        st["start"] = np.where(keep, start, st["start"])
+        st["settled"] = np.where(keep, settled, st["settled"])
+        if mean is not None and cov is not None and states is not None:
+            q = matched_nees(assigned, mean, cov, states)
+            counted = matched & keep
+            self.spread.add(q.reshape(self.batch, -1), counted.reshape(self.batch, -1))
+            self._nees[0] += np.where(counted, q, 0.0).reshape(self.batch, -1).sum(axis=1)
+            self._nees[1] += counted.reshape(self.batch, -1).sum(axis=1)
+        self.steps += 1
+
+    def summary(self) -> dict[str, np.ndarray]:
+        """The metrics of `TRACK_METRICS`, each an array over the B trials."""
+        s = self.sums
+
+        def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+            return np.where(b > 0, a / np.where(b > 0, b, 1.0), np.nan)
+
+        running = (self._state["start"] >= 0).sum(axis=1)
+        per_row = {
+            "gospa": ratio(s["gospa"], s["steps"]),
+            "gospa_localisation": ratio(s["localisation"], s["steps"]),
+            "gospa_missed": ratio(s["missed"], s["steps"]),
+            "gospa_false": ratio(s["false"], s["steps"]),
+            "switches": 100 * ratio(s["switches"], s["targets"]),
+            "fragmentations": 100 * ratio(s["fragmentations"], s["targets"]),
+            "false_tracks": ratio(s["false_tracks"], s["steps"]),
+            "false_tracks_per_target": ratio(s["false_tracks"], s["targets"]),
+            "time_to_confirm": ratio(s["confirm_time"], s["confirmed"]),
+            "never_confirmed": ratio(running, s["confirmed"] + running),
+            "siap_completeness": ratio(s["JT"], s["J"]),
+            "siap_ambiguity": ratio(s["NA"], s["JT"]),
+            "siap_spuriousness": ratio(s["N"] - s["NA"], s["N"]),
+        }
+        out = {
+            name: mean_std(value.reshape(self.batch, self.rows), axis=1)[0]
+            for name, value in per_row.items()
+        }
+        out["nees"] = ratio(self._nees[0], self._nees[1])
+        out["nees_median"] = self.spread.median()
+        out["nees_inside"] = self.spread.inside_fraction()
+        return out

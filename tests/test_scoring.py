@@ -1,0 +1,358 @@
+"""Tracks scored against the truth (uavtrack.tracks.scoring): GOSPA and SIAP against Stone
+Soup, switches, fragmentations and times to confirm against their definitions step by
+step, and the NEES of the matched tracks."""
+
+import datetime
+
+import numpy as np
+import pytest
+from scipy import stats
+
+from uavtrack import estimation
+from uavtrack.metrics import NEES_BINS_PER_DECADE, gospa
+from uavtrack.tracks.scoring import (
+    TRACK_METRICS,
+    TrackScore,
+    confirm_clock,
+    gospa_assignment,
+    label_changes,
+    matched_nees,
+    nearest_truth,
+)
+
+stonesoup = pytest.importorskip("stonesoup")
+from stonesoup.dataassociator.tracktotrack import TrackToTruth  # noqa: E402
+from stonesoup.measures import Euclidean  # noqa: E402
+from stonesoup.metricgenerator.manager import MultiManager  # noqa: E402
+from stonesoup.metricgenerator.ospametric import GOSPAMetric  # noqa: E402
+from stonesoup.metricgenerator.tracktotruthmetrics import SIAPMetrics  # noqa: E402
+from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState  # noqa: E402
+from stonesoup.types.state import State  # noqa: E402
+from stonesoup.types.track import Track  # noqa: E402
+
+NOW = datetime.datetime(2026, 1, 1)
+FAR = 1e4  # a track this far from everything is matched to nothing
+
+
+def states(points, t=NOW):
+    return [State(np.asarray(x, dtype=float).reshape(-1, 1), timestamp=t) for x in points]
+
+
+def random_rows(rng, P, Nt, K, scale=30.0):
+    X = rng.uniform(0, scale, (P, Nt, 2))
+    # tracks near truths, some far: matched, cut and false ones
+    Y = rng.uniform(0, scale, (P, K, 2))
+    near = rng.integers(0, max(Nt, 1), (P, K))
+    close = rng.random((P, K)) < 0.6
+    if Nt:
+        Y = np.where(
+            close[..., None], X[np.arange(P)[:, None], near] + rng.normal(0, 3, Y.shape), Y
+        )
+    present = rng.random((P, Nt)) < 0.8
+    confirmed = rng.random((P, K)) < 0.7
+    # what absent truths and unconfirmed slots hold must not matter
+    X = np.where(present[..., None], X, np.nan)
+    Y = np.where(confirmed[..., None], Y, np.inf)
+    return X, present, Y, confirmed
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0, 3.0])
+@pytest.mark.parametrize(("Nt", "K"), [(3, 5), (4, 10), (6, 3), (0, 4), (5, 0)])
+def test_gospa_and_its_assignment_equal_stone_soups(p, Nt, K):
+    rng = np.random.default_rng(int(p) * 100 + Nt * 10 + K)
+    P = 30
+    X, present, Y, confirmed = random_rows(rng, P, Nt, K)
+    c = rng.uniform(2.0, 20.0)
+    assigned, ours = gospa_assignment(X, present, Y, confirmed, c, p)
+    assert assigned.shape == (P, Nt)
+    for r in range(P):
+        truths, slots = np.flatnonzero(present[r]), np.flatnonzero(confirmed[r])
+        if not len(truths) and not len(slots):  # Stone Soup needs a state for a time
+            assert ours.distance[r] == 0 and (assigned[r] == -1).all()
+            continue
+        metric, theirs = GOSPAMetric(c=c, p=p).compute_gospa_metric(
+            states(Y[r, slots]), states(X[r, truths])
+        )
+        value = metric.value
+        assert ours.distance[r] == pytest.approx(value["distance"], abs=1e-9)
+        for part in ("localisation", "missed", "false"):
+            assert getattr(ours, part)[r] == pytest.approx(value[part], abs=1e-9), part
+        # the same pairs (random points: the optimal assignment is unique)
+        expected = np.full(Nt, -1)
+        for i, j in zip(truths, list(theirs) or [-1] * len(truths), strict=True):
+            expected[i] = slots[j] if j >= 0 else -1
+        assert np.array_equal(assigned[r], expected)
+        pairs = truths[assigned[r, truths] >= 0]
+        assert (np.linalg.norm(X[r, pairs] - Y[r, assigned[r, pairs]], axis=-1) < c).all()
+
+
+def test_without_masks_it_is_the_metrics_gospa(rng):
+    X, Y = rng.uniform(0, 40, (20, 5, 2)), rng.uniform(0, 40, (20, 8, 2))
+    _, ours = gospa_assignment(X, np.ones((20, 5), bool), Y, np.ones((20, 8), bool), 10.0, 2.0)
+    reference = gospa(X, Y, 10.0, 2.0)
+    for part in ("distance", "localisation", "missed", "false"):
+        assert getattr(ours, part) == pytest.approx(getattr(reference, part), rel=1e-12), part
+
+
+def test_siap_equals_stone_soups_over_several_steps():
+    """Three targets (one appears late, one leaves early) and tracks that follow them,
+    duplicate one, wander off, are deleted and reborn in another slot; Stone Soup's SIAP
+    with TrackToTruth at the same threshold, one step to start or end an association."""
+    rng = np.random.default_rng(7)
+    T, Nt, K, threshold = 12, 3, 5, 4.0
+    X = np.cumsum(rng.normal(0, 1.5, (T, Nt, 2)), axis=0) + np.array([[0, 0], [15, 0], [0, 15]])
+    present = np.ones((T, Nt), bool)
+    present[:3, 2] = False
+    present[9:, 1] = False
+    # (label, slot, first step, last step, target followed or None, noise)
+    lives = [
+        (10, 0, 0, 11, 0, 1.0),
+        (11, 1, 1, 8, 1, 1.5),
+        (12, 2, 2, 6, 0, 2.0),  # a duplicate of target 0
+        (13, 3, 0, 4, None, 0.0),  # a false track
+        (14, 2, 8, 11, 2, 1.0),  # slot 2 reused
+        (15, 4, 4, 11, 1, 6.0),  # often beyond the threshold, and on after its target left
+    ]
+    tracks = np.full((T, K, 2), np.nan)
+    labels = np.full((T, K), -1)
+    confirmed = np.zeros((T, K), bool)
+    paths = []
+    for label, slot, first, last, target, noise in lives:
+        steps = np.arange(first, last + 1)
+        if target is None:
+            where = rng.uniform(-20, 40, (len(steps), 2))
+        else:
+            where = X[steps, target] + rng.normal(0, noise, (len(steps), 2))
+        tracks[steps, slot], labels[steps, slot], confirmed[steps, slot] = where, label, True
+        times = [NOW + datetime.timedelta(seconds=int(k)) for k in steps]
+        paths.append(Track([s for w, t in zip(where, times, strict=True) for s in states([w], t)]))
+    truths = [
+        GroundTruthPath(
+            [
+                GroundTruthState(
+                    X[k, i].reshape(2, 1), timestamp=NOW + datetime.timedelta(seconds=k)
+                )
+                for k in range(T)
+                if present[k, i]
+            ]
+        )
+        for i in range(Nt)
+    ]
+    score = TrackScore(batch=1, rows=1, n_targets=Nt, cutoff=10.0, threshold=threshold)
+    for k in range(T):
+        score.add(
+            truth=X[k][None],
+            present=present[k][None],
+            tracks=tracks[k][None],
+            labels=labels[k][None],
+            confirmed=confirmed[k][None],
+            in_view=present[k][None],
+        )
+    ours = score.summary()
+    siap = SIAPMetrics(position_measure=Euclidean((0, 1)), velocity_measure=Euclidean((0, 1)))
+    associator = TrackToTruth(
+        association_threshold=threshold, consec_pairs_confirm=1, consec_misses_end=1
+    )
+    manager = MultiManager([siap], associator)
+    manager.add_data({"groundtruth_paths": set(truths), "tracks": set(paths)})
+    theirs = {m.title: m.value for m in manager.generate_metrics()["siap_generator"].values()}
+    assert 0 < ours["siap_completeness"][0] < 1 and ours["siap_ambiguity"][0] > 1
+    assert 0 < ours["siap_spuriousness"][0] < 1
+    for name in ("Completeness", "Ambiguity", "Spuriousness"):
+        key = f"siap_{name.lower()}"
+        assert ours[key][0] == pytest.approx(theirs[f"SIAP {name}"], rel=1e-12), name
+
+
+def test_the_siap_association_is_the_nearest_truth_within_the_threshold():
+    X = np.array([[[0.0, 0.0], [4.0, 0.0], [50.0, 0.0]]])
+    Y = np.array([[[1.0, 0.0], [2.9, 0.0], [3.0, 3.0], [48.0, 0.0], [20.0, 0.0]]])
+    present = np.array([[True, True, False]])
+    nearest = nearest_truth(X, present, Y, np.ones((1, 5), bool), threshold=3.0)
+    # (3, 3) is 3.16 from truth 1: out; (48, 0) is near truth 2, which is absent
+    assert nearest.tolist() == [[0, 1, -1, -1, -1]]
+
+
+def reference_changes(labels, present, in_view):
+    """Switches and fragmentations by their definitions, one target at a time."""
+    T, Nt = labels.shape
+    switches = fragments = 0
+    for i in range(Nt):
+        last = None
+        for k in range(T):
+            if labels[k, i] >= 0:
+                switches += last is not None and labels[k, i] != last
+                last = labels[k, i]
+            elif k > 0 and labels[k - 1, i] >= 0 and present[k, i] and in_view[k, i]:
+                fragments += 1
+    return switches, fragments
+
+
+def test_switches_and_fragmentations_follow_their_definitions(rng):
+    T, Nt = 40, 6
+    for _ in range(20):
+        labels = np.where(rng.random((T, Nt)) < 0.7, rng.integers(0, 3, (T, Nt)), -1)
+        present = rng.random((T, Nt)) < 0.9
+        labels = np.where(present, labels, -1)
+        in_view = rng.random((T, Nt)) < 0.6
+        last, was = np.full(Nt, -1), np.zeros(Nt, bool)
+        switches = fragments = 0
+        for k in range(T):
+            s, f = label_changes(labels[k], last, was, present[k], in_view[k])
+            switches, fragments = switches + s.sum(), fragments + f.sum()
+            last, was = np.where(labels[k] >= 0, labels[k], last), labels[k] >= 0
+        assert (switches, fragments) == reference_changes(labels, present, in_view)
+
+
+def test_the_clock_of_a_new_target():
+    # target 0: in view from step 2, matched from 5: 3 steps; target 1: matched before it
+    # is ever new (the team knew it): no time; target 2: new at 6, never matched
+    T = 9
+    matched = np.zeros((T, 3), bool)
+    matched[5:, 0] = matched[0:, 1] = True
+    matched[7, 0] = False  # lost again: timed once only
+    in_view = np.zeros((T, 3), bool)
+    in_view[2:, 0] = in_view[3:, 1] = in_view[6:, 2] = True
+    start, settled, times = np.full(3, -1), np.zeros(3, bool), []
+    for k in range(T):
+        start, settled, time = confirm_clock(
+            k, start, settled, matched[k], np.ones(3, bool), in_view[k]
+        )
+        times += [(k, i, t) for i, t in enumerate(time) if t >= 0]
+    assert times == [(5, 0, 3)]
+    assert start.tolist() == [-1, -1, 6] and settled.tolist() == [True, True, False]
+
+
+def place(X, follow, K):
+    """Track positions: slot j on truth follow[j] (-1: far from everything)."""
+    Y = np.full(X.shape[:-2] + (K, 2), FAR)
+    for j, i in enumerate(follow):
+        if i >= 0:
+            Y[..., j, :] = X[..., i, :] + 0.5
+    return Y
+
+
+def test_the_accumulator_per_row_and_per_trial():
+    """Two trials of two UAVs: the scores of each row by hand, a trial the mean of its rows,
+    a failed UAV's steps counted in nothing."""
+    Nt, K, c = 2, 4, 10.0
+    X = np.array([[0.0, 0.0], [100.0, 0.0]])
+    score = TrackScore(batch=2, rows=2, n_targets=Nt, cutoff=c)
+    # per step and row: the truth each slot follows (-1 far), its labels, the confirmed slots
+    plans = {
+        # row 0: target 0 by label 1, then 2 (a switch), lost at step 3 in view (a
+        # fragmentation); target 1 never followed; a false track at step 1
+        0: [([0, -1, -1, -1], [1, -1, -1, -1]), ([0, -1, -1, -1], [1, -1, 9, -1]),
+            ([0, -1, -1, -1], [2, -1, -1, -1]), ([-1, -1, -1, -1], [-1, -1, -1, -1])],
+        # row 1: both targets by one track each, plus a duplicate of target 1 throughout
+        1: [([0, 1, 1, -1], [3, 4, 5, -1])] * 4,
+        # row 2: nothing confirmed; row 3: target 0 followed, then the UAV fails at step 2
+        2: [([-1, -1, -1, -1], [-1, -1, -1, -1])] * 4,
+        3: [([0, -1, -1, -1], [6, -1, -1, -1])] * 2 + [([-1, -1, -1, -1], [7, -1, -1, -1])] * 2,
+    }  # fmt: skip
+    in_view = np.ones((4, Nt), bool)
+    in_view[:, 1] = False  # target 1 never in view: never new
+    for k in range(4):
+        follow = np.array([plans[r][k][0] for r in range(4)])
+        labels = np.array([plans[r][k][1] for r in range(4)])
+        tracks = np.stack([place(X, f, K) for f in follow])
+        alive = np.array([True, True, True, k < 2])
+        score.add(
+            truth=np.broadcast_to(X, (4, Nt, 2)),
+            tracks=tracks,
+            labels=labels,
+            confirmed=labels >= 0,
+            in_view=in_view,
+            alive=alive,
+        )
+    s = score.summary()
+    half = c / 2  # c^p / 2 at p = 1
+    loc = np.hypot(0.5, 0.5)
+    rows = {
+        "gospa": [
+            np.mean([loc + half, loc + 2 * half, loc + half, 2 * half]),
+            2 * loc + half,
+            2 * half,
+            loc + half,
+        ],
+        "gospa_false": [half / 4, half, 0.0, 0.0],
+        "gospa_missed": [np.mean([half, half, half, 2 * half]), 0.0, 2 * half, half],
+        "switches": [100 * 1 / 8, 0.0, 0.0, 0.0],
+        "fragmentations": [100 * 1 / 8, 0.0, 0.0, 0.0],
+        "false_tracks": [1 / 4, 1.0, 0.0, 0.0],
+        "false_tracks_per_target": [1 / 8, 1 / 2, 0.0, 0.0],
+        "siap_completeness": [3 / 8, 1.0, 0.0, 1 / 2],
+        "siap_ambiguity": [1.0, 3 / 2, np.nan, 1.0],
+        "siap_spuriousness": [1 / 4, 0.0, np.nan, 0.0],
+    }
+    for name, values in rows.items():
+        expected = [np.nanmean(values[:2]), np.nanmean(values[2:])]
+        assert s[name] == pytest.approx(expected, rel=1e-12, abs=1e-12), name
+    # row 2: target 0 new at step 0 and never confirmed; the other rows knew it at once
+    assert np.isnan(s["time_to_confirm"]).all()
+    assert np.isnan(s["never_confirmed"][0]) and s["never_confirmed"][1] == 1.0
+    assert set(s) == set(TRACK_METRICS)
+
+
+def test_the_nees_of_the_matched_tracks(rng):
+    B, rows, Nt, K, T = 2, 3, 4, 7, 300
+    score = TrackScore(batch=B, rows=rows, n_targets=Nt, cutoff=30.0)
+    samples = [[] for _ in range(B)]
+    for _ in range(T):
+        # targets 100 m apart, tracks a few metres off: each track on its own target
+        where = rng.uniform(0, 20, (B * rows, Nt, 2)) + 100.0 * np.arange(Nt)[:, None]
+        states = np.concatenate([where, rng.normal(0, 2, (B * rows, Nt, 2))], -1)
+        A = rng.normal(size=(B * rows, K, 4, 4))
+        cov = A @ np.swapaxes(A, -1, -2) + 0.5 * np.eye(4)
+        follow = rng.permutation(K)[:Nt]  # slot follow[i] on target i, the rest empty
+        error = (np.linalg.cholesky(cov) @ rng.normal(size=(B * rows, K, 4, 1)))[..., 0]
+        mean = np.full((B * rows, K, 4), np.nan)
+        mean[:, follow] = states - error[:, follow]
+        confirmed = ~np.isnan(mean[..., 0])
+        confirmed[0, follow[0]] = False  # a tentative track is not scored
+        score.add(
+            truth=states[..., :2],
+            tracks=mean[..., :2],
+            labels=np.tile(np.arange(K), (B * rows, 1)),
+            confirmed=confirmed,
+            in_view=np.ones((B * rows, Nt), bool),
+            mean=mean,
+            cov=np.where(confirmed[..., None, None], cov, np.nan),
+            states=states,
+        )
+        assigned, _ = gospa_assignment(
+            states[..., :2], np.ones((B * rows, Nt), bool), mean[..., :2], confirmed, 30.0
+        )
+        q = estimation.nees(mean[:, follow], cov[:, follow], states)
+        ok = assigned == follow  # every confirmed track is on its target (errors of a few m)
+        assert ok.sum() == B * rows * Nt - 1
+        both = matched_nees(assigned, mean, cov, states)
+        assert both[ok] == pytest.approx(q[ok], rel=1e-12) and np.isnan(both[~ok]).all()
+        for b in range(B):
+            samples[b].extend(q[b * rows : (b + 1) * rows][ok[b * rows : (b + 1) * rows]])
+    s = score.summary()
+    resolution = 10 ** (1 / (2 * NEES_BINS_PER_DECADE))
+    low, high = stats.chi2.ppf([0.025, 0.975], 4)
+    for b in range(B):
+        q = np.array(samples[b])
+        assert s["nees"][b] == pytest.approx(q.mean(), rel=1e-12)
+        assert 1 / resolution <= s["nees_median"][b] / np.median(q) <= resolution
+        assert s["nees_inside"][b] * len(q) == pytest.approx(np.sum((q >= low) & (q <= high)))
+        lo, hi = stats.binom.interval(0.99, len(q), 0.95)
+        assert lo / len(q) <= s["nees_inside"][b] <= hi / len(q)
+
+
+def test_inputs_of_the_wrong_shape_are_refused():
+    score = TrackScore(batch=1, rows=2, n_targets=3)
+    good = dict(
+        truth=np.zeros((2, 3, 2)),
+        tracks=np.zeros((2, 4, 2)),
+        labels=np.zeros((2, 4), int),
+        confirmed=np.ones((2, 4), bool),
+        in_view=np.ones((2, 3), bool),
+    )
+    with pytest.raises(ValueError, match="truth must be"):
+        score.add(**(good | {"truth": np.zeros((1, 3, 2))}))
+    with pytest.raises(ValueError, match="labels and confirmed"):
+        score.add(**(good | {"labels": np.zeros((2, 5), int)}))
+    score.add(**good)
+    assert score.steps == 1
