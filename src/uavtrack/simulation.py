@@ -33,11 +33,15 @@ from . import _process, estimation, flight, fusion, network, planning, sensing, 
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
-from .methods import Assigned, Held, Inputs, Method, Setting, get
+from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
+from .methods.base import FusedTracks, Local
 from .metrics import METRICS, Tally
 from .radio import Radio, RadioState
 from .robust import gate
-from .world import initial_conditions, streams
+from .tracks import columns, manage
+from .tracks import scan as scans
+from .tracks.scoring import Scores
+from .world import detection_stream, initial_conditions, streams
 from .world import trial_seed as trial_seed  # public here too
 
 NOISE_BLOCK = 64
@@ -97,6 +101,15 @@ class Context:
     const: Constants
     faults: Faults
     setting: Setting
+    detection: scans.Draws | None = None
+    """Each trial's draws of missed detections, clutter and scan order
+    (`tracks.scan.Draws`), when the sensor misses or sees clutter, or the scans come
+    unlabelled; None for the paper's sensor."""
+
+    @property
+    def tracked(self) -> bool:
+        """Whether the UAVs keep tracks of unknown association (gnn, jpda)."""
+        return self.scenario.tracker.association != "known"
 
     @classmethod
     def of(
@@ -117,8 +130,19 @@ class Context:
             prune=scenario.prunes,
             rule=scenario.fusion.rule,
             gate=None if robust.gate is None else gate.threshold(robust.gate),
+            scenario=scenario,
         )
-        return cls(scenario=scenario, method=method, const=const, faults=faults, setting=setting)
+        detection = None
+        if not scenario.sensor.ideal or scenario.tracker.association != "known":
+            detection = scans.Draws.of([detection_stream(s) for s in seeds])
+        return cls(
+            scenario=scenario,
+            method=method,
+            const=const,
+            faults=faults,
+            setting=setting,
+            detection=detection,
+        )
 
 
 def _plan(
@@ -186,6 +210,10 @@ class State:
     modes: the IMM's mode-conditioned beliefs (`estimation.Modes`; None: the paper's
     filter), of which mean and cov are the combined estimate. seen (B, Nu, Nt): the
     step each UAV last measured each target (-1: never; kept with ``robust.gate``).
+    With unknown association (``tracker.association`` gnn or jpda) mean and cov are
+    each UAV's K track slots (B, Nu, K, ...), book their labels, statuses and counters
+    (`tracks.manage.Book`), target the label each UAV followed last, and central a
+    central node's tracks (centralized).
     """
 
     k: int
@@ -199,6 +227,9 @@ class State:
     flight: flight.Autopilot | None = None
     modes: estimation.Modes | None = None
     seen: np.ndarray | None = None
+    book: manage.Book | None = None
+    central: manage.Slots | None = None
+    labels: np.ndarray | None = None  # (B, L) the labels of the held bids' columns
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -222,16 +253,22 @@ class Cycle:
         "(Nu, Nt)", "target inside the UAV's observation disk (a failed UAV sees nothing)", bool
     )
     mean: np.ndarray = _record(
-        "(Nu, Nt, 4)", "each UAV's fused estimate of each target (NaN: the UAV has failed)"
+        "(Nu, K, 4)",
+        "each UAV's fused estimate of each target, K = Nt (NaN: the UAV has failed); with "
+        "tracker.association gnn or jpda, of each of its K track slots (see label, status)",
     )
-    cov: np.ndarray = _record("(Nu, Nt, 4, 4)", "its covariance")
+    cov: np.ndarray = _record("(Nu, K, 4, 4)", "its covariance")
     bids: np.ndarray = _record(
-        "(Nu, Nt)",
-        "the UAV's best planning value per target, its bid (NaN: the UAV failed, or a bid "
-        "not scored because no assignment can read it, see planner.prune)",
+        "(Nu, K)",
+        "the UAV's best planning value per target (per confirmed track), its bid (NaN: the "
+        "UAV failed, a slot not confirmed, or a bid not scored because no assignment can "
+        "read it, see planner.prune)",
     )
     assignment: np.ndarray = _record(
-        "(Nu,)", "the target each UAV tracks (-1: the UAV has failed)", np.int64
+        "(Nu,)",
+        "the target each UAV tracks, or with tracker.association gnn or jpda the team "
+        "label of its track (-1: the UAV has failed, or follows no track)",
+        np.int64,
     )
     action: np.ndarray = _record(
         "(Nu,)", "the bank angle flown [rad] (with uav.dynamics = jsbsim, the autopilot's setpoint)"
@@ -262,6 +299,12 @@ class Cycle:
     decision_wall_ms: np.ndarray = _record(
         "(Nu,)", "the same in wall time [ms] (NaN inside a batch)"
     )
+    label: np.ndarray | None = field(default=None, repr=False, compare=False)
+    """With unknown association: each slot's team label (Nu, K) (-1: empty)."""
+    status: np.ndarray | None = field(default=None, repr=False, compare=False)
+    """With unknown association: each slot's status (Nu, K) (`tracks.manage`)."""
+    scan: scans.Scan | None = field(default=None, repr=False, compare=False)
+    """With unknown association: each UAV's scan."""
     confidence: np.ndarray | None = field(default=None, repr=False, compare=False)
     """1 / trace(cov) (Nu, Nt) when the method already has it (not recorded: the
     metrics read it instead of computing it again)."""
@@ -270,27 +313,51 @@ class Cycle:
 RECORDED = tuple(f for f in fields(Cycle) if "shape" in f.metadata)
 """The fields of `Cycle` a trace holds."""
 
+TRACKED: dict[str, tuple[str, str, type]] = {
+    "label": ("(Nu, K)", "team label of each track slot (-1: empty)", np.int64),
+    "status": ("(Nu, K)", "its status: 0 empty, 1 tentative, 2 confirmed", np.int8),
+    "scan_polar": (
+        "(Nu, Z, 2)",
+        "each UAV's measurements of the scan, range [m] and bearing [rad], in the order the "
+        "UAV received them (Z: the most of any UAV and step; padding 0)",
+        np.float64,
+    ),
+    "scan_z": ("(Nu, Z, 2)", "their conversion to a ground position [m]", np.float64),
+    "scan_valid": ("(Nu, Z)", "a measurement, not padding", bool),
+    "scan_origin": (
+        "(Nu, Z)",
+        "for evaluation only: the target measured, -1 clutter, -2 padding",
+        np.int64,
+    ),
+}
+"""What a trace holds beside `RECORDED` with tracker.association gnn or jpda: name ->
+(shape per step, meaning, dtype)."""
+
 
 def _trace_arrays(self: Any) -> dict[str, np.ndarray]:
-    return {name: getattr(self, name) for name in self.__dataclass_fields__}
+    out = {name: getattr(self, name) for name in self.__dataclass_fields__}
+    return {name: value for name, value in out.items() if value is not None}
 
 
 if TYPE_CHECKING:  # what a checker knows of Trace, whose fields are made from Cycle's
 
     class Trace:
-        def __init__(self, targets: np.ndarray, **recorded: np.ndarray) -> None: ...
+        def __init__(self, targets: np.ndarray, **recorded: np.ndarray | None) -> None: ...
         def __getattr__(self, name: str) -> np.ndarray: ...
         def arrays(self) -> dict[str, np.ndarray]: ...
 
 else:
     Trace = make_dataclass(
         "Trace",
-        [("targets", np.ndarray)] + [(f.name, np.ndarray) for f in RECORDED],
+        [("targets", np.ndarray)]
+        + [(f.name, np.ndarray) for f in RECORDED]
+        + [(name, np.ndarray | None, field(default=None)) for name in TRACKED],
         frozen=True,
         namespace={
             "arrays": _trace_arrays,
             "__doc__": "Everything a run did, step by step: targets (T, Nt, 4) the true target "
-            "states x, y, vx, vy at each cycle, then every field of `Cycle` over the T steps. "
+            "states x, y, vx, vy at each cycle, then every field of `Cycle` over the T steps, "
+            "and with tracker.association gnn or jpda those of `TRACKED` (None otherwise). "
             "arrays() gives them as a dict (the .npz of `uavtrack run --trace`).",
             "__module__": __name__,
         },
@@ -315,6 +382,16 @@ class Pending:
     own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
     plan_seconds: np.ndarray  # (2,): CPU, wall (`timing`)
     belief: estimation.Belief  # each UAV's own (mean, cov, modes) after its update, before fusion
+    detected: np.ndarray | None = None  # (B, Nu, Nt) the pairs measured (None: all observed)
+    tracks: FusedTracks | None = None  # with unknown association: the tracks after fusion
+    scan: scans.Scan | None = None  # with unknown association: the scans
+    columns: np.ndarray | None = None  # with unknown association: the column each UAV took
+    labels: np.ndarray | None = None  # (B, L) with unknown association: the columns' labels
+
+    @property
+    def width(self) -> int:
+        """The columns of the assignment: targets, or labels with unknown association."""
+        return self.bids.shape[-1] if self.labels is None else self.labels.shape[1]
 
 
 def decide(
@@ -328,14 +405,21 @@ def decide(
     bids (NaN), no auction (no messages; every UAV keeps its last target) and the
     method's own actions fly straight. What the UAVs sense and know is unchanged.
     """
-    scenario, method, faults = ctx.scenario, ctx.method, ctx.faults
+    if ctx.tracked:
+        return _decide_tracked(state, targets, noise, ctx, plan)
+    scenario, method = ctx.scenario, ctx.method
     k, uavs = state.k, state.uavs
-    alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
-    believed = world.believed(uavs, faults.position_error(k))
-    links = network.radio_links(uavs, alive, scenario.comm_range)
-    radio = Radio(k, links, alive, faults, state.radio)
-    observed, z, R = sense(uavs, believed, targets, noise, alive, scenario)
-    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, observed, z, R)
+    alive, believed, radio = _world(state, ctx)
+    observed, polar = observe(uavs, targets, noise, alive, scenario)
+    detected = observed
+    if ctx.detection is not None:  # a missed target is not measured; clutter is known false
+        detected = scans.detected(
+            ctx.detection.detect, observed, scenario.sensor.detection_probability
+        )
+        polar = polar[detected[observed]]
+    b, i, _ = np.nonzero(detected)
+    z, R = convert(believed[b, i], polar, scenario)
+    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, detected, z, R)
     mean, cov = belief[:2]
     inputs = Inputs(
         k=k,
@@ -348,11 +432,11 @@ def decide(
         previous=state.target,
         held=state.held,
         setting=ctx.setting,
-        measured=measured(state, observed, z, R, ctx),
+        measured=measured(state, detected, z, R, ctx),
     )
     fused = method.fuse(inputs)
     if not plan:
-        return _unplanned(state, believed, alive, observed, radio, fused, belief)
+        return _unplanned(state, believed, alive, observed, radio, fused, belief, detected)
     start = timing.start()
     bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
     plan_seconds = timing.since(start)
@@ -372,7 +456,177 @@ def decide(
         own=own,
         plan_seconds=plan_seconds,
         belief=belief,
+        detected=detected,
     )
+
+
+def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray, Radio]:
+    """Who is alive at this step, where the UAVs believe they are, and the radio."""
+    faults, k = ctx.faults, state.k
+    alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
+    believed = world.believed(state.uavs, faults.position_error(k))
+    links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
+    return alive, believed, Radio(k, links, alive, faults, state.radio)
+
+
+def measure_scan(
+    uavs: np.ndarray,
+    believed: np.ndarray,
+    observed: np.ndarray,
+    polar: np.ndarray,
+    alive: np.ndarray,
+    ctx: Context,
+) -> scans.Scan:
+    """Each UAV's unlabelled scan (`tracks.scan`): the detected targets' measurements
+    (polar (K, 2) of the observing pairs in the order of ``np.nonzero(observed)``) and
+    the clutter, shuffled, converted from where each UAV believes it is."""
+    sensor, draws = ctx.scenario.sensor, ctx.detection
+    assert draws is not None, "a run of unknown association has its detection streams"
+    got = scans.detected(draws.detect, observed, sensor.detection_probability)
+    polar = polar[got[observed]]
+    nothing = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    false = [
+        scans.clutter(rng, uavs[b], alive[b], sensor) if sensor.clutter_rate > 0 else nothing
+        for b, rng in enumerate(draws.clutter)
+    ]
+    raw, valid, origin = scans.assemble(draws.order, got, polar, false, shuffle=True)
+    where = np.broadcast_to(believed[:, :, None], raw.shape[:3] + believed.shape[-1:])
+    z, R = convert(where[valid], raw[valid], ctx.scenario)
+    zz = np.zeros(raw.shape)
+    RR = np.broadcast_to(np.eye(2), raw.shape + (2,)).copy()
+    zz[valid], RR[valid] = z, R
+    return scans.Scan(polar=raw, z=zz, R=RR, valid=valid, origin=origin)
+
+
+def _decide_tracked(
+    state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context, plan: bool
+) -> Pending:
+    """`decide` with unknown association: each UAV's scan comes unlabelled, its tracks
+    and the team's agreement on them (`Method.fuse_tracks`) replace the per-target
+    filters and max-consensus, and the auction runs over team labels
+    (`tracks.columns`)."""
+    scenario, method = ctx.scenario, ctx.method
+    k, uavs = state.k, state.uavs
+    assert state.book is not None, "a run of unknown association starts with its tracks"
+    alive, believed, radio = _world(state, ctx)
+    observed, polar = observe(uavs, targets, noise, alive, scenario)
+    scan = measure_scan(uavs, believed, observed, polar, alive, ctx)
+    local = Local(
+        book=state.book,
+        mean=state.mean,
+        cov=state.cov,
+        z=scan.z,
+        R=scan.R,
+        valid=scan.valid,
+        tracker=ctx.const.tracker,
+        modes=state.modes,
+        central=state.central,
+    )
+    inputs = Inputs(
+        k=k,
+        radio=radio,
+        mean=state.mean,
+        cov=state.cov,
+        gamma=estimation.confidence(state.cov),
+        believed=believed,
+        alive=alive,
+        previous=state.target,
+        held=state.held,
+        setting=ctx.setting,
+    )
+    tracks = method.fuse_tracks(inputs, local)
+    B, Nu = alive.shape
+    fused = Fused(
+        mean=tracks.mean,
+        cov=tracks.cov,
+        rounds=tracks.rounds,
+        sent=tracks.sent,
+        delivered=tracks.delivered,
+        seconds=np.zeros((B, Nu, 2)),
+    )
+    confirmed = tracks.book.confirmed & alive[..., None]
+    cols = columns.of(tracks.book.label, confirmed)
+    held = state.held
+    if held is not None and state.labels is not None:  # the held bids by this step's labels
+        held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)
+    inputs = replace(
+        inputs,
+        mean=tracks.mean,
+        cov=tracks.cov,
+        gamma=estimation.confidence(tracks.cov),
+        previous=columns.label_column(state.target, cols.labels),
+        held=held,
+    )
+    belief = (tracks.mean, tracks.cov, None)
+    if not plan:
+        pending = _unplanned(state, believed, alive, observed, radio, fused, belief)
+        return replace(pending, tracks=tracks, scan=scan, labels=cols.labels)
+    start = timing.start()
+    slot_bids, best = ctx.setting.plan(believed, tracks.mean)
+    plan_seconds = timing.since(start)
+    slot_bids = np.where(confirmed, slot_bids, np.nan)
+    assigned = method.assign(inputs, fused, columns.bids(np.nan_to_num(slot_bids), cols))
+    slot = columns.slot_of(assigned.target, cols, np.where(confirmed, slot_bids, -np.inf))
+    chosen = np.take_along_axis(best, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
+    own = np.where(alive & (slot >= 0), chosen, STRAIGHT)
+    label = np.take_along_axis(tracks.book.label, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
+    followed = np.where(alive & (slot >= 0), label, -1)
+    taken = np.where(alive, columns.label_column(followed, cols.labels), -1)
+    return Pending(
+        k=k,
+        uavs=uavs,
+        believed=believed,
+        alive=alive,
+        observed=observed,
+        radio=radio,
+        fused=fused,
+        bids=slot_bids,
+        assigned=replace(assigned, target=followed),
+        own=own,
+        plan_seconds=plan_seconds,
+        belief=belief,
+        tracks=tracks,
+        scan=scan,
+        columns=taken,
+        labels=cols.labels,
+    )
+
+
+def _finish_tracked(
+    state: State, pending: Pending, ctx: Context, cycle: Cycle, new_uavs: np.ndarray
+) -> tuple[State, Cycle]:
+    """`finish` with unknown association: every UAV's tracks (and a central node's)
+    predicted to the next scan (eq. 23), the labels of the bids held kept beside them."""
+    tracks, tracker = pending.tracks, ctx.const.tracker
+    assert tracks is not None
+    own, modes = tracks.own, None
+    if own is not None and own.modes is not None:  # an IMM: fused tracks restart their modes
+        modes = manage.restart(own.modes, tracks.changed == 2, tracks.mean, tracks.cov, tracker)
+        mean, cov, modes = tracker.close(own.mean, own.cov, modes, tracks.mean, tracks.cov)
+    else:
+        mean, cov = estimation.predict(tracks.mean, tracks.cov, tracker.A, tracker.Q)
+    central = state.central
+    if tracks.central is not None:
+        c = tracks.central
+        m, P, node_modes = tracker.close(c.mean, c.cov, c.modes, c.mean, c.cov)
+        central = manage.Slots(book=c.book, mean=m, cov=P, modes=node_modes)
+    target = pending.assigned.target
+    new = State(
+        k=pending.k + 1,
+        uavs=new_uavs,
+        mean=mean,
+        cov=cov,
+        alive=pending.alive,
+        target=np.where(target >= 0, target, state.target),
+        radio=pending.radio.close(),
+        held=pending.assigned.held,
+        flight=state.flight,
+        modes=modes,
+        book=tracks.book,
+        central=central,
+        labels=pending.labels,
+    )
+    return new, cycle
 
 
 def measured(
@@ -394,6 +648,7 @@ def _unplanned(
     radio: Radio,
     fused: Any,
     belief: estimation.Belief,
+    detected: np.ndarray | None = None,
 ) -> Pending:
     B, Nu = alive.shape
     nothing = np.zeros(B, dtype=np.int64)
@@ -416,6 +671,7 @@ def _unplanned(
         own=own,
         plan_seconds=np.zeros(2),
         belief=belief,
+        detected=detected,
     )
 
 
@@ -467,12 +723,19 @@ def finish(
         messages=fused.sent + assigned.sent,
         delivered=fused.delivered + assigned.delivered,
         late=np.zeros((B, len(PROTOCOLS)), dtype=np.int64),
-        conflicts=conflicts(target, alive, bids.shape[-1]),
+        conflicts=conflicts(
+            target if pending.columns is None else pending.columns, alive, pending.width
+        ),
         alive=alive,
         decision_time_ms=np.where(alive, ms[..., timing.CPU], np.nan),
         decision_wall_ms=np.where(alive, ms[..., timing.WALL], np.nan),
         confidence=fused.gamma,
+        label=None if pending.tracks is None else pending.tracks.book.label,
+        status=None if pending.tracks is None else pending.tracks.book.status,
+        scan=pending.scan,
     )
+    if pending.tracks is not None:
+        return _finish_tracked(state, pending, ctx, cycle, new_uavs)
     mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov)
     new = State(
         k=pending.k + 1,
@@ -485,7 +748,13 @@ def finish(
         held=assigned.held,
         flight=state.flight,
         modes=modes,
-        seen=None if ctx.setting.gate is None else gate.seen(state.seen, pending.observed, state.k),
+        seen=None
+        if ctx.setting.gate is None
+        else gate.seen(
+            state.seen,
+            pending.observed if pending.detected is None else pending.detected,
+            state.k,
+        ),
     )
     return new, cycle
 
@@ -583,6 +852,14 @@ def initial_state(
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
     pilot, uavs = flight.start(scenario, seeds, uavs)
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
+    book = central = labels = None
+    if scenario.tracker.association != "known":  # the briefed targets as confirmed tracks
+        node = manage.briefed(mean[:, :1], cov[:, :1], scenario.track_slots)
+        central = manage.Slots(
+            book=node[0], mean=node[1], cov=node[2], modes=tracker.start(node[1], node[2])[2]
+        )
+        book, mean, cov = manage.briefed(mean, cov, scenario.track_slots)
+        labels = np.broadcast_to(np.arange(Nt), (B, Nt)).copy()
     mean, cov, modes = tracker.start(mean, cov)
     state = State(
         k=0,
@@ -595,6 +872,9 @@ def initial_state(
         held=held,
         flight=pilot,
         modes=modes,
+        book=book,
+        central=central,
+        labels=labels,
     )
     return state, trajectory, list(sensor_rngs)
 
@@ -637,14 +917,7 @@ def run(
     ctx = Context.of(scenario, method, seeds)
     state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
-    tally = Tally(
-        batch=B,
-        n_uavs=Nu,
-        n_targets=Nt,
-        timed=B == 1,
-        cutoff=scenario.evaluation.ospa_cutoff,
-        order=scenario.evaluation.ospa_order,
-    )
+    tally = scores(scenario, B, timed=B == 1)
     rec = Recorder(T, timed=B == 1) if trace else None
     noises = sensor_noise(sensor_rngs, Nu, Nt, T)
     for k, noise in enumerate(noises):
@@ -658,12 +931,29 @@ def run(
     return BatchResult(method.name, scenario, tally.summary(), traces)
 
 
+def scores(scenario: Scenario, batch: int, timed: bool) -> Scores:
+    """The metrics of a run of `batch` trials (`metrics.Tally`, and with tracks of unknown
+    association their scores, `tracks.scoring.Scores`), fed one `Cycle` at a time."""
+    e = scenario.evaluation
+    return Scores(
+        tally=Tally(
+            batch=batch,
+            n_uavs=scenario.n_uavs,
+            n_targets=scenario.n_targets,
+            timed=timed,
+            cutoff=e.ospa_cutoff,
+            order=e.ospa_order,
+        )
+    )
+
+
 class Recorder:
     """Per-step arrays of every `Cycle` field, allocated at the first step."""
 
     def __init__(self, steps: int, timed: bool) -> None:
         self.steps, self.timed = steps, timed
         self.arrays: dict[str, np.ndarray] = {}
+        self.tracked: list[dict[str, np.ndarray]] = []  # per step, `TRACKED`'s arrays
 
     def record(self, k: int, cycle: Cycle) -> None:
         if not self.arrays:
@@ -675,6 +965,18 @@ class Recorder:
                 )
         for name, array in self.arrays.items():
             array[:, k] = getattr(cycle, name)
+        if cycle.label is not None and cycle.status is not None and cycle.scan is not None:
+            scan = cycle.scan
+            self.tracked.append(
+                {
+                    "label": cycle.label,
+                    "status": cycle.status,
+                    "scan_polar": scan.polar,
+                    "scan_z": scan.z,
+                    "scan_valid": scan.valid,
+                    "scan_origin": scan.origin,
+                }
+            )
         if not self.timed:
             self.arrays["decision_time_ms"][:, k] = np.nan
             self.arrays["decision_wall_ms"][:, k] = np.nan
@@ -683,10 +985,38 @@ class Recorder:
         """One Trace per trial, over the steps of `trajectory` (B, T', Nt, 4), T' at
         most the steps recorded (an episode cut short)."""
         n = trajectory.shape[1]
+        extra = self._tracked(n)
         return [
-            Trace(trajectory[b], **{name: a[b, :n] for name, a in self.arrays.items()})
+            Trace(
+                trajectory[b],
+                **{name: a[b, :n] for name, a in self.arrays.items()},
+                **{name: a[b] for name, a in extra.items()},
+            )
             for b in range(trajectory.shape[0])
         ]
+
+    def _tracked(self, n: int) -> dict[str, np.ndarray]:
+        """`TRACKED`'s arrays (B, T, ...) of the first n steps, scans padded to the most
+        measurements of any step."""
+        if not self.tracked:
+            return {}
+        steps = self.tracked[:n]
+        Z = max(step["scan_valid"].shape[-1] for step in steps)
+        out = {}
+        for name, (_, _, dtype) in TRACKED.items():
+            parts = [step[name] for step in steps]
+            if name.startswith("scan"):
+                fill = -2 if name == "scan_origin" else 0
+                parts = [
+                    np.pad(
+                        p,
+                        [(0, 0), (0, 0), (0, Z - p.shape[2])] + [(0, 0)] * (p.ndim - 3),
+                        constant_values=fill,
+                    )
+                    for p in parts
+                ]
+            out[name] = np.stack(parts, axis=1).astype(dtype)
+        return out
 
 
 def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, float]:
@@ -790,6 +1120,18 @@ class Result:
     gospa: float
     gospa_best: float
     gospa_missed_best: float
+    gospa_localisation: float
+    gospa_missed: float
+    gospa_false: float
+    switches: float
+    fragmentations: float
+    false_tracks: float
+    false_tracks_per_target: float
+    time_to_confirm: float
+    never_confirmed: float
+    siap_completeness: float
+    siap_ambiguity: float
+    siap_spuriousness: float
     rounds: float
     messages: float
     delivered: float

@@ -138,6 +138,16 @@ def flight_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     )
 
 
+def detection_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
+    """The detection stream of one trial (missed detections, clutter and the order of an
+    unlabelled scan, `tracks.scan`): a fifth child of its seed, so the others are the
+    same whatever the sensor's detection probability and clutter rate."""
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, 4), pool_size=seq.pool_size
+    )
+
+
 def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
     """(truth, sensor) generators of one trial (see `children`)."""
     truth, sensor, _ = children(seed)

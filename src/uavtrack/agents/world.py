@@ -39,7 +39,6 @@ from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
 from ..methods import get
-from ..metrics import Tally
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
 from .security import WORLD, Gate, Keyring
 from .stops import STOPS
@@ -210,14 +209,7 @@ class WorldProgram:
         pilot = state.flight if state.flight is not None else Unicycle(s.dt)
         self.wait_ready()
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
-        tally = Tally(
-            batch=1,
-            n_uavs=Nu,
-            n_targets=Nt,
-            timed=True,
-            cutoff=s.evaluation.ospa_cutoff,
-            order=s.evaluation.ospa_order,
-        )
+        tally = simulation.scores(s, 1, timed=True)
         recorder = simulation.Recorder(T, timed=True) if trace else None
         told = np.ones(Nu, dtype=bool)  # the UAVs sent a Sense last cycle
         due = time.monotonic()  # when the next cycle is due (with realtime)

@@ -150,24 +150,66 @@ class Scenario(Part):
         return self
 
     @model_validator(mode="after")
+    def _tracks(self) -> Scenario:
+        """What tracks of unknown association cannot do yet, said before a run starts."""
+        if self.tracker.association == "known":
+            return self
+        if self.track_slots < self.n_targets:
+            raise ValueError(
+                f"tracker.max_tracks {self.tracker.max_tracks} cannot hold the "
+                f"{self.n_targets} targets every UAV starts with; give at least {self.n_targets}"
+            )
+        if self.faults.delay > 0:
+            raise ValueError(
+                f"tracker.association = {self.tracker.association} runs on a radio without "
+                "delay: set faults.delay = 0 (tracks sent a cycle late are not predicted yet)"
+            )
+        if self.robust.gate is not None:
+            raise ValueError(
+                f"robust.gate reads measurements by target; with tracker.association = "
+                f"{self.tracker.association} the tracks' own gates apply: leave robust.gate unset"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _models(self) -> Scenario:
         """A setting of a model that is not on would do nothing: refuse it."""
-        for group, value, wanted, on in (
+        tracks = ("max_tracks", "gate_probability", "confirm", "delete_misses", "delete_std")
+        tracks += ("birth_velocity_std",)
+        for group, value, wanted, on, names in (
             (
                 self.target.manoeuvre,
                 self.target.motion,
                 "target.motion = manoeuvring",
                 "manoeuvring",
+                tuple(type(self.target.manoeuvre).model_fields),
             ),
-            (self.tracker, self.tracker.model, "tracker.model = imm", "imm"),
+            (
+                self.tracker,
+                self.tracker.model,
+                "tracker.model = imm",
+                "imm",
+                ("manoeuvre_std", "turn_rates_deg", "transition"),
+            ),
+            (
+                self.tracker,
+                "known" if self.tracker.association == "known" else "tracks",
+                "tracker.association = gnn or jpda",
+                "tracks",
+                tracks,
+            ),
         ):
             if value == on:
                 continue
-            for name, info in type(group).model_fields.items():
-                if name != "model" and getattr(group, name) != info.get_default(
-                    call_default_factory=True
-                ):
+            fields = type(group).model_fields
+            for name in names:
+                if getattr(group, name) != fields[name].get_default(call_default_factory=True):
                     prefix = "target.manoeuvre" if group is self.target.manoeuvre else "tracker"
+                    if on == "tracks":
+                        raise ValueError(
+                            f"{prefix}.{name} needs {wanted} (it does nothing otherwise); set "
+                            f"tracker.association=gnn (or jpda) or leave {prefix}.{name} unset"
+                        )
                     raise ValueError(
                         f"{prefix}.{name} needs {wanted} (it does nothing otherwise); set "
                         f"{wanted.replace(' = ', '=')} or leave {prefix}.{name} unset"

@@ -10,7 +10,6 @@ import numpy as np
 
 from ..config import Scenario
 from ..methods import Method
-from ..metrics import Tally
 from ..simulation import (
     BatchResult,
     Context,
@@ -21,6 +20,7 @@ from ..simulation import (
     finish,
     graph,
     initial_state,
+    scores,
     sensor_noise,
 )
 from .spaces import Spaces, View, rewards
@@ -54,15 +54,7 @@ class Episodes:
         self.seen = np.zeros((B, s.n_targets))  # steps each target was in some UAV's view
         self.tally = self.recorder = None
         if record:
-            e = s.evaluation
-            self.tally = Tally(
-                batch=B,
-                n_uavs=s.n_uavs,
-                n_targets=s.n_targets,
-                timed=B == 1,
-                cutoff=e.ospa_cutoff,
-                order=e.ospa_order,
-            )
+            self.tally = scores(s, B, timed=B == 1)
             self.recorder = Recorder(s.steps, timed=B == 1)
         self.pending: Pending | None = self._decide()
 

@@ -76,9 +76,14 @@ def run_job(job: Job) -> dict[str, Any]:
 UNDEFINED_ALLOWED = (
     "rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms", "decision_wall_ms",
     "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best", "nees_median",
-    "nees_inside", "nees_best_median", "nees_best_inside",
+    "nees_inside", "nees_best_median", "nees_best_inside", "gospa_localisation",
+    "gospa_missed", "gospa_false", "switches", "fragmentations", "false_tracks",
+    "false_tracks_per_target", "time_to_confirm", "never_confirmed", "siap_completeness",
+    "siap_ambiguity", "siap_spuriousness",
 )  # fmt: skip
-"""Metrics that may be NaN: nothing to average (every UAV failed), or not measured."""
+"""Metrics that may be NaN: nothing to average (every UAV failed), not measured, or not
+defined for the run (the track metrics with known association, the per-target estimate
+metrics with tracks)."""
 
 
 def check_finite(metrics: dict[str, np.ndarray], what: str) -> None:

@@ -32,7 +32,7 @@ from .. import __version__
 from .._files import write_npz
 from ..config import Scenario, ScenarioError
 from ..errors import UsageError
-from ..simulation import RECORDED, Result, Trace
+from ..simulation import RECORDED, TRACKED, Result, Trace
 
 FORMAT = 2
 """The trace format this uavtrack writes and reads. It changes only when an array is
@@ -114,7 +114,7 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
     except (json.JSONDecodeError, ScenarioError) as exc:
         raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
     if later:  # arrays of a later format, not counted when the file was written
-        sizes = {"Nu": scenario.n_uavs, "Nt": scenario.n_targets}
+        sizes = _sizes(scenario)
         steps = arrays["targets"].shape[0] if arrays["targets"].ndim else 0
         for f in later:
             arrays[f.name] = np.zeros(_shape(f, sizes, steps), f.metadata["dtype"])
@@ -127,7 +127,7 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
             TraceVersionWarning,
             stacklevel=2,
         )
-    trace = Trace(**{n: arrays[n] for n in names})
+    trace = Trace(**{n: arrays[n] for n in names}, **{n: arrays[n] for n in TRACKED if n in arrays})
     seed = int(arrays["seed"]) if "seed" in arrays else None
     return TraceFile(
         trace=trace, scenario=scenario, method=str(arrays["method"]), seed=seed, version=version
@@ -159,7 +159,7 @@ def _check_format(path: Path, entry: np.ndarray | None, version: str) -> int:
 def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario) -> None:
     """Every array has the shape `Cycle` declares for the scenario's team over the steps
     `targets` holds, and numbers in it: a file whose arrays disagree is refused."""
-    sizes = {"Nu": scenario.n_uavs, "Nt": scenario.n_targets}
+    sizes = _sizes(scenario)
     targets = arrays["targets"]
     steps = targets.shape[0] if targets.ndim else 0
     expected: dict[str, tuple[int, ...]] = {"targets": (steps, scenario.n_targets, 4)}
@@ -177,9 +177,20 @@ def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario)
             raise UsageError(f"{path}: {name} holds {array.dtype}, not numbers")
 
 
+def _sizes(scenario: Scenario) -> dict[str, int]:
+    """The sizes a trace's shapes name: Nu UAVs, Nt targets, K track slots (the targets
+    with known association, `Scenario.track_slots` with gnn or jpda)."""
+    known = scenario.tracker.association == "known"
+    return {
+        "Nu": scenario.n_uavs,
+        "Nt": scenario.n_targets,
+        "K": scenario.n_targets if known else scenario.track_slots,
+    }
+
+
 def _shape(f, sizes: dict[str, int], steps: int) -> tuple[int, ...]:
     """The shape `Cycle` declares for field `f` over `steps` steps, its team's sizes
-    (``Nu``, ``Nt``) from `sizes`."""
+    (``Nu``, ``Nt``, ``K``) from `sizes`."""
     dims = [d.strip() for d in f.metadata["shape"].strip("()").split(",") if d.strip()]
     return (steps, *(sizes[d] if d in sizes else int(d) for d in dims))
 

@@ -11,9 +11,11 @@ from typing import ClassVar
 
 import numpy as np
 
-from .. import fusion, network
+from .. import estimation, fusion, network
+from ..config import Scenario
 from ..radio import Radio, counted
 from ..robust import gate
+from ..tracks import association, manage, team
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -29,7 +31,8 @@ class Setting:
     loses nor delays, so that every UAV knows the neighbourhoods its bids serve).
     rule: the fusion rule of each consensus round (``fusion.rule``). gate: the
     measurement gate's threshold on a squared Mahalanobis distance (``robust.gate``,
-    `gate.threshold`; None: off).
+    `gate.threshold`; None: off). scenario: the run's (the trackers of unknown
+    association read their settings there).
     """
 
     faulty: bool
@@ -42,6 +45,7 @@ class Setting:
     prune: bool = False
     rule: str = "max_consensus"
     gate: float | None = None
+    scenario: Scenario | None = None
 
 
 @dataclass(frozen=True)
@@ -106,6 +110,46 @@ class Assigned:
     held: Held | None = None
 
 
+@dataclass(frozen=True, kw_only=True)
+class Local:
+    """What a method's track fusion starts from, with unknown association
+    (``tracker.association`` gnn or jpda): each UAV's tracks predicted to this scan
+    (`manage.Book` book, mean (B, N, K, 4), cov (B, N, K, 4, 4)), its scan (z (B, N, Z,
+    2), R (B, N, Z, 2, 2), valid (B, N, Z)), the run's filter (`estimation.Tracker`) and
+    with an IMM each slot's modes, and a central node's tracks predicted to this scan
+    (`manage.Slots` with N = 1; None for a method without one)."""
+
+    book: manage.Book
+    mean: np.ndarray
+    cov: np.ndarray
+    z: np.ndarray
+    R: np.ndarray
+    valid: np.ndarray
+    tracker: estimation.Tracker
+    modes: estimation.Modes | None = None
+    central: manage.Slots | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class FusedTracks:
+    """Each UAV's tracks after its scan and the fusion (book, mean, cov as in `Local`),
+    changed (B, N, K) int8 (`team.agree`'s codes: 0 the UAV's own filter, 1 its own track
+    with a fused estimate, 2 a track new to it, 3 emptied), the rounds each UAV ran
+    (B, N), messages sent and delivered (B,), each UAV's own tracks after its scan,
+    before the fusion (own; with an IMM its modes, which the fused estimates restart),
+    and the central node's tracks after the scans (None without one)."""
+
+    book: manage.Book
+    mean: np.ndarray
+    cov: np.ndarray
+    changed: np.ndarray
+    rounds: np.ndarray
+    sent: np.ndarray
+    delivered: np.ndarray
+    own: manage.Slots | None = None
+    central: manage.Slots | None = None
+
+
 class Method:
     """Interface of a decision method; subclasses override `fuse` and `assign`."""
 
@@ -116,6 +160,11 @@ class Method:
     def fuse(self, inputs: Inputs) -> Fused:
         """Consensus over the radio: the D_i protocol, then max-consensus rounds."""
         return consensus(inputs)
+
+    def fuse_tracks(self, inputs: Inputs, local: Local) -> FusedTracks:
+        """With unknown association: each UAV's own tracker runs on its scan
+        (`manage.scan`), then the team agrees on tracks over the radio (`team_fusion`)."""
+        return team_fusion(inputs, local)
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         """Targets from bids (B, N, M)."""
@@ -208,3 +257,43 @@ def gated(inputs: Inputs) -> Admit | None:
         return gate.admitted(links, estimates(own), estimates(offered), measured, threshold)
 
     return admit
+
+
+def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
+    """Each UAV's scan on its own tracks (`manage.scan`), then the D_i protocol and as
+    many rounds of track-to-track association and fusion (`team.agree`): the paper's
+    fusion (Algorithm 2 lines 15-25) over tracks that carry team labels."""
+    s, radio, alive = inputs.setting, inputs.radio, inputs.alive
+    scenario = s.scenario
+    if scenario is None:
+        raise ValueError("the track fusion needs the scenario in the setting")
+    scanned = manage.scan(
+        local.book, local.mean, local.cov, local.z, local.R, local.valid,
+        inputs.believed, alive, scenario, local.modes, local.tracker,
+    )  # fmt: skip
+    depth = fusion.learn_depth(radio, alive, s.budget)
+    rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
+    if s.budget is not None:
+        rounds = np.minimum(rounds, s.budget)
+    book = scanned.book
+    own = team.TrackSet(mean=scanned.mean, cov=scanned.cov, label=book.label, status=book.status)
+    threshold = association.threshold(scenario.tracker.gate_probability, 4)
+    agreed, changed, sent, delivered = team.agree(radio, own, rounds, threshold, s.rule)
+    book = manage.after_fusion(book, agreed.label, agreed.status, changed, scenario)
+    sent, delivered = counted(
+        s.delay,
+        lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
+        ((depth.sent, depth.delivered), (sent, delivered)),
+    )
+    return FusedTracks(
+        book=book,
+        mean=agreed.mean,
+        cov=agreed.cov,
+        changed=changed,
+        rounds=rounds,
+        sent=sent,
+        delivered=delivered,
+        own=manage.Slots(
+            book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
+        ),
+    )

@@ -21,7 +21,8 @@ import numpy as np
 from .. import assignment, fusion, timing
 from ..radio import counted
 from ..robust import gate
-from .base import Assigned, Fused, Inputs, Method, Setting
+from ..tracks import manage
+from .base import Assigned, Fused, FusedTracks, Inputs, Local, Method, Setting
 
 
 class Centralized(Method):
@@ -99,6 +100,62 @@ class Centralized(Method):
             delivered=delivered,
             seconds=seconds,
             target=target,
+        )
+
+    def fuse_tracks(self, inputs: Inputs, local: Local) -> FusedTracks:
+        """One multi-sensor tracker at the central node: each UAV uploads its scan, the
+        node runs the association rule of the run on the scans one UAV after another
+        (`manage.scan` on its own tracks, the UAV's disk as the sensor's), and every UAV
+        downloads the node's tracks. A lost upload leaves that scan out; a lost download
+        leaves the UAV with the tracks it downloaded before, predicted."""
+        s, radio, alive = inputs.setting, inputs.radio, inputs.alive
+        scenario = s.scenario
+        if scenario is None or local.central is None:
+            raise ValueError("the central tracker needs the scenario and its own tracks")
+        B, n = alive.shape
+        heard, take = alive, alive
+        sent = delivered = np.full(B, 2 * n if n > 1 else 0, dtype=np.int64)
+        if s.faulty:
+            radio.send("upload", {"alive": alive})
+            upload, up_ok = radio.receive_central("upload")
+            heard = up_ok & upload["alive"] if upload is not None else np.zeros_like(alive)
+        node = local.central
+        for i in range(n):
+            one = slice(i, i + 1)
+            scanned = manage.scan(
+                node.book, node.mean, node.cov, local.z[:, one], local.R[:, one],
+                local.valid[:, one], inputs.believed[:, one], heard[:, one], scenario,
+                node.modes, local.tracker,
+            )  # fmt: skip
+            node = manage.Slots(
+                book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
+            )
+        book, mean, cov = node.book, node.mean, node.cov
+        if s.faulty:
+            radio.send("download", {"alive": alive})
+            download, down_ok = radio.receive_central("download")
+            take = down_ok & alive if download is not None else np.zeros_like(alive)
+            arrived = [
+                (alive.sum(axis=1), heard.sum(axis=1)),
+                (alive.sum(axis=1), take.sum(axis=1)),
+            ]
+            sent, delivered = counted(
+                s.delay,
+                lambda: (radio.transmitted_central(p) for p in ("upload", "download")),
+                arrived,
+            )
+        every = manage.broadcast(book, n)
+        out = manage.where(take, every, local.book)
+        pick = take[..., None]
+        return FusedTracks(
+            book=out,
+            mean=np.where(pick[..., None], mean, local.mean),
+            cov=np.where(pick[..., None, None], cov, local.cov),
+            changed=np.where(pick & out.present, 1, 0).astype(np.int8),
+            rounds=np.where(alive, 1 if n > 1 else 0, 0),
+            sent=sent,
+            delivered=delivered,
+            central=node,
         )
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:

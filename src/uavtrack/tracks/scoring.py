@@ -37,26 +37,36 @@ confirmed from its confirmation to its deletion).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..estimation import nees
-from ..metrics import GOSPA, NeesSpread, cut_costs, matching, mean_std
+
+if TYPE_CHECKING:
+    from ..simulation import Cycle
+
+from ..metrics import GOSPA, METRICS, PER_UAV_SETS, NeesSpread, Tally, cut_costs, matching, mean_std
 
 TRACK_METRICS: dict[str, tuple[str, str]] = {
     "gospa": ("m", "GOSPA distance (alpha = 2) of the row's confirmed tracks, mean per step"),
-    "gospa_localisation": ("m^p", "its localisation part (p-th power), mean per step"),
-    "gospa_missed": ("m^p", "its missed part, c^p / 2 per unmatched truth, mean per step"),
-    "gospa_false": ("m^p", "its false part, c^p / 2 per unmatched track, mean per step"),
-    "switches": ("", "track switches per target and 100 steps (CLEAR MOT mismatches)"),
-    "fragmentations": ("", "fragmentations per target and 100 steps, losses while in view"),
-    "false_tracks": ("", "confirmed tracks matched to no truth, per step"),
-    "false_tracks_per_target": ("", "the same per present target and step"),
-    "time_to_confirm": ("steps", "steps from a new target's first sight to its first match"),
-    "never_confirmed": ("", "fraction of the timed targets not matched by the end"),
-    "siap_completeness": ("", "fraction of the truths with a SIAP-associated track"),
-    "siap_ambiguity": ("", "SIAP-associated tracks per truth that has one (1 is ideal)"),
-    "siap_spuriousness": ("", "fraction of the confirmed tracks associated with no truth"),
+    **{
+        name: METRICS[name]
+        for name in (
+            "gospa_localisation",
+            "gospa_missed",
+            "gospa_false",
+            "switches",
+            "fragmentations",
+            "false_tracks",
+            "false_tracks_per_target",
+            "time_to_confirm",
+            "never_confirmed",
+            "siap_completeness",
+            "siap_ambiguity",
+            "siap_spuriousness",
+        )
+    },  # fmt: skip
     "nees": ("", "mean NEES of the confirmed tracks matched to a truth (4 when consistent)"),
     "nees_median": ("", "its median, as metrics.NeesSpread reads it (3.36 when consistent)"),
     "nees_inside": ("", "its fraction inside the 95 % chi-square(4) interval (0.95)"),
@@ -384,3 +394,62 @@ class TrackScore:
         out["nees_median"] = self.spread.median()
         out["nees_inside"] = self.spread.inside_fraction()
         return out
+
+
+TRACKS_ONLY = tuple(
+    name for name in TRACK_METRICS if name not in ("gospa", "nees", "nees_median", "nees_inside")
+)
+"""The metrics a run of known association does not have (NaN there)."""
+
+REPLACED = ("rmse", "rmse_best", "nees_best", "nees_best_median", "nees_best_inside", "ospa",
+            "ospa_best", "gospa_best", "gospa_missed_best")  # fmt: skip
+"""The per-target estimate metrics a run of tracks does not have (NaN there): a track
+set has no estimate per target index."""
+
+
+@dataclass(kw_only=True)
+class Scores:
+    """The metrics of a run (`metrics.METRICS`): its `metrics.Tally`, and with tracks of
+    unknown association their `TrackScore` (created at the first cycle that carries
+    labels), whose GOSPA and NEES stand for the tally's per-target ones."""
+
+    tally: Tally
+    tracks: TrackScore | None = None
+
+    def add(self, cycle: Cycle, truth: np.ndarray) -> None:
+        """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
+        self.tally.add(cycle, truth)
+        if cycle.label is None or cycle.status is None:
+            return
+        t = self.tally
+        B, Nu, K = cycle.label.shape
+        if t.n_targets > PER_UAV_SETS:  # as the per-UAV sets of the tally: too costly
+            return
+        if self.tracks is None:
+            self.tracks = TrackScore(
+                batch=B, rows=Nu, n_targets=t.n_targets, cutoff=t.cutoff, order=t.order
+            )
+        P = B * Nu
+        states = np.repeat(truth, Nu, axis=0)  # (P, Nt, 4): each row its trial's targets
+        alive = cycle.alive.reshape(P)
+        mean = np.where(alive[:, None, None], cycle.mean.reshape(P, K, 4), 0.0)
+        cov = np.where(alive[:, None, None, None], cycle.cov.reshape(P, K, 4, 4), np.eye(4))
+        self.tracks.add(
+            truth=states[..., :2],
+            tracks=mean[..., :2],
+            labels=cycle.label.reshape(P, K),
+            confirmed=cycle.status.reshape(P, K) == 2,
+            in_view=cycle.observed.reshape(P, t.n_targets),
+            alive=alive,
+            mean=mean,
+            cov=cov,
+            states=states,
+        )
+
+    def summary(self) -> dict[str, np.ndarray]:
+        """Per-trial metrics of `METRICS`, each an array over the batch."""
+        out = self.tally.summary()
+        nothing = np.full(self.tally.batch, np.nan)
+        if self.tracks is None:
+            return out | {name: nothing for name in TRACKS_ONLY}
+        return out | {name: nothing for name in REPLACED} | self.tracks.summary()

@@ -297,7 +297,7 @@ def _gated(
     return where[inside], d2[inside]
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class _Edges:
     """Gated pairs: own slot - offer (own, offer, d2) and offer - offer of different
     senders at one receiver (a, b, d2_ab, a < b); offers index the flat offers."""
@@ -311,7 +311,14 @@ class _Edges:
 
     def without(self, drop: np.ndarray) -> _Edges:
         keep = ~drop
-        return _Edges(self.own[keep], self.offer[keep], self.d2[keep], self.a, self.b, self.d2_ab)
+        return _Edges(
+            own=self.own[keep],
+            offer=self.offer[keep],
+            d2=self.d2[keep],
+            a=self.a,
+            b=self.b,
+            d2_ab=self.d2_ab,
+        )
 
 
 def _gate_edges(
@@ -342,7 +349,7 @@ def _gate_edges(
     keep = (a < b) & (sender[U[a]] != sender[U[b]])
     a, b = U[a[keep]], U[b[keep]]
     pair, d2_ab = _gated(o_mean[a], o_cov[a], o_mean[b], o_cov[b], threshold)
-    return _Edges(s[hit], u[hit], d2, a[pair], b[pair], d2_ab)
+    return _Edges(own=s[hit], offer=u[hit], d2=d2, a=a[pair], b=b[pair], d2_ab=d2_ab)
 
 
 def _associate(

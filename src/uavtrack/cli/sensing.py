@@ -1,0 +1,101 @@
+"""`uavtrack sensing`: missed detections, clutter and unknown association, for the three
+methods, paired against known association."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
+from .experiments import (
+    AddressOpt,
+    EngineName,
+    EngineOpt,
+    ProgressOpt,
+    SeedOpt,
+    StepsOpt,
+    WorkersOpt,
+    refuse_set,
+    run_experiment,
+)
+
+
+@app.command()
+def sensing(
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            metavar="DIR",
+            help="results folder [results/sensing; results/sensing-quick with --quick]",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="trials per cell and method [50]")
+    ] = None,
+    steps: StepsOpt = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 60 steps")
+    ] = False,
+    workers: WorkersOpt = None,
+    engine: EngineOpt = EngineName.local,
+    address: AddressOpt = None,
+    seed: SeedOpt = 0,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    team: TeamOpt = None,
+    progress: ProgressOpt = None,
+) -> None:
+    """The three methods at detection probability 1, 0.9, 0.7 x clutter 0, 2, 10 per scan
+    x association gnn, jpda, each paired with known association on the same trials:
+    observation rate, GOSPA, false tracks, switches, SIAP, NEES; into a folder."""
+    from ..experiments import sensing as experiment
+
+    scenario = load_scenario(config, set_, team)
+    refuse_set(
+        scenario,
+        ("sensor.detection_probability", "sensor.clutter_rate", "tracker.association"),
+        "sensing",
+        "the detection probability, the clutter rate and the association",
+    )
+    summary, out, info = run_experiment(
+        "sensing",
+        experiment,
+        scenario,
+        dict(locals()),  # the command's options, by name
+        lambda jobs: ["sensing.png"],
+        lambda summary, out: experiment.figure(summary, out / "sensing.png"),
+        experiment.report,
+    )
+    _print(summary, out, info)
+
+
+def _print(summary: dict, out: Path, info: dict) -> None:
+    from rich.table import Table
+
+    table = Table(title="sensing (mean over trials)")
+    for col in ("method", "P_D", "clutter", "assoc.", "rate", "− known", "GOSPA", "false/tgt"):
+        table.add_column(col, justify="left" if col in ("method", "assoc.") else "right")
+    for method, rows in summary["methods"].items():
+        for k, e in enumerate(rows.values()):
+            against = e.get("against_known")
+            false = e["false_tracks_per_target"]["mean"]
+            table.add_row(
+                method if k == 0 else "",
+                f"{e['pd']:g}",
+                f"{e['clutter']:g}",
+                e["association"],
+                f"{e['observation_rate']['mean']:.3f}",
+                f"{against['observation_rate']['mean']:+.3f}" if against else "",
+                f"{e['gospa']['mean']:.2f}",
+                "" if false is None or false != false else f"{false:.3f}",
+            )
+    console().print(table)
+    met = sum(g["met"] for g in summary["goals"])
+    typer.echo(
+        f"goals met: {met} of {len(summary['goals'])} (report.md); wrote {out}/summary.json, "
+        f"report.md, sensing.png ({info['jobs_run']} jobs run, {info['jobs_skipped']} reused, "
+        f"{info['seconds']:.1f} s)"
+    )
