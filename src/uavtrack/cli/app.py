@@ -236,6 +236,32 @@ RUN_ROWS = (
     ("decision_time_ms", "decision time per UAV and cycle [ms of CPU time]", "{:.3f}"),
     ("decision_wall_ms", "the same in wall time [ms]", "{:.3f}"),
 )
+TRACK_ROWS = (
+    ("gospa", "GOSPA, each UAV's confirmed tracks [m]", "{:.2f}"),
+    ("gospa_localisation", "  its localisation part [m^p]", "{:.2f}"),
+    ("gospa_missed", "  its missed part [m^p]", "{:.2f}"),
+    ("gospa_false", "  its false part [m^p]", "{:.2f}"),
+    ("false_tracks_per_target", "false confirmed tracks per target and step", "{:.3f}"),
+    ("switches", "track switches per target and 100 steps", "{:.2f}"),
+    ("fragmentations", "fragmentations per target and 100 steps", "{:.2f}"),
+    ("time_to_confirm", "steps to confirm a target found anew", "{:.1f}"),
+    ("siap_completeness", "SIAP completeness", "{:.3f}"),
+    ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),
+    ("siap_spuriousness", "SIAP spuriousness", "{:.3f}"),
+    ("nees", "NEES, confirmed tracks matched to a target (4 if consistent)", "{:.2f}"),
+    ("nees_median", "  its median (3.36 if consistent)", "{:.2f}"),
+    ("nees_inside", "  inside its 95% interval (0.95 if consistent)", "{:.3f}"),
+)
+"""The rows of `uavtrack run` with tracker.association gnn or jpda, in place of the
+per-target estimate rows, which a track set does not have."""
+
+TRACK_CAPTION = (
+    "Tracks: each UAV's confirmed tracks against the true targets, one-to-one by the GOSPA "
+    "assignment (cut-off evaluation.ospa_cutoff, order evaluation.ospa_order); a track "
+    "matched to no target is false; a switch is a target's matched label changing; SIAP "
+    "associates each track with its nearest target within the cut-off."
+)
+
 FAULT_ROWS = (
     ("delivered", "messages delivered per step", "{:.2f}"),
     ("conflicts", "conflicts per step (doubled targets while one is free)", "{:.3f}"),
@@ -436,7 +462,12 @@ def show(
     from ..methods import get
 
     central = get(summary["method"]).central
-    for key, label, fmt in RUN_ROWS:
+    rows_shown = RUN_ROWS
+    if scenario.tracker.association != "known":
+        keep = ("rounds", "messages", "decision_time_ms", "decision_wall_ms")
+        rows_shown = TRACK_ROWS + tuple(r for r in RUN_ROWS if r[0] in keep)
+        table.caption = TRACK_CAPTION
+    for key, label, fmt in rows_shown:
         if key == "decision_time_ms" and central:
             label = "decision time per cycle, the central node's for the whole team [ms of CPU]"
         table.add_row(escape(label), number(fmt, summary[key]))

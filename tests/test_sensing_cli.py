@@ -1,0 +1,87 @@
+"""`uavtrack sensing` and `uavtrack run` with tracks, from the command line."""
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from uavtrack import cli
+from uavtrack.experiments import sensing
+
+
+def test_run_with_tracks_shows_the_track_scores(capsys):
+    code = cli.main(
+        ["run", "--set", "tracker.association=gnn", "--set", "sensor.clutter_rate=1",
+         "--set", "steps=30", "--json"]
+    )  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    summary = json.loads(out)
+    assert summary["gospa"] >= 0 and 0 <= summary["siap_completeness"] <= 1
+    assert summary["rmse"] is None or np.isnan(summary["rmse"])  # no estimate per target
+    code = cli.main(["run", "--set", "tracker.association=jpda", "--set", "steps=10"])
+    out, _ = capsys.readouterr()
+    assert code == 0 and "false confirmed tracks per target and step" in out
+
+
+@pytest.mark.parametrize(
+    ("args", "named"),
+    [
+        (["--set", "tracker.association=jdpa"], "tracker.association"),
+        (["--set", "tracker.confirm=[3,2]", "--set", "tracker.association=gnn"], "confirm"),
+        (["--set", "tracker.max_tracks=9"], "tracker.max_tracks needs"),
+        (["--set", "tracker.association=gnn", "--set", "faults.delay=1"], "faults.delay"),
+        (["--set", "sensor.clutter_rate=-1"], "sensor.clutter_rate"),
+    ],
+)
+def test_bad_track_settings_are_refused_in_one_line(args, named, capsys):
+    code = cli.main(["run", *args])
+    _, err = capsys.readouterr()
+    assert code == 2
+    assert named in err and len(err.strip().splitlines()) == 1 and "Traceback" not in err
+
+
+def test_sensing_refuses_a_base_that_sets_what_it_sweeps(tmp_path, capsys):
+    out = tmp_path / "s"
+    code = cli.main(["sensing", "--quick", "--set", "sensor.clutter_rate=1", "--out", str(out)])
+    _, err = capsys.readouterr()
+    assert code == 2 and "sensing sets" in err
+    assert not out.exists()
+
+
+@pytest.mark.integration
+def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, capsys):
+    from PIL import Image
+
+    out = tmp_path / "s"
+    args = ["sensing", "--quick", "--steps", "20", "--out", str(out), "--no-progress"]
+    code = cli.main(args)
+    _, err = capsys.readouterr()
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["methods"]) == list(sensing.METHODS)
+    rows = pd.DataFrame(
+        [
+            {"method": m, **{k: v for k, v in e.items() if isinstance(v, float | int | str)}}
+            for m, cells in summary["methods"].items()
+            for e in cells.values()
+        ]
+    )
+    assert len(rows) == 3 * (3 + 3 * 3 * 2)  # known per P_D, and every tracked cell
+    for method, cells in summary["methods"].items():
+        for key, e in cells.items():
+            if e["association"] == "known":
+                continue
+            known = cells[f"pd={e['pd']:g} clutter=0 known"]
+            diff = e["against_known"]["observation_rate"]["mean"]  # paired on the trials
+            rate, base = e["observation_rate"]["mean"], known["observation_rate"]["mean"]
+            assert diff == pytest.approx(rate - base, abs=1e-12), (method, key)
+    assert len(summary["goals"]) == 9 and all(isinstance(g["met"], bool) for g in summary["goals"])
+    report = (out / "report.md").read_text()
+    assert "## Goals" in report and "| 0.9 | 2 | jpda |" in report
+    with Image.open(out / "sensing.png") as im:
+        assert im.size[0] > 1000
+    code = cli.main(args)  # resumes: every job is done
+    out_text, _ = capsys.readouterr()
+    assert code == 0 and "0 jobs run" in out_text
