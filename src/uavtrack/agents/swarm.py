@@ -128,6 +128,7 @@ def run_swarm(
     also publishes its pose, transform and estimates as ROS 2 topics, the world the
     simulated clock on /clock (`io.ros2`, zenoh only).
     """
+    scenario.refuse_tracks("the agent form (uavtrack swarm)")
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
     get(method)  # refuses an unknown method now

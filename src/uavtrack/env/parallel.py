@@ -59,6 +59,7 @@ def scenario_of(
         overrides = {**overrides, "steps": max_cycles}
     if overrides:
         scenario = scenario.with_overrides(flatten(overrides), origin=origin)
+    scenario.refuse_tracks("the environment")
     return scenario
 
 

@@ -100,6 +100,7 @@ def write_bag(
 ) -> dict[str, int]:
     """Write `trace` (of `scenario`) as a ROS 2 bag folder at `path`, which must not
     exist; it appears only once complete. Returns the messages written per topic."""
+    scenario.refuse_tracks("a ROS 2 bag")
     path = check_new_folder(path, "--bag", "the bag")
     try:
         with new_folder(path) as folder:  # rosbags makes it: path.name.mcap inside

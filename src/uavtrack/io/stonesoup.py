@@ -69,6 +69,9 @@ def to_stonesoup(
             raise UsageError("dt goes with a bare Trace; this source has its own")
         saved = trace_file.load(source)
         trace, dt = saved.trace, saved.dt
+        saved.scenario.refuse_tracks("to_stonesoup")
+    if trace.label is not None:  # a bare Trace of tracks
+        raise UsageError("to_stonesoup does not take a trace of tracks (gnn or jpda) yet")
     T, Nt = trace.targets.shape[:2]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
     truths = set()

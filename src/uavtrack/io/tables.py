@@ -85,6 +85,7 @@ def to_xarray(
     uavtrack, the version that ran the trial."""
     saved = trace_file.load(source, scenario, method, seed)
     trace, scenario = saved.trace, saved.scenario
+    scenario.refuse_tracks("the tables")
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     docs = _docs()
@@ -166,6 +167,9 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     else:
         saved = trace_file.load(source)
         trace, dt = saved.trace, saved.dt
+        saved.scenario.refuse_tracks("the tables")
+    if trace.label is not None:  # a bare Trace of tracks
+        raise UsageError("the tables do not take a trace of tracks (gnn or jpda) yet")
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     time = np.arange(T) * dt

@@ -189,6 +189,7 @@ def show(trace, scenario, name: str = "uavtrack") -> int:
 
 def log(rec: rr.RecordingStream, trace, scenario) -> None:
     """Log every entity of `ENTITIES` for a trace into the recording stream `rec`."""
+    scenario.refuse_tracks("the Rerun viewer")
     T, nu, nt = trace.observed.shape
     steps = rr.TimeColumn("step", sequence=np.arange(T))
     alive = trace.alive
