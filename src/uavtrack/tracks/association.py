@@ -28,16 +28,24 @@ track's hypotheses over all events, and each track's posterior is the moment-mat
 Gaussian of its hypotheses' Kalman updates weighted by beta (`pda_update`).
 """
 
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown, and scipy's compiled solvers carry no types.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false, reportUnknownLambdaType=false
+
 from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
-from scipy.stats import chi2
+
+# scipy ships no type stubs; pyright reads its Python source
+from scipy.optimize import linear_sum_assignment  # pyright: ignore[reportMissingTypeStubs]
+from scipy.sparse import coo_matrix  # pyright: ignore[reportMissingTypeStubs]
+from scipy.sparse.csgraph import connected_components  # pyright: ignore[reportMissingTypeStubs]
+from scipy.stats import chi2  # pyright: ignore[reportMissingTypeStubs]
 
 from ..estimation import filter_step, update
 
@@ -291,7 +299,7 @@ def _log_weights(
     """(link (P, K, Z) bool, log w_k0 (P, K), log w_kj (P, K, Z), -inf where not linked):
     a link is a gated pair whose track can be detected (P_D > 0)."""
     _check_gate(gate_probability)
-    P, K, Z = gated.shape
+    P, K, _ = gated.shape
     pd = np.broadcast_to(np.asarray(pd, dtype=float), (P, K))
     density = np.broadcast_to(np.asarray(density, dtype=float), (P,))
     if not np.all((pd >= 0) & (pd <= 1)):
@@ -319,7 +327,7 @@ def _clusters(link: np.ndarray, joint: np.ndarray) -> list[tuple[np.ndarray, np.
     the row, each in increasing order."""
     if not joint.any():
         return []
-    P, K, Z = link.shape
+    _, K, Z = link.shape
     p, k, j = np.nonzero(link & joint[:, :, None])
     tracks, t_index = np.unique(p * K + k, return_inverse=True)
     meas, m_index = np.unique(p * Z + j, return_inverse=True)

@@ -53,7 +53,7 @@ def of(label: np.ndarray, confirmed: np.ndarray) -> Columns:
 def bids(slot_bids: np.ndarray, cols: Columns) -> np.ndarray:
     """Each UAV's bids by column, (B, N, L): its bid for the slot holding that label, 0
     for a label it does not hold confirmed. slot_bids (B, N, K)."""
-    B, N, K = slot_bids.shape
+    B, N, _ = slot_bids.shape
     out = np.zeros((B, N, cols.width))
     b, i, s = np.nonzero(cols.column >= 0)
     out[b, i, cols.column[b, i, s]] = slot_bids[b, i, s]
@@ -65,7 +65,6 @@ def slot_of(target: np.ndarray, cols: Columns, slot_bids: np.ndarray) -> np.ndar
     (-1: none). A UAV assigned a label it does not hold confirmed (possible when a
     neighbourhood has more UAVs than labels) follows its own best confirmed track
     instead; one without any returns -1 (it flies straight, searching)."""
-    B, N, K = cols.column.shape
     match = (cols.column == target[..., None]) & (target[..., None] >= 0)
     has = match.any(axis=-1)
     own = np.where(cols.column >= 0, slot_bids, -np.inf)

@@ -391,7 +391,7 @@ def _births(
     row, which = np.nonzero(take)
     rank = meas_rank[row, which]
     # the slot of each birth: the rank-th empty slot of its row
-    erow, eslot = np.nonzero(empty & (slot_rank < n_born[:, None]))
+    _, eslot = np.nonzero(empty & (slot_rank < n_born[:, None]))
     slot = np.empty_like(row)
     order = np.lexsort((rank, row))
     slot[order] = eslot  # both sorted by (row, rank): births and the slots they fill

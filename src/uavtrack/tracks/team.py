@@ -25,9 +25,11 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.optimize import linear_sum_assignment
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import connected_components
+
+# scipy ships no type stubs; pyright reads its Python source
+from scipy.optimize import linear_sum_assignment  # pyright: ignore[reportMissingTypeStubs]
+from scipy.sparse import coo_matrix  # pyright: ignore[reportMissingTypeStubs]
+from scipy.sparse.csgraph import connected_components  # pyright: ignore[reportMissingTypeStubs]
 
 from .. import fusion, network
 from ..estimation import confidence
