@@ -65,3 +65,17 @@ def test_a_bad_out_is_refused_before_the_timings(tmp_path):
     assert done.returncode == 2 and "Traceback" not in done.stderr
     assert "--out: taken is a directory" in done.stderr.strip().splitlines()[-1]
     assert done.stdout == ""  # nothing was timed
+
+
+def test_sensing_benchmark_prints_the_ratio_and_writes_only_where_asked(tmp_path):
+    args = ("--steps", "5", "--team-steps", "1", "--repeats", "1")
+    done = run("sensing.py", tmp_path, *args)
+    assert done.returncode == 0, done.stderr
+    assert "ratio" in done.stdout and files_in(tmp_path) == ["benchmarks/sensing.py"]
+    done = run("sensing.py", tmp_path / "b", *args, "--out", "mine.json")
+    assert done.returncode == 0, done.stderr
+    figures = json.loads((tmp_path / "b" / "mine.json").read_text())
+    for row in figures["results"]:
+        assert row["ratio"] == pytest.approx(row["jpda_cpu_s"] / row["known_cpu_s"])
+    bad = run("sensing.py", tmp_path / "c", "--steps", "0")
+    assert bad.returncode == 2 and "at least 1" in bad.stderr
