@@ -22,6 +22,7 @@ def _one(status, hits=0, scans=0, misses=0, label=7):
         scans=a(scans),
         misses=a(misses),
         serial=np.zeros((1, 1), dtype=np.int64),
+        stamp=a(0),
     )
 
 
@@ -104,6 +105,7 @@ def test_births_fill_empty_slots_with_labels_new_to_the_team():
         scans=np.zeros((B, N, K), np.int64),
         misses=np.zeros((B, N, K), np.int64),
         serial=np.array([[0, 0, 5]]),
+        stamp=np.zeros((B, N, K), np.int64),
     )
     mean = np.zeros((B, N, K, 4))
     cov = np.broadcast_to(np.eye(4), (B, N, K, 4, 4)).copy()

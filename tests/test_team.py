@@ -498,3 +498,66 @@ def test_with_every_message_lost_every_uav_keeps_its_tracks(form):
     out, changed, sent, delivered = team.agree(radio, tracks, np.full((B, n), 2), GATE)
     assert np.array_equal(out.label, tracks.label) and (changed == team.KEPT).all()
     assert sent.tolist() == [2 * n * (n - 1)] * B and delivered.tolist() == [0] * B
+
+
+# ------------------------------------------------------------------ deletions that travel
+
+
+def with_life(tracks, stamp, tombs):
+    return TrackSet(
+        mean=tracks.mean,
+        cov=tracks.cov,
+        label=tracks.label,
+        status=tracks.status,
+        stamp=np.asarray(stamp, dtype=np.int64),
+        tombs=np.asarray(tombs, dtype=np.int64),
+    )
+
+
+def test_a_tombstone_empties_older_tracks_of_its_label_only():
+    tracks = empty(1, 1, 3)
+    for k, label in enumerate((7, 7, 8)):
+        put(tracks, 0, 0, k, np.zeros(4), np.eye(4), label)
+    tracks = TrackSet(
+        mean=tracks.mean, cov=tracks.cov, label=np.array([[[7, 9, 8]]]), status=tracks.status
+    )
+    tombs = np.array([[[[7, 10], [9, 10], [-1, -1]]]])
+    buried = team.bury(with_life(tracks, [[[5, 10, 3]]], tombs), tombs)
+    # label 7 measured at 5 < 10: gone; label 9 measured at 10, after the deletion: kept
+    assert buried.status[0, 0].tolist() == [0, 2, 2]
+    assert buried.label[0, 0].tolist() == [-1, 9, 8]
+
+
+def test_tombstones_keep_the_latest_step_of_each_label_and_the_latest_labels():
+    tombs = np.full((1, 1, 3, 2), -1, dtype=np.int64)
+    tombs = team.entomb(tombs, np.array([[[4, -1, 5]]]), 10)
+    tombs = team.entomb(tombs, np.array([[[4, 6, -1]]]), 12)
+    got = {tuple(t) for t in tombs[0, 0]}
+    assert got == {(4, 12), (6, 12), (5, 10)}
+    tombs = team.entomb(tombs, np.array([[[9, -1, -1]]]), 13)  # full: the oldest goes
+    assert {tuple(t) for t in tombs[0, 0]} == {(4, 12), (6, 12), (9, 13)}
+
+
+def test_a_deletion_travels_through_the_team_and_is_not_undone_by_its_copies():
+    """On a path 0 - 1 - 2, UAV 0 deleted label 7 at step 10 where it looked; UAVs 1 and
+    2 hold copies measured at step 5: after the rounds nobody holds it, and everyone
+    knows the tombstone. A copy measured after the deletion (step 12) stands."""
+    adjacency = np.array([[[0, 1, 0], [1, 0, 1], [0, 1, 0]]], dtype=bool)
+    for stamp_2, kept in ((5, False), (12, True)):
+        tracks = empty(1, 3, 2)
+        put(tracks, 0, 1, 0, np.zeros(4), np.eye(4), 7)
+        put(tracks, 0, 2, 0, np.zeros(4), np.eye(4), 7)
+        tombs = np.full((1, 3, 2, 2), -1, dtype=np.int64)
+        tombs[0, 0, 0] = (7, 10)
+        start = with_life(tracks, [[[0, 0], [5, 0], [stamp_2, 0]]], tombs)
+        out, changed, _, _ = team.agree(
+            fusion.perfect_radio(adjacency), start, np.full((1, 3), 2), GATE
+        )
+        assert out.tombs is not None and (out.tombs[0, :, :, 0] == 7).any(axis=1).all()
+        holds = (out.label[0] == 7) & (out.status[0] == team.CONFIRMED)
+        if kept:  # the fresher copy spreads back, and the tombstone stays below it
+            assert holds.all(axis=None) or holds[2].any()
+            assert (out.stamp[0][holds] == 12).all()
+        else:
+            assert not holds.any()
+            assert changed[0, 1, 0] == team.EMPTIED and changed[0, 2, 0] == team.EMPTIED

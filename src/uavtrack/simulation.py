@@ -230,6 +230,7 @@ class State:
     book: manage.Book | None = None
     central: manage.Slots | None = None
     labels: np.ndarray | None = None  # (B, L) the labels of the held bids' columns
+    tombs: np.ndarray | None = None  # (B, Nu, T, 2) the tombstones each UAV knows
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -521,6 +522,7 @@ def _decide_tracked(
         tracker=ctx.const.tracker,
         modes=state.modes,
         central=state.central,
+        tombs=state.tombs,
     )
     inputs = Inputs(
         k=k,
@@ -625,6 +627,7 @@ def _finish_tracked(
         book=tracks.book,
         central=central,
         labels=pending.labels,
+        tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
     )
     return new, cycle
 
@@ -852,7 +855,7 @@ def initial_state(
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
     pilot, uavs = flight.start(scenario, seeds, uavs)
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
-    book = central = labels = None
+    book = central = labels = tombs = None
     if scenario.tracker.association != "known":  # the briefed targets as confirmed tracks
         node = manage.briefed(mean[:, :1], cov[:, :1], scenario.track_slots)
         central = manage.Slots(
@@ -860,6 +863,7 @@ def initial_state(
         )
         book, mean, cov = manage.briefed(mean, cov, scenario.track_slots)
         labels = np.broadcast_to(np.arange(Nt), (B, Nt)).copy()
+        tombs = np.full((B, Nu, scenario.track_slots, 2), -1, dtype=np.int64)
     mean, cov, modes = tracker.start(mean, cov)
     state = State(
         k=0,
@@ -875,6 +879,7 @@ def initial_state(
         book=book,
         central=central,
         labels=labels,
+        tombs=tombs,
     )
     return state, trajectory, list(sensor_rngs)
 

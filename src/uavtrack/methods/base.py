@@ -116,8 +116,9 @@ class Local:
     (``tracker.association`` gnn or jpda): each UAV's tracks predicted to this scan
     (`manage.Book` book, mean (B, N, K, 4), cov (B, N, K, 4, 4)), its scan (z (B, N, Z,
     2), R (B, N, Z, 2, 2), valid (B, N, Z)), the run's filter (`estimation.Tracker`) and
-    with an IMM each slot's modes, and a central node's tracks predicted to this scan
-    (`manage.Slots` with N = 1; None for a method without one)."""
+    with an IMM each slot's modes, a central node's tracks predicted to this scan
+    (`manage.Slots` with N = 1; None for a method without one), and the tombstones each
+    UAV knows (`team.TrackSet`; None for a method that keeps none)."""
 
     book: manage.Book
     mean: np.ndarray
@@ -128,6 +129,7 @@ class Local:
     tracker: estimation.Tracker
     modes: estimation.Modes | None = None
     central: manage.Slots | None = None
+    tombs: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -148,6 +150,7 @@ class FusedTracks:
     delivered: np.ndarray
     own: manage.Slots | None = None
     central: manage.Slots | None = None
+    tombs: np.ndarray | None = None
 
 
 class Method:
@@ -269,17 +272,27 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         raise ValueError("the track fusion needs the scenario in the setting")
     scanned = manage.scan(
         local.book, local.mean, local.cov, local.z, local.R, local.valid,
-        inputs.believed, alive, scenario, local.modes, local.tracker,
+        inputs.believed, alive, scenario, local.modes, local.tracker, inputs.k,
     )  # fmt: skip
     depth = fusion.learn_depth(radio, alive, s.budget)
     rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
     if s.budget is not None:
         rounds = np.minimum(rounds, s.budget)
     book = scanned.book
-    own = team.TrackSet(mean=scanned.mean, cov=scanned.cov, label=book.label, status=book.status)
+    tombs = local.tombs
+    if tombs is not None and scanned.dead is not None:
+        tombs = team.entomb(tombs, scanned.dead, inputs.k)
+    own = team.TrackSet(
+        mean=scanned.mean,
+        cov=scanned.cov,
+        label=book.label,
+        status=book.status,
+        stamp=book.stamp,
+        tombs=tombs,
+    )
     threshold = association.threshold(scenario.tracker.gate_probability, 4)
     agreed, changed, sent, delivered = team.agree(radio, own, rounds, threshold, s.rule)
-    book = manage.after_fusion(book, agreed.label, agreed.status, changed, scenario)
+    book = manage.after_fusion(book, agreed.label, agreed.status, changed, scenario, agreed.stamp)
     sent, delivered = counted(
         s.delay,
         lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
@@ -296,4 +309,5 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         own=manage.Slots(
             book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
         ),
+        tombs=agreed.tombs,
     )

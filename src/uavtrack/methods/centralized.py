@@ -125,7 +125,7 @@ class Centralized(Method):
             scanned = manage.scan(
                 node.book, node.mean, node.cov, local.z[:, one], local.R[:, one],
                 local.valid[:, one], inputs.believed[:, one], heard[:, one], scenario,
-                node.modes, local.tracker,
+                node.modes, local.tracker, inputs.k,
             )  # fmt: skip
             node = manage.Slots(
                 book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes

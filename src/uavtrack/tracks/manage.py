@@ -16,7 +16,9 @@ Each scan, in this order:
    inflated (`MANOEUVRE_STD`), so that its gate grows back over a target it lost; a
    tentative track is confirmed when it met a measurement in M of its first N scans in
    view (``tracker.confirm``) and deleted when it no longer can; a confirmed track is
-   deleted after ``tracker.delete_misses`` consecutive scans in view without one; any
+   deleted after ``tracker.delete_misses`` consecutive scans in view without one (its
+   label then goes to the team as a tombstone, `team.bury`: evidence that nothing is
+   there); a track's stamp is the last step a measurement met it; any
    track is deleted when its position std exceeds ``tracker.delete_std`` or it lies
    outside the field (`OUTSIDE`);
 4. initiation: each measurement no track claimed starts a tentative track in an empty
@@ -78,8 +80,9 @@ class Book:
     """The bookkeeping of every UAV's slots (B, N, K): label int64 (-1 empty), status
     int8 (`EMPTY`, `TENTATIVE`, `CONFIRMED`), hits int64 (of a tentative track, the scans
     in view that met a measurement), scans int64 (its scans in view), misses int64
-    (consecutive scans in view without a measurement), and serial (B, N) int64, the
-    births of each UAV so far."""
+    (consecutive scans in view without a measurement), serial (B, N) int64, the births
+    of each UAV so far, and stamp (B, N, K) int64, the last step a measurement met the
+    track anywhere in the team as far as the UAV knows (`team.TrackSet`)."""
 
     label: np.ndarray
     status: np.ndarray
@@ -87,6 +90,7 @@ class Book:
     scans: np.ndarray
     misses: np.ndarray
     serial: np.ndarray
+    stamp: np.ndarray
 
     @property
     def present(self) -> np.ndarray:
@@ -119,6 +123,7 @@ def briefed(mean: np.ndarray, cov: np.ndarray, slots: int) -> tuple[Book, np.nda
         scans=zeros.copy(),
         misses=zeros.copy(),
         serial=np.zeros((B, N), dtype=np.int64),
+        stamp=zeros.copy(),
     )
     return book, out_mean, out_cov
 
@@ -138,8 +143,10 @@ class Slots:
 class Scanned:
     """What a UAV's scan did to its tracks: the updated mean and cov, the book, and per
     slot met (B, N, K) bool (a measurement lay in its gate while in view), in_view
-    (B, N, K) bool, born (B, N, K) bool (a track started this scan), and with an IMM
-    (``tracker.model = "imm"``) each slot's modes."""
+    (B, N, K) bool, born (B, N, K) bool (a track started this scan), with an IMM
+    (``tracker.model = "imm"``) each slot's modes, and dead (B, N, K) the labels of the
+    confirmed tracks deleted after missing in view (-1 elsewhere): evidence that nothing
+    is there, which the team's fusion spreads (`team.bury`)."""
 
     mean: np.ndarray
     cov: np.ndarray
@@ -148,6 +155,7 @@ class Scanned:
     in_view: np.ndarray
     born: np.ndarray
     modes: estimation.Modes | None = None
+    dead: np.ndarray | None = None
 
 
 def scan(
@@ -162,6 +170,7 @@ def scan(
     scenario: Scenario,
     modes: estimation.Modes | None = None,
     tracker: estimation.Tracker | None = None,
+    k: int = 0,
 ) -> Scanned:
     """One scan of every UAV's tracker (steps 1-4 of the module's docstring).
 
@@ -230,7 +239,16 @@ def scan(
     near &= present.reshape(P, K, 1)
     unused &= ~near.any(axis=1)
     met = gated.any(axis=-1).reshape(B, N, K) & in_view
+    before = book
     book = _count(book, met, in_view, new_cov, scenario, new_mean)
+    book = replace(book, stamp=np.where(met, k, book.stamp))
+    lost = (
+        (before.status == CONFIRMED)
+        & (book.status == EMPTY)
+        & (before.misses + 1 >= settings.delete_misses)
+        & in_view
+    )
+    dead = np.where(lost, before.label, -1)
     new_mean = np.where(present[..., None], new_mean, mean)
     new_cov = np.where(present[..., None, None], new_cov, cov)
     coast = in_view & book.confirmed & ~gated.any(axis=-1).reshape(B, N, K)
@@ -239,12 +257,20 @@ def scan(
     book, new_mean, new_cov, born = _births(
         book, new_mean, new_cov, zz, RR, unused, scenario.n_targets, settings.birth_velocity_std
     )
+    book = replace(book, stamp=np.where(born, k, book.stamp))
     if modes is not None:
         if tracker is None:
             raise ValueError("modes given without their tracker")
         modes = restart(modes, born, new_mean, new_cov, tracker)
     return Scanned(
-        mean=new_mean, cov=new_cov, book=book, met=met, in_view=in_view, born=born, modes=modes
+        mean=new_mean,
+        cov=new_cov,
+        book=book,
+        met=met,
+        in_view=in_view,
+        born=born,
+        modes=modes,
+        dead=dead,
     )
 
 
@@ -416,12 +442,18 @@ def _births(
     new_book = Book(
         **{name: value.reshape(B, N, K) for name, value in out.items()},
         serial=(serial + n_born).reshape(B, N),
+        stamp=book.stamp,
     )
     return new_book, mean.reshape(B, N, K, 4), cov.reshape(B, N, K, 4, 4), born.reshape(B, N, K)
 
 
 def after_fusion(
-    book: Book, label: np.ndarray, status: np.ndarray, changed: np.ndarray, scenario: Scenario
+    book: Book,
+    label: np.ndarray,
+    status: np.ndarray,
+    changed: np.ndarray,
+    scenario: Scenario,
+    stamp: np.ndarray | None = None,
 ) -> Book:
     """The book after the team's fusion (`team.agree`): each slot's label and status as
     agreed; a track new to the UAV (changed 2) starts its counters afresh (confirmed, no
@@ -434,6 +466,7 @@ def after_fusion(
         hits=np.where(fresh, 0, book.hits),
         scans=np.where(fresh, 0, book.scans),
         misses=np.where(fresh, 0, book.misses),
+        stamp=book.stamp if stamp is None else stamp,
     )
 
 
@@ -442,7 +475,7 @@ def broadcast(book: Book, n: int) -> Book:
     return Book(
         **{
             name: np.repeat(getattr(book, name), n, axis=1)
-            for name in ("label", "status", "hits", "scans", "misses")
+            for name in ("label", "status", "hits", "scans", "misses", "stamp")
         },
         serial=np.repeat(book.serial, n, axis=1),
     )
@@ -454,7 +487,7 @@ def where(take: np.ndarray, a: Book, b: Book) -> Book:
     return Book(
         **{
             name: np.where(pick, getattr(a, name), getattr(b, name))
-            for name in ("label", "status", "hits", "scans", "misses")
+            for name in ("label", "status", "hits", "scans", "misses", "stamp")
         },
         serial=np.where(take, a.serial, b.serial),
     )

@@ -44,7 +44,11 @@ RULES = ("max_consensus", "covariance_intersection")
 @dataclass(frozen=True, kw_only=True)
 class TrackSet:
     """Each UAV's track slots: mean (B, N, K, 4), cov (B, N, K, 4, 4), label (B, N, K)
-    int64 (-1 empty), status (B, N, K) int8 (0 empty, 1 tentative, 2 confirmed).
+    int64 (-1 empty), status (B, N, K) int8 (0 empty, 1 tentative, 2 confirmed); and
+    optionally stamp (B, N, K) int64, the last step a measurement met the track anywhere
+    in the team as far as the UAV knows, and tombs (B, N, T, 2) int64, the labels the UAV
+    knows were deleted where a UAV looked and did not see them, with the step of each
+    (label -1: none), which travel with the tracks (`agree`).
 
     The estimates of empty slots are never read."""
 
@@ -52,18 +56,26 @@ class TrackSet:
     cov: np.ndarray
     label: np.ndarray
     status: np.ndarray
+    stamp: np.ndarray | None = None
+    tombs: np.ndarray | None = None
 
     def __post_init__(self) -> None:
         lead = self.status.shape
         if len(lead) != 3:
             raise ValueError(f"track status must be (B, N, K), got shape {lead}")
         wanted = {"mean": lead + (4,), "cov": lead + (4, 4), "label": lead}
+        if self.stamp is not None:
+            wanted["stamp"] = lead
         for name, shape in wanted.items():
             if getattr(self, name).shape != shape:
                 raise ValueError(
                     f"track {name} must have shape {shape} for status {lead}, "
                     f"got {getattr(self, name).shape}"
                 )
+        if self.tombs is not None and (
+            self.tombs.ndim != 4 or self.tombs.shape[:2] != lead[:2] or self.tombs.shape[3] != 2
+        ):
+            raise ValueError(f"tombs must be (B, N, T, 2) for status {lead}")
 
 
 def team_round(
@@ -143,6 +155,8 @@ def team_round(
     row, sender = t[e] * n + i[e], q[e]
     o_mean, o_cov = offered.mean.reshape(S, 4)[src], offered.cov.reshape(S, 4, 4)[src]
     o_label, o_gamma = offered.label.reshape(S)[src], confidence(offered.cov.reshape(S, 4, 4)[src])
+    stamp0 = _stamp(own).reshape(S)
+    o_stamp = _stamp(offered).reshape(S)[src]
 
     # 2. same label: the slot of the receiver holding it
     mine = own.label.reshape(B * n, K)[row]
@@ -172,6 +186,7 @@ def team_round(
     c_cov = np.concatenate([cov0, o_cov])
     c_label = np.concatenate([label0, o_label])
     g_key, g_mean, g_cov, g_label = _fuse(key, cand, prio, c_mean, c_cov, c_label, rule)
+    g_stamp = _newest(key, cand, np.concatenate([stamp0, o_stamp]))
 
     mean, cov = mean0.copy(), cov0.copy()
     label, status = label0.copy(), status0.copy()
@@ -179,6 +194,8 @@ def team_round(
     mine_g = g_key < S
     s = g_key[mine_g]
     mean[s], cov[s], label[s], status[s] = g_mean[mine_g], g_cov[mine_g], g_label[mine_g], CONFIRMED
+    stamp = stamp0.copy()
+    stamp[s] = g_stamp[mine_g]
     moved = (
         np.any(mean[s] != mean0[s], axis=-1)
         | np.any(cov[s] != cov0[s], axis=(-2, -1))
@@ -193,14 +210,30 @@ def team_round(
     ok = slot >= 0
     d = slot[ok]
     mean[d], cov[d], label[d] = g_mean[new][ok], g_cov[new][ok], g_label[new][ok]
+    stamp[d] = g_stamp[new][ok]
     status[d], changed[d] = CONFIRMED, ADOPTED
     out = TrackSet(
         mean=mean.reshape(own.mean.shape),
         cov=cov.reshape(own.cov.shape),
         label=label.reshape(own.label.shape),
         status=status.reshape(own.status.shape),
+        stamp=None if own.stamp is None else stamp.reshape(own.label.shape),
+        tombs=own.tombs,
     )
     return out, changed.reshape(B, n, K)
+
+
+def _stamp(tracks: TrackSet) -> np.ndarray:
+    return np.zeros(tracks.label.shape, np.int64) if tracks.stamp is None else tracks.stamp
+
+
+def _newest(key: np.ndarray, cand: np.ndarray, stamp: np.ndarray) -> np.ndarray:
+    """Each group's newest stamp (groups as `_fuse` orders them: keys ascending)."""
+    if not key.size:
+        return stamp[:0]
+    order = np.argsort(key, kind="stable")
+    key, cand = key[order], cand[order]
+    return np.maximum.reduceat(stamp[cand], np.flatnonzero(_starts(key)))
 
 
 def agree(
@@ -223,9 +256,15 @@ def agree(
     rounds: (B, N) int. Returns (tracks, changed (B, N, K) int8, sent (B,), delivered
     (B,)): changed says per final slot whether it holds the UAV's own track as its filter
     left it (0), its own track with a fused estimate, label or status (1), a track new to
-    this UAV (2: adopted in some round, whatever befell it later), or nothing where it
-    held a track (3, which `team_round` never gives: the codes of the rounds combine by
-    their maximum); sent and delivered count the messages as `fusion.count` does.
+    this UAV (2: adopted in some round, whatever befell it later but a tombstone), or
+    nothing where it held a track (3: buried by a tombstone, `bury`; `team_round` itself
+    never empties a slot); sent and delivered count the messages as `fusion.count` does.
+
+    With tombstones (``tracks.tombs``) each round first merges the senders' tombstones
+    into the receiver's (`merge_tombs`) and buries what they name (`bury`), then
+    associates and fuses, then buries again what it adopted from a sender that knew less:
+    a deletion travels as far as the tracks do, and a copy of a deleted track does not
+    bring it back unless a measurement met it after the deletion.
     """
     if rule not in RULES:
         raise ValueError(f"unknown fusion rule {rule!r}: expected one of {', '.join(RULES)}")
@@ -244,10 +283,82 @@ def agree(
         links = inbox.delivered.into(active)
         if not links.edges:  # the dense form keeps every receiver: mute the finished
             links = network.Links(batch=B, n=n, dense=links.matrix & active[:, :, None])
+        if tracks.tombs is not None:  # deletions first: what is known gone is not fused
+            before = tracks.status
+            tracks = bury(tracks, merge_tombs(tracks.tombs, inbox.content.tombs, links))
+            changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
         tracks, now = team_round(tracks, inbox.content, links, threshold, rule)
-        changed = np.maximum(changed, now)  # a new track stays new
+        # a new track stays new; an emptied slot that takes a new track holds a new track
+        changed = np.where(now == ADOPTED, ADOPTED, np.maximum(changed, now))
+        if tracks.tombs is not None:  # and not kept, if adopted from a UAV that knew less
+            before = tracks.status
+            tracks = bury(tracks, tracks.tombs)
+            changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
     radio.send("consensus", tracks)  # the final tracks, for later rounds (with delay)
-    return tracks, changed, sent, delivered
+    return tracks, changed.astype(np.int8), sent, delivered
+
+
+def merge_tombs(own: np.ndarray, offered: np.ndarray | None, links: network.Links) -> np.ndarray:
+    """Each receiver's tombstones (B, N, T, 2) with those of the senders delivered to it:
+    per label the latest step, the T latest labels kept."""
+    if offered is None:
+        return own
+    B, n, T, _ = own.shape
+    t, i, q = _deliveries(links)
+    extra = np.full((B * n, n, T, 2), -1, dtype=np.int64)
+    extra[t * n + i, q] = offered[t, q]
+    return _latest(own, extra.reshape(B, n, n * T, 2))
+
+
+def entomb(tombs: np.ndarray, label: np.ndarray, step: int) -> np.ndarray:
+    """Tombstones (B, N, T, 2) with the labels (B, N, K) (-1: none) entered at `step`."""
+    new = np.stack([label, np.where(label >= 0, step, -1)], axis=-1)
+    return _latest(tombs, new)
+
+
+def _latest(own: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """Tombstones own (B, N, T, 2) and more (B, N, M, 2) as T per UAV: per label the
+    latest step, the T latest labels kept."""
+    B, n, T, _ = own.shape
+    every = np.concatenate([own, more], axis=2).reshape(B * n, -1, 2)
+    label, step = every[..., 0], every[..., 1]
+    # the latest step per label first, then the labels by step, latest first
+    order = np.lexsort((-step, label), axis=-1)
+    label = np.take_along_axis(label, order, axis=-1)
+    step = np.take_along_axis(step, order, axis=-1)
+    first = np.ones(label.shape, dtype=bool)
+    first[:, 1:] = label[:, 1:] != label[:, :-1]
+    keep = first & (label >= 0)
+    step = np.where(keep, step, -1)
+    pick = np.argsort(-step, axis=-1, kind="stable")[:, :T]
+    out = np.stack(
+        [
+            np.where(np.take_along_axis(keep, pick, -1), np.take_along_axis(label, pick, -1), -1),
+            np.take_along_axis(step, pick, -1),
+        ],
+        axis=-1,
+    )
+    return out.reshape(B, n, T, 2)
+
+
+def bury(tracks: TrackSet, tombs: np.ndarray) -> TrackSet:
+    """The tracks with the tombstones `tombs` (B, N, T, 2) kept, and every slot whose
+    label they name emptied unless a measurement met it at or after its tombstone's step
+    (its stamp): a UAV that saw the target after the deletion knows better."""
+    step = np.where(
+        (tombs[:, :, None, :, 0] == tracks.label[..., None]) & (tracks.label[..., None] >= 0),
+        tombs[:, :, None, :, 1],
+        -1,
+    ).max(axis=-1)  # (B, N, K): the tombstone of each slot's label, -1 none
+    dead = (step >= 0) & (_stamp(tracks) < step) & (tracks.status != EMPTY)
+    return TrackSet(
+        mean=tracks.mean,
+        cov=tracks.cov,
+        label=np.where(dead, -1, tracks.label),
+        status=np.where(dead, EMPTY, tracks.status).astype(tracks.status.dtype),
+        stamp=tracks.stamp,
+        tombs=tombs,
+    )
 
 
 # ------------------------------------------------------------------ the parts
