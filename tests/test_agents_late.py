@@ -44,8 +44,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def head(trace, k: int):
     """The first k steps of a trace."""
+    arrays = trace.arrays() if hasattr(trace, "arrays") else vars(trace)
     names = ("targets", *uavtrack.simulation.Trace.__dataclass_fields__)
-    return types.SimpleNamespace(**{n: getattr(trace, n)[:k] for n in names if hasattr(trace, n)})
+    return types.SimpleNamespace(
+        **{n: arrays[n][:k] for n in names if arrays.get(n) is not None and arrays[n].ndim}
+    )
 
 
 def first_late(trace) -> int | None:

@@ -35,7 +35,7 @@ from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local
-from .metrics import METRICS, Tally
+from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, Tally
 from .radio import Radio, RadioState
 from .robust import gate
 from .tracks import columns, manage
@@ -1032,8 +1032,9 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
     consensus tuples on each radio link, whose number is estimated from the UAVs'
     density at the start and over the field; with lost or late messages each UAV's
     copy of every neighbour's bids), the per-pair state of the cycle (n_uavs x
-    n_targets estimates and a block of sensor noise), and the trace (steps x n_uavs x
-    n_targets). The estimate is checked against measured peaks in the tests.
+    n_targets estimates and a block of sensor noise), the trace (steps x n_uavs x
+    n_targets) and each trial's NEES histograms. The estimate is checked against
+    measured peaks in the tests.
     """
     T, Nu, Nt = scenario.steps, scenario.n_uavs, scenario.n_targets
     f = 8  # bytes per float
@@ -1055,6 +1056,10 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
     }
     if trace:
         parts["steps"] += batch * T * (Nu * Nt * (4 + 16 + 1 + 1) + Nu * 12) * f
+    # the NEES histograms of each trial (every UAV's, the team's best), and a copy of
+    # one where its median is read (`metrics.NeesSpread`)
+    bins = (NEES_DECADES[1] - NEES_DECADES[0]) * NEES_BINS_PER_DECADE + 2
+    parts["trials"] = batch * 3 * bins * f
     return parts
 
 
@@ -1080,6 +1085,7 @@ def check_memory(scenario: Scenario, batch: int = 1, trace: bool = False) -> Non
         "planner.horizon": "planner.horizon (or n_uavs, n_targets)",
         "n_uavs": "n_uavs",
         "n_targets": "n_targets (or n_uavs)",
+        "trials": "the trials run at once",
     }[field_]
     trials = f" for {batch} trials at once" if batch > 1 else ""
     fewer = " or the trials run at once" if batch > 1 else ""
