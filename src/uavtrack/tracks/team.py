@@ -305,39 +305,41 @@ def merge_tombs(own: np.ndarray, offered: np.ndarray | None, links: network.Link
         return own
     B, n, T, _ = own.shape
     t, i, q = _deliveries(links)
-    extra = np.full((B * n, n, T, 2), -1, dtype=np.int64)
-    extra[t * n + i, q] = offered[t, q]
-    return _latest(own, extra.reshape(B, n, n * T, 2))
+    sent = offered.reshape(B * n, T, 2)[t * n + q]  # (E, T, 2): each delivery's tombstones
+    rows = np.repeat(t * n + i, T)
+    return _latest(own, rows, sent.reshape(-1, 2))
 
 
 def entomb(tombs: np.ndarray, label: np.ndarray, step: int) -> np.ndarray:
     """Tombstones (B, N, T, 2) with the labels (B, N, K) (-1: none) entered at `step`."""
-    new = np.stack([label, np.where(label >= 0, step, -1)], axis=-1)
-    return _latest(tombs, new)
+    B, n, K = label.shape
+    rows = np.repeat(np.arange(B * n), K)
+    more = np.stack([label.reshape(-1), np.full(label.size, step)], axis=-1)
+    return _latest(tombs, rows, more)
 
 
-def _latest(own: np.ndarray, more: np.ndarray) -> np.ndarray:
-    """Tombstones own (B, N, T, 2) and more (B, N, M, 2) as T per UAV: per label the
-    latest step, the T latest labels kept."""
+def _latest(own: np.ndarray, rows: np.ndarray, more: np.ndarray) -> np.ndarray:
+    """Tombstones own (B, N, T, 2) and more (M, 2) for the UAVs rows (M,) (trial * N +
+    UAV) as T per UAV: per label the latest step, the T latest labels kept (ties to the
+    smaller label). Only tombstones with a label (>= 0) are sorted: most are none."""
     B, n, T, _ = own.shape
-    every = np.concatenate([own, more], axis=2).reshape(B * n, -1, 2)
-    label, step = every[..., 0], every[..., 1]
-    # the latest step per label first, then the labels by step, latest first
-    order = np.lexsort((-step, label), axis=-1)
-    label = np.take_along_axis(label, order, axis=-1)
-    step = np.take_along_axis(step, order, axis=-1)
-    first = np.ones(label.shape, dtype=bool)
-    first[:, 1:] = label[:, 1:] != label[:, :-1]
-    keep = first & (label >= 0)
-    step = np.where(keep, step, -1)
-    pick = np.argsort(-step, axis=-1, kind="stable")[:, :T]
-    out = np.stack(
-        [
-            np.where(np.take_along_axis(keep, pick, -1), np.take_along_axis(label, pick, -1), -1),
-            np.take_along_axis(step, pick, -1),
-        ],
-        axis=-1,
-    )
+    flat = own.reshape(B * n * T, 2)
+    row = np.concatenate([np.repeat(np.arange(B * n), T), rows])
+    every = np.concatenate([flat, more])
+    real = every[:, 0] >= 0
+    row, label, step = row[real], every[real, 0], every[real, 1]
+    order = np.lexsort((-step, label, row))  # per UAV and label, the latest step first
+    row, label, step = row[order], label[order], step[order]
+    first = np.ones(row.size, dtype=bool)
+    first[1:] = (row[1:] != row[:-1]) | (label[1:] != label[:-1])
+    row, label, step = row[first], label[first], step[first]
+    order = np.lexsort((label, -step, row))  # per UAV, the latest first
+    row, label, step = row[order], label[order], step[order]
+    rank = np.arange(row.size) - np.searchsorted(row, row, side="left")
+    keep = rank < T
+    out = np.full((B * n, T, 2), -1, dtype=np.int64)
+    out[row[keep], rank[keep], 0] = label[keep]
+    out[row[keep], rank[keep], 1] = step[keep]
     return out.reshape(B, n, T, 2)
 
 
@@ -345,11 +347,20 @@ def bury(tracks: TrackSet, tombs: np.ndarray) -> TrackSet:
     """The tracks with the tombstones `tombs` (B, N, T, 2) kept, and every slot whose
     label they name emptied unless a measurement met it at or after its tombstone's step
     (its stamp): a UAV that saw the target after the deletion knows better."""
-    step = np.where(
-        (tombs[:, :, None, :, 0] == tracks.label[..., None]) & (tracks.label[..., None] >= 0),
-        tombs[:, :, None, :, 1],
-        -1,
-    ).max(axis=-1)  # (B, N, K): the tombstone of each slot's label, -1 none
+    B, n, K = tracks.label.shape
+    T = tombs.shape[2]
+    flat = tombs.reshape(B * n * T, 2)
+    real = flat[:, 0] >= 0
+    step = np.full((B, n, K), -1, dtype=np.int64)  # the tombstone of each slot's label
+    if real.any():
+        span = int(max(flat[real, 0].max(), tracks.label.max(initial=0))) + 1
+        keys = np.repeat(np.arange(B * n), T)[real] * span + flat[real, 0]
+        order = np.argsort(keys, kind="stable")  # one tombstone per label and UAV
+        keys, steps = keys[order], flat[real, 1][order]
+        held = tracks.label >= 0
+        slot_keys = np.arange(B * n).reshape(B, n, 1) * span + tracks.label
+        at = np.minimum(np.searchsorted(keys, slot_keys), keys.size - 1)
+        step = np.where(held & (keys[at] == slot_keys), steps[at], -1)
     dead = (step >= 0) & (_stamp(tracks) < step) & (tracks.status != EMPTY)
     return TrackSet(
         mean=tracks.mean,
