@@ -444,7 +444,7 @@ class TrackerModel(Part):
             "measured against 2 of 3, the common choice: the gate of a track born from "
             "one converted measurement (radial std up to 6 m) holds a false measurement "
             "with probability near 0.08 per scan at 2 per scan, and 2 of 3 confirmed "
-            "enough of them to lower the distributed rate at P_D 0.9 to 0.31 (0.52 with "
+            "enough of them to lower the distributed rate at P_D 0.9 to 0.47 (0.69 with "
             "4 of 5; 20 trials; docs: Missed detections, clutter and unknown association)"
         ),
     )
