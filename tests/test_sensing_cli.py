@@ -77,7 +77,13 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
             diff = e["against_known"]["observation_rate"]["mean"]  # paired on the trials
             rate, base = e["observation_rate"]["mean"], known["observation_rate"]["mean"]
             assert diff == pytest.approx(rate - base, abs=1e-12), (method, key)
-    assert len(summary["goals"]) == 9 and all(isinstance(g["met"], bool) for g in summary["goals"])
+    goals = summary["goals"]
+    assert len(goals) == 10 and all(isinstance(g["met"], bool) for g in goals)
+    parity = [g for g in goals if g["goal"].startswith("P_D 1, no clutter")]
+    cells = summary["methods"]["distributed"]
+    for g, association in zip(parity, sensing.ASSOCIATIONS, strict=True):
+        diff = cells[f"pd=1 clutter=0 {association}"]["against_known"]["observation_rate"]
+        assert g["value"] == pytest.approx(abs(diff["mean"])) and g["met"] == (g["value"] <= 0.005)
     report = (out / "report.md").read_text()
     assert "## Goals" in report and "| 0.9 | 2 | jpda |" in report
     with Image.open(out / "sensing.png") as im:

@@ -258,8 +258,8 @@ class Scenario(Part):
         if self.tracker.association != "known":
             raise ScenarioError(
                 f"{what} does not take tracker.association = {self.tracker.association} yet "
-                "(it reads one estimate per target, not track slots); run that scenario with "
-                "uavtrack run, compare, sweep or sensing, or leave tracker.association unset"
+                "(it reads one estimate per target, not track slots); leave it out, or leave "
+                "tracker.association unset"
             )
 
     @property
