@@ -186,6 +186,18 @@ class Method:
         return f"{type(self).__name__}()"
 
 
+def fusion_rounds(inputs: Inputs) -> tuple[fusion.Depth, np.ndarray]:
+    """The D_i protocol over the cycle's radio (`fusion.learn_depth`) and the rounds
+    (B, N) each living UAV fuses for: its depth plus ``extra_rounds``, at most the
+    round budget; 0 for the dead."""
+    s, alive = inputs.setting, inputs.alive
+    depth = fusion.learn_depth(inputs.radio, alive, s.budget)
+    rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
+    if s.budget is not None:
+        rounds = np.minimum(rounds, s.budget)
+    return depth, rounds
+
+
 def consensus(inputs: Inputs) -> Fused:
     """The paper's fusion (Algorithm 2 lines 15-25) over the cycle's radio.
 
@@ -193,11 +205,8 @@ def consensus(inputs: Inputs) -> Fused:
     are; with delay they travel by value with their time stamps (estimates of earlier
     cycles), predicted forward before use when ``robust.stale``.
     """
-    s, radio, alive = inputs.setting, inputs.radio, inputs.alive
-    depth = fusion.learn_depth(radio, alive, s.budget)
-    rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
-    if s.budget is not None:
-        rounds = np.minimum(rounds, s.budget)
+    s, radio = inputs.setting, inputs.radio
+    depth, rounds = fusion_rounds(inputs)
     admit = gated(inputs)
     if s.delay == 0 and s.rule == "max_consensus":
         tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
@@ -274,10 +283,7 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         local.book, local.mean, local.cov, local.z, local.R, local.valid,
         inputs.believed, alive, scenario, local.modes, local.tracker, inputs.k,
     )  # fmt: skip
-    depth = fusion.learn_depth(radio, alive, s.budget)
-    rounds = np.where(alive, depth.depth + s.extra_rounds, 0)
-    if s.budget is not None:
-        rounds = np.minimum(rounds, s.budget)
+    depth, rounds = fusion_rounds(inputs)
     book = scanned.book
     tombs = local.tombs
     if tombs is not None and scanned.dead is not None:
