@@ -241,24 +241,34 @@ def assert_honest_programs_finished(swarm, member: Member, steps: int) -> None:
 STEPS = 80
 """Cycles of each run: enough for every decodable variant of a report (one a cycle)."""
 RUNS = {
-    # (method, the member): the kinds it sends
-    ("distributed", 1): {"radio:presence", "radio:flood+consensus", "radio:beacon+bids", "report"},
-    ("centralized", 1): {"radio:presence", "radio:upload", "report"},
-    ("centralized", 5): {"radio:presence", "radio:download", "report"},
-}
+    # (method, the member, association): the kinds it sends
+    ("distributed", 1, "known"): {
+        "radio:presence", "radio:flood+consensus", "radio:beacon+bids", "report"
+    },
+    ("centralized", 1, "known"): {"radio:presence", "radio:upload", "report"},
+    ("centralized", 5, "known"): {"radio:presence", "radio:download", "report"},
+    # tracks with labels, status, stamps and tombstones; bids by label
+    ("distributed", 1, "jpda"): {
+        "radio:presence", "radio:flood+consensus", "radio:beacon+bids", "report"
+    },
+}  # fmt: skip
+TRACKED = {"sensor.detection_probability": 0.9, "sensor.clutter_rate": 2.0}
 
 
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
-@pytest.mark.parametrize("method,me", list(RUNS), ids=lambda x: str(x))
+@pytest.mark.parametrize("method,me,association", list(RUNS), ids=lambda x: str(x))
 def test_every_kind_field_and_bad_value_from_a_member_stops_no_honest_program(
-    monkeypatch, method, me
+    monkeypatch, method, me, association
 ):
     scenario = uavtrack.Scenario(steps=STEPS)
+    if association != "known":  # a report has two more fields: label and status
+        tracked = {"tracker.association": association, "steps": STEPS + 20, **TRACKED}
+        scenario = scenario.with_overrides(tracked)
     swarm, member = attacked(monkeypatch, scenario, method, me)
     assert_honest_programs_finished(swarm, member, scenario.steps)
     sent = fields_of(member.sent)
     kinds = {kind for kind, _ in sent}
-    assert RUNS[(method, me)] | set(WORLDS) <= kinds
+    assert RUNS[(method, me, association)] | set(WORLDS) <= kinds
     assert member.sent == member.all, sorted(member.all - member.sent)[:5]  # every variant
     for (kind, name), values in sent.items():  # every field at every bad value
         assert set(BAD) <= values, (kind, name, set(BAD) - values)
@@ -331,6 +341,67 @@ def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, ho
     result = swarm.result
     assert np.isfinite([result.observation_rate, result.rmse, result.nees, result.ospa]).all()
     assert result.rmse < 100  # the honest UAVs kept their estimates
+
+
+def lied_tracks(content: dict, how: str) -> dict:
+    """A member's consensus tracks altered, each still finite and well formed."""
+    mean, cov, label, status = (
+        content[n].array().copy() for n in ("mean", "cov", "label", "status")
+    )
+    if how == "tracks moved 1 km":
+        mean = mean + [1000.0, 1000.0, 0.0, 0.0]
+    elif how == "covariance 1e-9":
+        cov = np.broadcast_to(1e-9 * np.eye(4), cov.shape).copy()
+    elif how == "one label twice":
+        label[status != 0] = label[status != 0].min()
+    elif how == "a label beyond the run":
+        label[status != 0] = 2**40 + np.arange((status != 0).sum())
+    elif how == "status 7":
+        status[status != 0] = 7
+    changed = {"mean": mean, "cov": cov, "label": label, "status": status}
+    return dict(content, **{name: Array.of(value) for name, value in changed.items()})
+
+
+TRACK_ATTACKS = {
+    "tracks moved 1 km": "position out of bounds",
+    "covariance 1e-9": "covariance below the sensor's accuracy",
+    "one label twice": "labels not distinct",
+    "a label beyond the run": "index out of range",
+    "status 7": "track status out of range",
+}
+
+
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+@pytest.mark.parametrize("how", list(TRACK_ATTACKS))
+def test_a_members_lies_about_its_tracks_are_dropped_by_reason(monkeypatch, how):
+    from uavtrack.agents import agent
+
+    send = agent.AgentRadio.send
+
+    def faulty(self, k, parts, to=None):
+        if self.me == 1:
+            parts = [
+                msgspec.structs.replace(p, content=lied_tracks(p.content, how))
+                if p.protocol == "consensus" and p.content is not None
+                else p
+                for p in parts
+            ]
+        send(self, k, parts, to)
+
+    monkeypatch.setattr(agent.AgentRadio, "send", faulty)
+    scenario = uavtrack.Scenario(steps=3).with_overrides({"tracker.association": "jpda", **TRACKED})
+    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.2)
+    assert swarm.traffic.lost == {}
+    assert swarm.traffic.drops.get(TRACK_ATTACKS[how], 0) > 0, swarm.traffic.drops
+    trace = swarm.result.trace
+    honest = [0, 2, 3, 4]
+    held = trace.status[:, honest] != 0
+    assert np.isfinite(trace.mean[:, honest][held]).all()
+    assert (trace.label[:, honest][held] < 2**40).all()  # no lie was adopted
+    reference = uavtrack.simulate(scenario, "distributed", seed=1)
+    assert reference.gospa_false == 0 and np.isfinite(reference.gospa)
+    assert swarm.result.gospa_false == 0  # a track moved 1 km would be a false one
+    assert swarm.result.gospa < 2 * reference.gospa
 
 
 # ------------------------------------------------------------------ a member that lies well

@@ -114,7 +114,7 @@ def test_births_fill_empty_slots_with_labels_new_to_the_team():
     unused = np.array(
         [[True, False, True, True], [True, False, False, False], [False, True, True, False]]
     )
-    out, m, c, born = manage._births(book, mean, cov, z, R, unused, 4, 2.0)
+    out, m, c, born = manage._births(book, mean, cov, z, R, unused, 4, 2.0, (0, N))
     # UAV 0: 3 unused, 2 empty slots -> the first two unused measurements are born
     assert born[0, 0].tolist() == [False, True, True]
     np.testing.assert_array_equal(m[0, 0, 1, :2], z[0, 0]) and np.testing.assert_array_equal(
@@ -128,3 +128,8 @@ def test_births_fill_empty_slots_with_labels_new_to_the_team():
     assert out.label[0, 0, 1:].tolist() == [4 + 0 * 3 + 0, 4 + 1 * 3 + 0]
     assert out.label[0, 2, :2].tolist() == [4 + 5 * 3 + 2, 4 + 6 * 3 + 2]
     assert out.serial.tolist() == [[2, 0, 7]]
+    # a UAV's program runs its row alone (team: its index, the team's size): the same labels
+    row = manage.Book(**{f: getattr(book, f)[:, 2:] for f in book.__dataclass_fields__})
+    alone = manage._births(row, mean[:, 2:], cov[:, 2:], z[2:], R[2:], unused[2:], 4, 2.0, (2, N))
+    assert alone[0].label[0, 0].tolist() == out.label[0, 2].tolist()
+    np.testing.assert_allclose(alone[1][0, 0], m[0, 2], rtol=1e-15)

@@ -94,8 +94,8 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
 
 
 def test_the_forms_that_read_targets_refuse_tracks_in_one_line(tmp_path, capsys):
-    """The agent form, the environment and the per-target outputs do not take tracks
-    yet: each says so in one line rather than misreading the slots as targets."""
+    """The environment and the per-target outputs do not take tracks yet: each says so
+    in one line rather than misreading the slots as targets."""
     import uavtrack
     from uavtrack.env import parallel_env
     from uavtrack.errors import ScenarioError
@@ -108,9 +108,6 @@ def test_the_forms_that_read_targets_refuse_tracks_in_one_line(tmp_path, capsys)
         tables.to_frames(r)
     with pytest.raises(ScenarioError, match="to_stonesoup"):
         stonesoup.to_stonesoup(r)
-    code = cli.main(["swarm", "--set", "tracker.association=jpda", "--set", "steps=3"])
-    _, err = capsys.readouterr()
-    assert code == 2 and "agent form" in err and len(err.strip().splitlines()) == 1
     code = cli.main(
         ["run", "--set", "tracker.association=jpda", "--set", "steps=3",
          "--bag", str(tmp_path / "b")]

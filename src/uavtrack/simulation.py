@@ -558,6 +558,7 @@ def _decide_tracked(
         gamma=estimation.confidence(tracks.cov),
         previous=columns.label_column(state.target, cols.labels),
         held=held,
+        holds=columns.holds(cols),
     )
     belief = (tracks.mean, tracks.cov, None)
     if not plan:
@@ -733,8 +734,13 @@ def finish(
         decision_time_ms=np.where(alive, ms[..., timing.CPU], np.nan),
         decision_wall_ms=np.where(alive, ms[..., timing.WALL], np.nan),
         confidence=fused.gamma,
-        label=None if pending.tracks is None else pending.tracks.book.label,
-        status=None if pending.tracks is None else pending.tracks.book.status,
+        # a failed UAV holds no track (its slots stay as they were, unread)
+        label=None
+        if pending.tracks is None
+        else np.where(alive[..., None], pending.tracks.book.label, -1),
+        status=None
+        if pending.tracks is None
+        else np.where(alive[..., None], pending.tracks.book.status, 0).astype(np.int8),
         scan=pending.scan,
     )
     if pending.tracks is not None:

@@ -7,10 +7,12 @@ test in the project goes through `assert_same_trace`, as PettingZoo's
 ``parallel_seed_test`` does for environments.
 
 Decisions and truth must agree exactly: UAV and target states, observations,
-assignments, actions, who is alive. Estimates (mean, covariance) and bids are floats
-computed in different orders by different forms, so they agree to `atol` (1e-9 by
-default). Counters (rounds, messages, late messages) are compared when both traces hold
-them: a form whose messages missed their cycle says so in `late`.
+assignments, actions, who is alive, and with unknown association the tracks' labels and
+status and which measurement of each scan came from which target. Estimates (mean,
+covariance), bids and converted measurements are floats computed in different orders by
+different forms, so they agree to `atol` (1e-9 by default). Counters (rounds, messages,
+late messages) are compared when both traces hold them: a form whose messages missed
+their cycle says so in `late`.
 """
 
 from __future__ import annotations
@@ -18,7 +20,8 @@ from __future__ import annotations
 import numpy as np
 
 EXACT = ("targets", "uavs", "observed", "assignment", "action", "alive")
-CLOSE = ("mean", "cov", "bids")
+EXACT += ("label", "status", "scan_valid", "scan_origin")  # with unknown association
+CLOSE = ("mean", "cov", "bids", "scan_polar", "scan_z")
 COUNTERS = ("rounds", "messages", "delivered", "late", "conflicts")
 
 

@@ -283,8 +283,6 @@ class UavAgent:
         final tuple from rounds + 1. When rounds = R - 1, the tuple of round R was already
         the final one: round R + 1 only marks it final."""
         s = self.setting
-        known = np.zeros(self.n, dtype=bool)
-        known[self.me] = True
         state = fusion.Estimates(  # per target: confidence, estimate, stamp and whose it is
             gamma=estimation.confidence(cov),
             mean=mean,
@@ -292,6 +290,24 @@ class UavAgent:
             stamp=np.full(self.m, k, dtype=np.int64),
             origin=np.full(self.m, self.me, dtype=np.int64),
         )
+
+        def adopt(state: fusion.Estimates, contents: dict[int, dict]) -> fusion.Estimates:
+            offered = {q: fusion.Estimates.of(self._plausible(t)) for q, t in contents.items()}
+            if s.stale:
+                offered = {q: s.forward(t, k) for q, t in offered.items()}
+            return self._adopt(state, offered)
+
+        state, rounds, sent, delivered = self.rounds(k, state, lambda t: dict(t.items()), adopt)
+        mean, cov = fusion.required(state.mean, "mean"), fusion.required(state.cov, "cov")
+        return mean, cov, rounds, sent, delivered
+
+    def rounds(self, k: int, state, content, adopt):
+        """The D_i protocol with the consensus rounds of `consensus` over any state:
+        content(state) is what a round sends, adopt(state, contents by sender) what a
+        round's arrivals make of it. Returns (state, rounds, sent, delivered)."""
+        s = self.setting
+        known = np.zeros(self.n, dtype=bool)
+        known[self.me] = True
         self.largest = 1
         stopped = rounds = None  # R, and the consensus rounds once D_i is known
         depth = r = 0
@@ -306,12 +322,12 @@ class UavAgent:
                 parts.append(part("flood", r, {"known": known}, final=r))
                 flood_final = True
             if rounds is None or r <= rounds:
-                parts.append(part("consensus", r, dict(state.items())))
+                parts.append(part("consensus", r, content(state)))
             elif not consensus_final:
                 if rounds + 1 < r:  # rounds = R - 1: the tuple of round R was the final one
                     parts.append(part("consensus", r, None, final=rounds + 1))
                 else:
-                    parts.append(part("consensus", r, dict(state.items()), final=r))
+                    parts.append(part("consensus", r, content(state), final=r))
                 consensus_final = True
             if parts:
                 self.radio.send(k, parts)
@@ -329,13 +345,7 @@ class UavAgent:
                 inbox = self.radio.receive(k, "consensus", r)
                 if inbox is not None:
                     arrived.append((inbox.sent, inbox.delivered))
-                    offered = {
-                        q: fusion.Estimates.of(self._plausible(t))
-                        for q, t in inbox.contents.items()
-                    }
-                    if s.stale:
-                        offered = {q: s.forward(t, k) for q, t in offered.items()}
-                    state = self._adopt(state, offered)
+                    state = adopt(state, inbox.contents)
         # the loop ends once D_i is known (it stopped) and the consensus rounds are done
         assert stopped is not None and rounds is not None
         sent, delivered = counted(
@@ -346,8 +356,7 @@ class UavAgent:
             ),
             arrived,
         )
-        mean, cov = fusion.required(state.mean, "mean"), fusion.required(state.cov, "cov")
-        return mean, cov, rounds, sent, delivered
+        return state, rounds, sent, delivered
 
     def _flood(self, inbox: Inbox | None, known: np.ndarray, r: int):
         """Round r of the D_i protocol (`fusion.learn_depth`) from this UAV's side: its
@@ -422,22 +431,13 @@ class UavAgent:
     def auction(self, k: int, bids: np.ndarray, alive: np.ndarray):
         """Beacon and bids to the neighbours (one message), then this UAV's auction
         (`assignment.local`)."""
-        s, me, n = self.setting, self.me, self.n
-        self.radio.send(
-            k,
-            [
-                part("beacon", 0, {"position": self.believed[:3]}),  # who, where, when
-                part("bids", 0, {"bids": bids, "stamp": np.array(k, dtype=np.int64)}),
-            ],
-        )
-        beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
-        sent, delivered = counted(
-            s.delay,
-            lambda: (self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")),
-            ((a.sent, a.delivered) for a in (beacon, inbox) if a is not None),
-        )
+        s, n = self.setting, self.n
+        stamp = np.array(k, dtype=np.int64)
+        beacon, inbox, (sent, delivered) = self.heard(k, {"bids": bids, "stamp": stamp})
         if inbox is None:  # nothing has arrived yet: alone
             members, view = np.zeros(n, dtype=bool), np.broadcast_to(bids, (n, self.m)).copy()
+            target, seconds = self.solve(view, members, alive, bids)
+            return target, seconds, (sent, delivered)
         else:
             got = np.zeros(n, dtype=bool)
             offered = np.zeros((n, self.m))
@@ -452,6 +452,33 @@ class UavAgent:
             if self.held is not None:
                 self.held = Held(view, stamp)
             view = view.copy()
+        target, seconds = self.solve(view, members, alive, bids)
+        return target, seconds, (sent, delivered)
+
+    def heard(self, k: int, bids_part: dict):
+        """Beacon and bids (the parts given) to the neighbours in one message; returns
+        what arrived of both and the messages (sent, delivered)."""
+        s = self.setting
+        self.radio.send(
+            k,
+            [
+                part("beacon", 0, {"position": self.believed[:3]}),  # who, where, when
+                part("bids", 0, bids_part),
+            ],
+        )
+        beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
+        sent, delivered = counted(
+            s.delay,
+            lambda: (self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")),
+            ((a.sent, a.delivered) for a in (beacon, inbox) if a is not None),
+        )
+        return beacon, inbox, (sent, delivered)
+
+    def solve(self, view: np.ndarray, members: np.ndarray, alive: np.ndarray, bids: np.ndarray):
+        """This UAV's auction (`assignment.local`) over the bids it holds, view (N, M)
+        (its own row replaced by `bids`), among the living members that can serve it.
+        Returns (target, seconds (2,))."""
+        me = self.me
         view[me] = bids
         members = members & alive
         members[me] = True
@@ -468,7 +495,7 @@ class UavAgent:
             assert isinstance(method, Distributed), "the auction is Distributed's"
             solve = None if method.built_in_solve else method.solve
             target = assignment.local(view[rows], int(np.searchsorted(rows, me)), solve, timing)
-        return target, timing.since(start), (sent, delivered)
+        return target, timing.since(start)
 
     # ------------------------------------------------------------ centralized
 

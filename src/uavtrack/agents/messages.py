@@ -28,6 +28,7 @@ reason: nothing a peer sends stops a program.
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from typing import Any
 
@@ -38,7 +39,7 @@ from .. import estimation
 from ..faults import PROTOCOLS
 from ..robust.plausibility import CONSISTENT, Bounds
 
-VERSION = 5
+VERSION = 6
 """Schema version; a message of another version is dropped."""
 
 
@@ -89,7 +90,9 @@ class Sense(msgspec.Struct, tag="sense", frozen=True, kw_only=True):
     """One cycle for one UAV: its believed state (5,), which targets it observes (Nt,)
     and their range-bearing measurements (K, 2), who it can hear this cycle (N,) bool,
     who is alive (N,) bool, and whether the central node is (centralized method).
-    alive[uav] False tells the agent it has failed."""
+    alive[uav] False tells the agent it has failed. With unknown association
+    (``tracker.association`` gnn or jpda) the scan comes unlabelled: observed is empty
+    (0,) and z (Z, 2) holds the detections and clutter in the order the sensor gave them."""
 
     version: int
     run: str
@@ -122,7 +125,9 @@ class Ready(msgspec.Struct, tag="ready", frozen=True):
 
 class Report(msgspec.Struct, tag="report", frozen=True, kw_only=True):
     """A UAV's decision of one cycle and what the trace records of it (the central
-    node's report has empty arrays, action and target -1)."""
+    node's report has empty arrays, action and target -1). With unknown association the
+    estimates and bids are the K track slots', label and status (K,) say whose, and the
+    target is the team label followed (-1: none)."""
 
     version: int
     run: str
@@ -143,6 +148,8 @@ class Report(msgspec.Struct, tag="report", frozen=True, kw_only=True):
     received: int = 0
     drops: dict[str, int] = {}
     late: dict[str, int] = {}  # messages of this cycle that missed it, by protocol
+    label: Array | None = None  # with unknown association: each slot's team label
+    status: Array | None = None  # and its status (0 empty, 1 tentative, 2 confirmed)
 
 
 class Lost(msgspec.Struct, tag="lost", frozen=True, kw_only=True):
@@ -225,6 +232,18 @@ DOMAINS = {
     "target or none": "a target, 0 to M - 1, or -1: none",
     "bids": "each in [0, the run's largest bid], or NaN (not scored) where the run prunes "
     "bids (planner.prune without losses or delays), at least one scored",
+    "track status": "0 empty, 1 tentative or 2 confirmed; the slot's label is -1 exactly "
+    "where it is empty, and the labels of a sender's slots are distinct",
+    "track estimate": "finite; a confirmed track outside the field plus the run's margin or "
+    "faster than its largest is not used (`Spec.tracks`)",
+    "track covariance": "as covariance, for the slots with a track (an empty slot's must be "
+    "finite); a confirmed track's below the run's floor is not used",
+    "track stamp": "for the slots with a track, a cycle in [0, k]",
+    "tombstones": "rows (label, cycle): label -1 (none) or a team label with a cycle in [0, k], "
+    "each label once",
+    "slot bids": "for a confirmed slot, in [0, the run's largest bid]; NaN elsewhere",
+    "bid labels": "the label of each confirmed slot a bid is for, -1 for none, each once",
+    "label or none": "a team label (below the run's largest), or -1: none",
 }
 """What the values of a field may be, beyond its dtype and shape (`Spec.contents`); the
 run's numbers are `plausibility.Bounds`."""
@@ -254,11 +273,19 @@ class Spec:
     behind: int
     ahead: int = 2
     bounds: Bounds | None = None
+    slots: int = 0
+    """Track slots K per UAV with unknown association (0: known association)."""
+    scan: int = 0
+    """The most measurements a scan may hold with unknown association."""
+    labels: int = 0
+    """With unknown association, the labels of the run are below this: a UAV starts at
+    most K tracks a scan, each under a label of its own (`tracks.manage`)."""
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
         n = scenario.n_uavs
         budget = scenario.faults.round_budget or 0
+        tracked = scenario.tracker.association != "known"
         return cls(
             n=n,
             m=scenario.n_targets,
@@ -267,12 +294,21 @@ class Spec:
             rounds=n + scenario.robust.extra_rounds + budget + 3,
             behind=scenario.faults.delay + 1,
             bounds=Bounds.of(scenario),
+            slots=scenario.track_slots if tracked else 0,
+            labels=scenario.n_targets + (scenario.track_slots * (scenario.steps + 1) + 1) * n,
+            # a Poisson count of clutter beyond 10 times its mean and 50 has a
+            # probability below 1e-20 at any rate
+            scan=scenario.n_targets + 50 + 10 * math.ceil(scenario.sensor.clutter_rate)
+            if tracked
+            else 0,
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
         """The arrays of a protocol's content: name -> (dtype, shape, domain), the
         domain one of `DOMAINS`."""
         n, m = self.n, self.m
+        if self.slots:
+            return self._tracked(protocol)
         tuples = {
             "gamma": (F, (m,), "confidence"),
             "mean": (F, (m, 4), "estimate"),
@@ -290,6 +326,31 @@ class Spec:
                 **tuples,
                 "gamma": (F, (m,), "confidence or none"),
                 "target": (I, (), "target or none"),
+            },
+        }.get(protocol)
+
+    def _tracked(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
+        """`contents` with unknown association: the consensus carries a UAV's track
+        slots with their labels, status, stamps and tombstones (`tracks.team.TrackSet`),
+        the bids one per slot with its label; the centralized baseline's upload and
+        download are not part of the agent form with tracks."""
+        K = self.slots
+        return {
+            "presence": {"heard": (B, (self.programs,), "flags")},
+            "flood": {"known": (B, (self.n,), "known")},
+            "consensus": {
+                "mean": (F, (K, 4), "track estimate"),
+                "cov": (F, (K, 4, 4), "track covariance"),
+                "label": (I, (K,), "label or none"),
+                "status": (I, (K,), "track status"),
+                "stamp": (I, (K,), "track stamp"),
+                "tombs": (I, (K, 2), "tombstones"),
+            },
+            "beacon": {"position": (F, (3,), "position")},
+            "bids": {
+                "bids": (F, (K,), "slot bids"),
+                "label": (I, (K,), "bid labels"),
+                "stamp": (I, (), "cycle"),
             },
         }.get(protocol)
 
@@ -329,7 +390,9 @@ class Spec:
         if value.dtype.kind != "f":
             return None
         nan = np.isnan(value)
-        if domain == "bids":
+        if domain == "slot bids":  # NaN where no confirmed track: checked with the labels
+            pass
+        elif domain == "bids":
             if nan.all() or nan.any() and not (self.bounds is None or self.bounds.unscored):
                 return "bids not scored"
         elif nan.any():
@@ -344,6 +407,10 @@ class Spec:
         """Why finite `value` is outside `domain` (None: it is inside)."""
         b = self.bounds
         live = np.isfinite(arrays["gamma"]) if "gamma" in arrays else slice(None)
+        if "status" in arrays:  # track slots: only those with a track are read
+            live = arrays["status"] != 0
+        if domain in TRACK_DOMAINS:
+            return self._track_domain(domain, value, arrays, k, live)
         if domain == "known":
             return None if sender < value.size and value[sender] else "sender not in its own set"
         if domain == "uav index":
@@ -370,6 +437,67 @@ class Spec:
             scored = value[~np.isnan(value)]
             return None if ((scored >= 0) & (scored <= b.bid)).all() else "bid out of bounds"
         return None
+
+    def _track_domain(self, domain: str, value, arrays: dict, k: int, live) -> str | None:
+        """`_domain` of the fields of track slots."""
+        if domain == "track status":
+            label = arrays["label"]
+            if not np.isin(value, (0, 1, 2)).all() or ((label >= 0) != (value != 0)).any():
+                return "track status out of range"
+            return None if _distinct(label) else "labels not distinct"
+        labels = (value >= -1) & (value < self.labels)
+        if domain == "label or none":
+            return None if labels.all() else "index out of range"
+        if domain == "bid labels":
+            if not labels.all():
+                return "index out of range"
+            return None if _distinct(value) else "labels not distinct"
+        if domain == "track covariance":
+            return _covariance(value[live], self.bounds)
+        if domain == "track stamp":
+            return None if ((value[live] >= 0) & (value[live] <= k)).all() else "stamp out of range"
+        if domain == "tombstones":
+            label, step = value[:, 0], value[:, 1]
+            some = label >= 0
+            if not ((label >= -1) & (label < self.labels)).all():
+                return "index out of range"
+            if not ((step[some] >= 0) & (step[some] <= k)).all():
+                return "stamp out of range"
+            return None if _distinct(label) else "labels not distinct"
+        if domain == "slot bids":
+            confirmed = arrays["status"] == 2 if "status" in arrays else arrays["label"] >= 0
+            if (np.isnan(value) != ~confirmed).any():
+                return "bids not scored"
+            scored = value[confirmed]
+            bound = np.inf if self.bounds is None else self.bounds.bid
+            return None if ((scored >= 0) & (scored <= bound)).all() else "bid out of bounds"
+        return None  # "track estimate": finite (`_finite`); plausibility is `tracks`'
+
+    def tracks(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
+        """`estimates` for a checked consensus content of track slots: a confirmed track
+        beyond the run's plausibility bounds is taken as no track (its slot empty), as
+        if the sender did not hold it. Returns the content and the tracks left out by
+        reason."""
+        b, status = self.bounds, content["status"]
+        confirmed = status == 2
+        if b is None or not confirmed.any():
+            return content, {}
+        mean, cov = content["mean"], content["cov"]
+        reasons = np.full(status.shape, "", dtype=object)
+        inside = ((mean[:, :2] >= b.low) & (mean[:, :2] <= b.high)).all(axis=1)
+        slow = np.hypot(mean[:, 2], mean[:, 3]) <= b.speed
+        sharp = np.linalg.eigvalsh(cov)[:, 0] >= b.floor
+        reasons[confirmed & ~sharp] = "covariance below the sensor's accuracy"
+        reasons[confirmed & ~slow] = "speed out of bounds"
+        reasons[confirmed & ~inside] = "position out of bounds"
+        bad = reasons != ""
+        if not bad.any():
+            return content, {}
+        out = dict(content)
+        out["status"] = np.where(bad, 0, status)
+        out["label"] = np.where(bad, -1, content["label"])
+        found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
+        return out, dict(zip(found.tolist(), counts.tolist(), strict=True))
 
     def estimates(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
         """The estimates of a checked tuple content ("gamma", "mean", "cov", ...) that
@@ -448,6 +576,10 @@ class Spec:
         except ValueError:
             return "wrong shape or type"
         n, m = self.n, self.m
+        if self.slots:  # an unlabelled scan: no target is named
+            m, K = 0, message.z.shape[0] if len(message.z.shape) == 2 else -1
+            if not 0 <= K <= self.scan:
+                return "wrong shape or type"
         kinds = {
             "believed": (F, (5,), "finite"),
             "observed": (B, (m,), "flags"),
@@ -481,7 +613,8 @@ class Spec:
             if (message.action, message.target) != (-1, -1):
                 return "action or target out of range"
             return {}
-        if not 0 <= message.action < self.actions or not 0 <= message.target < self.m:
+        target_ok = message.target >= -1 if self.slots else 0 <= message.target < self.m
+        if not 0 <= message.action < self.actions or not target_ok:
             return "action or target out of range"
         m = self.m
         kinds = {
@@ -489,10 +622,34 @@ class Spec:
             "cov": (F, (m, 4, 4), "covariance"),
             "bids": (F, (m,), "bids"),
         }
-        arrays = self.arrays({name: getattr(message, name) for name in kinds}, kinds)
+        if self.slots:
+            K = self.slots
+            kinds = {
+                "mean": (F, (K, 4), "track estimate"),
+                "cov": (F, (K, 4, 4), "track covariance"),
+                "bids": (F, (K,), "slot bids"),
+                "label": (I, (K,), "label or none"),
+                "status": (I, (K,), "track status"),
+            }
+        wire = {name: getattr(message, name) for name in kinds}
+        if any(value is None for value in wire.values()):
+            return "unexpected fields"
+        arrays = self.arrays(wire, kinds)
         if isinstance(arrays, str) or self.bounds is None:
             return arrays
         return _recorded(arrays, self.bounds) or arrays
+
+
+TRACK_DOMAINS = frozenset(
+    ("track status", "label or none", "bid labels", "track covariance", "track stamp")
+    + ("tombstones", "slot bids", "track estimate")
+)
+
+
+def _distinct(label: np.ndarray) -> bool:
+    """The labels other than -1 are distinct."""
+    held = np.sort(label[label >= 0])
+    return not (held[1:] == held[:-1]).any()
 
 
 COUNT = 2**48
@@ -547,9 +704,10 @@ def _recorded(arrays: dict, bounds: Bounds) -> str | None:
     most at a plausible speed from a plausible place), covariances below the floor of a
     filter that took in an estimate at the floor (`plausibility.Bounds.adopted`)."""
     margin = -bounds.low
-    xy = arrays["mean"][:, :2]
+    live = arrays["status"] != 0 if "status" in arrays else slice(None)
+    xy = arrays["mean"][live, :2]
     if not ((xy >= bounds.low - margin) & (xy <= bounds.high + margin)).all():
         return "position out of bounds"
-    if not (np.linalg.eigvalsh(arrays["cov"])[:, 0] >= bounds.adopted).all():
+    if not (np.linalg.eigvalsh(arrays["cov"][live])[:, 0] >= bounds.adopted).all():
         return "covariance below the sensor's accuracy"
     return None

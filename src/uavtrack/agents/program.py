@@ -22,6 +22,7 @@ from ..methods import get
 from .agent import CentralAgent, UavAgent, part
 from .messages import VERSION, Radio, Ready, Spec, encode
 from .security import WORLD, Credential, Gate
+from .tracked import TrackedUav
 from .transport import ANY_HELLO, Link, Mailbox, Transport, ZenohTransport, inbox_key, keys
 
 STARTUP = 120.0
@@ -128,7 +129,8 @@ def serve(
     else:
         prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
         prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
-        program = UavAgent(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
+        kind = UavAgent if scenario.tracker.association == "known" else TrackedUav
+        program = kind(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
     node = None
     if ros2 is not None and me < n:
         from ..io.ros2 import UavNode

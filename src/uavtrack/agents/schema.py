@@ -84,7 +84,9 @@ def _admits() -> list[str]:
     """What each field of a radio part may hold (`messages.Spec`): one rule for the
     check at the radio and the code that uses the message."""
     n, m, p = -1, -2, -3  # stand-ins for the run's sizes, named in the table
+    K = -4
     spec = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1)
+    tracked = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1, slots=K)
     lines = [
         "## What a message may hold",
         "",
@@ -101,16 +103,35 @@ def _admits() -> list[str]:
         "| protocol | field | dtype | shape | domain |",
         "|---|---|---|---|---|",
     ]
-    size = {n: "N", m: "M", p: "P"}
-    for protocol in ("presence", "flood", "consensus", "beacon", "bids", "upload", "download"):
+    size = {n: "N", m: "M", p: "P", K: "K"}
+    protocols = ("presence", "flood", "consensus", "beacon", "bids", "upload", "download")
+    lines += _rows(spec, protocols, size)
+    lines += [
+        "",
+        "With unknown association (``tracker.association`` gnn or jpda) a UAV's Sense "
+        "names no target (observed is empty, z holds the scan's Z measurements), its "
+        "Report carries its K track slots with `label` and `status` (the target: the team "
+        "label it follows, -1 none), and these parts replace their namesakes (the "
+        "centralized baseline runs in the agent form with known association only):",
+        "",
+        "| protocol | field | dtype | shape | domain |",
+        "|---|---|---|---|---|",
+    ]
+    lines += _rows(tracked, ("consensus", "bids"), size)
+    lines += ["", "Domains:", ""]
+    lines += [f"- **{name}**: {text}" for name, text in messages.DOMAINS.items()]
+    lines += [""]
+    return lines
+
+
+def _rows(spec: messages.Spec, protocols, size: dict) -> list[str]:
+    lines = []
+    for protocol in protocols:
         for name, (dtype, shape, domain) in (spec.contents(protocol) or {}).items():
             axes = [size.get(x, str(x)) for x in shape]
             shown = "(" + ", ".join(axes) + ("," if len(axes) == 1 else "") + ")"
             kind = np.dtype(dtype).name
             lines.append(f"| {protocol} | `{name}` | {kind} | {shown} | {domain} |")
-    lines += ["", "Domains:", ""]
-    lines += [f"- **{name}**: {text}" for name, text in messages.DOMAINS.items()]
-    lines += [""]
     return lines
 
 

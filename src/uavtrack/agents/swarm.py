@@ -128,10 +128,10 @@ def run_swarm(
     also publishes its pose, transform and estimates as ROS 2 topics, the world the
     simulated clock on /clock (`io.ros2`, zenoh only).
     """
-    scenario.refuse_tracks("the agent form (uavtrack swarm)")
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
-    get(method)  # refuses an unknown method now
+    if get(method).central:  # refuses an unknown method now
+        scenario.refuse_tracks("the agent form's centralized baseline")
     if sign and not spawn and keys is None:
         raise UsageError(
             "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "

@@ -39,6 +39,8 @@ from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
 from ..methods import get
+from ..tracks import columns
+from ..tracks.team import CONFIRMED
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
 from .security import WORLD, Gate, Keyring
 from .stops import STOPS
@@ -205,7 +207,7 @@ class WorldProgram:
         s, ctx = self.scenario, self.ctx
         state, trajectory, sensor_rngs = simulation.initial_state(s, self.seeds)
         uavs, alive = state.uavs, state.alive
-        self.prior = (state.mean[0, 0], state.cov[0, 0, 0])
+        self.prior = (state.mean[0, 0, : s.n_targets], state.cov[0, 0, 0])  # the briefed
         pilot = state.flight if state.flight is not None else Unicycle(s.dt)
         self.wait_ready()
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
@@ -232,9 +234,12 @@ class WorldProgram:
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory[:, k]
             observed, z = simulation.observe(uavs, targets, noise, alive, s)
-            self.send(k, believed[0], observed[0], z, graph[0], alive[0], told)
+            scan = None
+            if ctx.tracked:  # each UAV's unlabelled scan: detections and clutter
+                scan = simulation.measure_scan(uavs, believed, observed, z, alive, ctx)
+            self.send(k, believed[0], observed[0], z, graph[0], alive[0], told, scan)
             told = alive[0].copy()
-            cycle, actions = self.collect(k, uavs, observed, alive)
+            cycle, actions = self.collect(k, uavs, observed, alive, scan)
             self.traffic.count_late(k, cycle.late[0])
             if recorder is not None:
                 recorder.record(k, cycle)
@@ -309,21 +314,25 @@ class WorldProgram:
             f"than the Zenoh session's lease ({LEASE:g} s)"
         )
 
-    def send(self, k, believed, observed, z, graph, alive, told) -> None:
+    def send(self, k, believed, observed, z, graph, alive, told, scan=None) -> None:
         """Each UAV told last cycle its Sense (a UAV no longer alive learns it has failed),
-        and the central node its Tick."""
+        and the central node its Tick. With a scan (unknown association) a UAV is told its
+        measurements unlabelled, in the order of its scan, and no target's index."""
         rows = np.nonzero(observed)[0]  # the UAV of each measurement, in order
         alive_array = Array.of(alive)
         self.asked = {}
         for i in np.flatnonzero(told):
+            seen, mine = observed[i], z[rows == i]
+            if scan is not None:
+                seen, mine = np.zeros(0, dtype=bool), scan.polar[0, i][scan.valid[0, i]]
             message = Sense(
                 version=VERSION,
                 run=self.run,
                 k=k,
                 uav=int(i),
                 believed=Array.of(believed[i]),
-                observed=Array.of(observed[i]),
-                z=Array.of(z[rows == i]),
+                observed=Array.of(seen),
+                z=Array.of(mine),
                 links=Array.of(graph[i]),
                 alive=alive_array,
                 central=self.central_alive,
@@ -335,12 +344,13 @@ class WorldProgram:
             self.asked[n] = Tick(VERSION, self.run, k, alive_array)
             self.link.send(n, self.asked[n])
 
-    def collect(self, k, uavs, observed, alive):
+    def collect(self, k, uavs, observed, alive, scan=None):
         """Wait for every living UAV's report (and the central node's); build the Cycle.
         A program whose report does not come is lost from this cycle on: `alive` (1, N)
         and `observed` are updated in place. Returns the cycle and the actions (1, N)."""
         s = self.scenario
         Nu, Nt = s.n_uavs, s.n_targets
+        K = s.track_slots if scan is not None else Nt  # the estimates: targets or slots
         expected = [i for i in range(Nu) if alive[0, i]] + ([Nu] if self.central_alive else [])
         mailbox = self.mailbox
         limit = time.monotonic() + self.cycle_deadline()
@@ -377,9 +387,11 @@ class WorldProgram:
             },
         )
         observed &= alive[:, :, None]
-        mean = np.full((1, Nu, Nt, 4), np.nan)
-        cov = np.full((1, Nu, Nt, 4, 4), np.nan)
-        bids = np.full((1, Nu, Nt), np.nan)
+        mean = np.full((1, Nu, K, 4), np.nan)
+        cov = np.full((1, Nu, K, 4, 4), np.nan)
+        bids = np.full((1, Nu, K), np.nan)
+        label = np.full((1, Nu, K), -1, dtype=np.int64)
+        status = np.zeros((1, Nu, K), dtype=np.int8)
         target = np.full((1, Nu), -1, dtype=np.int64)
         actions = np.full((1, Nu), simulation.STRAIGHT, dtype=np.int64)
         rounds = np.zeros((1, Nu), dtype=np.int64)
@@ -398,6 +410,8 @@ class WorldProgram:
             if i == Nu or not alive[0, i]:
                 continue
             mean[0, i], cov[0, i], bids[0, i] = arrays["mean"], arrays["cov"], arrays["bids"]
+            if scan is not None:
+                label[0, i], status[0, i] = arrays["label"], arrays["status"]
             target[0, i], actions[0, i] = report.target, report.action
             rounds[0, i], decision[0, i] = report.rounds, report.decision_ms
             wall[0, i] = report.decision_wall_ms
@@ -413,12 +427,24 @@ class WorldProgram:
             messages=np.array([sent]),
             delivered=np.array([delivered]),
             late=missed[None],
-            conflicts=simulation.conflicts(target, alive, Nt),
+            conflicts=self._conflicts(target, alive, label, status),
             alive=alive.copy(),
             decision_time_ms=decision,
             decision_wall_ms=wall,
+            label=label if scan is not None else None,
+            status=status if scan is not None else None,
+            scan=scan,
         )
         return cycle, actions
+
+    def _conflicts(self, target, alive, label, status) -> np.ndarray:
+        """`simulation.conflicts` of the targets followed; with tracks, of the team labels
+        followed, among the labels the living UAVs hold confirmed (`tracks.columns`)."""
+        if self.scenario.tracker.association == "known":
+            return simulation.conflicts(target, alive, self.scenario.n_targets)
+        cols = columns.of(label, (status == CONFIRMED) & alive[..., None])
+        taken = np.where(alive, columns.label_column(target, cols.labels), -1)
+        return simulation.conflicts(taken, alive, cols.width)
 
     def cycle_deadline(self) -> float:
         """How long the world waits for the reports of a cycle: every round of every

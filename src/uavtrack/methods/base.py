@@ -64,7 +64,10 @@ class Inputs:
     the UAV states as the UAVs believe them (B, N, 5), who is alive (B, N), each UAV's
     previous target (B, N) (-1: none), the bids held (`Held`, when messages get lost),
     and with the measurement gate (``robust.gate``) what each UAV measured
-    (`gate.Measured`)."""
+    (`gate.Measured`). With tracks (unknown association) the targets are the columns
+    of team labels (`tracks.columns`) and holds (B, N, M) says which each UAV holds
+    confirmed: a UAV knows a label only from its own tracks and the bids that reached it,
+    so the bids it holds of a sender count only for such labels."""
 
     k: int
     radio: Radio
@@ -77,6 +80,7 @@ class Inputs:
     held: Held | None
     setting: Setting
     measured: gate.Measured | None = None
+    holds: np.ndarray | None = None
 
 
 @dataclass(frozen=True, kw_only=True)

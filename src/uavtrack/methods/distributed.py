@@ -79,6 +79,8 @@ class Distributed(Method):
                 held,
                 s.stale,
             )
+            if inputs.holds is not None:  # labels: only those this UAV knows this cycle
+                view = known_labels(view, got, inputs.holds)
             held = held if held is None else Held(view, stamp)
             view = np.array(np.broadcast_to(view, (B, n, n, m)))
             view[:, idx, idx] = bids  # a UAV's own bids are current
@@ -93,6 +95,17 @@ class Distributed(Method):
             delivered=delivered,
             held=held,
         )
+
+
+def known_labels(view: np.ndarray, got: np.ndarray, holds: np.ndarray) -> np.ndarray:
+    """The bids a receiver holds (B, N, N, L), by columns of team labels, kept only for
+    the labels it knows this cycle: those it holds confirmed and those of the senders
+    whose bids arrived (got (B, N, N)); holds (B, N, L). A label known to the batch but
+    not to the receiver (held by nobody it heard from, or by nobody any more) is
+    nothing it could bid on: 0, as for a label a sender does not hold."""
+    heard = np.einsum("bis,bsl->bil", got.astype(np.int64), holds.astype(np.int64)) > 0
+    known = holds | heard
+    return np.where(known[:, :, None, :], view, 0.0)
 
 
 def bid_view(

@@ -60,6 +60,15 @@ def bids(slot_bids: np.ndarray, cols: Columns) -> np.ndarray:
     return out
 
 
+def holds(cols: Columns) -> np.ndarray:
+    """Which labels each UAV holds confirmed, (B, N, L) bool by column."""
+    B, N, _ = cols.column.shape
+    out = np.zeros((B, N, cols.width), dtype=bool)
+    b, i, s = np.nonzero(cols.column >= 0)
+    out[b, i, cols.column[b, i, s]] = True
+    return out
+
+
 def slot_of(target: np.ndarray, cols: Columns, slot_bids: np.ndarray) -> np.ndarray:
     """The slot each UAV follows: the one holding its assigned column, target (B, N)
     (-1: none). A UAV assigned a label it does not hold confirmed (possible when a

@@ -171,6 +171,7 @@ def scan(
     modes: estimation.Modes | None = None,
     tracker: estimation.Tracker | None = None,
     k: int = 0,
+    team: tuple[int, int] | None = None,
 ) -> Scanned:
     """One scan of every UAV's tracker (steps 1-4 of the module's docstring).
 
@@ -186,6 +187,9 @@ def scan(
     1 - P_D P_G + P_D / lambda sum_z N(z; H x_j, S_j) over the gated measurements (the
     IMM-PDA of Bar-Shalom, Willett and Tian, Tracking and Data Fusion, 2011). A track born
     from one measurement starts every mode there, at the stationary mode probabilities.
+
+    team: (the first UAV's index, the team's size) when the rows are part of a team (a
+    UAV's program runs its own row: (its index, N)); new labels are unique in the team.
     """
     B, N, K = book.label.shape
     Z = z.shape[2]
@@ -255,8 +259,9 @@ def scan(
     jump = estimation.process_noise(scenario.dt, MANOEUVRE_STD, MANOEUVRE_STD)
     new_cov = np.where(coast[..., None, None], new_cov + jump, new_cov)
     book, new_mean, new_cov, born = _births(
-        book, new_mean, new_cov, zz, RR, unused, scenario.n_targets, settings.birth_velocity_std
-    )
+        book, new_mean, new_cov, zz, RR, unused, scenario.n_targets,
+        settings.birth_velocity_std, team or (0, N),
+    )  # fmt: skip
     book = replace(book, stamp=np.where(born, k, book.stamp))
     if modes is not None:
         if tracker is None:
@@ -400,10 +405,13 @@ def _births(
     unused: np.ndarray,
     n_targets: int,
     velocity_std: float,
+    team: tuple[int, int],
 ) -> tuple[Book, np.ndarray, np.ndarray, np.ndarray]:
     """Tentative tracks from the measurements no track claimed (step 4): the r-th unused
     measurement of a row, by position (x, then y), goes to its r-th empty slot and takes
-    its r-th new label, so that the order in which a scan arrives changes nothing."""
+    its r-th new label, so that the order in which a scan arrives changes nothing. The
+    s-th birth of UAV i of a team of n takes label n_targets + s n + i (team: (the index
+    of the UAV of the first row, n)): unique in the team without a word exchanged."""
     B, N, K = book.label.shape
     P = B * N
     empty = (book.status == EMPTY).reshape(P, K)
@@ -421,7 +429,8 @@ def _births(
     order = np.lexsort((rank, row))
     slot[order] = eslot  # both sorted by (row, rank): births and the slots they fill
     serial = book.serial.reshape(P)
-    label = n_targets + (serial[row] + rank) * N + row % N
+    first, size = team
+    label = n_targets + (serial[row] + rank) * size + first + row % N
     mean, cov = mean.reshape(P, K, 4).copy(), cov.reshape(P, K, 4, 4).copy()
     mean[row, slot] = 0.0
     mean[row, slot, :2] = z[row, which]

@@ -283,19 +283,35 @@ def agree(
         links = inbox.delivered.into(active)
         if not links.edges:  # the dense form keeps every receiver: mute the finished
             links = network.Links(batch=B, n=n, dense=links.matrix & active[:, :, None])
-        if tracks.tombs is not None:  # deletions first: what is known gone is not fused
-            before = tracks.status
-            tracks = bury(tracks, merge_tombs(tracks.tombs, inbox.content.tombs, links))
-            changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
-        tracks, now = team_round(tracks, inbox.content, links, threshold, rule)
-        # a new track stays new; an emptied slot that takes a new track holds a new track
-        changed = np.where(now == ADOPTED, ADOPTED, np.maximum(changed, now))
-        if tracks.tombs is not None:  # and not kept, if adopted from a UAV that knew less
-            before = tracks.status
-            tracks = bury(tracks, tracks.tombs)
-            changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
+        tracks, changed = agree_round(tracks, changed, inbox.content, links, threshold, rule)
     radio.send("consensus", tracks)  # the final tracks, for later rounds (with delay)
     return tracks, changed.astype(np.int8), sent, delivered
+
+
+def agree_round(
+    tracks: TrackSet,
+    changed: np.ndarray,
+    offered: TrackSet,
+    links: network.Links,
+    threshold: float,
+    rule: str = "max_consensus",
+) -> tuple[TrackSet, np.ndarray]:
+    """One round of `agree` for the receivers of `links`: the senders' tombstones merged
+    and applied (`merge_tombs`, `bury`), then `team_round`, then the tombstones applied
+    again to what was adopted; `changed` (B, N, K) int8 accumulated as `agree` says.
+    The agent form runs it on one receiver's closed neighbourhood."""
+    if tracks.tombs is not None:  # deletions first: what is known gone is not fused
+        before = tracks.status
+        tracks = bury(tracks, merge_tombs(tracks.tombs, offered.tombs, links))
+        changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
+    tracks, now = team_round(tracks, offered, links, threshold, rule)
+    # a new track stays new; an emptied slot that takes a new track holds a new track
+    changed = np.where(now == ADOPTED, ADOPTED, np.maximum(changed, now))
+    if tracks.tombs is not None:  # and not kept, if adopted from a UAV that knew less
+        before = tracks.status
+        tracks = bury(tracks, tracks.tombs)
+        changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
+    return tracks, changed.astype(np.int8)
 
 
 def merge_tombs(own: np.ndarray, offered: np.ndarray | None, links: network.Links) -> np.ndarray:

@@ -1,0 +1,263 @@
+"""One UAV as a program with unknown association: its track slots, the team's
+agreement on them over the radio, and the auction over team labels.
+
+The world sends the UAV its scan unlabelled (`messages.Sense`: the detections and the
+clutter in the order the sensor gave them, no target named). The program runs the
+batch simulator's stages on its own row (leading axes of size 1): `manage.scan` on its
+slots, the D_i protocol with rounds of `team.agree_round` on the tracks its neighbours
+send (labels, status, stamps and tombstones travel with them), `manage.after_fusion`,
+`planning.plan` over its slots, and the auction (`assignment.local`) over the labels it
+knows: its own confirmed tracks' and those of the bids that reached it, in increasing
+order, as the batch lays them out in columns (`tracks.columns`); the bids it holds of a
+neighbour whose message was lost count for those labels only, as in the batch
+(`methods.distributed.known_labels`). So a swarm's trace equals `uavtrack run`'s for
+the same seed and faults.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .. import assignment, estimation, network, simulation, timing
+from ..methods import Distributed, Greedy, bid_view
+from ..methods.base import Held
+from ..tracks import association, manage, team
+from .agent import UavAgent, dropped
+from .messages import VERSION, Report, packed
+
+
+class TrackedUav(UavAgent):
+    """A UAV's program with ``tracker.association`` gnn or jpda (see the module
+    docstring). The centralized baseline is not part of it: its node would run one
+    tracker on every UAV's scan, which the agent form does not carry."""
+
+    def __init__(self, me, scenario, method, faults, link, mailbox, deadline, prior) -> None:
+        super().__init__(me, scenario, method, faults, link, mailbox, deadline, prior)
+        if not isinstance(self.method, Distributed | Greedy):
+            raise ValueError(
+                f"method {self.method.name!r}: the agent form runs unknown association "
+                "(tracker.association gnn or jpda) with methods built on Distributed or Greedy"
+            )
+        K = scenario.track_slots
+        mean, cov = prior  # (M, 4), (M, 4, 4): the briefed targets
+        book, mean, cov = manage.briefed(mean[None, None], cov[None, None], K)
+        self.book = book
+        self.mean, self.cov, self.modes = self.ctx.const.tracker.start(mean, cov)
+        self.tombs = np.full((1, 1, K, 2), -1, dtype=np.int64)
+        self.threshold = association.threshold(scenario.tracker.gate_probability, 4)
+        self.target = -1  # the team label followed
+        self.kept: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
+        """The bids held of each neighbour (labels, bids, step sent), when messages get
+        lost: `Held` by label."""
+
+    def cycle(self, k: int, sense: dict[str, np.ndarray], central: bool = True) -> Report:
+        s, tracker = self.scenario, self.ctx.const.tracker
+        believed = self.believed = sense["believed"]
+        alive = sense["alive"]
+        self.radio.begin(k, sense["links"], alive, central)
+        raw = sense["z"]
+        z, R = simulation.convert(np.repeat(believed[None], len(raw), axis=0), raw, s)
+        one = np.ones((1, 1), dtype=bool)
+        scanned = manage.scan(
+            self.book, self.mean, self.cov, z[None, None], R[None, None],
+            np.ones((1, 1, len(raw)), dtype=bool), believed[None, None], one, s,
+            self.modes, tracker, k, (self.me, self.n),
+        )  # fmt: skip
+        tombs = self.tombs
+        if scanned.dead is not None:
+            tombs = team.entomb(tombs, scanned.dead, k)
+        own = team.TrackSet(
+            mean=scanned.mean, cov=scanned.cov, label=scanned.book.label,
+            status=scanned.book.status, stamp=scanned.book.stamp, tombs=tombs,
+        )  # fmt: skip
+        state = (own, np.zeros(own.status.shape, dtype=np.int8))
+        (agreed, changed), rounds, sent, delivered = self.rounds(
+            k, state, lambda state: _content(state[0]), self._agree
+        )
+        book = manage.after_fusion(
+            scanned.book, agreed.label, agreed.status, changed, s, agreed.stamp
+        )
+        confirmed = book.confirmed[0, 0]
+        plan_start = timing.start()
+        slot_bids, best = self.setting.plan(believed[None, None], agreed.mean)
+        slot_bids, best = np.where(confirmed, slot_bids[0, 0], np.nan), best[0, 0]
+        plan_seconds = timing.since(plan_start)
+        labels = book.label[0, 0]
+        if isinstance(self.method, Greedy):
+            column, solve_seconds, more = self._greedy(slot_bids, labels, confirmed)
+            held = np.unique(labels[confirmed])
+        else:
+            column, held, solve_seconds, more = self._auction(k, slot_bids, labels, alive)
+        slot = _slot_of(column, held, labels, confirmed, slot_bids)
+        action = int(best[slot]) if slot >= 0 else simulation.STRAIGHT
+        followed = int(labels[slot]) if slot >= 0 else -1
+        self.target = followed if followed >= 0 else self.target
+        cpu, wall = (1e3 * (plan_seconds + solve_seconds)).tolist()
+        report = Report(
+            version=VERSION, run=self.run, k=k, uav=self.me, action=action, target=followed,
+            mean=packed({"x": agreed.mean[0, 0]})["x"], cov=packed({"x": agreed.cov[0, 0]})["x"],
+            bids=packed({"x": slot_bids})["x"], rounds=int(rounds),
+            sent=int(sent + more[0]), delivered=int(delivered + more[1]),
+            decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
+            label=packed({"x": labels})["x"],
+            status=packed({"x": book.status[0, 0].astype(np.int64)})["x"],
+        )  # fmt: skip
+        self._close(scanned, agreed, changed, book)
+        return report
+
+    def _close(self, scanned, agreed: team.TrackSet, changed, book) -> None:
+        """The tracks predicted to the next scan (`simulation._finish_tracked`)."""
+        tracker = self.ctx.const.tracker
+        if scanned.modes is not None:  # an IMM: fused tracks restart their modes
+            modes = manage.restart(scanned.modes, changed == 2, agreed.mean, agreed.cov, tracker)
+            self.mean, self.cov, self.modes = tracker.close(
+                scanned.mean, scanned.cov, modes, agreed.mean, agreed.cov
+            )
+        else:
+            self.mean, self.cov = estimation.predict(agreed.mean, agreed.cov, tracker.A, tracker.Q)
+        self.book = book
+        if agreed.tombs is not None:
+            self.tombs = agreed.tombs
+
+    # ------------------------------------------------------------ fusion
+
+    def _agree(self, state, contents: dict[int, dict]):
+        """One round of `team.agree_round` over this UAV's closed neighbourhood: itself
+        and the senders whose tracks arrived, in index order (the senders' tracks beyond
+        the run's plausibility bounds left out, `messages.Spec.tracks`)."""
+        own, changed = state
+        offered = {}
+        for q, content in contents.items():
+            content, reasons = self.spec.tracks(content)
+            dropped(self.mailbox, reasons)
+            offered[q] = content
+        ids = sorted({self.me, *offered})
+        where = ids.index(self.me)
+
+        def stacked(name: str, mine: np.ndarray, dtype=None) -> np.ndarray:
+            rows = [mine if q == self.me else offered[q][name] for q in ids]
+            out = np.stack(rows)[None]
+            return out if dtype is None else out.astype(dtype)
+
+        tracks = team.TrackSet(
+            mean=stacked("mean", own.mean[0, 0]),
+            cov=stacked("cov", own.cov[0, 0]),
+            label=stacked("label", own.label[0, 0], np.int64),
+            status=stacked("status", own.status[0, 0], np.int8),
+            stamp=stacked("stamp", _stamp(own), np.int64),
+            tombs=None if own.tombs is None else stacked("tombs", own.tombs[0, 0], np.int64),
+        )
+        dense = np.eye(len(ids), dtype=bool)[None]
+        dense[0, where, :] = True
+        links = network.Links(batch=1, n=len(ids), dense=dense)
+        every = np.zeros(tracks.status.shape, dtype=np.int8)
+        every[0, where] = changed[0, 0]
+        out, now = team.agree_round(tracks, every, tracks, links, self.threshold, self.setting.rule)
+        mine = team.TrackSet(
+            mean=out.mean[:, where : where + 1],
+            cov=out.cov[:, where : where + 1],
+            label=out.label[:, where : where + 1],
+            status=out.status[:, where : where + 1],
+            stamp=None if out.stamp is None else out.stamp[:, where : where + 1],
+            tombs=None if out.tombs is None else out.tombs[:, where : where + 1],
+        )
+        return mine, now[:, where : where + 1]
+
+    # ------------------------------------------------------------ assignment
+
+    def _greedy(self, slot_bids, labels, confirmed):
+        """The greedy baseline: the best bid among its own confirmed tracks' labels
+        (ties to the lowest label)."""
+        held = np.unique(labels[confirmed])
+        start = timing.start()
+        column = int(assignment.greedy(_by_label(slot_bids, labels, confirmed, held)))
+        return column, timing.since(start), (0, 0)
+
+    def _auction(self, k: int, slot_bids, labels, alive):
+        """Bids by label to the neighbours, then the auction over the labels this UAV
+        knows (`UavAgent.solve`). Returns (column, the labels of the columns, seconds,
+        messages (sent, delivered))."""
+        n, s = self.n, self.setting
+        confirmed = ~np.isnan(slot_bids)
+        sent_labels = np.where(confirmed, labels, -1)
+        stamp = np.array(k, dtype=np.int64)
+        beacon, inbox, more = self.heard(
+            k, {"bids": slot_bids, "label": sent_labels, "stamp": stamp}
+        )
+        contents = {} if inbox is None else inbox.contents
+        known = np.unique(
+            np.concatenate([labels[confirmed], *(c["label"] for c in contents.values())])
+        )
+        known = known[known >= 0]
+        if known.size == 0:  # nothing to follow: the auction has no column
+            return -1, known, np.zeros(2), more
+        own = _by_label(slot_bids, labels, confirmed, known)
+        if inbox is None:  # nothing has arrived yet: alone
+            members = np.zeros(n, dtype=bool)
+            view = np.broadcast_to(own, (n, known.size)).copy()
+            target, seconds = self.solve(view, members, alive, own)
+            return target, known, seconds, more
+        got, offered, stamps = np.zeros(n, dtype=bool), np.zeros((n, known.size)), np.zeros(n, int)
+        for q, c in contents.items():
+            got[q], stamps[q] = True, c["stamp"]
+            offered[q] = _by_label(c["bids"], c["label"], c["label"] >= 0, known)
+        heard = got
+        if beacon is not None:
+            heard = np.zeros(n, dtype=bool)
+            heard[list(beacon.contents)] = True
+        held = None
+        if self.held is not None:  # the bids held of each sender, by the labels known now
+            value, when = np.zeros((n, known.size)), np.full(n, -1, dtype=np.int64)
+            for q, (were, bids, sent_at) in self.kept.items():
+                value[q] = _by_label(bids, were, were >= 0, known)
+                when[q] = sent_at
+            held = Held(value, when)
+        members, view, stamp = bid_view(got, offered, stamps, heard, held, s.stale)
+        if self.held is not None:
+            self.kept = {
+                int(q): (known, view[q].copy(), int(stamp[q])) for q in np.flatnonzero(stamp >= 0)
+            }
+            self.held = held
+        target, seconds = self.solve(view.copy(), members, alive, own)
+        return target, known, seconds, more
+
+
+def _content(tracks: team.TrackSet) -> dict[str, np.ndarray]:
+    """A round's consensus content: this UAV's slots (`messages.Spec` "consensus")."""
+    assert tracks.stamp is not None and tracks.tombs is not None
+    return {
+        "mean": tracks.mean[0, 0],
+        "cov": tracks.cov[0, 0],
+        "label": tracks.label[0, 0],
+        "status": tracks.status[0, 0].astype(np.int64),
+        "stamp": tracks.stamp[0, 0],
+        "tombs": tracks.tombs[0, 0],
+    }
+
+
+def _stamp(tracks: team.TrackSet) -> np.ndarray:
+    assert tracks.stamp is not None  # a UAV's tracks carry their stamps
+    return tracks.stamp[0, 0]
+
+
+def _by_label(bids: np.ndarray, labels: np.ndarray, confirmed: np.ndarray, known: np.ndarray):
+    """Bids per slot (K,) laid out by the labels `known` (L,) sorted: the bid of the
+    confirmed slot holding each, 0 where none does (`tracks.columns.bids`)."""
+    out = np.zeros(known.size)
+    slots = np.flatnonzero(confirmed)
+    at = np.searchsorted(known, labels[slots])
+    inside = (at < known.size) & (known[np.minimum(at, known.size - 1)] == labels[slots])
+    out[at[inside]] = np.nan_to_num(bids[slots[inside]])
+    return out
+
+
+def _slot_of(column: int, known: np.ndarray, labels, confirmed, slot_bids) -> int:
+    """The slot followed (`tracks.columns.slot_of`): the one holding the assigned label,
+    else the best own confirmed track, else -1."""
+    if column >= 0:
+        match = np.flatnonzero(confirmed & (labels == known[column]))
+        if match.size:
+            return int(match[0])
+    if not confirmed.any():
+        return -1
+    return int(np.argmax(np.where(confirmed, slot_bids, -np.inf)))
