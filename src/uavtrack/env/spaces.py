@@ -319,9 +319,7 @@ def check_reward(kind: str, scenario: Scenario | None = None) -> str:
     return kind
 
 
-def team_tracks(
-    view: View, rows: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def team_tracks(view: View, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """The team's confirmed tracks as `rows` rows per trial: per team label held
     confirmed by a living UAV (`View.label`) the most confident estimate (1/trace P,
     the lowest UAV and slot on ties, as `metrics.team_best`), in increasing label
