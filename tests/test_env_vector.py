@@ -48,8 +48,14 @@ def _dense(observations, agents, size):
             "fusion": {"rule": "covariance_intersection"},
             "reward": "difference",
         },
+        {
+            "tracker": {"association": "jpda"},
+            "sensor": {"detection_probability": 0.9, "clutter_rate": 2},
+            "faults": {"failures": [[2, 6]]},
+            "reward": "difference",
+        },
     ],
-    ids=["paper", "faults", "failure-information", "imm-difference"],
+    ids=["paper", "faults", "failure-information", "imm-difference", "jpda-clutter"],
 )
 def test_every_trial_is_the_single_environments(settings):
     B, T = 4, 20
@@ -90,6 +96,18 @@ def test_paper_actions_reproduce_simulate_trial_by_trial():
     for b in range(3):
         reference = uavtrack.simulate(uavtrack.Scenario(steps=15), "distributed", seed=20 + b)
         assert info["observation_rate"][b] == reference.observation_rate
+
+
+def test_paper_actions_reproduce_simulate_with_tracks_trial_by_trial():
+    tracked = {"tracker": {"association": "gnn"}, "sensor": {"clutter_rate": 2}}
+    v = vector_env(3, steps=15, **tracked)
+    v.reset(seed=30)
+    for _ in range(15):
+        *_, info = v.step(v.paper_actions())
+    scenario = uavtrack.Scenario(steps=15, **tracked)
+    for b in range(3):
+        reference = uavtrack.simulate(scenario, "distributed", seed=30 + b)
+        assert info["observation_rate"][b] == pytest.approx(reference.observation_rate, rel=1e-12)
 
 
 def test_without_paper_actions_the_agents_trial_is_the_same():

@@ -98,6 +98,32 @@ def test_sb3_vec_env_ends_episodes_as_terminal_states():
     assert model.num_timesteps == 100
 
 
+TRACKED = {
+    "tracker": {"association": "jpda"},
+    "sensor": {"detection_probability": 0.9, "clutter_rate": 2},
+}
+
+
+def test_tracked_scenarios_in_torchrl_and_sb3():
+    check_env_specs(torchrl_env(vector_env(2, steps=5, **TRACKED), seed=0))
+    env = torchrl_env(vector_env(2, steps=5, **TRACKED), seed=0)
+    rollout = env.rollout(5, break_when_any_done=False)
+    assert rollout["next", "done"][:, -1].all()
+    # the rewards are vector_env's trials 0 and 1 flown with the same actions
+    v = vector_env(2, steps=5, **TRACKED)
+    v.reset(seed=0)
+    for k in range(5):
+        _, rewards, *_ = v.step(rollout["agents", "action"][:, k].numpy())
+        got = rollout["next", "agents", "reward"][:, k, :, 0].numpy()
+        np.testing.assert_allclose(got, rewards, rtol=1e-6)
+    wrapped = PettingZooWrapper(parallel_env(steps=6, **TRACKED), return_state=True)
+    check_env_specs(wrapped)
+    vec = sb3_vec_env(vector_env(2, steps=4, **TRACKED), seed=1)
+    model = PPO("MlpPolicy", vec, n_steps=4, batch_size=40, n_epochs=1, seed=0)
+    model.learn(40)
+    assert model.num_timesteps == 40
+
+
 # ---------------------------------------------------------------- BenchMARL
 
 

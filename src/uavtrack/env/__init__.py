@@ -31,7 +31,7 @@ Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
   less the first step's); "difference" the share only this UAV sees; "information"
   the information its own measurements bring. The last cycle's action earns 0.
 * **Info**: ``paper_action`` (what ``method_for_others``, default "distributed", would
-  fly), ``target`` (its assignment), ``in_view``.
+  fly), ``target`` (its assignment), ``in_view`` (the targets in its disk).
 * **Episodes** last the scenario's steps (``max_cycles``): at the end every agent is
   terminated (the time left is in the observation, so the end is part of the task)
   and truncated (the steps ran out). A UAV that fails (faults) terminates as an agent
@@ -44,6 +44,19 @@ Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
 
 ``reset(seed=s)`` draws the trial as ``simulate(scenario, method, seed=s)`` does, so
 flying every ``paper_action`` reproduces ``simulate``'s trial exactly (``result()``).
+
+**Tracks of unknown association** (``tracker.association`` gnn or jpda): a UAV knows
+no target index, so its target rows are its *confirmed* tracks after fusion, nearest
+first, and "in view now" is whether one of its own measurements of this scan lies in
+the track's gate (`episodes.in_view_now`), never the truth's disk. `max_targets`
+defaults to the number of targets (the count the team is briefed on; more confirmed
+tracks are false or duplicates) and may rise to the track slots. The Dict form gives
+every slot with its team label (``"labels"``, -1 for a slot not confirmed). The state
+holds per team label the most confident living UAV's estimate, lowest label first, as
+many rows as `max_targets` (`spaces.team_tracks`). "team" and "difference" stay on the
+truth; "information" is refused (one filter per target is what its gain compares).
+Info ``target`` is the team label followed (-1: none), ``in_view`` the tracks its own
+scan met.
 """
 
 from __future__ import annotations

@@ -23,6 +23,8 @@ from ..simulation import (
     scores,
     sensor_noise,
 )
+from ..tracks import association
+from ..tracks.scan import Scan
 from .spaces import Spaces, View, rewards
 
 
@@ -101,10 +103,18 @@ class Episodes:
 
     def view(self) -> View:
         """What the pending cycle shows; once done, the state flown to with its
-        predicted estimates (nothing in view)."""
+        predicted estimates (nothing in view). With tracks, each UAV's confirmed
+        tracks after fusion and which of them its own scan met (`in_view_now`)."""
         p = self.pending
         if p is not None:
             links = graph(p.uavs, p.alive, self.scenario)
+            label = met = None
+            if p.tracks is not None:
+                t = p.tracks
+                label = np.where(t.book.confirmed & p.alive[..., None], t.book.label, -1)
+                assert p.scan is not None  # a tracked cycle carries its scans
+                gate = self.scenario.tracker.gate_probability
+                met = in_view_now(t.mean, t.cov, label >= 0, p.scan, gate)
             return View(
                 k=p.k,
                 believed=p.believed,
@@ -114,10 +124,16 @@ class Episodes:
                 links=links,
                 alive=p.alive,
                 observed=p.observed,
+                label=label,
+                met=met,
             )
         s = self.state
         links = graph(s.uavs, s.alive, self.scenario)
-        observed = np.zeros(s.mean.shape[:3], dtype=bool)
+        observed = np.zeros(s.alive.shape + (self.scenario.n_targets,), dtype=bool)
+        label = met = None
+        if s.book is not None:
+            label = np.where(s.book.confirmed & s.alive[..., None], s.book.label, -1)
+            met = np.zeros(label.shape, dtype=bool)
         return View(
             k=s.k,
             believed=s.uavs,
@@ -127,6 +143,8 @@ class Episodes:
             links=links,
             alive=s.alive,
             observed=observed,
+            label=label,
+            met=met,
         )
 
     def observation_rate(self) -> np.ndarray:
@@ -147,3 +165,24 @@ class Episodes:
         if k >= self.scenario.steps:
             return None
         return decide(self.state, self.trajectory[:, k], next(self.noises), self.ctx, self.plan)
+
+
+def in_view_now(
+    mean: np.ndarray, cov: np.ndarray, confirmed: np.ndarray, scan: Scan, gate_probability: float
+) -> np.ndarray:
+    """Which tracks a UAV saw itself this scan, (B, Nu, K) bool: one of its own
+    measurements (`Scan`, clutter or not: it cannot tell) lies in the gate
+    d2 <= chi2.ppf(P_G, 2) of a confirmed track's estimate (mean (B, Nu, K, 4), cov
+    (B, Nu, K, 4, 4)). What a UAV of unknown association knows in place of the truth's
+    "inside my disk": a track it measured, not a target."""
+    B, Nu, K = confirmed.shape
+    Z = scan.z.shape[2]
+    P = B * Nu
+    inn = association.innovations(
+        mean.reshape(P, K, 4), cov.reshape(P, K, 4, 4),
+        scan.z.reshape(P, Z, 2), scan.R.reshape(P, Z, 2, 2),
+    )  # fmt: skip
+    gated = association.gate(
+        inn.d2, confirmed.reshape(P, K), scan.valid.reshape(P, Z), gate_probability
+    )
+    return gated.any(axis=-1).reshape(B, Nu, K)

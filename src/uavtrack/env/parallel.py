@@ -59,7 +59,6 @@ def scenario_of(
         overrides = {**overrides, "steps": max_cycles}
     if overrides:
         scenario = scenario.with_overrides(flatten(overrides), origin=origin)
-    scenario.refuse_tracks("the environment")
     return scenario
 
 
@@ -98,7 +97,7 @@ class UAVTrackingEnv(ParallelEnv):
         if not isinstance(scenario, Scenario):
             raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
         self.scenario, self.method, self.render_mode = scenario, get(method), render_mode
-        self.reward = check_reward(reward)
+        self.reward = check_reward(reward, scenario)
         self.spaces = Spaces(scenario, observation, max_targets, max_neighbours)
         check_memory(scenario, 1, trace=True)  # refused now, not at the first step
         self.possible_agents = [f"uav_{i}" for i in range(scenario.n_uavs)]
@@ -221,12 +220,16 @@ class UAVTrackingEnv(ParallelEnv):
         return {a: built[0, self._index[a]] for a in agents}
 
     def _infos(self, agents: list[str]) -> dict[str, dict]:
-        p = self._started().current
+        run = self._started()
+        p = run.current
+        # with tracks: the team label followed, and the tracks its own scan met
+        seen = p.observed if p.tracks is None else run.view().met
+        assert seen is not None  # a tracked view carries what each UAV met
         return {
             a: {
                 "paper_action": int(p.own[0, i]),
                 "target": int(p.assigned.target[0, i]),
-                "in_view": int(p.observed[0, i].sum()),
+                "in_view": int(seen[0, i].sum()),
             }
             for a in agents
             for i in (self._index[a],)

@@ -9,6 +9,12 @@ from the field's centre in units of half its side; distances from the UAV as
 log(1 + d / rho), rho the observation radius h tan(alpha) at the scenario's altitude;
 speeds in units of the UAV's airspeed; a standard deviation sigma as log(sigma / rho).
 Every entry is clipped to [-BOUND, BOUND] and missing entries are 0 with their mask 0.
+
+With tracks of unknown association (``tracker.association`` gnn or jpda) a UAV knows
+no target index: its target rows are its *confirmed* tracks after fusion (a `View`
+with `label`), "in view" is whether one of its own measurements of this scan lies in
+the track's gate (`View.met`), and the state's target rows are the team's confirmed
+labels (`Spaces.state`).
 """
 
 from __future__ import annotations
@@ -20,6 +26,8 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import Scenario
+from ..errors import ScenarioError
+from ..estimation import confidence
 from ..metrics import team_best
 
 BOUND = 10.0
@@ -35,7 +43,8 @@ REWARDS = {
     "reward minus the team reward without this UAV (a difference reward)",
     "information": "the information the UAV's own measurements at the next cycle bring on the "
     "targets' positions, 1/2 log det(P-) / det(P+) summed over its targets [nats] (the "
-    "det G of the Fisher information the planner scores, as a gain over the prior)",
+    "det G of the Fisher information the planner scores, as a gain over the prior; not "
+    "with tracks of unknown association)",
 }
 """Reward options, by name: what an action at cycle k earns (see the docs, The environment)."""
 
@@ -54,7 +63,13 @@ class View:
     believed (B, Nu, 5) the UAVs' states as they believe them; uavs (B, Nu, 5) the true
     states; mean (B, Nu, Nt, 4), cov (B, Nu, Nt, 4, 4) each UAV's fused estimates;
     links (B, Nu, Nu) the radio graph; alive (B, Nu); observed (B, Nu, Nt) the targets
-    in each UAV's disk; k the step.
+    in each UAV's disk (the truth: the rewards read it); k the step.
+
+    With tracks of unknown association mean (B, Nu, K, 4) and cov (B, Nu, K, 4, 4) are
+    each UAV's K track slots after fusion, label (B, Nu, K) the team label of each
+    confirmed track of a living UAV (-1 in every other slot) and met (B, Nu, K) whether
+    one of the UAV's own measurements of this scan lies in that track's gate; both are
+    None with the paper's known association.
     """
 
     k: int
@@ -65,6 +80,8 @@ class View:
     links: np.ndarray
     alive: np.ndarray
     observed: np.ndarray
+    label: np.ndarray | None = None
+    met: np.ndarray | None = None
 
 
 class Spaces:
@@ -80,8 +97,13 @@ class Spaces:
         if observation not in OBSERVATIONS:
             raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
         nu, nt = scenario.n_uavs, scenario.n_targets
-        self.max_targets = _count("max_targets", max_targets, nt, 1)
-        self.max_neighbours = _count("max_neighbours", max_neighbours, nu - 1, 0)
+        self.tracked = scenario.tracker.association != "known"
+        # with tracks a UAV holds up to K slots; its rows default to the n_targets it
+        # was briefed on: more confirmed tracks than targets are false or duplicates,
+        # and the nearest first keep those that matter to its flight
+        rows = scenario.track_slots if self.tracked else nt
+        self.max_targets = _count("max_targets", max_targets, rows, 1, nt)
+        self.max_neighbours = _count("max_neighbours", max_neighbours, nu - 1, 0, nu - 1)
         if observation == "dict" and (max_targets is not None or max_neighbours is not None):
             raise ValueError("max_targets and max_neighbours apply to observation='box' only")
         self.scenario, self.form = scenario, observation
@@ -90,21 +112,26 @@ class Spaces:
         self.speed, self.altitude = scenario.uav.speed, scenario.uav.altitude
         self.size = len(OWN) + self.max_targets * len(TARGET)
         self.size += self.max_neighbours * len(NEIGHBOUR)
-        self.state_size = 1 + nu * len(UAV_STATE) + nt * len(TARGET_STATE)
+        # the state's target rows: one per target, or with tracks as many team labels
+        # as a UAV's observation has track rows
+        self.state_rows = self.max_targets if self.tracked else nt
+        self.state_size = 1 + nu * len(UAV_STATE) + self.state_rows * len(TARGET_STATE)
         box = lambda n: spaces.Box(-BOUND, BOUND, (n,), np.float32)  # noqa: E731
         self.state_space = box(self.state_size)
         if observation == "box":
             self.observation_space = box(self.size)
         else:
             raw = lambda *shape: spaces.Box(-np.inf, np.inf, shape, np.float64)  # noqa: E731
-            self.observation_space = spaces.Dict(
-                {
-                    "uav": raw(5),
-                    "estimates": raw(nt, 4),
-                    "covariance": raw(nt, 3),
-                    "neighbours": spaces.MultiBinary(nu),
-                }
-            )
+            parts = {
+                "uav": raw(5),
+                "estimates": raw(rows, 4),
+                "covariance": raw(rows, 3),
+                "neighbours": spaces.MultiBinary(nu),
+            }
+            if self.tracked:
+                top = np.iinfo(np.int64).max
+                parts["labels"] = spaces.Box(-1, top, (rows,), np.int64)
+            self.observation_space = spaces.Dict(parts)
 
     def layout(self) -> dict[str, slice]:
         """Where each part of a Box observation lies: own, targets, neighbours (rows of
@@ -119,13 +146,19 @@ class Spaces:
         """Every UAV's observation: (B, Nu, size) float32, or for the Dict form a dict of
         (B, Nu, ...) arrays. Fresh arrays, never views of the simulator's."""
         if self.form == "dict":
-            P = view.cov
-            return {
+            m, P = view.mean, view.cov
+            out = {
                 "uav": np.array(view.believed, dtype=np.float64),
-                "estimates": np.array(view.mean, dtype=np.float64),
+                "estimates": np.array(m, dtype=np.float64),
                 "covariance": np.stack([P[..., 0, 0], P[..., 1, 1], P[..., 0, 1]], axis=-1),
                 "neighbours": view.links.astype(np.int8),
             }
+            if view.label is not None:  # a slot not confirmed holds nothing the UAV tracks
+                kept = view.label >= 0
+                out["estimates"] = np.where(kept[..., None], out["estimates"], 0.0)
+                out["covariance"] = np.where(kept[..., None], out["covariance"], 0.0)
+                out["labels"] = view.label.copy()
+            return out
         B, Nu = view.alive.shape
         own = self._own(view)
         targets = self._targets(view)
@@ -162,6 +195,10 @@ class Spaces:
         c, s = np.cos(u[..., 4])[..., None], np.sin(u[..., 4])[..., None]
         dx, dy = m[..., 0] - u[..., 0:1], m[..., 1] - u[..., 1:2]
         present = view.alive[..., None] & np.isfinite(m).all(axis=-1)
+        in_view = view.observed
+        if view.label is not None:  # tracks: the confirmed ones, seen by its own sensor
+            present &= view.label >= 0
+            in_view = view.met
         d = np.hypot(dx, dy)
         safe = np.where(d > 0, d, 1.0)
         sigma2 = (view.cov[..., 0, 0] + view.cov[..., 1, 1]) / 2
@@ -174,7 +211,7 @@ class Spaces:
                 (c * m[..., 2] + s * m[..., 3]) / self.speed,
                 (c * m[..., 3] - s * m[..., 2]) / self.speed,
                 0.5 * np.log(np.maximum(sigma2, 1e-300)) - math.log(self.rho),
-                view.observed.astype(np.float64),
+                np.asarray(in_view, dtype=np.float64),
             ],
             axis=-1,
         )
@@ -211,11 +248,15 @@ class Spaces:
     def state(self, view: View) -> np.ndarray:
         """The team's global view (B, state_size) float32: the step, every UAV's true
         state, and per target the team's best estimate (the living UAV most confident
-        in it, 1/trace P) and whether any UAV sees it."""
+        in it, 1/trace P) and whether any UAV sees it. With tracks, per team label
+        (`team_tracks`) instead of per target."""
         B, Nu = view.alive.shape
         uav_rows = self._uav_rows(view.uavs, view.alive)
-        best, m, P = team_best(view.mean, view.cov, view.alive)
-        present = best >= 0
+        if view.label is None:
+            best, m, P = team_best(view.mean, view.cov, view.alive)
+            present, seen = best >= 0, view.observed.any(axis=1)
+        else:
+            present, m, P, seen = team_tracks(view, self.state_rows)
         sigma2 = (P[..., 0, 0] + P[..., 1, 1]) / 2
         target_rows = np.stack(
             [
@@ -226,7 +267,7 @@ class Spaces:
                 m[..., 3] / self.speed,
                 0.5 * np.log(np.where(present, np.maximum(sigma2, 1e-300), 1.0))
                 - math.log(self.rho),
-                view.observed.any(axis=1).astype(np.float64),
+                seen.astype(np.float64),
             ],
             axis=-1,
         )
@@ -261,10 +302,56 @@ def rewards(
     return np.where(observed, gain, 0.0).sum(axis=-1)
 
 
-def check_reward(kind: str) -> str:
+def check_reward(kind: str, scenario: Scenario | None = None) -> str:
+    """`kind` if it names a reward `scenario` can pay; a one-line error otherwise."""
     if kind not in REWARDS:
         raise ValueError(f"reward must be one of {sorted(REWARDS)}, got {kind!r}")
+    if kind == "information" and scenario is not None:
+        if scenario.tracker.association != "known":
+            # its gain compares each target's filter before and after the UAV's own
+            # update; a track slot is fused with teammates' tracks, born or emptied
+            # within the scan, so no one filter holds the UAV's own gain
+            raise ScenarioError(
+                f"reward 'information' reads one filter per target; with "
+                f"tracker.association = {scenario.tracker.association} give reward "
+                "'team' or 'difference'"
+            )
     return kind
+
+
+def team_tracks(view: View, rows: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """The team's confirmed tracks as `rows` rows per trial: per team label held
+    confirmed by a living UAV (`View.label`) the most confident estimate (1/trace P,
+    the lowest UAV and slot on ties, as `metrics.team_best`), in increasing label
+    order (the briefed targets' labels 0 .. Nt - 1 first, then the births in the order
+    the team started them), the first `rows` labels kept. Returns present (B, rows),
+    mean (B, rows, 4), cov (B, rows, 4, 4) (zeros where absent) and seen (B, rows):
+    some UAV's own measurement of this scan lies in that label's gate (`View.met`)."""
+    assert view.label is not None and view.met is not None
+    B, Nu, K = view.label.shape
+    n = Nu * K
+    label = view.label.reshape(B, n)
+    held = label >= 0
+    key = np.where(held, label, np.iinfo(np.int64).max)
+    cov = np.where(held[..., None, None], view.cov.reshape(B, n, 4, 4), np.eye(4))
+    gamma = np.where(held, confidence(cov), -np.inf)
+    order = np.lexsort((-gamma, key), axis=-1)  # by label, the most confident first
+    ordered = np.take_along_axis(key, order, axis=-1)
+    first = np.take_along_axis(held, order, axis=-1)
+    first[:, 1:] &= ordered[:, 1:] != ordered[:, :-1]
+    rank = np.cumsum(first, axis=-1) - 1
+    b, j = np.nonzero(first & (rank < rows))
+    at, src = rank[b, j], order[b, j]
+    present = np.zeros((B, rows), dtype=bool)
+    best_mean, best_cov = np.zeros((B, rows, 4)), np.zeros((B, rows, 4, 4))
+    chosen = np.full((B, rows), -1, dtype=np.int64)
+    present[b, at] = True
+    best_mean[b, at] = view.mean.reshape(B, n, 4)[b, src]
+    best_cov[b, at] = cov[b, src]
+    chosen[b, at] = label[b, src]
+    met = view.met.reshape(B, n) & held
+    seen = ((label[:, None, :] == chosen[:, :, None]) & met[:, None, :]).any(axis=-1)
+    return present, best_mean, best_cov, seen & present
 
 
 def _logdet2(P: np.ndarray) -> np.ndarray:
@@ -280,9 +367,9 @@ def _nearest(rows: np.ndarray, distance: np.ndarray, count: int) -> np.ndarray:
     return np.take_along_axis(rows, order[..., None], axis=-2)
 
 
-def _count(name: str, value: int | None, most: int, least: int) -> int:
+def _count(name: str, value: int | None, most: int, least: int, default: int) -> int:
     if value is None:
-        return most
+        return default
     if isinstance(value, bool) or not isinstance(value, int | np.integer):
         raise TypeError(f"{name} must be an integer, not {type(value).__name__}")
     if not least <= value <= most:

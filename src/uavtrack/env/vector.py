@@ -80,7 +80,7 @@ class VectorEnv:
             raise TypeError(f"scenario must be a uavtrack.Scenario, not {type(scenario).__name__}")
         check_memory(scenario, int(num_envs))  # refused now, not at the first step
         self.scenario, self.method = scenario, get(method)
-        self.reward = check_reward(reward)
+        self.reward = check_reward(reward, scenario)
         self.spaces = Spaces(scenario, observation, max_targets, max_neighbours)
         self.num_envs, self.num_agents = int(num_envs), scenario.n_uavs
         self.observation_space = self.spaces.observation_space  # one agent's
