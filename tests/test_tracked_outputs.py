@@ -6,7 +6,9 @@ import numpy as np
 import pytest
 
 import uavtrack
+import uavtrack.io
 from uavtrack import cli
+from uavtrack.errors import UsageError
 
 pd = pytest.importorskip("pandas")
 xr = pytest.importorskip("xarray")
@@ -114,3 +116,80 @@ def test_the_dataset_of_a_tracked_run_has_slots_and_scans(tmp_path, saved):
         e = ds["estimate"].sel(state="vx", uav=2, slot=3).values
         np.testing.assert_allclose(e, trace.mean[:, 2, 3, 2], rtol=1e-12)
         assert int(ds["scan_valid"].sum()) == int(trace.scan_valid.sum())
+
+
+def test_stone_soup_scores_the_tracks_by_label_as_uavtrack_does(saved):
+    """Each UAV's confirmed tracks by label, scored by Stone Soup's GOSPA (alpha 2, no
+    switching penalty, on the positions) per step, averaged over the steps the UAV
+    lives and then over the UAVs, are uavtrack's gospa of the run."""
+    pytest.importorskip("stonesoup")
+    from stonesoup.measures import Euclidean
+    from stonesoup.metricgenerator.ospametric import GOSPAMetric
+    from stonesoup.types.detection import Clutter, TrueDetection
+
+    from uavtrack.io.stonesoup import POSITION
+
+    path, result = saved
+    trace = result.trace
+    e = TRACKED.evaluation
+    truths, per_uav = uavtrack.io.to_stonesoup(path, tracks="uavs")
+    confirmed = (trace.status == 2) & trace.alive[..., None]
+    expected = {
+        (int(i), int(trace.label[k, i, s])) for k, i, s in zip(*np.nonzero(confirmed), strict=True)
+    }
+    assert {(t.metadata["uav"], t.metadata["label"]) for t in per_uav} == expected
+    for track in per_uav:  # one state per step the UAV holds the label confirmed
+        i, label = track.metadata["uav"], track.metadata["label"]
+        k, s = np.nonzero(confirmed[:, i] & (trace.label[:, i] == label))
+        assert len(track) == len(k) and track.id == f"uav-{i}-label-{label}"
+        for state, k_, s_ in zip(track.states, k, s, strict=True):
+            x, y, vx, vy = trace.mean[k_, i, s_]
+            np.testing.assert_allclose(state.state_vector.ravel(), [x, vx, y, vy], rtol=1e-12)
+            assert (state.timestamp - uavtrack.io.stonesoup.EPOCH).total_seconds() == 0.5 * k_
+    gospa = GOSPAMetric(c=e.ospa_cutoff, p=e.ospa_order, measure=Euclidean(mapping=POSITION))
+    times = sorted({state.timestamp for path_ in truths for state in path_})
+    per_row = []
+    for i in range(TRACKED.n_uavs):
+        mine = [t for t in per_uav if t.metadata["uav"] == i]
+        stamps = [{s.timestamp: s for s in t} for t in mine]
+        values = [
+            gospa.compute_gospa_metric([s[t] for s in stamps if t in s], [p[t] for p in truths])[
+                0
+            ].value["distance"]
+            for k, t in enumerate(times)
+            if trace.alive[k, i]
+        ]
+        per_row.append(np.mean(values))
+    assert len(per_row) == 5 and trace.alive[:, 1].sum() == 12
+    assert np.mean(per_row) == pytest.approx(result.gospa, rel=1e-9)
+
+    # the team's tracks: one per label, each step the most confident holder's state
+    _, team = uavtrack.io.to_stonesoup(result, tracks="best")
+    assert {t.metadata["label"] for t in team} == {label for _, label in expected}
+    track = max(team, key=len)
+    label = track.metadata["label"]
+    spread = np.where(
+        confirmed & (trace.label == label), np.trace(trace.cov, axis1=-2, axis2=-1), np.inf
+    )
+    held = np.flatnonzero(np.isfinite(spread).any(axis=(1, 2)))
+    assert len(track) == len(held)
+    for state, k in zip(track.states, held, strict=True):
+        i, s = np.unravel_index(np.argmin(spread[k]), spread[k].shape)
+        np.testing.assert_allclose(state.covar[0, 0], trace.cov[k, i, s, 0, 0], rtol=1e-12)
+
+    # the scans as a detector yields them: true detections of the truths, and clutter
+    scans = uavtrack.io.to_detections(path, truths=truths)
+    assert len(scans) == 30
+    found = [d for _, detections in scans for d in detections]
+    assert len(found) == int(trace.scan_valid.sum())
+    clutter = [d for d in found if isinstance(d, Clutter)]
+    assert len(clutter) == int((trace.scan_origin == -1).sum()) > 0
+    true = [d for d in found if isinstance(d, TrueDetection)]
+    assert len(true) + len(clutter) == len(found)
+    ids = {p.id: p for p in truths}
+    for d in true:
+        assert d.groundtruth_path is ids[f"target-{d.metadata['origin']}"]
+        target = d.groundtruth_path[d.timestamp].state_vector.ravel()
+        assert np.hypot(*(d.state_vector.ravel() - target[[0, 2]])) < 100.0
+    with pytest.raises(UsageError, match="scans of a run of tracks"):
+        uavtrack.io.to_detections(uavtrack.simulate(uavtrack.Scenario(steps=3), trace=True))
