@@ -104,9 +104,3 @@ def test_the_forms_that_read_targets_refuse_tracks_in_one_line(tmp_path, capsys)
     code = cli.main(["swarm", "--set", "tracker.association=jpda", "--set", "steps=3"])
     _, err = capsys.readouterr()
     assert code == 2 and "agent form" in err and len(err.strip().splitlines()) == 1
-    code = cli.main(
-        ["run", "--set", "tracker.association=jpda", "--set", "steps=3",
-         "--bag", str(tmp_path / "b")]
-    )  # fmt: skip
-    _, err = capsys.readouterr()
-    assert code == 2 and "ROS 2 bag" in err and not (tmp_path / "b").exists()

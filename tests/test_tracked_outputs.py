@@ -193,3 +193,69 @@ def test_stone_soup_scores_the_tracks_by_label_as_uavtrack_does(saved):
         assert np.hypot(*(d.state_vector.ravel() - target[[0, 2]])) < 100.0
     with pytest.raises(UsageError, match="scans of a run of tracks"):
         uavtrack.io.to_detections(uavtrack.simulate(uavtrack.Scenario(steps=3), trace=True))
+
+
+def test_the_bag_of_a_tracked_run_holds_tracks_by_label_and_the_scans(tmp_path, saved, capsys):
+    pytest.importorskip("rosbags")
+    from rosbags.highlevel import AnyReader
+
+    path, result = saved
+    trace = result.trace
+    bag = tmp_path / "bag"
+    code = cli.main(
+        ["run", "--seed", "1", "--bag", str(bag), "--set", "tracker.association=jpda",
+         "--set", "sensor.detection_probability=0.9", "--set", "sensor.clutter_rate=2",
+         "--set", "steps=30", "--set", "faults.failures=[[1, 12]]"]
+    )  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    with AnyReader([bag]) as reader:
+        topics = {c.topic for c in reader.connections}
+        assert not any(t.startswith("/team/target_") for t in topics)
+        assert "/team/estimates" not in topics
+
+        def read(topic):
+            chosen = [c for c in reader.connections if c.topic == topic]
+            return [
+                (t, reader.deserialize(raw, c.msgtype)) for c, t, raw in reader.messages(chosen)
+            ]
+
+        for i in (1, 3):
+            tracks = read(f"/uav_{i}/tracks")
+            assert len(tracks) == int(trace.alive[:, i].sum())  # UAV 1 fails at step 12
+            for t, msg in tracks:
+                k = t // 500_000_000
+                assert msg.markers[0].action == 3  # DELETEALL: the last step's tracks go
+                ellipses = [x for x in msg.markers if x.ns in ("tentative", "confirmed")]
+                held = np.flatnonzero(trace.status[k, i] > 0)
+                assert [x.id for x in ellipses] == trace.label[k, i, held].tolist()
+                assert [x.ns for x in ellipses] == [
+                    ("", "tentative", "confirmed")[s] for s in trace.status[k, i, held]
+                ]
+                for x, s in zip(ellipses, held, strict=True):
+                    mean, P = trace.mean[k, i, s], trace.cov[k, i, s, :2, :2]
+                    assert (x.pose.position.x, x.pose.position.y) == tuple(mean[:2])
+                    axes = np.sort(np.linalg.eigvalsh(P))[::-1]  # 2-sigma diameters
+                    np.testing.assert_allclose([x.scale.x, x.scale.y], 4 * np.sqrt(axes), rtol=1e-9)
+                texts = [x for x in msg.markers if x.ns == "label"]
+                assert [x.text for x in texts] == [f"L{x.id}" for x in ellipses]
+            scans = read(f"/uav_{i}/scan")
+            assert len(scans) == len(tracks)
+            for t, msg in scans:
+                k = t // 500_000_000
+                spots = {x.ns: [(p.x, p.y) for p in x.points] for x in msg.markers}
+                valid, origin = trace.scan_valid[k, i], trace.scan_origin[k, i]
+                for ns, chosen in (("detections", origin >= 0), ("clutter", origin == -1)):
+                    expect = [tuple(z) for z in trace.scan_z[k, i][valid & chosen]]
+                    assert spots[ns] == expect
+        # the assignment lines end at each UAV's own estimate of the track it follows
+        t, msg = read("/team/assignments")[20]
+        ends = [(p.x, p.y) for p in msg.markers[0].points][1::2]
+        followed = [
+            tuple(
+                trace.mean[
+                    20, i, np.flatnonzero(trace.label[20, i] == trace.assignment[20, i])[0], :2
+                ]
+            )
+            for i in np.flatnonzero(trace.alive[20] & (trace.assignment[20] >= 0))
+        ]
+        assert ends == followed and len(ends) > 0

@@ -53,6 +53,7 @@ from ..config import Scenario, ScenarioError
 from ..errors import UsageError
 from ..metrics import METRICS, team_best
 from ..simulation import TRACKED, Cycle, Trace
+from ..tracks.manage import STATUS_NAMES
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -65,8 +66,6 @@ UNITS = {"x": "m", "y": "m", "altitude": "m", "speed": "m/s", "heading": "rad", 
 TABLES = ("steps", "uavs", "targets", "pairs")
 TRACK_TABLES = ("steps", "uavs", "targets", "tracks", "measurements")
 """The tables of a run of tracks (unknown association)."""
-STATUS = {1: "tentative", 2: "confirmed"}
-"""A track's status code (`tracks.manage`) as the tables name it."""
 
 
 def unit(column: str) -> str | None:
@@ -294,7 +293,7 @@ def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
     held = (trace.status > 0) & trace.alive[..., None]
     k, i, s = np.nonzero(held)  # step, UAV, slot in order
     rows = {"step": k, "time": time[k], "uav": i, "slot": s, "label": trace.label[held]}
-    names = np.array(["", *STATUS.values()])
+    names = np.array([STATUS_NAMES[code] for code in range(len(STATUS_NAMES))])
     rows["status"] = names[trace.status[held]]
     rows["bid"] = trace.bids[held]
     rows.update(_estimates(trace.mean[held], trace.cov[held]))
