@@ -259,3 +259,60 @@ def test_the_bag_of_a_tracked_run_holds_tracks_by_label_and_the_scans(tmp_path, 
             for i in np.flatnonzero(trace.alive[20] & (trace.assignment[20] >= 0))
         ]
         assert ends == followed and len(ends) > 0
+
+
+def test_a_recording_of_a_tracked_run_draws_tracks_by_label_and_the_scans(tmp_path, saved):
+    """Through the command line: each track at its estimate with its team label as class
+    id and text, tentative ones apart; true detections and clutter apart."""
+    pytest.importorskip("rerun")
+    from uavtrack.viz import rerun
+
+    from .test_viewer import column, contents
+
+    _, result = saved
+    trace = result.trace
+    path = tmp_path / "run.rrd"
+    code = cli.main(
+        ["run", "--seed", "1", "--rerun", str(path), "--set", "tracker.association=jpda",
+         "--set", "sensor.detection_probability=0.9", "--set", "sensor.clutter_rate=2",
+         "--set", "steps=30", "--set", "faults.failures=[[1, 12]]"]
+    )  # fmt: skip
+    assert code == 0
+    dynamic, static = contents(path)
+    assert set(dynamic) | (static - {"__properties"}) == set(rerun.ENTITIES + rerun.TRACK_ENTITIES)
+    T, Nu, K = trace.label.shape
+    held = ((trace.status > 0) & trace.alive[..., None]).reshape(T, Nu * K)
+    where = column(path, "world/tracks", "positions")
+    ids = column(path, "world/tracks", "class_ids")
+    labels = column(path, "world/tracks", "labels")
+    for k in (0, 11, 12, 29):
+        drawn = np.isfinite(np.array(where[k], dtype=float)).all(axis=1)
+        np.testing.assert_array_equal(drawn, held[k])  # UAV 1's go when it fails at 12
+        n = np.flatnonzero(held[k])
+        i, s = np.divmod(n, K)
+        np.testing.assert_allclose(
+            np.array(where[k], dtype=float)[n, :2], trace.mean[k, i, s, :2], rtol=1e-6
+        )  # float32
+        assert [ids[k][m] for m in n] == trace.label[k, i, s].tolist()
+        names = [labels[k][m] for m in n]
+        tentative = trace.status[k, i, s] == 1
+        assert names == [
+            f"L{label}" + (" (tentative)" if t else "")
+            for label, t in zip(trace.label[k, i, s], tentative, strict=True)
+        ]
+    assert any(" (tentative)" in x for k in where for x in labels[k])
+    for entity, chosen in (
+        ("world/scan/detections", trace.scan_origin >= 0),
+        ("world/scan/clutter", trace.scan_origin == -1),
+    ):
+        spots = column(path, entity, "positions")
+        seen = (chosen & trace.scan_valid & trace.alive[..., None]).reshape(T, -1)
+        counts = [int(np.isfinite(np.array(spots[k], float)).all(axis=1).sum()) for k in range(T)]
+        assert counts == seen.sum(axis=1).tolist()
+    assert sum(counts) > 0
+    # a UAV's estimate is its own of the track it follows
+    centers = column(path, "world/estimates/ellipses", "centers")
+    k = 20
+    for i in np.flatnonzero(trace.alive[k] & (trace.assignment[k] >= 0)):
+        s = np.flatnonzero(trace.label[k, i] == trace.assignment[k, i])[0]
+        np.testing.assert_allclose(centers[k][i][:2], trace.mean[k, i, s, :2], rtol=1e-6)
