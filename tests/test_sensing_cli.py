@@ -91,23 +91,3 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
     code = cli.main(args)  # resumes: every job is done
     out_text, _ = capsys.readouterr()
     assert code == 0 and "0 jobs run" in out_text
-
-
-def test_the_forms_that_read_targets_refuse_tracks_in_one_line(tmp_path, capsys):
-    """The per-target outputs do not take tracks yet: each says so
-    in one line rather than misreading the slots as targets."""
-    import uavtrack
-    from uavtrack.errors import ScenarioError
-    from uavtrack.io import stonesoup, tables
-
-    r = uavtrack.simulate(uavtrack.Scenario(steps=5, tracker={"association": "gnn"}), seed=0)
-    with pytest.raises(ScenarioError, match="the tables"):
-        tables.to_frames(r)
-    with pytest.raises(ScenarioError, match="to_stonesoup"):
-        stonesoup.to_stonesoup(r)
-    code = cli.main(
-        ["run", "--set", "tracker.association=jpda", "--set", "steps=3",
-         "--bag", str(tmp_path / "b")]
-    )  # fmt: skip
-    _, err = capsys.readouterr()
-    assert code == 2 and "ROS 2 bag" in err and not (tmp_path / "b").exists()

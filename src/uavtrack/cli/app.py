@@ -380,10 +380,6 @@ def run(
     check_distinct({"--trace": trace, "--rerun": rerun or None, "--bag": bag})
     if trace is not None:
         check_output(trace, "--trace")
-    if bag is not None:
-        scenario.refuse_tracks("--bag (a ROS 2 bag)")
-    if rerun is not None:
-        scenario.refuse_tracks("--rerun (the Rerun viewer)")
     check_bag(bag)
     viewer = None
     if rerun is not None:

@@ -9,6 +9,7 @@ path of a trace file (``uavtrack run --trace run.npz``), a `Result` with a trace
     ds = uavtrack.io.to_xarray("run.npz")              # a Dataset: step, uav, target
     frames = uavtrack.io.to_frames("run.npz")          # steps, uavs, targets, pairs
     truths, tracks = uavtrack.io.to_stonesoup("run.npz")   # Stone Soup's types
+    scans = uavtrack.io.to_detections("run.npz")       # a run of tracks' detections
     saved = uavtrack.io.read("run.npz")                # the arrays, scenario, method, seed
 
 They are imported when first used, so ``import uavtrack.io`` needs no optional extra.
@@ -25,6 +26,7 @@ _WHERE = {
     "write_table": "tables",
     "results_frame": "tables",
     "to_stonesoup": "stonesoup",
+    "to_detections": "stonesoup",
 }
 
 __all__ = sorted(_WHERE)

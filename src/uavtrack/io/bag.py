@@ -20,6 +20,20 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
 * ``/team/estimates`` MarkerArray: those estimates as 2-sigma ellipses (flat cylinders);
 * ``/team/assignments`` MarkerArray: a line from each UAV to its target's estimate;
 * ``/team/links`` MarkerArray: the radio links (3-D distance within r_C).
+
+A run of tracks (``tracker.association`` gnn or jpda) has no estimate per target: the
+``/team/target_j/estimate`` and ``/team/estimates`` topics give way to
+
+* ``/uav_i/tracks`` MarkerArray, each living UAV's tracks: a DELETEALL marker (RViz
+  forgets the last step's), then per track a 2-sigma ellipse (flat cylinder, id = its team
+  label, ns ``confirmed`` or ``tentative``, blue or grey) and a text marker (ns
+  ``label``, id = the label, text ``L<label>``) above it;
+* ``/uav_i/scan`` MarkerArray, each living UAV's measurements of the step at their
+  ground positions: two sphere lists, ns ``detections`` (red) and ``clutter`` (grey),
+  split by the origin the simulator knows (for evaluation: a UAV does not);
+
+and ``/team/assignments`` draws a line from each UAV to its own estimate of the track it
+follows.
 """
 
 from __future__ import annotations
@@ -40,6 +54,7 @@ except ImportError as exc:  # an optional extra
 from .._files import check_new_folder, new_folder
 from ..metrics import team_best
 from ..network import radio_links
+from ..tracks.manage import CONFIRMED, STATUS_NAMES, TENTATIVE
 from .mavlink import LocalFrame
 from .ros2 import FRAME, estimate_of, header_of, pose_of, store, transform_of, uav_pose
 
@@ -62,14 +77,17 @@ class _Messages:
     def pose(self, x: float, y: float, z: float, yaw: float):
         return pose_of(x, y, z, yaw)
 
-    def marker(self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=()):
+    def marker(
+        self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=(),
+        text: str = "", action: int = 0,
+    ):  # fmt: skip
         T = self.T
         return T["visualization_msgs/msg/Marker"](
             header=self.header(ns_time),
             ns=ns,
             id=ident,
             type=kind,
-            action=0,
+            action=action,
             pose=pose,
             scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]),
             color=self.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
@@ -82,7 +100,7 @@ class _Messages:
                 header=self.header(ns_time), format="", data=np.zeros(0, np.uint8)
             ),
             uv_coordinates=[],
-            text="",
+            text=text,
             mesh_resource="",
             mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
             mesh_use_embedded_materials=False,
@@ -100,7 +118,6 @@ def write_bag(
 ) -> dict[str, int]:
     """Write `trace` (of `scenario`) as a ROS 2 bag folder at `path`, which must not
     exist; it appears only once complete. Returns the messages written per topic."""
-    scenario.refuse_tracks("a ROS 2 bag")
     path = check_new_folder(path, "--bag", "the bag")
     try:
         with new_folder(path) as folder:  # rosbags makes it: path.name.mcap inside
@@ -116,7 +133,9 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
     dt_ns = int(round(scenario.dt * 1e9))
     frame = LocalFrame(*origin)
     east, north = frame.radii
-    best, best_mean, best_cov = team_best(trace.mean, trace.cov, trace.alive)
+    best = best_mean = best_cov = None
+    if trace.label is None:
+        best, best_mean, best_cov = team_best(trace.mean, trace.cov, trace.alive)
     counts: dict[str, int] = {}
     with Writer(folder, version=9, storage_plugin=StoragePlugin.MCAP) as writer:
         connections = {}
@@ -165,23 +184,12 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                                       (4.0, 4.0, 4.0), (1.0, 0.2, 0.2, 1.0)))  # fmt: skip
             write("/tf", T_["tf2_msgs/msg/TFMessage"](transforms=transforms), ns)
             write("/targets/truth", T_["visualization_msgs/msg/MarkerArray"](markers=truth), ns)
-            ellipses = []
-            for j in np.flatnonzero(best[k] >= 0):
-                P = best_cov[k, j]
-                x, y = (float(v) for v in best_mean[k, j, :2])
-                estimate = estimate_of(m.header(ns), best_mean[k, j], P)
-                write(f"/team/target_{j}/estimate", estimate, ns)
-                major, minor, angle = _ellipse(P[:2, :2])
-                ellipse = m.pose(x, y, 0.0, angle)
-                size = (4 * major, 4 * minor, 0.1)  # 2-sigma diameters
-                ellipses.append(m.marker(ns, "estimate", int(j), 3, ellipse, size,
-                                         (0.2, 0.6, 1.0, 0.5)))  # fmt: skip
-            write("/team/estimates", T_["visualization_msgs/msg/MarkerArray"](markers=ellipses), ns)
-            lines = []
-            for i in np.flatnonzero(alive & (trace.assignment[k] >= 0)):
-                j = int(trace.assignment[k, i])
-                if best[k, j] >= 0:
-                    lines += [uavs[i, :3], (*best_mean[k, j, :2], 0.0)]
+            if trace.label is None:
+                ellipses, lines = _estimates(m, ns, write, trace, k, best, best_mean, best_cov)
+                write("/team/estimates", T_["visualization_msgs/msg/MarkerArray"](
+                    markers=ellipses), ns)  # fmt: skip
+            else:
+                lines = _tracks(m, ns, write, trace, k)
             write("/team/assignments", T_["visualization_msgs/msg/MarkerArray"](markers=[
                 m.marker(ns, "assignment", 0, 5, m.pose(0, 0, 0, 0), (0.5, 0, 0),
                          (0.2, 0.9, 0.2, 0.8), lines)]), ns)  # fmt: skip
@@ -193,6 +201,68 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 m.marker(ns, "link", 0, 5, m.pose(0, 0, 0, 0), (0.3, 0, 0),
                          (0.9, 0.9, 0.9, 0.6), ends)]), ns)  # fmt: skip
     return counts
+
+
+def _estimates(m: _Messages, ns: int, write, trace, k: int, best, best_mean, best_cov):
+    """The team's best estimate of each target at step k (its topic), and the ellipses and
+    the assignment lines of the step."""
+    uavs, alive = trace.uavs[k], trace.alive[k]
+    ellipses = []
+    for j in np.flatnonzero(best[k] >= 0):
+        P = best_cov[k, j]
+        write(f"/team/target_{j}/estimate", estimate_of(m.header(ns), best_mean[k, j], P), ns)
+        ellipses.append(_ellipse_marker(m, ns, "estimate", int(j), best_mean[k, j], P,
+                                        (0.2, 0.6, 1.0, 0.5)))  # fmt: skip
+    lines = []
+    for i in np.flatnonzero(alive & (trace.assignment[k] >= 0)):
+        j = int(trace.assignment[k, i])
+        if best[k, j] >= 0:
+            lines += [uavs[i, :3], (*best_mean[k, j, :2], 0.0)]
+    return ellipses, lines
+
+
+TRACK_COLOURS = {TENTATIVE: (0.6, 0.6, 0.6, 0.4), CONFIRMED: (0.2, 0.6, 1.0, 0.6)}
+"""A track's ellipse colour by status: tentative grey, confirmed blue."""
+
+
+def _tracks(m: _Messages, ns: int, write, trace, k: int) -> list:
+    """Each living UAV's tracks and scan at step k (their topics); the assignment lines,
+    from each UAV to its own estimate of the track it follows."""
+    MarkerArray = m.T["visualization_msgs/msg/MarkerArray"]
+    lines = []
+    for i in np.flatnonzero(trace.alive[k]):
+        markers = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
+                            action=3)]  # fmt: skip  # DELETEALL: the last step's go
+        for s in np.flatnonzero(trace.status[k, i] > 0):
+            label, status = int(trace.label[k, i, s]), int(trace.status[k, i, s])
+            mean, P = trace.mean[k, i, s], trace.cov[k, i, s]
+            markers.append(_ellipse_marker(m, ns, STATUS_NAMES[status], label, mean, P,
+                                           TRACK_COLOURS[status]))  # fmt: skip
+            above = m.pose(float(mean[0]), float(mean[1]), 3.0, 0.0)
+            markers.append(m.marker(ns, "label", label, 9, above, (0, 0, 3.0),
+                                    (1.0, 1.0, 1.0, 1.0), text=f"L{label}"))  # fmt: skip
+            if status == CONFIRMED and label == trace.assignment[k, i]:
+                lines += [trace.uavs[k, i, :3], (*mean[:2], 0.0)]
+        write(f"/uav_{i}/tracks", MarkerArray(markers=markers), ns)
+        valid = trace.scan_valid[k, i]
+        clutter = trace.scan_origin[k, i] == -1
+        where = np.concatenate([trace.scan_z[k, i], np.zeros((len(valid), 1))], axis=1)
+        scan = [
+            m.marker(ns, name, n, 7, m.pose(0, 0, 0, 0), (2.0, 2.0, 2.0), rgba, where[chosen])
+            for n, (name, chosen, rgba) in enumerate(
+                (("detections", valid & ~clutter, (1.0, 0.2, 0.2, 1.0)),
+                 ("clutter", valid & clutter, (0.6, 0.6, 0.6, 1.0)))
+            )
+        ]  # fmt: skip
+        write(f"/uav_{i}/scan", MarkerArray(markers=scan), ns)
+    return lines
+
+
+def _ellipse_marker(m: _Messages, ns: int, space: str, ident: int, mean, P, rgba):
+    """A flat cylinder of the 2-sigma ellipse of an estimate's position."""
+    major, minor, angle = _ellipse(P[:2, :2])
+    place = m.pose(float(mean[0]), float(mean[1]), 0.0, angle)
+    return m.marker(ns, space, ident, 3, place, (4 * major, 4 * minor, 0.1), rgba)
 
 
 def _ellipse(P: np.ndarray) -> tuple[float, float, float]:

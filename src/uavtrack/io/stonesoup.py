@@ -4,6 +4,10 @@ dependency; ``pip install stonesoup``).
 Stone Soup orders a constant-velocity state (x, vx, y, vy); uavtrack's is (x, y, vx, vy):
 the conversion reorders the states and covariances. Timestamps are `trace.EPOCH` (or
 `start`) plus the step times k dt.
+
+A run of tracks (``tracker.association`` gnn or jpda) gives tracks by team label, of
+their confirmed states only (a tentative track is not yet an output of a tracker), and
+its scans as Stone Soup's detections (`to_detections`).
 """
 
 from __future__ import annotations
@@ -24,7 +28,7 @@ ORDER = [0, 2, 1, 3]
 POSITION = (0, 2)
 """Where x and y lie in a Stone Soup state: the mapping its metrics measure on."""
 
-__all__ = ["EPOCH", "ORDER", "POSITION", "to_stonesoup"]
+__all__ = ["EPOCH", "ORDER", "POSITION", "to_detections", "to_stonesoup"]
 
 
 def to_stonesoup(
@@ -50,9 +54,22 @@ def to_stonesoup(
       each step, and average over the living UAVs and the steps (compare every UAV's
       tracks at once and the Nu Nt estimates of Nt targets count as false tracks). Split
       the set by ``track.metadata["uav"]`` to reproduce them.
+
+    With unknown association (a trace with labels) the tracks are those of the team's
+    labels, confirmed states only:
+
+    * ``tracks="best"``: one track per team label ever confirmed (id ``label-L``,
+      metadata ``{"label": L}``): at each step the confirmed estimate of the most
+      confident living UAV that holds the label (1/trace P), absent at steps where none
+      holds it confirmed.
+    * ``tracks="uavs"``: one track per UAV and label it confirmed (id ``uav-i-label-L``,
+      metadata ``{"uav": i, "label": L}``), its confirmed states while the UAV lives.
+      uavtrack's ``gospa`` scores each UAV's confirmed tracks alone against the truths at
+      each step, averages over the steps the UAV lives, then over the UAVs: split the set
+      by ``track.metadata["uav"]`` and Stone Soup's ``GOSPAMetric`` (same c and p, alpha 2,
+      no switching penalty, measured on `POSITION`) gives it again.
     """
     try:
-        from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
         from stonesoup.types.state import GaussianState
         from stonesoup.types.track import Track
     except ImportError as exc:
@@ -69,21 +86,15 @@ def to_stonesoup(
             raise UsageError("dt goes with a bare Trace; this source has its own")
         saved = trace_file.load(source)
         trace, dt = saved.trace, saved.dt
-        saved.scenario.refuse_tracks("to_stonesoup")
-    if trace.label is not None:  # a bare Trace of tracks
-        raise UsageError("to_stonesoup does not take a trace of tracks (gnn or jpda) yet")
     T, Nt = trace.targets.shape[:2]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
-    truths = set()
-    for j in range(Nt):
-        states = [
-            GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k]) for k in range(T)
-        ]
-        truths.add(GroundTruthPath(states, id=f"target-{j}"))
+    truths = _truths(trace, times)
 
     def gaussian(mean, cov, k):
         return GaussianState(mean[ORDER], cov[np.ix_(ORDER, ORDER)], timestamp=times[k])
 
+    if trace.label is not None:
+        return truths, _labelled(trace, tracks, gaussian, Track)
     out = set()
     if tracks == "best":
         best = team_best(trace.mean, trace.cov, trace.alive)[0]
@@ -106,3 +117,102 @@ def to_stonesoup(
                     Track(states, id=f"uav-{i}-target-{j}", init_metadata={"uav": i, "target": j})
                 )
     return truths, out
+
+
+def _truths(trace: Trace, times: list[_dt.datetime]) -> set:
+    """The true targets as `GroundTruthPath`s, id ``target-j``."""
+    from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
+
+    truths = set()
+    for j in range(trace.targets.shape[1]):
+        states = [
+            GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k])
+            for k in range(len(times))
+        ]
+        truths.add(GroundTruthPath(states, id=f"target-{j}"))
+    return truths
+
+
+def _labelled(trace: Trace, tracks: str, gaussian, Track) -> set:
+    """The confirmed tracks of a run of tracks by team label (see `to_stonesoup`)."""
+    confirmed = (trace.status == 2) & trace.alive[..., None]  # (T, Nu, K)
+    states: dict[tuple[int, ...], list] = {}
+    if tracks == "uavs":
+        for k, i, s in zip(*np.nonzero(confirmed), strict=True):
+            key = (int(i), int(trace.label[k, i, s]))
+            states.setdefault(key, []).append(gaussian(trace.mean[k, i, s], trace.cov[k, i, s], k))
+        return {
+            Track(found, id=f"uav-{i}-label-{label}", init_metadata={"uav": i, "label": label})
+            for (i, label), found in states.items()
+        }
+    spread = np.trace(trace.cov, axis1=-2, axis2=-1)  # 1/confidence
+    for k in range(trace.targets.shape[0]):
+        best: dict[int, tuple[float, int, int]] = {}
+        for i, s in zip(*np.nonzero(confirmed[k]), strict=True):
+            label = int(trace.label[k, i, s])
+            if label not in best or spread[k, i, s] < best[label][0]:
+                best[label] = (float(spread[k, i, s]), int(i), int(s))
+        for label, (_, i, s) in best.items():
+            states.setdefault((label,), []).append(
+                gaussian(trace.mean[k, i, s], trace.cov[k, i, s], k)
+            )
+    return {
+        Track(found, id=f"label-{label}", init_metadata={"label": label})
+        for (label,), found in states.items()
+    }
+
+
+def to_detections(
+    source, dt: float | None = None, start: _dt.datetime = EPOCH, truths: set | None = None
+) -> list[tuple[_dt.datetime, set]]:
+    """A run of tracks' scans as Stone Soup's detections, as a detector yields them: a
+    (timestamp, detections) pair per step. `source` as `to_stonesoup`'s.
+
+    Each measurement is a `TrueDetection` of its target's `GroundTruthPath` (those of
+    `truths`, from `to_stonesoup`, when given, so that they are the same objects; else
+    new ones) or a `Clutter`, whose state vector is its ground position (x, y) [m];
+    ``metadata`` holds the UAV (``uav``), the measured ``range`` [m] and ``bearing``
+    [rad], and for evaluation the ``origin`` (target index, -1 clutter). No measurement
+    model is attached: the conversion's covariance R depends on where the UAV believed it
+    was, which the trace does not keep."""
+    try:
+        from stonesoup.types.detection import Clutter, TrueDetection
+    except ImportError as exc:
+        raise ImportError(f"to_detections needs stonesoup: pip install stonesoup ({exc})") from None
+
+    if isinstance(source, Trace):
+        if dt is None:
+            raise UsageError("a bare Trace needs its step dt: to_detections(trace, dt)")
+        trace = source
+    else:
+        if dt is not None:
+            raise UsageError("dt goes with a bare Trace; this source has its own")
+        saved = trace_file.load(source)
+        trace, dt = saved.trace, saved.dt
+    if trace.label is None:
+        raise UsageError(
+            "to_detections reads the scans of a run of tracks (tracker.association gnn or "
+            "jpda); this trace has none"
+        )
+    T = trace.targets.shape[0]
+    times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
+    paths = {path.id: path for path in (truths if truths is not None else _truths(trace, times))}
+    out = []
+    for k in range(T):
+        found = set()
+        for i, z in zip(*np.nonzero(trace.scan_valid[k]), strict=True):
+            origin = int(trace.scan_origin[k, i, z])
+            r, bearing = (float(v) for v in trace.scan_polar[k, i, z])
+            meta = {"uav": int(i), "range": r, "bearing": bearing, "origin": origin}
+            vector = trace.scan_z[k, i, z].reshape(2, 1)
+            if origin >= 0:
+                found.add(
+                    TrueDetection(
+                        vector, groundtruth_path=paths[f"target-{origin}"], timestamp=times[k],
+                        metadata=meta,
+                    )
+                )  # fmt: skip
+            else:
+                found.add(Clutter(vector, timestamp=times[k], metadata=meta))
+        out.append((times[k], found))
+    return out

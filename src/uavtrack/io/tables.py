@@ -13,6 +13,18 @@ Tables (one row per ...):
 * ``pairs``: step, UAV and target: in_view (of this UAV), bid, the UAV's fused estimate (est_x ...
   est_vy) and the 10 entries of its covariance's upper triangle (P_x_x, P_x_y, ...).
 
+With unknown association (``tracker.association`` gnn or jpda) a UAV's estimates are track
+slots, not targets: ``pairs`` and the ``best_*`` columns of ``targets`` are left out (a slot
+is no target), ``uavs``' assignment is the team label of the UAV's track, and two tables
+come instead (`TRACK_TABLES`):
+
+* ``tracks``: step, UAV and slot holding a track (tentative or confirmed) of a living UAV:
+  its team label, status (``tentative``, ``confirmed``), bid (NaN unless confirmed), the
+  estimate (est_x ... est_vy) and its covariance's 10 entries, as in ``pairs``;
+* ``measurements``: one row per measurement of a scan: step, UAV, index (its place in the
+  UAV's scan), range [m], bearing [rad], x, y (its conversion to the ground [m]), origin
+  (for evaluation only: the target measured, -1 for clutter) and clutter (origin -1).
+
 A failed UAV's estimate, covariance and bid are NaN from the step it fails (its state
 stays where it fell). Units travel with the data: a frame's ``attrs["units"]``, a
 Parquet field's metadata (``unit``), a netCDF variable's ``units`` (see `unit`).
@@ -40,17 +52,20 @@ except ImportError as exc:  # an optional extra
 from ..config import Scenario, ScenarioError
 from ..errors import UsageError
 from ..metrics import METRICS, team_best
-from ..simulation import Cycle, Trace
+from ..simulation import TRACKED, Cycle, Trace
+from ..tracks.manage import STATUS_NAMES
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
 TARGET_STATE = ("x", "y", "vx", "vy")
 UNITS = {"x": "m", "y": "m", "altitude": "m", "speed": "m/s", "heading": "rad", "vx": "m/s",
          "vy": "m/s", "time": "s", "bank_angle": "rad", "decision_time_ms": "ms",
-         "decision_wall_ms": "ms"}  # fmt: skip
+         "decision_wall_ms": "ms", "range": "m", "bearing": "rad"}  # fmt: skip
 """The unit of every table column that has one (estimates and covariance entries: see
 `unit`); netCDF variables and Parquet fields carry the same strings (UDUNITS syntax)."""
 TABLES = ("steps", "uavs", "targets", "pairs")
+TRACK_TABLES = ("steps", "uavs", "targets", "tracks", "measurements")
+"""The tables of a run of tracks (unknown association)."""
 
 
 def unit(column: str) -> str | None:
@@ -63,6 +78,16 @@ def unit(column: str) -> str | None:
         if column.startswith(prefix) and column[len(prefix) :] in TARGET_STATE:
             return UNITS[column[len(prefix) :]]
     return UNITS.get(column)
+
+
+def _estimates(mean: np.ndarray, cov: np.ndarray) -> dict[str, np.ndarray]:
+    """Columns est_x ... est_vy and the covariance's upper triangle P_x_x ... P_vy_vy of
+    estimates (..., 4) and covariances (..., 4, 4), flattened over the leading axes."""
+    out = {f"est_{name}": mean[..., c].ravel() for c, name in enumerate(TARGET_STATE)}
+    for a in range(4):
+        for b in range(a, 4):
+            out[f"P_{TARGET_STATE[a]}_{TARGET_STATE[b]}"] = cov[..., a, b].ravel()
+    return out
 
 
 def _docs() -> dict[str, str]:
@@ -82,15 +107,22 @@ def to_xarray(
     datetimes, step k at EPOCH + k dt. Every variable has a long_name and, where it has
     one, its units (UDUNITS; the estimates' and covariances' units, which differ by
     state, are in their comment). Attributes: dt [s], method, seed, scenario (JSON) and
-    uavtrack, the version that ran the trial."""
+    uavtrack, the version that ran the trial.
+
+    With unknown association (``tracker.association`` gnn or jpda) the estimates,
+    covariances and bids are per track slot (dimension ``slot``, not ``target``), with
+    each slot's ``label`` and ``status``, and the scans' measurements (dimension
+    ``measurement``, padded: ``scan_valid``) as ``scan_range``, ``scan_bearing``,
+    ``scan_x``, ``scan_y`` and ``scan_origin`` (`simulation.TRACKED`)."""
     saved = trace_file.load(source, scenario, method, seed)
     trace, scenario = saved.trace, saved.scenario
-    scenario.refuse_tracks("the tables")
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     docs = _docs()
     step = ("step",)
-    su, st, sut = ("step", "uav"), ("step", "target"), ("step", "uav", "target")
+    su, st = ("step", "uav"), ("step", "target")
+    tracked = trace.label is not None
+    sut = ("step", "uav", "slot" if tracked else "target")
     variables: dict[str, Any] = {}
     for i, name in enumerate(TARGET_STATE):
         variables[f"target_{name}"] = (
@@ -101,7 +133,11 @@ def to_xarray(
     for i, name in enumerate(UAV_STATE):
         variables[f"uav_{name}"] = (su, trace.uavs[..., i], _attrs(f"true UAV {name}", name))
     variables["uav_altitude"][2]["standard_name"] = "height"  # above the flat ground
-    variables["observed"] = (sut, trace.observed, {"long_name": docs["observed"]})
+    variables["observed"] = (
+        ("step", "uav", "target"),
+        trace.observed,
+        {"long_name": docs["observed"]},
+    )
     variables["estimate"] = (
         sut + ("state",), trace.mean,
         {"long_name": docs["mean"], "comment": "units by state: x, y in m; vx, vy in m/s"},
@@ -121,6 +157,8 @@ def to_xarray(
     )  # fmt: skip
     for name in ("messages", "delivered", "conflicts"):
         variables[name] = (step, getattr(trace, name), {"long_name": docs[name]})
+    if tracked:
+        _track_variables(variables, trace, sut)
     attrs = {
         "title": "a uavtrack trial, step by step",
         "source": f"uavtrack {saved.version}",
@@ -142,6 +180,12 @@ def to_xarray(
         "state": ("state", list(TARGET_STATE), {"long_name": "component of a target's state"}),
         "state_": ("state_", list(TARGET_STATE), {"long_name": "the same, second axis"}),
     }
+    if tracked:
+        K, Z = trace.label.shape[2], trace.scan_valid.shape[2]
+        coords["slot"] = ("slot", np.arange(K), {"long_name": "track slot of a UAV"})
+        coords["measurement"] = (
+            "measurement", np.arange(Z), {"long_name": "place of a measurement in a UAV's scan"}
+        )  # fmt: skip
     dataset = xr.Dataset(variables, coords=coords, attrs=attrs)
     dataset["time"].encoding.update(
         units=f"seconds since {trace_file.EPOCH:%Y-%m-%d}",  # midnight
@@ -151,15 +195,35 @@ def to_xarray(
     return dataset
 
 
+def _track_variables(variables: dict[str, Any], trace: Trace, sus: tuple[str, ...]) -> None:
+    """The variables of `simulation.TRACKED`: labels and statuses per slot, the scans."""
+    variables["label"] = (sus, trace.label, {"long_name": TRACKED["label"][1]})
+    variables["status"] = (sus, trace.status, {"long_name": TRACKED["status"][1]})
+    sum_ = ("step", "uav", "measurement")
+    for c, (name, units) in enumerate((("range", "m"), ("bearing", "rad"))):
+        variables[f"scan_{name}"] = (
+            sum_, trace.scan_polar[..., c],
+            {"long_name": f"measured {name}, in the order the UAV received them", "units": units},
+        )  # fmt: skip
+    for c, name in enumerate(("x", "y")):
+        variables[f"scan_{name}"] = (
+            sum_, trace.scan_z[..., c],
+            {"long_name": f"the measurement's conversion to the ground, {name}", "units": "m"},
+        )  # fmt: skip
+    variables["scan_valid"] = (sum_, trace.scan_valid, {"long_name": TRACKED["scan_valid"][1]})
+    variables["scan_origin"] = (sum_, trace.scan_origin, {"long_name": TRACKED["scan_origin"][1]})
+
+
 def _attrs(long_name: str, name: str) -> dict[str, str]:
     return {"long_name": long_name, "units": UNITS[name]}
 
 
 def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
-    """A trial as the four tidy tables of the module's documentation, from a trace
-    file's path, a `Result` with a trace, a `TraceFile`, or a bare `Trace` with its step
-    `dt` [s]. Each frame's ``attrs["units"]`` maps its columns to their units (Parquet
-    keeps them, see `write_table`)."""
+    """A trial as the tidy tables of the module's documentation, from a trace file's
+    path, a `Result` with a trace, a `TraceFile`, or a bare `Trace` with its step `dt`
+    [s]: `TABLES`, or with tracks of unknown association `TRACK_TABLES`. Each frame's
+    ``attrs["units"]`` maps its columns to their units (Parquet keeps them, see
+    `write_table`)."""
     if isinstance(source, Trace):
         if dt is None:
             raise UsageError("a bare Trace needs its step dt: to_frames(trace, dt)")
@@ -167,9 +231,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     else:
         saved = trace_file.load(source)
         trace, dt = saved.trace, saved.dt
-        saved.scenario.refuse_tracks("the tables")
-    if trace.label is not None:  # a bare Trace of tracks
-        raise UsageError("the tables do not take a trace of tracks (gnn or jpda) yet")
+    tracked = trace.label is not None
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     time = np.arange(T) * dt
@@ -196,35 +258,66 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
         decision_time_ms=trace.decision_time_ms.ravel(),
         decision_wall_ms=trace.decision_wall_ms.ravel(),
     )
-    best, best_mean, _ = team_best(trace.mean, trace.cov, trace.alive)
     k, j = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nt), indexing="ij"))
     targets = {"step": k, "time": time[k], "target": j}
     for c, name in enumerate(TARGET_STATE):
         targets[name] = trace.targets[..., c].ravel()
     targets["in_view"] = trace.observed.any(axis=1).ravel()
-    targets["best_uav"] = best.ravel()
-    for c, name in enumerate(TARGET_STATE):
-        targets[f"best_{name}"] = best_mean[..., c].ravel()
-    k, i, j = (
-        a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nu), np.arange(Nt), indexing="ij")
-    )
-    pairs = {"step": k, "time": time[k], "uav": i, "target": j}
-    pairs["in_view"] = trace.observed.ravel()
-    pairs["bid"] = trace.bids.ravel()
-    for c, name in enumerate(TARGET_STATE):
-        pairs[f"est_{name}"] = trace.mean[..., c].ravel()
-    for a in range(4):
-        for b in range(a, 4):
-            pairs[f"P_{TARGET_STATE[a]}_{TARGET_STATE[b]}"] = trace.cov[..., a, b].ravel()
-    frames = {
-        "steps": steps,
-        "uavs": pd.DataFrame(uavs),
-        "targets": pd.DataFrame(targets),
-        "pairs": pd.DataFrame(pairs),
-    }
+    frames = {"steps": steps, "uavs": pd.DataFrame(uavs)}
+    if tracked:
+        frames["targets"] = pd.DataFrame(targets)
+        frames["tracks"] = _tracks(trace, time)
+        frames["measurements"] = _measurements(trace, time)
+    else:
+        best, best_mean, _ = team_best(trace.mean, trace.cov, trace.alive)
+        targets["best_uav"] = best.ravel()
+        for c, name in enumerate(TARGET_STATE):
+            targets[f"best_{name}"] = best_mean[..., c].ravel()
+        k, i, j = (
+            a.ravel()
+            for a in np.meshgrid(np.arange(T), np.arange(Nu), np.arange(Nt), indexing="ij")
+        )
+        pairs = {"step": k, "time": time[k], "uav": i, "target": j}
+        pairs["in_view"] = trace.observed.ravel()
+        pairs["bid"] = trace.bids.ravel()
+        pairs.update(_estimates(trace.mean, trace.cov))
+        frames["targets"] = pd.DataFrame(targets)
+        frames["pairs"] = pd.DataFrame(pairs)
     for frame in frames.values():
         frame.attrs["units"] = {c: unit(c) for c in frame.columns if unit(c)}
     return frames
+
+
+def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
+    """The ``tracks`` table: a row per step, living UAV and slot that holds a track."""
+    held = (trace.status > 0) & trace.alive[..., None]
+    k, i, s = np.nonzero(held)  # step, UAV, slot in order
+    rows = {"step": k, "time": time[k], "uav": i, "slot": s, "label": trace.label[held]}
+    names = np.array([STATUS_NAMES[code] for code in range(len(STATUS_NAMES))])
+    rows["status"] = names[trace.status[held]]
+    rows["bid"] = trace.bids[held]
+    rows.update(_estimates(trace.mean[held], trace.cov[held]))
+    return pd.DataFrame(rows)
+
+
+def _measurements(trace: Trace, time: np.ndarray) -> pd.DataFrame:
+    """The ``measurements`` table: a row per measurement of every UAV's scan."""
+    k, i, z = np.nonzero(trace.scan_valid)
+    origin = trace.scan_origin[k, i, z]
+    return pd.DataFrame(
+        {
+            "step": k,
+            "time": time[k],
+            "uav": i,
+            "index": z,
+            "range": trace.scan_polar[k, i, z, 0],
+            "bearing": trace.scan_polar[k, i, z, 1],
+            "x": trace.scan_z[k, i, z, 0],
+            "y": trace.scan_z[k, i, z, 1],
+            "origin": origin,
+            "clutter": origin == -1,
+        }
+    )
 
 
 def write_table(frame: pd.DataFrame, path: str | Path, format: str = "parquet") -> None:

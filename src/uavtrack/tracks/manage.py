@@ -51,6 +51,9 @@ from . import association
 EMPTY, TENTATIVE, CONFIRMED = 0, 1, 2
 """Track statuses."""
 
+STATUS_NAMES = {EMPTY: "empty", TENTATIVE: "tentative", CONFIRMED: "confirmed"}
+"""Each status's name, as the outputs (tables, bags, recordings) write it."""
+
 MANOEUVRE_STD = 2.3
 """A confirmed track predicted in view with no measurement in its gate coasts with the
 process noise of a white acceleration of this std [m/s^2] added (the IMM's jump mode,

@@ -13,8 +13,17 @@ stays, grey, where it fell; what it no longer has is NaN, which the viewer does 
 draw), and instance j of the targets is target j. The recording id names the method,
 the seed and the scenario's digest, so recordings of different runs open side by side.
 The default layout shows the field from above beside a 3-D view, and each time series
-in a view on its own scale. A recording is read back with ``rerun.chunk.RrdReader``, as
-pyarrow record batches. Needs the viz extra (rerun-sdk, pyarrow).
+in a view on its own scale.
+
+A run of tracks (``tracker.association`` gnn or jpda) adds `TRACK_ENTITIES`: every UAV's
+tracks (instance i K + s is slot s of UAV i) with the team label as class id and a label
+text ``L<label>``, confirmed in the UAV's colour, tentative grey and smaller, each with
+its 2-sigma ellipse; and the scans, true detections red and clutter grey (split by the
+origin the simulator knows, for evaluation). A UAV's estimate on ``world/estimates`` is
+then its own estimate of the track it follows.
+
+A recording is read back with ``rerun.chunk.RrdReader``, as pyarrow record batches.
+Needs the viz extra (rerun-sdk, pyarrow).
 """
 
 from __future__ import annotations
@@ -41,6 +50,7 @@ from .._files import write_bytes
 from ..errors import RunError, UsageError
 from ..network import in_range
 from ..sensing import observation_radius
+from ..tracks.manage import CONFIRMED
 
 ENTITIES = (
     "world/field",
@@ -58,6 +68,14 @@ ENTITIES = (
     "metrics/messages",
 )
 """Every entity a recording holds: one per kind, whatever the team's size."""
+
+TRACK_ENTITIES = (
+    "world/tracks",
+    "world/tracks/ellipses",
+    "world/scan/detections",
+    "world/scan/clutter",
+)
+"""The entities a recording of a run of tracks holds besides `ENTITIES`."""
 
 THIN = 0.05  # [m] the vertical half-size of flat ellipsoids (disks, ellipses)
 
@@ -189,7 +207,6 @@ def show(trace, scenario, name: str = "uavtrack") -> int:
 
 def log(rec: rr.RecordingStream, trace, scenario) -> None:
     """Log every entity of `ENTITIES` for a trace into the recording stream `rec`."""
-    scenario.refuse_tracks("the Rerun viewer")
     T, nu, nt = trace.observed.shape
     steps = rr.TimeColumn("step", sequence=np.arange(T))
     alive = trace.alive
@@ -261,6 +278,10 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
     # each UAV's estimate of the target it tracks, with its 2-sigma ellipse
     tracking = alive & (trace.assignment >= 0)
     j = np.maximum(trace.assignment, 0)
+    if trace.label is not None:  # the UAV's own slot of the track it follows
+        own = tracking[..., None] & (trace.label == trace.assignment[..., None])
+        tracking, j = own.any(axis=-1), own.argmax(axis=-1)
+        _tracks(rec, trace, steps, colors)
     t_idx, u_idx = np.meshgrid(np.arange(T), np.arange(nu), indexing="ij")
     mean = np.nan_to_num(trace.mean[t_idx, u_idx, j, :2])  # (T, Nu, 2)
     cov = np.nan_to_num(trace.cov[t_idx, u_idx, j, :2, :2])
@@ -306,6 +327,52 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
         rec.send_columns(
             entity, indexes=[steps], columns=rr.Scalars.columns(scalars=np.nan_to_num(values))
         )
+
+
+def _tracks(rec: rr.RecordingStream, trace, steps, colors: np.ndarray) -> None:
+    """The entities of `TRACK_ENTITIES`: every UAV's track slots (T, Nu K), drawn where
+    the slot holds a track of a living UAV, and its scans (T, Nu Z)."""
+    T, nu, K = trace.label.shape
+    held = (trace.status > 0) & trace.alive[..., None]  # (T, Nu, K)
+    confirmed = trace.status == CONFIRMED
+    at = np.concatenate([np.nan_to_num(trace.mean[..., :2]), np.zeros((T, nu, K, 1))], -1)
+    own = np.broadcast_to(colors[:, None], (T, nu, K, 3))
+    color = np.where(confirmed[..., None], own, np.uint8(150)).reshape(T, nu * K, 3)
+    text = np.char.add("L", trace.label.astype(str))
+    text = np.where(confirmed, text, np.char.add(text, " (tentative)"))
+    text = np.where(held, text, "")  # an empty slot: not drawn, no text
+    flat = (T, nu * K)
+    shown = held.reshape(flat)
+    _send(
+        rec, "world/tracks", steps, shown, rr.Points3D,
+        positions=at.reshape(T, nu * K, 3),
+        class_ids=np.maximum(trace.label, 0).reshape(flat).astype(np.uint16),
+        labels=text.reshape(flat),
+        colors=color,
+        radii=np.where(confirmed, 1.5, 0.7).reshape(flat),
+    )  # fmt: skip
+    half, quaternion = _ellipses(np.nan_to_num(trace.cov[..., :2, :2]))
+    _send(
+        rec, "world/tracks/ellipses", steps, shown, rr.Ellipsoids3D,
+        centers=at.reshape(T, nu * K, 3),
+        half_sizes=half.reshape(T, nu * K, 3),
+        quaternions=quaternion.reshape(T, nu * K, 4),
+        colors=color,
+    )  # fmt: skip
+    Z = trace.scan_valid.shape[2]
+    ground = np.concatenate([trace.scan_z, np.zeros((T, nu, Z, 1))], axis=-1)
+    seen = trace.scan_valid & trace.alive[..., None]
+    clutter = trace.scan_origin == -1
+    for entity, chosen, rgb in (
+        ("world/scan/detections", seen & ~clutter, (230, 40, 40)),
+        ("world/scan/clutter", seen & clutter, (150, 150, 150)),
+    ):
+        _send(
+            rec, entity, steps, chosen.reshape(T, nu * Z), rr.Points3D,
+            positions=ground.reshape(T, nu * Z, 3),
+            colors=np.broadcast_to(np.array(rgb, np.uint8), (T, nu * Z, 3)),
+            radii=np.full((T, nu * Z), 0.8),
+        )  # fmt: skip
 
 
 GEOMETRY = ("positions", "origins", "vectors", "centers", "half_sizes", "strips")
