@@ -1,6 +1,7 @@
 """The agent form with unknown association: each UAV program gets its scan unlabelled,
 holds track slots, agrees on them with its neighbours by messages that carry labels,
-status, stamps and tombstones, and bids by label; the swarm's trace equals the batch
+status, stamps and tombstones, and bids by label (or, centralized, uploads its scan to
+one multi-sensor tracker and downloads its tracks); the swarm's trace equals the batch
 simulator's, tracks, labels and scans included."""
 
 from __future__ import annotations
@@ -31,8 +32,10 @@ def tracked(association: str = "jpda", steps: int = 40, **more) -> uavtrack.Scen
         ("distributed", {"faults.loss": 0.2}),
         ("greedy", {"faults.loss": 0.2}),
         ("distributed", {"faults.loss": 0.2, "faults.failures": [[1, 12]]}),
+        ("centralized", {}),
+        ("centralized", {"faults.loss": 0.2, "faults.failures": [[1, 12]]}),
     ],
-    ids=["no-faults", "loss", "greedy-loss", "loss-failure"],
+    ids=["no-faults", "loss", "greedy-loss", "loss-failure", "central", "central-faults"],
 )
 def test_memory_swarm_with_tracks_equals_the_simulator(method, faults):
     scenario = tracked(**faults)
@@ -57,10 +60,11 @@ def test_memory_swarm_with_tracks_equals_the_simulator(method, faults):
     ],
     ids=["gnn-imm", "jpda-ci"],
 )
-def test_memory_swarm_with_tracks_equals_the_simulator_in_every_setting(association, more):
+@pytest.mark.parametrize("method", ["distributed", "centralized"])
+def test_memory_swarm_with_tracks_equals_the_simulator_in_every_setting(method, association, more):
     scenario = tracked(association, steps=30, **more)
-    swarm = run_swarm(scenario, "distributed", seed=1, transport="memory")
-    assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "distributed", seed=1).trace)
+    swarm = run_swarm(scenario, method, seed=1, transport="memory")
+    assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, method, seed=1).trace)
 
 
 def test_a_uav_program_is_told_no_target_index():
@@ -88,22 +92,11 @@ def test_a_uav_program_is_told_no_target_index():
     assert sum(z[0] for _, z in seen) == per_step.sum()  # every measurement, clutter too
 
 
-def test_zenoh_swarm_of_processes_with_tracks_equals_run():
+@pytest.mark.parametrize("method", ["distributed", "centralized"])
+def test_zenoh_swarm_of_processes_with_tracks_equals_run(method):
     pytest.importorskip("zenoh")
     scenario = tracked(steps=15, **{"faults.loss": 0.2})
-    swarm = run_swarm(scenario, "distributed", seed=4, transport="zenoh")
-    reference = uavtrack.simulate(scenario, "distributed", seed=4)
+    swarm = run_swarm(scenario, method, seed=4, transport="zenoh")
+    reference = uavtrack.simulate(scenario, method, seed=4)
     assert_same_trace(swarm.result.trace, reference.trace)
     assert swarm.transport == "zenoh" and swarm.traffic.dropped == 0
-
-
-def test_the_centralized_swarm_with_tracks_is_refused_in_one_line(capsys):
-    from uavtrack import cli
-
-    code = cli.main(
-        ["swarm", "--method", "centralized", "--set", "steps=3"]
-        + ["--set", "tracker.association=jpda"]
-    )
-    _, err = capsys.readouterr()
-    assert code == 2 and err.count("\n") == 1
-    assert "centralized" in err and "tracker.association" in err

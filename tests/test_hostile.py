@@ -251,6 +251,8 @@ RUNS = {
     ("distributed", 1, "jpda"): {
         "radio:presence", "radio:flood+consensus", "radio:beacon+bids", "report"
     },
+    ("centralized", 1, "jpda"): {"radio:presence", "radio:upload", "report"},  # a scan
+    ("centralized", 5, "jpda"): {"radio:presence", "radio:download", "report"},  # a book
 }  # fmt: skip
 TRACKED = {"sensor.detection_probability": 0.9, "sensor.clutter_rate": 2.0}
 

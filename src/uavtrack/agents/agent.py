@@ -586,20 +586,10 @@ class CentralAgent:
         s, n, m = self.setting, self.n, self.m
         alive = tick["alive"]
         self.radio.begin(k, np.zeros(n, dtype=bool), alive)
-        offered = []  # the uploads offered to the node and those that came
         start = timing.start()
-        sent_at = k - self.radio.delay
         down, targets = nothing_heard(1, n, m), np.full((1, n), -1, dtype=np.int64)
-        if sent_at >= 0:
-            alive_then = self.radio.alive[sent_at]
-            uavs = np.flatnonzero(alive_then)
-            lost = self.radio.lost(sent_at, "upload", 0, uavs, np.array(n))
-            expected = [int(q) for q in uavs[~lost]]
-            mailbox = self.mailbox
-            mailbox.wait(
-                lambda: all(mailbox.content(sent_at, "upload", q, 0) is not None for q in expected),
-                time.monotonic() + self.radio.deadline,
-            )
+        uploads, offered = self.uploads(k)
+        if uploads is not None:
             heard = np.zeros((1, n), dtype=bool)
             got = {
                 "gamma": np.zeros((1, n, m)),
@@ -608,22 +598,53 @@ class CentralAgent:
                 "stamp": np.zeros((1, n, m), dtype=np.int64),
             }
             reported = np.zeros((1, n, 5))
-            for q in expected:
-                content = mailbox.content(sent_at, "upload", q, 0)
-                if content is None:
-                    self.radio.missed("upload", 1)
-                    continue
-                content = plausible(self.spec, mailbox, content)
+            for q, content in uploads.items():
+                content = plausible(self.spec, self.mailbox, content)
                 heard[0, q] = True
                 for name in got:
                     got[name][0, q] = content[name]
                 reported[0, q] = content["uav"]
-            if s.faulty:
-                offered.append((int(alive_then.sum()), int(heard.sum())))
-            else:  # every upload arrives, but one that was late; a UAV alone sends none
-                one = int(n > 1)
-                offered.append((n * one, int(heard.sum()) * one))
             down, targets = central_node(fusion.Estimates(**got), heard, reported, s, k, timing)
+        contents = {}
+        for i in np.flatnonzero(alive):  # each living UAV its download
+            contents[int(i)] = dict(down.map(lambda value, i=i: value[0, i]).items())
+            contents[int(i)]["target"] = np.array(targets[0, i], dtype=np.int64)
+        return self.downloads(k, alive, contents, offered, start)
+
+    def uploads(self, k: int) -> tuple[dict[int, dict] | None, list]:
+        """The uploads of `delay` cycles ago that came, by sender (None before any was
+        sent), and the uploads offered to the node and those that came (`radio.counted`)."""
+        s, n = self.setting, self.n
+        sent_at = k - self.radio.delay
+        if sent_at < 0:
+            return None, []
+        alive_then = self.radio.alive[sent_at]
+        uavs = np.flatnonzero(alive_then)
+        lost = self.radio.lost(sent_at, "upload", 0, uavs, np.array(n))
+        expected = [int(q) for q in uavs[~lost]]
+        mailbox = self.mailbox
+        mailbox.wait(
+            lambda: all(mailbox.content(sent_at, "upload", q, 0) is not None for q in expected),
+            time.monotonic() + self.radio.deadline,
+        )
+        uploads = {}
+        for q in expected:
+            content = mailbox.content(sent_at, "upload", q, 0)
+            if content is None:
+                self.radio.missed("upload", 1)
+                continue
+            uploads[q] = content
+        if s.faulty:
+            offered = [(int(alive_then.sum()), len(uploads))]
+        else:  # every upload arrives, but one that was late; a UAV alone sends none
+            one = int(n > 1)
+            offered = [(n * one, len(uploads) * one)]
+        return uploads, offered
+
+    def downloads(self, k: int, alive, contents: dict[int, dict], offered, start) -> Report:
+        """Each living UAV its download (contents by UAV); the node's report of the cycle
+        (its CPU time since `start`: its work, not its waits)."""
+        s, n = self.setting, self.n
         sent, delivered = counted(  # with delay: the downloads, when sent
             s.delay,
             lambda: [
@@ -632,11 +653,9 @@ class CentralAgent:
             ],
             offered,
         )
-        for i in np.flatnonzero(alive):  # each living UAV its download
-            content = dict(down.map(lambda value, i=i: value[0, i]).items())
-            content["target"] = np.array(targets[0, i], dtype=np.int64)
-            self.radio.send(k, [part("download", 0, content)], to=int(i))
-        cpu, wall = (1e3 * timing.since(start)).tolist()  # CPU: the node's work, not its waits
+        for i, content in contents.items():
+            self.radio.send(k, [part("download", 0, content)], to=i)
+        cpu, wall = (1e3 * timing.since(start)).tolist()
         empty = packed({"x": np.zeros(0)})["x"]
         return Report(
             version=VERSION, run=self.run, k=k, uav=n, action=-1, target=-1,

@@ -244,6 +244,9 @@ DOMAINS = {
     "slot bids": "for a confirmed slot, in [0, the run's largest bid]; NaN elsewhere",
     "bid labels": "the label of each confirmed slot a bid is for, -1 for none, each once",
     "label or none": "a team label (below the run's largest), or -1: none",
+    "measurement covariance": "as covariance, of a measurement (2 x 2)",
+    "ground positions": "x and y within the field plus the run's margin",
+    "counts": "a count in [0, the run's largest label]",
 }
 """What the values of a field may be, beyond its dtype and shape (`Spec.contents`); the
 run's numbers are `plausibility.Bounds`."""
@@ -332,8 +335,10 @@ class Spec:
     def _tracked(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
         """`contents` with unknown association: the consensus carries a UAV's track
         slots with their labels, status, stamps and tombstones (`tracks.team.TrackSet`),
-        the bids one per slot with its label; the centralized baseline's upload and
-        download are not part of the agent form with tracks."""
+        the bids one per slot with its label; the centralized baseline's upload a UAV's
+        scan (Z measurements, converted, with their covariances; Z, shown as -1, at most
+        `scan`) and where it believes it is, its download the node's tracks with their
+        book (`tracks.manage.Book`) and the label the node assigns the UAV."""
         K = self.slots
         return {
             "presence": {"heard": (B, (self.programs,), "flags")},
@@ -352,6 +357,23 @@ class Spec:
                 "label": (I, (K,), "bid labels"),
                 "stamp": (I, (), "cycle"),
             },
+            "upload": {
+                "z": (F, (-1, 2), "ground positions"),
+                "R": (F, (-1, 2, 2), "measurement covariance"),
+                "uav": (F, (5,), "uav state"),
+            },
+            "download": {
+                "mean": (F, (K, 4), "track estimate"),
+                "cov": (F, (K, 4, 4), "track covariance"),
+                "label": (I, (K,), "label or none"),
+                "status": (I, (K,), "track status"),
+                "stamp": (I, (K,), "track stamp"),
+                "hits": (I, (K,), "counts"),
+                "scans": (I, (K,), "counts"),
+                "misses": (I, (K,), "counts"),
+                "serial": (I, (), "counts"),
+                "target": (I, (), "label or none"),
+            },
         }.get(protocol)
 
     def arrays(
@@ -364,8 +386,12 @@ class Spec:
         if content.keys() != kinds.keys():
             return "unexpected fields"
         out = {}
+        rows = None  # the length of the fields whose first axis is -1: any up to `scan`
         for name, (dtype, shape, _) in kinds.items():
             wire = content[name]
+            if shape[:1] == (-1,) and len(wire.shape) == len(shape) and wire.shape:
+                rows = wire.shape[0] if rows is None else rows
+                shape = (rows if 0 <= rows <= self.scan else -1, *shape[1:])
             if wire.dtype != dtype or tuple(wire.shape) != shape:
                 return "wrong shape or type"
             try:
@@ -454,6 +480,12 @@ class Spec:
             return None if _distinct(value) else "labels not distinct"
         if domain == "track covariance":
             return _covariance(value[live], self.bounds)
+        if domain == "measurement covariance":
+            return _covariance(value, self.bounds)
+        if domain == "ground positions":
+            return None if self.bounds is None else _position(value, self.bounds)
+        if domain == "counts":
+            return None if ((value >= 0) & (value < self.labels)).all() else "count out of range"
         if domain == "track stamp":
             return None if ((value[live] >= 0) & (value[live] <= k)).all() else "stamp out of range"
         if domain == "tombstones":
@@ -474,12 +506,12 @@ class Spec:
         return None  # "track estimate": finite (`_finite`); plausibility is `tracks`'
 
     def tracks(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
-        """`estimates` for a checked consensus content of track slots: a confirmed track
-        beyond the run's plausibility bounds is taken as no track (its slot empty), as
-        if the sender did not hold it. Returns the content and the tracks left out by
-        reason."""
+        """`estimates` for a checked content of track slots (a consensus round's or a
+        download's): a track beyond the run's plausibility bounds is taken as no track
+        (its slot empty), as if the sender did not hold it. Returns the content and the
+        tracks left out by reason."""
         b, status = self.bounds, content["status"]
-        confirmed = status == 2
+        confirmed = status != 0  # every track: a download's tentative ones are taken too
         if b is None or not confirmed.any():
             return content, {}
         mean, cov = content["mean"], content["cov"]
@@ -642,7 +674,8 @@ class Spec:
 
 TRACK_DOMAINS = frozenset(
     ("track status", "label or none", "bid labels", "track covariance", "track stamp")
-    + ("tombstones", "slot bids", "track estimate")
+    + ("tombstones", "slot bids", "track estimate", "measurement covariance", "counts")
+    + ("ground positions",)
 )
 
 

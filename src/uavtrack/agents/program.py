@@ -22,7 +22,7 @@ from ..methods import get
 from .agent import CentralAgent, UavAgent, part
 from .messages import VERSION, Radio, Ready, Spec, encode
 from .security import WORLD, Credential, Gate
-from .tracked import TrackedUav
+from .tracked import TrackedCentral, TrackedUav
 from .transport import ANY_HELLO, Link, Mailbox, Transport, ZenohTransport, inbox_key, keys
 
 STARTUP = 120.0
@@ -124,12 +124,15 @@ def serve(
     mailbox.learn(spec, hello.publics)
     link = Link(transport, gate)
     faults = Faults(scenario.faults, hello.key.array()[None].astype(np.uint32), n)
-    if me == n:
+    prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
+    prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
+    tracked = scenario.tracker.association != "known"
+    if me == n and tracked:
+        program = TrackedCentral(scenario, faults, link, mailbox, hello.deadline, prior)
+    elif me == n:
         program = CentralAgent(scenario, faults, link, mailbox, hello.deadline)
     else:
-        prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
-        prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
-        kind = UavAgent if scenario.tracker.association == "known" else TrackedUav
+        kind = TrackedUav if tracked else UavAgent
         program = kind(me, scenario, hello.method, faults, link, mailbox, hello.deadline, prior)
     node = None
     if ros2 is not None and me < n:

@@ -83,8 +83,7 @@ def document() -> str:
 def _admits() -> list[str]:
     """What each field of a radio part may hold (`messages.Spec`): one rule for the
     check at the radio and the code that uses the message."""
-    n, m, p = -1, -2, -3  # stand-ins for the run's sizes, named in the table
-    K = -4
+    n, m, p, K = -2, -3, -4, -5  # stand-ins for the run's sizes, named in the table
     spec = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1)
     tracked = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1, slots=K)
     lines = [
@@ -103,7 +102,7 @@ def _admits() -> list[str]:
         "| protocol | field | dtype | shape | domain |",
         "|---|---|---|---|---|",
     ]
-    size = {n: "N", m: "M", p: "P", K: "K"}
+    size = {n: "N", m: "M", p: "P", K: "K", -1: "Z"}
     protocols = ("presence", "flood", "consensus", "beacon", "bids", "upload", "download")
     lines += _rows(spec, protocols, size)
     lines += [
@@ -111,13 +110,14 @@ def _admits() -> list[str]:
         "With unknown association (``tracker.association`` gnn or jpda) a UAV's Sense "
         "names no target (observed is empty, z holds the scan's Z measurements), its "
         "Report carries its K track slots with `label` and `status` (the target: the team "
-        "label it follows, -1 none), and these parts replace their namesakes (the "
-        "centralized baseline runs in the agent form with known association only):",
+        "label it follows, -1 none), and these parts replace their namesakes (Z: the "
+        "measurements of the scan uploaded, the same in each of its fields, at most the "
+        "run's largest scan):",
         "",
         "| protocol | field | dtype | shape | domain |",
         "|---|---|---|---|---|",
     ]
-    lines += _rows(tracked, ("consensus", "bids"), size)
+    lines += _rows(tracked, ("consensus", "bids", "upload", "download"), size)
     lines += ["", "Domains:", ""]
     lines += [f"- **{name}**: {text}" for name, text in messages.DOMAINS.items()]
     lines += [""]

@@ -130,8 +130,7 @@ def run_swarm(
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
-    if get(method).central:  # refuses an unknown method now
-        scenario.refuse_tracks("the agent form's centralized baseline")
+    get(method)  # refuses an unknown method now
     if sign and not spawn and keys is None:
         raise UsageError(
             "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "

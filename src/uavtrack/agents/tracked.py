@@ -16,28 +16,26 @@ the same seed and faults.
 
 from __future__ import annotations
 
+import time
+
 import numpy as np
 
 from .. import assignment, estimation, network, simulation, timing
-from ..methods import Distributed, Greedy, bid_view
+from ..methods import Greedy, bid_view
 from ..methods.base import Held
-from ..tracks import association, manage, team
-from .agent import UavAgent, dropped
+from ..radio import counted
+from ..tracks import association, columns, manage, team
+from .agent import CentralAgent, UavAgent, dropped, part
 from .messages import VERSION, Report, packed
 
 
 class TrackedUav(UavAgent):
     """A UAV's program with ``tracker.association`` gnn or jpda (see the module
-    docstring). The centralized baseline is not part of it: its node would run one
-    tracker on every UAV's scan, which the agent form does not carry."""
+    docstring); with the centralized baseline it uploads its scan and takes the central
+    node's tracks (`TrackedCentral`)."""
 
     def __init__(self, me, scenario, method, faults, link, mailbox, deadline, prior) -> None:
         super().__init__(me, scenario, method, faults, link, mailbox, deadline, prior)
-        if not isinstance(self.method, Distributed | Greedy):
-            raise ValueError(
-                f"method {self.method.name!r}: the agent form runs unknown association "
-                "(tracker.association gnn or jpda) with methods built on Distributed or Greedy"
-            )
         K = scenario.track_slots
         mean, cov = prior  # (M, 4), (M, 4, 4): the briefed targets
         book, mean, cov = manage.briefed(mean[None, None], cov[None, None], K)
@@ -57,6 +55,8 @@ class TrackedUav(UavAgent):
         self.radio.begin(k, sense["links"], alive, central)
         raw = sense["z"]
         z, R = simulation.convert(np.repeat(believed[None], len(raw), axis=0), raw, s)
+        if self.central:
+            return self._central_cycle(k, z, R)
         one = np.ones((1, 1), dtype=bool)
         scanned = manage.scan(
             self.book, self.mean, self.cov, z[None, None], R[None, None],
@@ -77,33 +77,106 @@ class TrackedUav(UavAgent):
         book = manage.after_fusion(
             scanned.book, agreed.label, agreed.status, changed, s, agreed.stamp
         )
-        confirmed = book.confirmed[0, 0]
-        plan_start = timing.start()
-        slot_bids, best = self.setting.plan(believed[None, None], agreed.mean)
-        slot_bids, best = np.where(confirmed, slot_bids[0, 0], np.nan), best[0, 0]
-        plan_seconds = timing.since(plan_start)
-        labels = book.label[0, 0]
+        slot_bids, best, plan_seconds = self._plan(book, agreed.mean)
+        labels, confirmed = book.label[0, 0], book.confirmed[0, 0]
         if isinstance(self.method, Greedy):
             column, solve_seconds, more = self._greedy(slot_bids, labels, confirmed)
             held = np.unique(labels[confirmed])
         else:
             column, held, solve_seconds, more = self._auction(k, slot_bids, labels, alive)
         slot = _slot_of(column, held, labels, confirmed, slot_bids)
+        report = self._report(
+            k, slot, best, book, agreed.mean, agreed.cov, slot_bids, int(rounds),
+            (sent + more[0], delivered + more[1]), plan_seconds + solve_seconds,
+        )  # fmt: skip
+        self._close(scanned, agreed, changed, book)
+        return report
+
+    def _plan(self, book: manage.Book, mean: np.ndarray):
+        """Bids of the confirmed slots (K,) (NaN elsewhere), the best first action of
+        each slot, and the seconds (CPU, wall) it took."""
+        start = timing.start()
+        slot_bids, best = self.setting.plan(self.believed[None, None], mean)
+        slot_bids = np.where(book.confirmed[0, 0], slot_bids[0, 0], np.nan)
+        return slot_bids, best[0, 0], timing.since(start)
+
+    def _report(self, k, slot, best, book, mean, cov, slot_bids, rounds, counts, seconds):
+        """The cycle's report, following the track in `slot` (-1: none, straight)."""
+        labels = book.label[0, 0]
         action = int(best[slot]) if slot >= 0 else simulation.STRAIGHT
         followed = int(labels[slot]) if slot >= 0 else -1
         self.target = followed if followed >= 0 else self.target
-        cpu, wall = (1e3 * (plan_seconds + solve_seconds)).tolist()
-        report = Report(
+        cpu, wall = (1e3 * seconds).tolist()
+        return Report(
             version=VERSION, run=self.run, k=k, uav=self.me, action=action, target=followed,
-            mean=packed({"x": agreed.mean[0, 0]})["x"], cov=packed({"x": agreed.cov[0, 0]})["x"],
-            bids=packed({"x": slot_bids})["x"], rounds=int(rounds),
-            sent=int(sent + more[0]), delivered=int(delivered + more[1]),
+            mean=packed({"x": mean[0, 0]})["x"], cov=packed({"x": cov[0, 0]})["x"],
+            bids=packed({"x": slot_bids})["x"], rounds=rounds,
+            sent=int(counts[0]), delivered=int(counts[1]),
             decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
             label=packed({"x": labels})["x"],
             status=packed({"x": book.status[0, 0].astype(np.int64)})["x"],
         )  # fmt: skip
-        self._close(scanned, agreed, changed, book)
+
+    def _central_cycle(self, k: int, z: np.ndarray, R: np.ndarray) -> Report:
+        """The centralized baseline from a UAV's side (`methods.Centralized.fuse_tracks`):
+        upload its scan, take the node's tracks and target where its download came (else
+        keep its tracks, predicted); follow the node's label, or under faults its
+        previous label if it still holds it confirmed, else its best confirmed track."""
+        s, one = self.setting, int(self.n > 1)
+        if self.radio.central[k]:
+            scan = {"z": z, "R": R, "uav": self.believed}
+            self.radio.send(k, [part("upload", 0, scan)], to=self.n)
+        content, offered = self._tracks_download(k)
+        sent, delivered = counted(
+            s.delay, lambda: [self.radio.transmitted(k, "upload", 1, 0, to=self.n)], offered
+        )
+        book, mean, cov = self.book, self.mean, self.cov
+        target = -1
+        if content is not None:
+            K = self.scenario.track_slots
+            book = manage.Book(
+                **{f: content[f].reshape(1, 1, K) for f in ("label", "hits", "scans", "misses")},
+                status=content["status"].astype(np.int8).reshape(1, 1, K),
+                serial=content["serial"].reshape(1, 1),
+                stamp=content["stamp"].reshape(1, 1, K),
+            )
+            mean, cov = content["mean"][None, None], content["cov"][None, None]
+            target = int(content["target"])
+        slot_bids, best, plan_seconds = self._plan(book, mean)
+        labels, confirmed = book.label[0, 0], book.confirmed[0, 0]
+        follow = target if not s.faulty else self.target
+        held = np.array([follow]) if follow >= 0 else np.zeros(0, dtype=np.int64)
+        slot = _slot_of(0 if held.size else -1, held, labels, confirmed, slot_bids)
+        report = self._report(
+            k, slot, best, book, mean, cov, slot_bids, one, (sent, delivered), plan_seconds
+        )
+        tracker = self.ctx.const.tracker
+        self.book, self.modes = book, None  # the node keeps the modes of an IMM
+        self.mean, self.cov = estimation.predict(mean, cov, tracker.A, tracker.Q)
         return report
+
+    def _tracks_download(self, k: int):
+        """The node's download of this cycle (its checked content, or None when it did
+        not come) and (offered, came) as `UavAgent.upload` counts it."""
+        s, one = self.setting, int(self.n > 1)
+        mailbox, node = self.mailbox, self.n
+        lost = bool(self.radio.lost(k, "download", 0, np.array(node), self.me))
+        expect = self.radio.central[k] and not lost
+        if expect:  # two rounds: the node waits up to a round's deadline for the uploads
+            mailbox.wait(
+                lambda: (
+                    mailbox.content(k, "download", node, 0) is not None or mailbox.is_gone(node)
+                ),
+                time.monotonic() + 2 * self.radio.deadline,
+            )
+        content = mailbox.content(k, "download", node, 0) if expect else None
+        if expect and content is None:  # late, or the node's token went: it never came
+            self.radio.missed("download", 1)
+        if content is not None:
+            content, reasons = self.spec.tracks(content)
+            dropped(self.mailbox, reasons)
+        mine = int(self.radio.alive[k][self.me]) if s.faulty else one
+        return content, [(mine, mine * int(content is not None))]
 
     def _close(self, scanned, agreed: team.TrackSet, changed, book) -> None:
         """The tracks predicted to the next scan (`simulation._finish_tracked`)."""
@@ -261,3 +334,63 @@ def _slot_of(column: int, known: np.ndarray, labels, confirmed, slot_bids) -> in
     if not confirmed.any():
         return -1
     return int(np.argmax(np.where(confirmed, slot_bids, -np.inf)))
+
+
+class TrackedCentral(CentralAgent):
+    """The central node of the centralized baseline with unknown association: one
+    multi-sensor tracker (`methods.Centralized.fuse_tracks`) on the scans uploaded, one
+    UAV's after another in index order, then (without faults) one assignment of every
+    UAV to the node's confirmed labels; each living UAV downloads the node's tracks, their
+    book and its label."""
+
+    def __init__(self, scenario, faults, link, mailbox, deadline, prior) -> None:
+        super().__init__(scenario, faults, link, mailbox, deadline)
+        mean, cov = prior  # (M, 4), (M, 4, 4): the briefed targets
+        book, mean, cov = manage.briefed(mean[None, None], cov[None, None], scenario.track_slots)
+        modes = self.ctx.const.tracker.start(mean, cov)[2]
+        self.node = manage.Slots(book=book, mean=mean, cov=cov, modes=modes)
+
+    def cycle(self, k: int, tick: dict[str, np.ndarray], central: bool = True) -> Report:
+        s, n, scenario = self.setting, self.n, self.scenario
+        tracker = self.ctx.const.tracker
+        alive = tick["alive"]
+        self.radio.begin(k, np.zeros(n, dtype=bool), alive)
+        start = timing.start()
+        uploads, offered = self.uploads(k)
+        uploads = uploads or {}
+        node = self.node
+        for _, content in sorted(uploads.items()):
+            scanned = manage.scan(
+                node.book, node.mean, node.cov, content["z"][None, None],
+                content["R"][None, None], np.ones((1, 1, len(content["z"])), dtype=bool),
+                content["uav"][None, None], np.ones((1, 1), dtype=bool), scenario,
+                node.modes, tracker, k,
+            )  # fmt: skip
+            node = manage.Slots(
+                book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
+            )
+        targets = np.full(n, -1, dtype=np.int64)
+        if not s.faulty and uploads:  # one assignment over every UAV's bids by label
+            heard = np.array(sorted(uploads))
+            believed = np.stack([uploads[i]["uav"] for i in heard])[None]
+            slot_bids = np.full((1, n, self.scenario.track_slots), np.nan)
+            slot_bids[0, heard] = s.plan(believed, np.repeat(node.mean, heard.size, axis=1))[0]
+            confirmed = np.repeat(node.book.confirmed, n, axis=1) & alive[None, :, None]
+            slot_bids = np.where(confirmed, slot_bids, np.nan)
+            cols = columns.of(np.repeat(node.book.label, n, axis=1), confirmed)
+            column, _ = assignment.centralized(columns.bids(np.nan_to_num(slot_bids), cols))
+            targets = np.where(column[0] >= 0, cols.labels[0, np.maximum(column[0], 0)], -1)
+        book = node.book
+        shared = {
+            "mean": node.mean[0, 0], "cov": node.cov[0, 0], "label": book.label[0, 0],
+            "status": book.status[0, 0].astype(np.int64), "stamp": book.stamp[0, 0],
+            "hits": book.hits[0, 0], "scans": book.scans[0, 0], "misses": book.misses[0, 0],
+            "serial": np.array(book.serial[0, 0], dtype=np.int64),
+        }  # fmt: skip
+        contents = {
+            int(i): dict(shared, target=np.array(targets[i], dtype=np.int64))
+            for i in np.flatnonzero(alive)
+        }
+        mean, cov, modes = tracker.close(node.mean, node.cov, node.modes, node.mean, node.cov)
+        self.node = manage.Slots(book=book, mean=mean, cov=cov, modes=modes)
+        return self.downloads(k, alive, contents, offered, start)
