@@ -252,16 +252,6 @@ class Scenario(Part):
             and (f.round_budget is None or f.round_budget >= 2)
         )
 
-    def refuse_tracks(self, what: str) -> None:
-        """Refuse, with a one-line ScenarioError, a scenario of unknown association
-        (``tracker.association`` gnn or jpda) where `what` does not take one yet."""
-        if self.tracker.association != "known":
-            raise ScenarioError(
-                f"{what} does not take tracker.association = {self.tracker.association} yet "
-                "(it reads one estimate per target, not track slots); leave it out, or leave "
-                "tracker.association unset"
-            )
-
     @property
     def track_slots(self) -> int:
         """Track slots K per UAV with unknown association (``tracker.max_tracks``, whose 0
