@@ -158,11 +158,9 @@ def team_round(
     stamp0 = _stamp(own).reshape(S)
     o_stamp = _stamp(offered).reshape(S)[src]
 
-    # 2. same label: the slot of the receiver holding it
-    mine = own.label.reshape(B * n, K)[row]
-    same = (mine == o_label[:, None]) & (own.status.reshape(B * n, K)[row] > EMPTY)
-    held = same.any(axis=1)
-    held_slot = row[held] * K + np.argmax(same[held], axis=1)
+    # 2. same label: the slot of the receiver holding it (labels are distinct within a
+    # UAV: one slot at most), found by a sorted join on (receiver, label)
+    held, held_slot = _holding(own, row, o_label)
 
     # 3. the other labels, the most confident offer of each per receiver
     free = np.flatnonzero(~held)
@@ -175,9 +173,19 @@ def team_round(
     edges = edges.without(block)
     anchors, members = _associate(U, sender, o_gamma, o_label, edges, S)
 
-    # every group: its anchor (own slot, or the adopted offer S + u) and its members
+    # every group: its anchor (own slot, or the adopted offer S + u) and its members;
+    # under max-consensus an offer of a confirmed slot's own label that is no more
+    # confident and no newer than the slot changes nothing (the slot wins ties): left out
+    same = np.flatnonzero(held)
+    if rule == "max_consensus" and same.size:
+        useful = (
+            (o_gamma[same] > confidence(cov0[held_slot]))
+            | (o_stamp[same] > stamp0[held_slot])
+            | (status0[held_slot] != CONFIRMED)
+        )
+        same, held_slot = same[useful], held_slot[useful]
     key = np.concatenate([held_slot, anchors])
-    cand = np.concatenate([S + np.flatnonzero(held), members])
+    cand = np.concatenate([S + same, members])
     owned = np.unique(key[key < S])
     key, cand = np.concatenate([key, owned]), np.concatenate([cand, owned])
     prio = np.where(cand < S, -1, sender[np.maximum(cand - S, 0)])  # own first, then sender
@@ -221,6 +229,26 @@ def team_round(
         tombs=own.tombs,
     )
     return out, changed.reshape(B, n, K)
+
+
+def _holding(own: TrackSet, row: np.ndarray, label: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Which of the offers (receiver row (O,), label (O,)) name a label their receiver
+    holds in a present slot, and that slot (flat, row * K + slot) for each of those."""
+    B, n, K = own.label.shape
+    present = own.status.reshape(B * n, K) != EMPTY
+    r, k = np.nonzero(present)
+    if not r.size or not row.size:
+        return np.zeros(row.shape, dtype=bool), np.zeros(0, dtype=np.int64)
+    mine = own.label.reshape(B * n, K)[r, k]
+    span = int(max(mine.max(), label.max())) + 1
+    keys = r * span + mine
+    order = np.argsort(keys, kind="stable")
+    keys = keys[order]
+    wanted = row * span + label
+    at = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+    held = (keys[at] == wanted) & (label >= 0)
+    slot = (r * K + k)[order][at]
+    return held, slot[held]
 
 
 def _stamp(tracks: TrackSet) -> np.ndarray:
