@@ -19,8 +19,12 @@ from __future__ import annotations
 
 import numpy as np
 
-EXACT = ("targets", "uavs", "observed", "assignment", "action", "alive")
-EXACT += ("label", "status", "scan_valid", "scan_origin")  # with unknown association
+EXACT = ("targets", "uavs", "observed", "assignment", "action", "alive") + (
+    "label",
+    "status",
+    "scan_valid",
+    "scan_origin",  # with unknown association
+)
 CLOSE = ("mean", "cov", "bids", "scan_polar", "scan_z")
 COUNTERS = ("rounds", "messages", "delivered", "late", "conflicts")
 

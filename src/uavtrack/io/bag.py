@@ -231,7 +231,7 @@ def _tracks(m: _Messages, ns: int, write, trace, k: int) -> list:
     MarkerArray = m.T["visualization_msgs/msg/MarkerArray"]
     lines = []
     for i in np.flatnonzero(trace.alive[k]):
-        markers = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
+        markers: list[Any] = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
                             action=3)]  # fmt: skip  # DELETEALL: the last step's go
         for s in np.flatnonzero(trace.status[k, i] > 0):
             label, status = int(trace.label[k, i, s]), int(trace.status[k, i, s])
@@ -247,7 +247,7 @@ def _tracks(m: _Messages, ns: int, write, trace, k: int) -> list:
         valid = trace.scan_valid[k, i]
         clutter = trace.scan_origin[k, i] == -1
         where = np.concatenate([trace.scan_z[k, i], np.zeros((len(valid), 1))], axis=1)
-        scan = [
+        scan: list[Any] = [
             m.marker(ns, name, n, 7, m.pose(0, 0, 0, 0), (2.0, 2.0, 2.0), rgba, where[chosen])
             for n, (name, chosen, rgba) in enumerate(
                 (("detections", valid & ~clutter, (1.0, 0.2, 0.2, 1.0)),
