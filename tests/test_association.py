@@ -466,3 +466,21 @@ def test_bad_arguments_name_what_is_wrong():
         assoc.jpda(inn, gated, 0.9, -1.0, 0.99)
     with pytest.raises(ValueError, match="max_events"):
         assoc.jpda(inn, gated, 0.9, 1e-3, 0.99, max_events=0)
+
+
+def test_components_number_as_scipy_does():
+    """The JPDA's clusters come from `components`: the same count and numbering as
+    scipy's connected_components on random graphs, isolated nodes and repeated edges
+    included."""
+    from scipy.sparse import coo_matrix
+    from scipy.sparse.csgraph import connected_components
+
+    rng = np.random.default_rng(1)
+    for _ in range(500):
+        n, e = int(rng.integers(1, 40)), int(rng.integers(0, 60))
+        a, b = rng.integers(0, n, e), rng.integers(0, n, e)
+        count, label = connected_components(
+            coo_matrix((np.ones(e), (a, b)), shape=(n, n)), directed=False
+        )
+        ours = assoc.components(a, b, n)
+        assert ours[0] == count and np.array_equal(ours[1], label)

@@ -58,31 +58,48 @@ _TINY = np.finfo(float).tiny  # lambda = 0 is taken as this (the limit lambda ->
 class Innovations:
     """The innovation of every (track, measurement) pair of every row.
 
-    nu (P, K, Z, 2) = z_j - H x_k; S (P, K, Z, 2, 2) = H P_k H^T + R_j;
-    d2 (P, K, Z) = nu^T S^-1 nu (the squared Mahalanobis distance that the gate tests);
-    log_lik (P, K, Z) = log N(z_j; H x_k, S_kj) = -d2 / 2 - log(det S) / 2 - log(2 pi).
+    d2 (P, K, Z) = nu^T S^-1 nu (the squared Mahalanobis distance that the gate tests),
+    nu = z_j - H x_k, S = H P_k H^T + R_j; log_lik (P, K, Z) = log N(z_j; H x_k, S_kj)
+    = -d2 / 2 - log(det S) / 2 - log(2 pi). `nu` (P, K, Z, 2) and `S` (P, K, Z, 2, 2)
+    are formed when asked for: the association reads only d2 and log_lik.
     """
 
-    nu: np.ndarray
-    S: np.ndarray
     d2: np.ndarray
     log_lik: np.ndarray
+    mean: np.ndarray
+    cov: np.ndarray
+    z: np.ndarray
+    R: np.ndarray
+
+    @property
+    def nu(self) -> np.ndarray:
+        return self.z[:, None, :, :] - self.mean[:, :, None, :2]
+
+    @property
+    def S(self) -> np.ndarray:
+        return self.cov[:, :, None, :2, :2] + self.R[:, None, :, :, :]
 
 
 def innovations(mean: np.ndarray, cov: np.ndarray, z: np.ndarray, R: np.ndarray) -> Innovations:
     """Innovations of every track of a row with every measurement of the row.
 
     mean (P, K, 4), cov (P, K, 4, 4), z (P, Z, 2), R (P, Z, 2, 2). S^-1 is the closed-form
-    2 x 2 inverse, as in `estimation.update`.
+    2 x 2 inverse, as in `estimation.update`; S's three distinct entries and nu's two
+    are formed apart, each (P, K, Z), never the (P, K, Z, 2, 2) array.
     """
-    nu = z[:, None, :, :] - mean[:, :, None, :2]
-    S = cov[:, :, None, :2, :2] + R[:, None, :, :, :]
-    s11, s12, s22 = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+
+    def pair(track: np.ndarray, measured: np.ndarray) -> np.ndarray:  # (P, K, Z)
+        return track[:, :, None] + measured[:, None, :]
+
+    s11 = pair(cov[..., 0, 0], R[..., 0, 0])
+    s12 = pair(cov[..., 0, 1], R[..., 0, 1])
+    s22 = pair(cov[..., 1, 1], R[..., 1, 1])
+    n0 = z[:, None, :, 0] - mean[:, :, None, 0]
+    n1 = z[:, None, :, 1] - mean[:, :, None, 1]
     det = s11 * s22 - s12 * s12
-    n0, n1 = nu[..., 0], nu[..., 1]
     d2 = (s22 * n0 * n0 - 2.0 * s12 * n0 * n1 + s11 * n1 * n1) / det
     log_lik = -0.5 * d2 - 0.5 * np.log(det) - np.log(2.0 * np.pi)
-    return Innovations(nu=nu, S=S, d2=d2, log_lik=log_lik)
+    return Innovations(d2=d2, log_lik=log_lik, mean=mean, cov=cov, z=z, R=R)
 
 
 @lru_cache(maxsize=32)
@@ -332,12 +349,7 @@ def _clusters(link: np.ndarray, joint: np.ndarray) -> list[tuple[np.ndarray, np.
     tracks, t_index = np.unique(p * K + k, return_inverse=True)
     meas, m_index = np.unique(p * Z + j, return_inverse=True)
     nt, nm = len(tracks), len(meas)
-    from scipy.sparse import coo_matrix  # pyright: ignore[reportMissingTypeStubs]
-
-    graph = coo_matrix((np.ones(len(p)), (t_index, nt + m_index)), shape=(nt + nm,) * 2)
-    from scipy.sparse.csgraph import connected_components  # pyright: ignore[reportMissingTypeStubs]
-
-    count, label = connected_components(graph, directed=False)
+    count, label = components(t_index, nt + m_index, nt + nm)
     sizes = [np.bincount(label[:nt], minlength=count), np.bincount(label[nt:], minlength=count)]
     # members of a cluster in a run of the sorted labels, each run in increasing order
     runs = [np.argsort(label[:nt], kind="stable"), np.argsort(label[nt:], kind="stable")]
@@ -348,6 +360,26 @@ def _clusters(link: np.ndarray, joint: np.ndarray) -> list[tuple[np.ndarray, np.
         t = tracks[runs[0][starts[0][c][:, None] + np.arange(n)]]
         out.append((t, meas[runs[1][starts[1][c][:, None] + np.arange(m)]] % Z))
     return out
+
+
+def components(a: np.ndarray, b: np.ndarray, n: int) -> tuple[int, np.ndarray]:
+    """The connected components of the undirected graph of n nodes and edges (a, b):
+    their count and each node's component, numbered in the order of their lowest node
+    (as `scipy.sparse.csgraph.connected_components` numbers them). Each node takes the
+    lowest label across its edges, then its label's label (pointer jumping), until
+    nothing changes: a few passes over the edges, as clusters of gated tracks are small."""
+    label = np.arange(n)
+    while True:
+        low = np.minimum(label[a], label[b])
+        new = label.copy()
+        np.minimum.at(new, a, low)
+        np.minimum.at(new, b, low)
+        new = new[new]
+        if np.array_equal(new, label):
+            break
+        label = new
+    roots, index = np.unique(label, return_inverse=True)
+    return len(roots), index
 
 
 GRID_EVENTS = 1024

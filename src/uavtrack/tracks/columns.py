@@ -83,11 +83,21 @@ def slot_of(target: np.ndarray, cols: Columns, slot_bids: np.ndarray) -> np.ndar
 
 
 def label_column(label: np.ndarray, labels: np.ndarray) -> np.ndarray:
-    """The column of each label (B, ...) among a trial's column labels (B, L); -1 for a
-    label absent (or -1)."""
-    lead = labels.reshape(labels.shape[:1] + (1,) * (label.ndim - 1) + labels.shape[1:])
-    match = (lead == label[..., None]) & (label[..., None] >= 0)
-    return np.where(match.any(axis=-1), np.argmax(match, axis=-1), -1)
+    """The column of each label (B, ...) among a trial's column labels (B, L), each row
+    increasing then -1 (`of`); -1 for a label absent (or -1). A sorted search on
+    (trial, label) keys: no (B, ..., L) comparison."""
+    B, L = labels.shape
+    valid = labels >= 0
+    span = int(max(labels.max(initial=0), label.max(initial=0))) + 1
+    trial = np.arange(B).reshape((B,) + (1,) * (label.ndim - 1))
+    keys = (np.arange(B)[:, None] * span + labels)[valid]  # increasing: rows in order
+    place = np.nonzero(valid)[1]
+    wanted = trial * span + label
+    if not keys.size:
+        return np.full(label.shape, -1, dtype=np.int64)
+    at = np.minimum(np.searchsorted(keys, wanted), keys.size - 1)
+    found = (keys[at] == wanted) & (label >= 0)
+    return np.where(found, place[at], -1)
 
 
 def relabel(value: np.ndarray, before: np.ndarray, after: np.ndarray) -> np.ndarray:

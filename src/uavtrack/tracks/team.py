@@ -168,8 +168,10 @@ def team_round(
     U = order[_starts(row[order], o_label[order])]
     edges = _gate_edges(U, row, sender, o_mean, o_cov, mean0, cov0, status0, K, threshold)
     # a sender that offered a slot's own label holds this other label as another target
-    taken = np.unique(held_slot * n + sender[held])
-    block = np.isin(edges.own * n + sender[edges.offer], taken)
+    taken = np.sort(held_slot * n + sender[held])  # membership by a sorted search
+    asked = edges.own * n + sender[edges.offer]
+    at = np.minimum(np.searchsorted(taken, asked), max(taken.size - 1, 0))
+    block = (taken[at] == asked) if taken.size else np.zeros(asked.shape, dtype=bool)
     edges = edges.without(block)
     anchors, members = _associate(U, sender, o_gamma, o_label, edges, S)
 
