@@ -261,3 +261,35 @@ def test_ros2_needs_zenoh_and_a_domain():
         run_swarm(uavtrack.Scenario(steps=2), transport="memory", ros2=0)
     with pytest.raises(UsageError, match="0 to 232"):
         run_swarm(uavtrack.Scenario(steps=2), transport="zenoh", ros2=500)
+
+
+def test_ros2_refuses_tracks_in_one_line(capsys):
+    """The live topics name one estimate per target: a run of track slots is refused
+    before anything starts, by the swarm and by a program that joins one."""
+    from uavtrack import cli
+    from uavtrack.agents import program
+    from uavtrack.agents.transport import Bus, MemoryTransport
+
+    tracked = uavtrack.Scenario(steps=2, tracker={"association": "jpda"})
+    with pytest.raises(UsageError, match="one estimate per target"):
+        run_swarm(tracked, transport="zenoh", ros2=0)
+    code = cli.main(["swarm", "--transport", "zenoh", "--ros2", "0", "--set",
+                     "tracker.association=gnn", "--set", "steps=2"])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "--bag" in err
+    # a program asked for ROS 2 topics that hears a world of tracks ends without a cycle,
+    # and `uavtrack agent` says why in one line
+    from tests.test_agents import hello_on
+
+    bus = Bus()
+    stop = hello_on(bus, tracked)
+    try:
+        served = program.serve(MemoryTransport(bus), "a1b2c3d4e5f6", 0, first=5, ros2=0)
+    finally:
+        stop.set()
+    assert served.end == "ros2 tracks" and served.ran == 0
+    from uavtrack.cli.swarm import _ended
+    from uavtrack.errors import UsageError as Usage
+
+    with pytest.raises(Usage, match="leave --ros2 out"):
+        _ended(served, "a1b2c3d4e5f6", 0, "tcp/127.0.0.1:7447")

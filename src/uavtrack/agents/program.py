@@ -47,7 +47,8 @@ class Served:
     program holds is not the one the world's Hello names for its number: a damaged or
     forged key file), "not authentic" (the only world that answered could not prove it
     is the run's: another key file's, or a forgery), "other run" (only worlds of other
-    runs, `others`, answered)."""
+    runs, `others`, answered), "ros2 tracks" (ROS 2 topics were asked for a run of
+    unknown association, whose live topics name one estimate per target)."""
 
     ran: int
     steps: int
@@ -116,6 +117,10 @@ def serve(
             at=hello.step,
             programs=programs,
             central=central,
+        )
+    if ros2 is not None and scenario.tracker.association != "known":
+        return Served(
+            ran=0, steps=scenario.steps, end="ros2 tracks", programs=programs, central=central
         )
     gate.programs = programs
     if central and me < n:  # without its central node a UAV waits for no download

@@ -534,6 +534,9 @@ def _ended(served, run: str, uav: int, connect: str, key: Path | None = None) ->
         "run's key: check that --key is this run's key file",
         "other run": f"the world at {connect} runs {', '.join(served.others)}, not run {run}"
         " (a key file or run id of another run; use those the world printed)",
+        "ros2 tracks": f"--ros2: run {run} has tracker.association = gnn or jpda, and the "
+        "live ROS 2 topics name one estimate per target; leave --ros2 out (a bag of the "
+        "trace shows the tracks: uavtrack swarm --bag)",
     }
     if served.end in usage:
         raise UsageError(usage[served.end])
