@@ -187,32 +187,27 @@ def label_changes(
 def confirm_clock(
     k: int,
     start: np.ndarray,
-    settled: np.ndarray,
     matched: np.ndarray,
     present: np.ndarray,
     in_view: np.ndarray,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One step of the time to confirm a new target, per (row, target).
+) -> tuple[np.ndarray, np.ndarray]:
+    """One step of the time to confirm a target found anew, per (row, target).
 
-    A target is *new* to a row from the first step k0 at which it is present, in view of
-    the row's UAV and not matched to a confirmed track; its time to confirm is k1 - k0
-    [steps], k1 the first step after k0 at which a confirmed track is matched to it
-    (whether or not it is still in view). Each target is timed at most once per row: one
-    matched before it was ever new (a track the row holds already, from its team) is not
-    new and gives no time. A clock still running at the end is a target never confirmed:
-    it gives no time, and `TrackScore` counts it in `never_confirmed`.
+    A target is *found anew* by a row at a step k0 at which it is present, in view of
+    the row's UAV and matched to none of its confirmed tracks (a target the UAV meets for
+    the first time, or one whose track it lost or let drift past the cut-off, whatever
+    the briefing said); its time to confirm is k1 - k0 [steps], k1 the first step after
+    k0 at which a confirmed track is matched to it (whether or not it is still in view).
+    Every such episode is timed. A clock still running at the end gives no time:
+    `TrackScore` counts it in `never_confirmed`.
 
-    `start` (..., Nt) is the step its clock started (-1: not running), `settled` whether
-    it was timed or known. Returns the new start, the new settled, and the times
-    (..., Nt) of the clocks stopped at step k (-1 elsewhere).
+    `start` (..., Nt) is the step its clock started (-1: not running). Returns the new
+    start and the times (..., Nt) of the clocks stopped at step k (-1 elsewhere).
     """
     stop = (start >= 0) & matched
     time = np.where(stop, k - start, -1)
-    known = ~settled & (start < 0) & matched
-    begin = ~settled & (start < 0) & present & in_view & ~matched
-    settled = settled | stop | known
-    start = np.where(stop, -1, np.where(begin, k, start))
-    return start, settled, time
+    begin = (start < 0) & present & in_view & ~matched
+    return np.where(stop, -1, np.where(begin, k, start)), time
 
 
 def matched_nees(
@@ -287,7 +282,6 @@ class TrackScore:
             "last": np.full((P, Nt), -1, np.int64),  # label last matched
             "was": np.zeros((P, Nt), bool),  # matched at the previous step
             "start": np.full((P, Nt), -1, np.int64),  # confirm clock
-            "settled": np.zeros((P, Nt), bool),
         }
 
     def add(
@@ -331,9 +325,7 @@ class TrackScore:
         matched = assigned >= 0
         label = np.where(matched, np.take_along_axis(labels, np.maximum(assigned, 0), 1), -1)
         switch, fragment = label_changes(label, st["last"], st["was"], present, in_view)
-        start, settled, time = confirm_clock(
-            self.steps, st["start"], st["settled"], matched, present, in_view
-        )
+        start, time = confirm_clock(self.steps, st["start"], matched, present, in_view)
         threshold = self.cutoff if self.threshold is None else self.threshold
         J, JT, N, NA = siap_counts(
             nearest_truth(truth, present, tracks, confirmed, threshold), present, confirmed
@@ -354,7 +346,6 @@ class TrackScore:
         st["last"] = np.where(keep & matched, label, st["last"])
         st["was"] = np.where(keep, matched, st["was"])
         st["start"] = np.where(keep, start, st["start"])
-        st["settled"] = np.where(keep, settled, st["settled"])
         if mean is not None and cov is not None and states is not None:
             q = matched_nees(assigned, mean, cov, states)
             counted = matched & keep
