@@ -231,6 +231,7 @@ RUN_ROWS = (
     ("ospa", "OSPA, every UAV's estimates [m]", "{:.2f}"),
     ("gospa_best", "GOSPA, team's best estimates [m]", "{:.2f}"),
     ("gospa_missed_best", "GOSPA missed targets per step, best estimates", "{:.3f}"),
+    ("gospa", "GOSPA, every UAV's estimates [m] (as tracks are scored)", "{:.2f}"),
     ("rounds", "consensus rounds per UAV and step", "{:.2f}"),
     ("messages", "messages per step", "{:.2f}"),
     ("decision_time_ms", "decision time per UAV and cycle [ms of CPU time]", "{:.3f}"),
