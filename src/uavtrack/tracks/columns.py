@@ -86,7 +86,7 @@ def label_column(label: np.ndarray, labels: np.ndarray) -> np.ndarray:
     """The column of each label (B, ...) among a trial's column labels (B, L), each row
     increasing then -1 (`of`); -1 for a label absent (or -1). A sorted search on
     (trial, label) keys: no (B, ..., L) comparison."""
-    B, L = labels.shape
+    B = labels.shape[0]
     valid = labels >= 0
     span = int(max(labels.max(initial=0), label.max(initial=0))) + 1
     trial = np.arange(B).reshape((B,) + (1,) * (label.ndim - 1))
