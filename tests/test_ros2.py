@@ -24,6 +24,7 @@ from uavtrack.io import ros2  # noqa: E402
 STORE = get_typestore(Stores.ROS2_JAZZY)
 TF = "tf2_msgs/msg/TFMessage"
 ESTIMATE = "geometry_msgs/msg/PoseWithCovarianceStamped"
+MARKERS = "visualization_msgs/msg/MarkerArray"
 POSE_TYPE = "geometry_msgs::msg::dds_::PoseStamped_"
 ESTIMATE_TYPE = "geometry_msgs::msg::dds_::PoseWithCovarianceStamped_"
 
@@ -263,33 +264,50 @@ def test_ros2_needs_zenoh_and_a_domain():
         run_swarm(uavtrack.Scenario(steps=2), transport="zenoh", ros2=500)
 
 
-def test_ros2_refuses_tracks_in_one_line(capsys):
-    """The live topics name one estimate per target: a run of track slots is refused
-    before anything starts, by the swarm and by a program that joins one."""
-    from uavtrack import cli
-    from uavtrack.agents import program
-    from uavtrack.agents.transport import Bus, MemoryTransport
+@pytest.mark.integration
+def test_a_swarm_of_tracks_publishes_them_by_label():
+    """With tracker.association jpda each UAV's estimates are its track slots: one
+    MarkerArray a step on /uav_i/tracks, a DELETEALL then per track its ellipse (id the
+    team label, namespace the status) at the trace's estimate, and its label's text."""
+    port = free_port()
+    listener = ZenohTransport([f"tcp/127.0.0.1:{port}"], [], mode="peer")
+    events, lock = [], threading.Lock()
 
-    tracked = uavtrack.Scenario(steps=2, tracker={"association": "jpda"})
-    with pytest.raises(UsageError, match="one estimate per target"):
-        run_swarm(tracked, transport="zenoh", ros2=0)
-    code = cli.main(["swarm", "--transport", "zenoh", "--ros2", "0", "--set",
-                     "tracker.association=gnn", "--set", "steps=2"])  # fmt: skip
-    err = capsys.readouterr().err
-    assert code == 2 and err.count("\n") == 1 and "--bag" in err
-    # a program asked for ROS 2 topics that hears a world of tracks ends without a cycle,
-    # and `uavtrack agent` says why in one line
-    from tests.test_agents import hello_on
+    def on_sample(sample):
+        with lock:
+            events.append(("data", str(sample.key_expr), sample.payload.to_bytes(), None))
 
-    bus = Bus()
-    stop = hello_on(bus, tracked)
+    subscriber = listener.session.declare_subscriber("8/**", on_sample)
+    steps = 6
+    scenario = uavtrack.Scenario(steps=steps).with_overrides(
+        {"tracker.association": "jpda", "sensor.detection_probability": 0.9,
+         "sensor.clutter_rate": 2.0}
+    )  # fmt: skip
     try:
-        served = program.serve(MemoryTransport(bus), "a1b2c3d4e5f6", 0, first=5, ros2=0)
+        swarm = run_swarm(
+            scenario, "distributed", seed=3, transport="zenoh", ros2=8,
+            connect=(f"tcp/127.0.0.1:{port}",),
+        )  # fmt: skip
     finally:
-        stop.set()
-    assert served.end == "ros2 tracks" and served.ran == 0
-    from uavtrack.cli.swarm import _ended
-    from uavtrack.errors import UsageError as Usage
-
-    with pytest.raises(Usage, match="leave --ros2 out"):
-        _ended(served, "a1b2c3d4e5f6", 0, "tcp/127.0.0.1:7447")
+        subscriber.undeclare()
+        listener.close()
+    trace = swarm.result.trace
+    with lock:
+        seen = [e for e in events if e[1].startswith("8/")]
+    key = f"8/uav_0/tracks/visualization_msgs::msg::dds_::MarkerArray_/{STORE.hash_rihs01(MARKERS)}"
+    samples = [e[2] for e in seen if e[1] == key]
+    assert len(samples) == steps
+    assert not any("/target_" in e[1] for e in seen)  # no per-target topic with tracks
+    for payload in samples:
+        markers = STORE.deserialize_cdr(payload, MARKERS).markers
+        k = stamp_of(markers[0]) // DT_NS
+        assert markers[0].action == 3  # DELETEALL
+        ellipses = [mk for mk in markers[1:] if mk.ns in ("tentative", "confirmed")]
+        held = np.flatnonzero(trace.status[k, 0] > 0)
+        assert sorted(mk.id for mk in ellipses) == sorted(trace.label[k, 0, held].tolist())
+        for mk in ellipses:
+            s = held[trace.label[k, 0, held] == mk.id][0]
+            assert mk.ns == ("confirmed" if trace.status[k, 0, s] == 2 else "tentative")
+            assert (mk.pose.position.x, mk.pose.position.y) == tuple(trace.mean[k, 0, s, :2])
+        texts = {mk.text for mk in markers if mk.ns == "label"}
+        assert texts == {f"L{label}" for label in trace.label[k, 0, held]}

@@ -47,8 +47,7 @@ class Served:
     program holds is not the one the world's Hello names for its number: a damaged or
     forged key file), "not authentic" (the only world that answered could not prove it
     is the run's: another key file's, or a forgery), "other run" (only worlds of other
-    runs, `others`, answered), "ros2 tracks" (ROS 2 topics were asked for a run of
-    unknown association, whose live topics name one estimate per target)."""
+    runs, `others`, answered)."""
 
     ran: int
     steps: int
@@ -118,10 +117,6 @@ def serve(
             programs=programs,
             central=central,
         )
-    if ros2 is not None and scenario.tracker.association != "known":
-        return Served(
-            ran=0, steps=scenario.steps, end="ros2 tracks", programs=programs, central=central
-        )
     gate.programs = programs
     if central and me < n:  # without its central node a UAV waits for no download
         transport.watch(f"{k_['alive']}{n}", mailbox.lost)
@@ -145,7 +140,8 @@ def serve(
 
         if not isinstance(transport, ZenohTransport):
             raise ValueError("ROS 2 topics need the Zenoh transport")
-        node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt)
+        tracks = scenario.tracker.association != "known"
+        node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt, tracks)
     try:
         return _cycles(transport, link, mailbox, program, node, run, me, n, programs,
                        central, scenario, wait)  # fmt: skip
@@ -210,7 +206,8 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
         mailbox.take(want)  # asked again while this cycle ran: this report answers it
         if node is not None:
             bank = program.ctx.const.actions[report.action]
-            node.publish(k, program.believed, bank, report.mean.array(), report.cov.array())
+            slots = [None if a is None else a.array() for a in (report.label, report.status)]
+            node.publish(k, program.believed, bank, report.mean.array(), report.cov.array(), *slots)
         ran += 1
     if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
         node.close()  # now, not when the lingering ends

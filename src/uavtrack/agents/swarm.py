@@ -145,12 +145,6 @@ def run_swarm(
             from ..io import ros2 as _  # noqa: F401
         except ImportError as exc:
             raise UsageError(f"--ros2: {exc}") from None
-        if scenario.tracker.association != "known":
-            raise UsageError(
-                "--ros2: the live ROS 2 topics name one estimate per target, and "
-                f"tracker.association = {scenario.tracker.association} holds track slots; "
-                "leave --ros2 out (--bag writes the tracks by label)"
-            )
     run = secrets.token_hex(6)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])

@@ -261,7 +261,9 @@ def swarm(
             realtime=realtime,
             trace=trace is not None or bag is not None,
             progress=lambda _: advance(1),
-            announce=_ros2_announcer(ros2, n, scenario.n_targets)
+            announce=_ros2_announcer(
+                ros2, n, scenario.n_targets, scenario.tracker.association != "known"
+            )
             if spawn
             else _announcer(n + central, sign, options.tls, ros2),
             sign=sign,
@@ -386,16 +388,20 @@ def reachable(endpoint: str) -> list[str]:
     return [a for a in addresses if a not in loopback] + loopback or [endpoint]
 
 
-def _ros2_announcer(domain: int | None, n_uavs: int, n_targets: int):
+def _ros2_announcer(domain: int | None, n_uavs: int, n_targets: int, tracks: bool = False):
     """What a ROS 2 user needs to hear a swarm with --ros2: the domain, the endpoint."""
     if domain is None:
         return None
+    estimates = (
+        f"/uav_I/tracks (I < {n_uavs}; MarkerArray, ids the team labels)"
+        if tracks
+        else f"/uav_I/target_J/estimate (I < {n_uavs}, J < {n_targets})"
+    )
 
     def announce(run: str, endpoint: str, written: list[Path]) -> None:
         typer.echo(
             f"ROS 2 (rmw_zenoh): domain {domain}, Zenoh endpoint {endpoint}; topics "
-            f"/clock (simulated time: use_sim_time), /tf, /uav_I/pose and "
-            f"/uav_I/target_J/estimate (I < {n_uavs}, J < {n_targets})",
+            f"/clock (simulated time: use_sim_time), /tf, /uav_I/pose and {estimates}",
             err=True,
         )
 
@@ -534,9 +540,6 @@ def _ended(served, run: str, uav: int, connect: str, key: Path | None = None) ->
         "run's key: check that --key is this run's key file",
         "other run": f"the world at {connect} runs {', '.join(served.others)}, not run {run}"
         " (a key file or run id of another run; use those the world printed)",
-        "ros2 tracks": f"--ros2: run {run} has tracker.association = gnn or jpda, and the "
-        "live ROS 2 topics name one estimate per target; leave --ros2 out (a bag of the "
-        "trace shows the tracks: uavtrack swarm --bag)",
     }
     if served.end in usage:
         raise UsageError(usage[served.end])

@@ -54,60 +54,16 @@ except ImportError as exc:  # an optional extra
 from .._files import check_new_folder, new_folder
 from ..metrics import team_best
 from ..network import radio_links
-from ..tracks.manage import CONFIRMED, STATUS_NAMES, TENTATIVE
+from ..tracks.manage import CONFIRMED
 from .mavlink import LocalFrame
-from .ros2 import FRAME, estimate_of, header_of, pose_of, store, transform_of, uav_pose
-
-
-class _Messages:
-    """Builders of the messages the bag holds, from one typestore."""
-
-    def __init__(self) -> None:
-        self.store = store()
-        t = self.store.types
-        self.T = t
-        self.Duration = t["builtin_interfaces/msg/Duration"]
-        self.Point = t["geometry_msgs/msg/Point"]
-        self.Vector3 = t["geometry_msgs/msg/Vector3"]
-        self.Color = t["std_msgs/msg/ColorRGBA"]
-
-    def header(self, ns: int, frame: str = FRAME) -> Any:
-        return header_of(ns, frame)
-
-    def pose(self, x: float, y: float, z: float, yaw: float):
-        return pose_of(x, y, z, yaw)
-
-    def marker(
-        self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=(),
-        text: str = "", action: int = 0,
-    ):  # fmt: skip
-        T = self.T
-        return T["visualization_msgs/msg/Marker"](
-            header=self.header(ns_time),
-            ns=ns,
-            id=ident,
-            type=kind,
-            action=action,
-            pose=pose,
-            scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]),
-            color=self.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
-            lifetime=self.Duration(sec=0, nanosec=0),
-            frame_locked=False,
-            points=[self.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points],
-            colors=[],
-            texture_resource="",
-            texture=T["sensor_msgs/msg/CompressedImage"](
-                header=self.header(ns_time), format="", data=np.zeros(0, np.uint8)
-            ),
-            uv_coordinates=[],
-            text=text,
-            mesh_resource="",
-            mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
-            mesh_use_embedded_materials=False,
-        )
-
-    def serialize(self, message) -> memoryview:
-        return self.store.serialize_cdr(message, message.__msgtype__)
+from .ros2 import (
+    Markers,
+    ellipse_marker,
+    estimate_of,
+    track_markers,
+    transform_of,
+    uav_pose,
+)
 
 
 def write_bag(
@@ -127,7 +83,7 @@ def write_bag(
 
 
 def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
-    m = _Messages()
+    m = Markers()
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
     dt_ns = int(round(scenario.dt * 1e9))
@@ -203,7 +159,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
     return counts
 
 
-def _estimates(m: _Messages, ns: int, write, trace, k: int, best, best_mean, best_cov):
+def _estimates(m: Markers, ns: int, write, trace, k: int, best, best_mean, best_cov):
     """The team's best estimate of each target at step k (its topic), and the ellipses and
     the assignment lines of the step."""
     uavs, alive = trace.uavs[k], trace.alive[k]
@@ -211,7 +167,7 @@ def _estimates(m: _Messages, ns: int, write, trace, k: int, best, best_mean, bes
     for j in np.flatnonzero(best[k] >= 0):
         P = best_cov[k, j]
         write(f"/team/target_{j}/estimate", estimate_of(m.header(ns), best_mean[k, j], P), ns)
-        ellipses.append(_ellipse_marker(m, ns, "estimate", int(j), best_mean[k, j], P,
+        ellipses.append(ellipse_marker(m, ns, "estimate", int(j), best_mean[k, j], P,
                                         (0.2, 0.6, 1.0, 0.5)))  # fmt: skip
     lines = []
     for i in np.flatnonzero(alive & (trace.assignment[k] >= 0)):
@@ -221,28 +177,17 @@ def _estimates(m: _Messages, ns: int, write, trace, k: int, best, best_mean, bes
     return ellipses, lines
 
 
-TRACK_COLOURS = {TENTATIVE: (0.6, 0.6, 0.6, 0.4), CONFIRMED: (0.2, 0.6, 1.0, 0.6)}
-"""A track's ellipse colour by status: tentative grey, confirmed blue."""
-
-
-def _tracks(m: _Messages, ns: int, write, trace, k: int) -> list:
+def _tracks(m: Markers, ns: int, write, trace, k: int) -> list:
     """Each living UAV's tracks and scan at step k (their topics); the assignment lines,
     from each UAV to its own estimate of the track it follows."""
     MarkerArray = m.T["visualization_msgs/msg/MarkerArray"]
     lines = []
     for i in np.flatnonzero(trace.alive[k]):
-        markers: list[Any] = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
-                            action=3)]  # fmt: skip  # DELETEALL: the last step's go
-        for s in np.flatnonzero(trace.status[k, i] > 0):
-            label, status = int(trace.label[k, i, s]), int(trace.status[k, i, s])
-            mean, P = trace.mean[k, i, s], trace.cov[k, i, s]
-            markers.append(_ellipse_marker(m, ns, STATUS_NAMES[status], label, mean, P,
-                                           TRACK_COLOURS[status]))  # fmt: skip
-            above = m.pose(float(mean[0]), float(mean[1]), 3.0, 0.0)
-            markers.append(m.marker(ns, "label", label, 9, above, (0, 0, 3.0),
-                                    (1.0, 1.0, 1.0, 1.0), text=f"L{label}"))  # fmt: skip
-            if status == CONFIRMED and label == trace.assignment[k, i]:
-                lines += [trace.uavs[k, i, :3], (*mean[:2], 0.0)]
+        label, status = trace.label[k, i], trace.status[k, i]
+        markers = track_markers(m, ns, label, status, trace.mean[k, i], trace.cov[k, i])
+        followed = np.flatnonzero((status == CONFIRMED) & (label == trace.assignment[k, i]))
+        for s in followed:
+            lines += [trace.uavs[k, i, :3], (*trace.mean[k, i, s, :2], 0.0)]
         write(f"/uav_{i}/tracks", MarkerArray(markers=markers), ns)
         valid = trace.scan_valid[k, i]
         clutter = trace.scan_origin[k, i] == -1
@@ -256,21 +201,3 @@ def _tracks(m: _Messages, ns: int, write, trace, k: int) -> list:
         ]  # fmt: skip
         write(f"/uav_{i}/scan", MarkerArray(markers=scan), ns)
     return lines
-
-
-def _ellipse_marker(m: _Messages, ns: int, space: str, ident: int, mean, P, rgba):
-    """A flat cylinder of the 2-sigma ellipse of an estimate's position."""
-    major, minor, angle = _ellipse(P[:2, :2])
-    place = m.pose(float(mean[0]), float(mean[1]), 0.0, angle)
-    return m.marker(ns, space, ident, 3, place, (4 * major, 4 * minor, 0.1), rgba)
-
-
-def _ellipse(P: np.ndarray) -> tuple[float, float, float]:
-    """1-sigma semi-axes and the major axis's angle of a 2 x 2 covariance."""
-    values, vectors = np.linalg.eigh(P)
-    values = np.maximum(values, 0.0)
-    return (
-        float(math.sqrt(values[1])),
-        float(math.sqrt(values[0])),
-        float(math.atan2(vectors[1, 1], vectors[0, 1])),
-    )

@@ -48,6 +48,7 @@ from typing import Any
 import numpy as np
 
 from ..errors import install_hint
+from ..tracks.manage import CONFIRMED, STATUS_NAMES, TENTATIVE
 
 try:
     from rosbags.typesys import Stores, get_typestore
@@ -62,6 +63,7 @@ POSE = "geometry_msgs/msg/PoseStamped"
 ESTIMATE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 CLOCK = "rosgraph_msgs/msg/Clock"
 TF = "tf2_msgs/msg/TFMessage"
+MARKERS = "visualization_msgs/msg/MarkerArray"
 FRAME = "map"
 UNKNOWN = 1e9  # [rad^2] the variance of a rotation nobody estimates
 
@@ -222,22 +224,38 @@ class UavNode(Node):
     (PoseStamped, `uav_pose`), its transform ``map`` -> ``uav_<i>`` on ``/tf``
     (TFMessage, the same pose) and ``/uav_<i>/target_<j>/estimate``
     (PoseWithCovarianceStamped, `estimate_of`), stamped with the simulated clock (step k
-    at k dt), in frame ``map``."""
+    at k dt), in frame ``map``. With tracks (``tracks=True``: tracker.association gnn or
+    jpda) the estimates are ``/uav_<i>/tracks`` instead (MarkerArray, `track_markers`:
+    each track's ellipse with its team label as id, as in the bag)."""
 
-    def __init__(self, session, domain: int, uav: int, n_targets: int, dt: float) -> None:
+    def __init__(
+        self, session, domain: int, uav: int, n_targets: int, dt: float, tracks: bool = False
+    ) -> None:
         topics = {f"/uav_{uav}/pose": POSE, "/tf": TF}
-        topics.update({f"/uav_{uav}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
+        if tracks:
+            topics[f"/uav_{uav}/tracks"] = MARKERS
+        else:
+            topics.update({f"/uav_{uav}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
         super().__init__(session, domain, uav, "/uavtrack", f"uav_{uav}", topics)
         self.uav, self.dt = uav, dt
+        self.markers = Markers() if tracks else None
 
-    def publish(self, k: int, uav: np.ndarray, bank: float, mean, cov) -> None:
+    def publish(
+        self, k: int, uav: np.ndarray, bank: float, mean, cov, label=None, status=None
+    ) -> None:
         """Step k: the UAV's state (x, y, h, V, heading), the bank angle it flies
-        (eq. 1, positive left) and its estimates (Nt, 4), covariances (Nt, 4, 4)."""
+        (eq. 1, positive left) and its estimates (Nt, 4), covariances (Nt, 4, 4); with
+        tracks, its slots' (K, ...) with their labels and status (K,)."""
         T = store().types
-        header = header_of(sim_ns(k, self.dt))
+        ns = sim_ns(k, self.dt)
+        header = header_of(ns)
         pose = uav_pose(uav, bank)
         self.put(f"/uav_{self.uav}/pose", T[POSE](header=header, pose=pose))
         self.put("/tf", T[TF](transforms=[transform_of(header, f"uav_{self.uav}", pose)]))
+        if self.markers is not None:
+            markers = track_markers(self.markers, ns, label, status, mean, cov)
+            self.put(f"/uav_{self.uav}/tracks", T[MARKERS](markers=markers))
+            return
         for j in range(len(mean)):
             self.put(f"/uav_{self.uav}/target_{j}/estimate", estimate_of(header, mean[j], cov[j]))
 
@@ -316,4 +334,95 @@ def estimate_of(header, mean: np.ndarray, P: np.ndarray):
         pose=T["geometry_msgs/msg/PoseWithCovariance"](
             pose=pose_of(float(mean[0]), float(mean[1]), 0.0, 0.0), covariance=covariance
         ),
+    )
+
+
+class Markers:
+    """Builders of the visualisation messages (the bag's and the live tracks'), from one
+    typestore."""
+
+    def __init__(self) -> None:
+        self.store = store()
+        t = self.store.types
+        self.T = t
+        self.Duration = t["builtin_interfaces/msg/Duration"]
+        self.Point = t["geometry_msgs/msg/Point"]
+        self.Vector3 = t["geometry_msgs/msg/Vector3"]
+        self.Color = t["std_msgs/msg/ColorRGBA"]
+
+    def header(self, ns: int, frame: str = FRAME) -> Any:
+        return header_of(ns, frame)
+
+    def pose(self, x: float, y: float, z: float, yaw: float):
+        return pose_of(x, y, z, yaw)
+
+    def marker(
+        self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=(),
+        text: str = "", action: int = 0,
+    ):  # fmt: skip
+        T = self.T
+        return T["visualization_msgs/msg/Marker"](
+            header=self.header(ns_time),
+            ns=ns,
+            id=ident,
+            type=kind,
+            action=action,
+            pose=pose,
+            scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]),
+            color=self.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
+            lifetime=self.Duration(sec=0, nanosec=0),
+            frame_locked=False,
+            points=[self.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points],
+            colors=[],
+            texture_resource="",
+            texture=T["sensor_msgs/msg/CompressedImage"](
+                header=self.header(ns_time), format="", data=np.zeros(0, np.uint8)
+            ),
+            uv_coordinates=[],
+            text=text,
+            mesh_resource="",
+            mesh_file=T["visualization_msgs/msg/MeshFile"](filename="", data=np.zeros(0, np.uint8)),
+            mesh_use_embedded_materials=False,
+        )
+
+    def serialize(self, message) -> memoryview:
+        return self.store.serialize_cdr(message, message.__msgtype__)
+
+
+TRACK_COLOURS = {TENTATIVE: (0.6, 0.6, 0.6, 0.4), CONFIRMED: (0.2, 0.6, 1.0, 0.6)}
+"""A track's ellipse colour by status: tentative grey, confirmed blue."""
+
+
+def track_markers(m: Markers, ns: int, label, status, mean, cov) -> list[Any]:
+    """A UAV's track slots (label, status (K,), mean (K, 4), cov (K, 4, 4)) as the
+    markers of one MarkerArray: a DELETEALL (the last step's go), then per track its
+    2-sigma ellipse (namespace its status, id its team label, `TRACK_COLOURS`) and a text
+    ``L<label>`` above it (namespace "label")."""
+    markers: list[Any] = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
+                          action=3)]  # fmt: skip
+    for s in np.flatnonzero(status > 0):
+        ident, state = int(label[s]), int(status[s])
+        markers.append(ellipse_marker(m, ns, STATUS_NAMES[state], ident, mean[s], cov[s],
+                                      TRACK_COLOURS[state]))  # fmt: skip
+        above = m.pose(float(mean[s, 0]), float(mean[s, 1]), 3.0, 0.0)
+        markers.append(m.marker(ns, "label", ident, 9, above, (0, 0, 3.0),
+                                (1.0, 1.0, 1.0, 1.0), text=f"L{ident}"))  # fmt: skip
+    return markers
+
+
+def ellipse_marker(m: Markers, ns: int, space: str, ident: int, mean, P, rgba):
+    """A flat cylinder of the 2-sigma ellipse of an estimate's position."""
+    major, minor, angle = _ellipse(P[:2, :2])
+    place = m.pose(float(mean[0]), float(mean[1]), 0.0, angle)
+    return m.marker(ns, space, ident, 3, place, (4 * major, 4 * minor, 0.1), rgba)
+
+
+def _ellipse(P: np.ndarray) -> tuple[float, float, float]:
+    """1-sigma semi-axes and the major axis's angle of a 2 x 2 covariance."""
+    values, vectors = np.linalg.eigh(P)
+    values = np.maximum(values, 0.0)
+    return (
+        float(math.sqrt(values[1])),
+        float(math.sqrt(values[0])),
+        float(math.atan2(vectors[1, 1], vectors[0, 1])),
     )
