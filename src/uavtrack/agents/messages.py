@@ -510,26 +510,15 @@ class Spec:
         download's): a track beyond the run's plausibility bounds is taken as no track
         (its slot empty), as if the sender did not hold it. Returns the content and the
         tracks left out by reason."""
-        b, status = self.bounds, content["status"]
-        confirmed = status != 0  # every track: a download's tentative ones are taken too
-        if b is None or not confirmed.any():
-            return content, {}
-        mean, cov = content["mean"], content["cov"]
-        reasons = np.full(status.shape, "", dtype=object)
-        inside = ((mean[:, :2] >= b.low) & (mean[:, :2] <= b.high)).all(axis=1)
-        slow = np.hypot(mean[:, 2], mean[:, 3]) <= b.speed
-        sharp = np.linalg.eigvalsh(cov)[:, 0] >= b.floor
-        reasons[confirmed & ~sharp] = "covariance below the sensor's accuracy"
-        reasons[confirmed & ~slow] = "speed out of bounds"
-        reasons[confirmed & ~inside] = "position out of bounds"
-        bad = reasons != ""
+        status = content["status"]
+        # every track: a download's tentative ones are taken too
+        bad, reasons = _implausible(content["mean"], content["cov"], status != 0, self.bounds)
         if not bad.any():
             return content, {}
         out = dict(content)
         out["status"] = np.where(bad, 0, status)
         out["label"] = np.where(bad, -1, content["label"])
-        found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
-        return out, dict(zip(found.tolist(), counts.tolist(), strict=True))
+        return out, reasons
 
     def estimates(self, content: dict[str, np.ndarray]) -> tuple[dict, dict[str, int]]:
         """The estimates of a checked tuple content ("gamma", "mean", "cov", ...) that
@@ -543,27 +532,15 @@ class Spec:
         honest UAV that adopted a plausible lie may itself come to hold an estimate
         beyond them (a Kalman update of a confident wrong prior moves its velocity far),
         and must not be silenced for the targets it knows."""
-        b, gamma = self.bounds, content["gamma"]
-        live = np.isfinite(gamma)
-        if b is None or not live.any():
-            return content, {}
-        mean, cov = content["mean"], content["cov"]
-        reasons = np.full(gamma.shape, "", dtype=object)
-        inside = ((mean[:, :2] >= b.low) & (mean[:, :2] <= b.high)).all(axis=1)
-        slow = np.hypot(mean[:, 2], mean[:, 3]) <= b.speed
-        sharp = np.linalg.eigvalsh(cov)[:, 0] >= b.floor
-        reasons[live & ~sharp] = "covariance below the sensor's accuracy"
-        reasons[live & ~slow] = "speed out of bounds"
-        reasons[live & ~inside] = "position out of bounds"
-        bad = reasons != ""
+        gamma, mean, cov = content["gamma"], content["mean"], content["cov"]
+        bad, reasons = _implausible(mean, cov, np.isfinite(gamma), self.bounds)
         if not bad.any():
             return content, {}
         out = dict(content)
         out["gamma"] = np.where(bad, -np.inf, gamma)
         out["mean"] = np.where(bad[:, None], 0.0, mean)
         out["cov"] = np.where(bad[:, None, None], np.eye(4), cov)
-        found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
-        return out, dict(zip(found.tolist(), counts.tolist(), strict=True))
+        return out, reasons
 
     def _uav(self, value) -> str | None:
         b = self.bounds
@@ -670,6 +647,28 @@ class Spec:
         if isinstance(arrays, str) or self.bounds is None:
             return arrays
         return _recorded(arrays, self.bounds) or arrays
+
+
+def _implausible(
+    mean: np.ndarray, cov: np.ndarray, live: np.ndarray, bounds: Bounds | None
+) -> tuple[np.ndarray, dict[str, int]]:
+    """Which of the estimates `live` (mean (M, 4), cov (M, 4, 4)) lie beyond the run's
+    plausibility bounds: outside the field plus its margin, faster than its largest, a
+    covariance below the sensor's best accuracy (the last reason named wins); and how
+    many by reason."""
+    bad = np.zeros(live.shape, dtype=bool)
+    if bounds is None or not live.any():
+        return bad, {}
+    reasons = np.full(live.shape, "", dtype=object)
+    inside = ((mean[:, :2] >= bounds.low) & (mean[:, :2] <= bounds.high)).all(axis=1)
+    slow = np.hypot(mean[:, 2], mean[:, 3]) <= bounds.speed
+    sharp = np.linalg.eigvalsh(cov)[:, 0] >= bounds.floor
+    reasons[live & ~sharp] = "covariance below the sensor's accuracy"
+    reasons[live & ~slow] = "speed out of bounds"
+    reasons[live & ~inside] = "position out of bounds"
+    bad = reasons != ""
+    found, counts = np.unique(reasons[bad].astype(str), return_counts=True)
+    return bad, dict(zip(found.tolist(), counts.tolist(), strict=True))
 
 
 TRACK_DOMAINS = frozenset(

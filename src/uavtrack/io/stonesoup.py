@@ -77,15 +77,7 @@ def to_stonesoup(
 
     if tracks not in ("best", "uavs"):
         raise UsageError(f"tracks must be 'best' or 'uavs', got {tracks!r}")
-    if isinstance(source, Trace):
-        if dt is None:
-            raise UsageError("a bare Trace needs its step dt: to_stonesoup(trace, dt)")
-        trace = source
-    else:
-        if dt is not None:
-            raise UsageError("dt goes with a bare Trace; this source has its own")
-        saved = trace_file.load(source)
-        trace, dt = saved.trace, saved.dt
+    trace, dt = _trace_and_dt(source, dt, "to_stonesoup")
     T, Nt = trace.targets.shape[:2]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
     truths = _truths(trace, times)
@@ -180,15 +172,7 @@ def to_detections(
     except ImportError as exc:
         raise ImportError(f"to_detections needs stonesoup: pip install stonesoup ({exc})") from None
 
-    if isinstance(source, Trace):
-        if dt is None:
-            raise UsageError("a bare Trace needs its step dt: to_detections(trace, dt)")
-        trace = source
-    else:
-        if dt is not None:
-            raise UsageError("dt goes with a bare Trace; this source has its own")
-        saved = trace_file.load(source)
-        trace, dt = saved.trace, saved.dt
+    trace, dt = _trace_and_dt(source, dt, "to_detections")
     if trace.label is None:
         raise UsageError(
             "to_detections reads the scans of a run of tracks (tracker.association gnn or "
@@ -216,3 +200,16 @@ def to_detections(
                 found.add(Clutter(vector, timestamp=times[k], metadata=meta))
         out.append((times[k], found))
     return out
+
+
+def _trace_and_dt(source, dt: float | None, caller: str) -> tuple[Trace, float]:
+    """The trace and its step [s]: a bare `Trace` with the dt given, or a saved run
+    (a path or a result), which holds its own."""
+    if isinstance(source, Trace):
+        if dt is None:
+            raise UsageError(f"a bare Trace needs its step dt: {caller}(trace, dt)")
+        return source, dt
+    if dt is not None:
+        raise UsageError("dt goes with a bare Trace; this source has its own")
+    saved = trace_file.load(source)
+    return saved.trace, saved.dt
