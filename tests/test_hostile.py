@@ -305,6 +305,26 @@ def altered(content: dict, how: str) -> dict:
     return dict(content, gamma=Array.of(gamma), mean=Array.of(mean), cov=Array.of(cov))
 
 
+def member_alters(monkeypatch, protocol: str, alter) -> None:
+    """Program 1, a member with valid keys, sends every part of `protocol` it has
+    content for altered by `alter(content)`; the rest as an honest program would."""
+    from uavtrack.agents import agent
+
+    send = agent.AgentRadio.send
+
+    def faulty(self, k, parts, to=None):
+        if self.me == 1:
+            parts = [
+                msgspec.structs.replace(p, content=alter(p.content))
+                if p.protocol == protocol and p.content is not None
+                else p
+                for p in parts
+            ]
+        send(self, k, parts, to)
+
+    monkeypatch.setattr(agent.AgentRadio, "send", faulty)
+
+
 ATTACKS = {
     "nan bids": "bids not scored",
     "covariance x 1e300": "covariance beyond the run's largest",
@@ -320,22 +340,8 @@ ATTACKS = {
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("how", list(ATTACKS))
 def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, how):
-    from uavtrack.agents import agent
-
-    send = agent.AgentRadio.send
-
-    def faulty(self, k, parts, to=None):
-        if self.me == 1:
-            protocol = "bids" if how == "nan bids" else "consensus"
-            parts = [
-                msgspec.structs.replace(p, content=altered(p.content, how))
-                if p.protocol == protocol and p.content is not None
-                else p
-                for p in parts
-            ]
-        send(self, k, parts, to)
-
-    monkeypatch.setattr(agent.AgentRadio, "send", faulty)
+    protocol = "bids" if how == "nan bids" else "consensus"
+    member_alters(monkeypatch, protocol, lambda content: altered(content, how))
     scenario = uavtrack.Scenario(steps=2)  # a refused message costs its receivers a deadline
     swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.2)
     assert swarm.traffic.lost == {}
@@ -376,21 +382,7 @@ TRACK_ATTACKS = {
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("how", list(TRACK_ATTACKS))
 def test_a_members_lies_about_its_tracks_are_dropped_by_reason(monkeypatch, how):
-    from uavtrack.agents import agent
-
-    send = agent.AgentRadio.send
-
-    def faulty(self, k, parts, to=None):
-        if self.me == 1:
-            parts = [
-                msgspec.structs.replace(p, content=lied_tracks(p.content, how))
-                if p.protocol == "consensus" and p.content is not None
-                else p
-                for p in parts
-            ]
-        send(self, k, parts, to)
-
-    monkeypatch.setattr(agent.AgentRadio, "send", faulty)
+    member_alters(monkeypatch, "consensus", lambda content: lied_tracks(content, how))
     scenario = uavtrack.Scenario(steps=3).with_overrides({"tracker.association": "jpda", **TRACKED})
     swarm = run_swarm(scenario, "distributed", seed=1, transport="memory", deadline=0.2)
     assert swarm.traffic.lost == {}

@@ -167,6 +167,16 @@ def plausible(spec: Spec, mailbox: Mailbox, content: dict) -> dict:
     return content
 
 
+def closed(ids: list[int], me: int) -> tuple[int, network.Links]:
+    """A receiver's closed neighbourhood as one batch of the stage functions: the row of
+    `me` among `ids` (itself and the senders heard, in index order) and links on which
+    that row hears every other row and the others hear nothing."""
+    where = ids.index(me)
+    dense = np.eye(len(ids), dtype=bool)[None]
+    dense[0, where, :] = True
+    return where, network.Links(batch=1, n=len(ids), dense=dense)
+
+
 def part(protocol: str, round_: int, content: dict | None, final: int = -1) -> Part:
     return Part(protocol, round_, final, None if content is None else packed(content))
 
@@ -369,12 +379,8 @@ class UavAgent:
             self.largest = max([int(known.sum()), *sizes])
         ids = sorted({self.me, *inbox.contents})
         offered = np.stack([known if q == self.me else inbox.contents[q]["known"] for q in ids])
-        dense = np.eye(len(ids), dtype=bool)[None]
-        dense[0, ids.index(self.me), :] = True
-        grown = fusion.flood(
-            offered[None], offered[None], network.Links(batch=1, n=len(ids), dense=dense)
-        )
-        grown = grown[0, ids.index(self.me)]
+        where, links = closed(ids, self.me)
+        grown = fusion.flood(offered[None], offered[None], links)[0, where]
         if not (grown != known).any():
             return known, r - 1, r
         budget = self.setting.budget
@@ -397,9 +403,7 @@ class UavAgent:
             return np.stack(rows)[None]
 
         candidates = fusion.Estimates(**{name: stacked(name, v) for name, v in state.items()})
-        dense = np.eye(len(ids), dtype=bool)[None]
-        dense[0, where, :] = True
-        links = network.Links(batch=1, n=len(ids), dense=dense)
+        where, links = closed(ids, self.me)
         admitted = None
         if self.setting.gate is not None:  # every row measured as this UAV (its row is kept)
             mine, rows = self.measured, (1, len(ids))

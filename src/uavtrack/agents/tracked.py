@@ -20,12 +20,12 @@ import time
 
 import numpy as np
 
-from .. import assignment, estimation, network, simulation, timing
+from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
-from ..methods.base import Held
+from ..methods.base import Held, scanned_tracks
 from ..radio import counted
 from ..tracks import association, columns, manage, team
-from .agent import CentralAgent, UavAgent, dropped, part
+from .agent import CentralAgent, UavAgent, closed, dropped, part
 from .messages import VERSION, Report, packed
 
 
@@ -63,13 +63,7 @@ class TrackedUav(UavAgent):
             np.ones((1, 1, len(raw)), dtype=bool), believed[None, None], one, s,
             self.modes, tracker, k, (self.me, self.n),
         )  # fmt: skip
-        tombs = self.tombs
-        if scanned.dead is not None:
-            tombs = team.entomb(tombs, scanned.dead, k)
-        own = team.TrackSet(
-            mean=scanned.mean, cov=scanned.cov, label=scanned.book.label,
-            status=scanned.book.status, stamp=scanned.book.stamp, tombs=tombs,
-        )  # fmt: skip
+        own = scanned_tracks(scanned, self.tombs, k)
         state = (own, np.zeros(own.status.shape, dtype=np.int8))
         (agreed, changed), rounds, sent, delivered = self.rounds(
             k, state, lambda state: _content(state[0]), self._agree
@@ -220,9 +214,7 @@ class TrackedUav(UavAgent):
             stamp=stacked("stamp", _stamp(own), np.int64),
             tombs=None if own.tombs is None else stacked("tombs", own.tombs[0, 0], np.int64),
         )
-        dense = np.eye(len(ids), dtype=bool)[None]
-        dense[0, where, :] = True
-        links = network.Links(batch=1, n=len(ids), dense=dense)
+        where, links = closed(ids, self.me)
         every = np.zeros(tracks.status.shape, dtype=np.int8)
         every[0, where] = changed[0, 0]
         out, now = team.agree_round(tracks, every, tracks, links, self.threshold, self.setting.rule)

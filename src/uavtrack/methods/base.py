@@ -275,6 +275,19 @@ def gated(inputs: Inputs) -> Admit | None:
     return admit
 
 
+def scanned_tracks(scanned: manage.Scanned, tombs: np.ndarray | None, k: int) -> team.TrackSet:
+    """What a UAV offers the team after its scan at step k: its slots with their labels,
+    status and stamps, and its tombstones (B, N, T, 2) with the confirmed tracks it
+    deleted after missing them in view entered (`team.entomb`)."""
+    if tombs is not None and scanned.dead is not None:
+        tombs = team.entomb(tombs, scanned.dead, k)
+    book = scanned.book
+    return team.TrackSet(
+        mean=scanned.mean, cov=scanned.cov, label=book.label, status=book.status,
+        stamp=book.stamp, tombs=tombs,
+    )  # fmt: skip
+
+
 def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
     """Each UAV's scan on its own tracks (`manage.scan`), then the D_i protocol and as
     many rounds of track-to-track association and fusion (`team.agree`): the paper's
@@ -289,17 +302,7 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
     )  # fmt: skip
     depth, rounds = fusion_rounds(inputs)
     book = scanned.book
-    tombs = local.tombs
-    if tombs is not None and scanned.dead is not None:
-        tombs = team.entomb(tombs, scanned.dead, inputs.k)
-    own = team.TrackSet(
-        mean=scanned.mean,
-        cov=scanned.cov,
-        label=book.label,
-        status=book.status,
-        stamp=book.stamp,
-        tombs=tombs,
-    )
+    own = scanned_tracks(scanned, local.tombs, inputs.k)
     threshold = association.threshold(scenario.tracker.gate_probability, 4)
     agreed, changed, sent, delivered = team.agree(radio, own, rounds, threshold, s.rule)
     book = manage.after_fusion(book, agreed.label, agreed.status, changed, scenario, agreed.stamp)
