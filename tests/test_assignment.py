@@ -289,8 +289,13 @@ def test_the_drivers_time_on_the_callers_clock_and_without_one_give_zeros(monkey
     for me in range(5):
         mine = assignment.local(bids[0], me, clock=None)
         assert mine == assignment.local(bids[0], me, clock=timing)
-    # the exact solver's first load is set-up on the caller's clock, no decision's time
+    # small problems never load scipy's solver; a large one's first load is set-up on
+    # the caller's clock, no decision's time
     monkeypatch.setattr(assignment, "_SOLVER", [])
     clock = Recording()
     assignment.auction(bids, members, clock=clock)
+    assert clock.set_ups == 0 and not assignment._SOLVER
+    large = rng.integers(0, 3, (1, 20, 20)).astype(float)
+    assignment.auction(large, np.ones((1, 20, 20), dtype=bool), clock=clock)
+    assignment.auction(large, np.ones((1, 20, 20), dtype=bool), clock=clock)
     assert clock.set_ups == 1 and len(assignment._SOLVER) == 1

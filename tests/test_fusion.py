@@ -212,7 +212,7 @@ def teams(draw):
 
 @settings(max_examples=80, deadline=None)
 @given(case=teams())
-def test_radio_links_from_the_kd_tree_equal_the_dense_relation(case):
+def test_radio_links_from_the_grid_equal_the_dense_relation(case):
     uavs, alive, radius = case
     dense = network.adjacency(uavs, radius) & alive[:, :, None] & alive[:, None, :]
     for form in ("dense", "edges"):
@@ -223,6 +223,22 @@ def test_radio_links_from_the_kd_tree_equal_the_dense_relation(case):
     # sorted by (trial, receiver, sender), every node's self-link present
     key = (edges.trial * uavs.shape[1] + edges.receiver) * uavs.shape[1] + edges.sender
     assert (np.diff(key) > 0).all() and edges.own.sum() == alive.size
+
+
+@pytest.mark.parametrize("spacing", [1.0, 0.5, 0.7071067811865476])
+def test_grid_pairs_keep_pairs_exactly_at_range_on_cell_borders(spacing):
+    """Positions on a lattice whose points fall on the cells' borders, at negative
+    coordinates too: every pair within range once, as the all-pairs check finds."""
+    r = 100.0
+    g = np.arange(-6, 7) * r * spacing
+    pos = np.array([(x, y, 50.0) for x in g for y in g] + [(g[0], g[0], 50.0)] * 3)
+    i, q = network.grid_pairs(pos, r)
+    pairs = {tuple(sorted(p)) for p in zip(i.tolist(), q.tolist(), strict=True)}
+    assert len(pairs) == i.size and (i != q).all()  # each unordered pair once
+    found = {p for p in pairs if network.in_range(pos[p[0]] - pos[p[1]], r)}
+    a, b = np.triu_indices(len(pos), 1)
+    keep = network.in_range(pos[a] - pos[b], r)
+    assert found == set(zip(a[keep].tolist(), b[keep].tolist(), strict=True))
 
 
 @pytest.mark.parametrize("form", ["dense", "edges"])

@@ -351,6 +351,8 @@ def test_set_up_inside_a_timed_stage_is_left_out():
 def test_no_decision_time_holds_a_module_loaded_on_first_use():
     code = (
         "import sys, uavtrack\n"
+        "from uavtrack.numerics import lsap\n"
+        "lsap.SMALL = 0  # every problem to scipy's solver, loaded on first use\n"
         "assert 'scipy.optimize' not in sys.modules\n"
         "t = uavtrack.run(uavtrack.Scenario(steps=5), 'distributed', [0], trace=True).traces[0]\n"
         "assert 'scipy.optimize' in sys.modules  # loaded during the run\n"
@@ -358,6 +360,23 @@ def test_no_decision_time_holds_a_module_loaded_on_first_use():
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert float(out.stdout) < 100.0  # loading scipy.optimize alone takes about 500 ms of CPU
+
+
+@pytest.mark.integration
+@pytest.mark.parametrize("association", ["known", "jpda", "gnn"])
+def test_a_single_trial_loads_no_scipy(association):
+    """scipy serves large problems only: a default trial (known association or tracks)
+    solves its assignments and gates in plain Python (`uavtrack.numerics`)."""
+    code = (
+        "import sys, uavtrack\n"
+        "s = uavtrack.Scenario.model_validate({'steps': 30, 'tracker': {'association':"
+        f" {association!r}}}, 'sensor': {{'detection_probability': 0.9, 'clutter_rate': 2.0}}}})\n"
+        "for method in ('distributed', 'centralized', 'greedy'):\n"
+        "    uavtrack.run(s, method, [0], trace=True)\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] == 'scipy'))\n"
+    )
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
 
 
 @pytest.mark.integration

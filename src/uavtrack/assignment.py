@@ -37,6 +37,8 @@ from typing import Any, Protocol
 
 import numpy as np
 
+from .numerics import lsap
+
 
 class Clock(Protocol):
     """The clock a caller times the solves on: the `uavtrack.timing` module is one.
@@ -72,9 +74,13 @@ NO_CLOCK = _NoClock()
 def linear_sum_assignment(
     cost: np.ndarray, maximize: bool = False, clock: Clock | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """scipy's exact solver, imported on first use: `scipy.optimize` takes about half a
-    second to load, and batches of trials solve their problems by `solve_many`, without
-    it unless bids tie."""
+    """The exact solver: scipy's `linear_sum_assignment`, computed in plain Python for a
+    small problem (`lsap`, the same answers, ties included) and by scipy for a larger
+    one, `scipy.optimize` imported on first use (about half a second: set-up on the
+    caller's `clock`, not a decision's time). Batches of trials solve their problems by
+    `solve_many`, without it unless bids tie."""
+    if cost.shape[0] * cost.shape[1] * min(cost.shape) <= lsap.SMALL:
+        return lsap.solve_lists(cost.tolist(), maximize)
     return load_solver(clock)(cost, maximize=maximize)
 
 

@@ -22,6 +22,7 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
+from .numerics import chisquare, lsap
 from .estimation import confidence, nees
 
 if TYPE_CHECKING:
@@ -179,11 +180,8 @@ def nees_interval(dim: int = 4, level: float = 0.95) -> tuple[float, float]:
     """The central `level` interval of chi-square(dim), where the NEES of a consistent
     estimate of a dim-D state falls with probability `level`: [chi2.ppf((1 - level) / 2,
     dim), chi2.ppf((1 + level) / 2, dim)], [0.484, 11.14] for the 4-D state at 95 %."""
-    # scipy.special, not scipy.stats: a run has loaded the first, not the second
-    from scipy.special import chdtri  # pyright: ignore[reportMissingTypeStubs]
-
     tail = (1.0 - level) / 2.0
-    return float(chdtri(dim, 1.0 - tail)), float(chdtri(dim, tail))
+    return chisquare.ppf(tail, dim), chisquare.ppf(1.0 - tail, dim)
 
 
 @dataclass
@@ -592,7 +590,7 @@ def matching(cost: np.ndarray) -> np.ndarray:
     (..., m, n): the column matched to each row (..., m), -1 for a row left out (m > n).
 
     Square problems up to `SMALL_SETS` try every matching at once (the first of equal
-    ones); the others are `scipy.optimize.linear_sum_assignment`'s, one per index.
+    ones); the others are `lsap.solve`'s (scipy's `linear_sum_assignment`), one per index.
     """
     shape, (m, n) = cost.shape[:-2], cost.shape[-2:]
     if 0 < m == n <= SMALL_SETS:  # no loop over the leading axes
@@ -600,13 +598,8 @@ def matching(cost: np.ndarray) -> np.ndarray:
         return _permutations(n)[np.argmin(chosen.sum(axis=-1), axis=-1)]
     match = np.full(shape + (m,), -1, dtype=np.intp)
     if m and n:
-        # loaded when first needed; scipy ships no type stubs, pyright reads its source
-        from scipy.optimize import (  # pyright: ignore[reportMissingTypeStubs]
-            linear_sum_assignment,
-        )
-
         for index in np.ndindex(shape):
-            rows, cols = linear_sum_assignment(cost[index])
+            rows, cols = lsap.solve(cost[index])
             match[index][rows] = cols
     return match
 
