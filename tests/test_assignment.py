@@ -264,6 +264,9 @@ class Recording:
     def since(self, mark):
         return self.timing.since(mark)
 
+    def tick(self):
+        return self.timing.tick()
+
     def set_up(self):
         self.set_ups += 1
         return self.timing.set_up()

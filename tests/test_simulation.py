@@ -347,6 +347,28 @@ def test_set_up_inside_a_timed_stage_is_left_out():
     assert 0 <= cpu < 0.005 and 0 <= wall < 0.05
 
 
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_the_cpu_clock_is_read_per_stage_not_per_uav(method, monkeypatch):
+    """The thread's CPU clock is a system call: a cycle reads it at the start and end of
+    its two timed stages (planning and assignment), whatever the team's size (and twice
+    more for a one-time set-up: a large problem's first load of scipy's solver)."""
+    import uavtrack
+
+    reads = []
+    real = time.thread_time
+    monkeypatch.setattr(time, "thread_time", lambda: reads.append(1) or real())
+    per_step = {}
+    for team in ("5x4", "20x16"):
+        n, m = (int(x) for x in team.split("x"))
+        scenario = uavtrack.Scenario(steps=6, n_uavs=n, n_targets=m)
+        reads.clear()
+        result = uavtrack.run(scenario, method, [0], trace=True)
+        per_step[team] = (len(reads) - 2 * ("scipy.optimize" in sys.modules)) / scenario.steps
+        times = result.traces[0].decision_time_ms
+        assert np.isfinite(times).all() and (times >= 0).all() and times.sum() > 0
+    assert per_step["5x4"] <= 4 and per_step["20x16"] <= 4, per_step
+
+
 @pytest.mark.integration
 def test_no_decision_time_holds_a_module_loaded_on_first_use():
     code = (

@@ -11,7 +11,9 @@ on a plain graph): UAVs that see the same problem (the same members with the sam
 share one solve, and the driver measures how long each solve takes on the clock its
 caller hands it (`Clock`; the simulator and the agents pass `uavtrack.timing`). The
 module reads no clock of its own: timing belongs to the caller, and without a clock the
-seconds are zeros.
+seconds are zeros. A stage reads the CPU clock (a system call) twice, at its start and
+its end, whatever the number of UAVs and problems; each solve inside it is timed on the
+cheap wall clock, and its CPU time is its share of the stage's by those wall times.
 Problems of the same size are solved together (`solve_many`): small ones by
 enumerating every assignment as arrays, with the exact solver for the rest and for
 every problem whose optimum is not unique by a clear margin, so the answers are those
@@ -44,12 +46,15 @@ class Clock(Protocol):
     """The clock a caller times the solves on: the `uavtrack.timing` module is one.
 
     start() marks both clocks; since(mark) is the seconds since, (2,) [CPU, wall];
-    set_up() is a context whose work (here: loading scipy's solver on first use) is left
-    out of `since`, being no decision's time."""
+    tick() reads the wall clock alone (seconds from any origin), cheaply; set_up() is a
+    context whose work (here: loading scipy's solver on first use) is left out of
+    `since` and `tick`, being no decision's time."""
 
     def start(self) -> Any: ...
 
     def since(self, mark: Any) -> np.ndarray: ...
+
+    def tick(self) -> float: ...
 
     def set_up(self) -> AbstractContextManager[None]: ...
 
@@ -63,12 +68,51 @@ class _NoClock:
     def since(self, mark: Any) -> np.ndarray:
         return np.zeros(2)
 
+    def tick(self) -> float:
+        return 0.0
+
     def set_up(self) -> AbstractContextManager[None]:
         return nullcontext()
 
 
 NO_CLOCK = _NoClock()
 """The clock of a caller that passes none: the solves' seconds are zeros."""
+
+
+class _SetUpOnly:
+    """A caller's clock for its set-up alone: nothing is read, every duration is zero."""
+
+    def __init__(self, clock: Clock) -> None:
+        self._clock = clock
+
+    def start(self) -> None:
+        return None
+
+    def since(self, mark: Any) -> np.ndarray:
+        return np.zeros(2)
+
+    def tick(self) -> float:
+        return 0.0
+
+    def set_up(self) -> AbstractContextManager[None]:
+        return self._clock.set_up()
+
+
+def set_up_only(clock: Clock | None) -> Clock:
+    """`clock` for the set-up of a solver's first load only, for a caller that times the
+    whole of a stage itself (the central node): its clock is read once, not again inside."""
+    return NO_CLOCK if clock is None else _SetUpOnly(clock)
+
+
+def charged(wall: np.ndarray, clock: Clock, stage: Any) -> np.ndarray:
+    """Seconds (..., 2) [CPU, wall] of the parts of a stage begun at `stage`, from their
+    wall times `wall` (`Clock.tick`): each part's CPU time is its wall time scaled by
+    the stage's CPU time over its wall time, both read once, now (`Clock.since`)."""
+    cpu, total = clock.since(stage).tolist()
+    out = np.empty(wall.shape + (2,))
+    out[..., 0] = wall * (cpu / total if total > 0 else 0.0)
+    out[..., 1] = wall
+    return out
 
 
 def linear_sum_assignment(
@@ -420,16 +464,19 @@ def auction(
     B, n = members.shape[:2]
     views = bids.ndim == 4
     own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
-    start = clock.start()
+    stage, tick = clock.start(), clock.tick
+    begun = tick()
     out = greedy(own)
-    seconds = np.empty(out.shape + (2,))
-    seconds[...] = clock.since(start) / max(out.size, 1)
+    wall = np.full(out.shape, (tick() - begun) / max(out.size, 1))
+    if solve is _solve and not views and B * n <= FEW:
+        _auction_lists(bids, members, out, wall, clock)
+        return out, charged(wall, clock, stage)
     idx = np.arange(n)
     members = members.copy()
     members[:, idx, idx] = True
     b, i = np.nonzero(members.sum(axis=-1) > 1)  # UAVs with others in their auction
     if not b.size:
-        return out, seconds
+        return out, charged(wall, clock, stage)
     rows = members[b, i]  # (K, N)
     if views:
         first, which = _distinct(b, rows, bids[b, i])
@@ -437,39 +484,39 @@ def auction(
         first, which = _distinct(b, rows)
     row = np.cumsum(rows, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
     choice = np.empty((first.size, n), dtype=np.int64)
-    cost = np.empty((first.size, 2))
+    cost = np.empty(first.size)
     size = rows[first].sum(axis=1)
     m = bids.shape[-1]
-    lists, share = None, np.zeros(2)
+    lists, share = None, 0.0
     if solve is _solve and not views and (size < m).any():
         # the built-in solver reads each member's k best bids only: rank every bidder's
         # once, as many as the largest problem needs (`ranked` keeps the order of each
         # shorter prefix), and charge the ranking to the problems by their members
-        start = clock.start()
+        begun = tick()
         problem, member = np.nonzero(rows[first])
         bidders = np.unique(b[first][problem] * n + member)
         lists = np.full((B * n, int(size[size < m].max())), -1, dtype=np.int64)
         lists[bidders] = ranked(bids.reshape(B * n, m)[bidders], lists.shape[1])
-        share = clock.since(start) / bidders.size
+        share = (tick() - begun) / bidders.size
     if solve is _solve:  # problems of one size together (`solve_many`) when many
-        for width in np.unique(size):
+        for width in np.unique(size).tolist():
             group = np.flatnonzero(size == width)
             if group.size < TOGETHER:  # a few: each alone costs less than the arrays
-                for u in group:
+                for u in group.tolist():
                     k = first[u]
                     problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-                    start = clock.start()
+                    begun = tick()
                     if lists is not None and width < m:
                         who = np.flatnonzero(rows[k]) + n * b[k]
                         solved = _restricted(problem, lists[who, :width], clock)
                     else:
                         solved = _solve(problem, clock)
-                    cost[u] = clock.since(start) + share * width
+                    cost[u] = tick() - begun + share * width
                     choice[u, :width] = solved
                 continue
             k = first[group]
             who = np.nonzero(rows[k])[1].reshape(-1, width)  # members, in index order
-            start = clock.start()
+            begun = tick()
             if views:
                 problem = bids[b[k][:, None], i[k][:, None], who]
             else:
@@ -478,17 +525,93 @@ def auction(
             if lists is not None and width < m:
                 best = lists[who + n * b[k][:, None], :width]
             choice[group, :width] = solve_many(problem, best, clock)
-            cost[group] = clock.since(start) / group.size + share * width
+            cost[group] = (tick() - begun) / group.size + share * width
     else:
-        for u, k in enumerate(first):  # a method's own solver: one call per problem
+        for u, k in enumerate(first.tolist()):  # a method's own solver: one call per problem
             problem = bids[b[k], i[k], rows[k]] if views else bids[b[k], rows[k]]
-            start = clock.start()
+            begun = tick()
             solved = solve(problem)
-            cost[u] = clock.since(start)
+            cost[u] = tick() - begun
             choice[u, : solved.size] = solved
     out[b, i] = choice[which, row]
-    seconds[b, i] = cost[which]
-    return out, seconds
+    wall[b, i] = cost[which]
+    return out, charged(wall, clock, stage)
+
+
+FEW = 32
+"""Most UAVs (trials x team) whose auctions run on Python lists (`_auction_lists`): in a
+single trial's small team each problem is a few bids, and a numpy call per step of the
+rule costs more than the arithmetic."""
+
+
+def _auction_lists(
+    bids: np.ndarray, members: np.ndarray, out: np.ndarray, wall: np.ndarray, clock: Clock
+) -> None:
+    """`auction`'s rule with the built-in solver on Python lists, for few UAVs: the same
+    problems (one per distinct trial and neighbourhood) solved by the same rule
+    (`_solve_lists`), the same targets. Writes the target and the solve's wall seconds
+    of every UAV with others in its auction into `out` and `wall` (B, N)."""
+    tick = clock.tick
+    values = bids.tolist()
+    solved: dict[tuple[int, tuple[int, ...]], tuple[float, list[int]]] = {}
+    for b, team in enumerate(members.tolist()):
+        for i, row in enumerate(team):
+            who = tuple(q for q in range(len(row)) if row[q] or q == i)
+            if len(who) < 2:
+                continue
+            key = (b, who)
+            if key not in solved:
+                begun = tick()
+                choice = _solve_lists([values[b][q] for q in who], clock)
+                solved[key] = (tick() - begun, choice)
+            seconds, choice = solved[key]
+            out[b, i] = choice[who.index(i)]
+            wall[b, i] = seconds
+
+
+def _solve_lists(bids: list[list[float]], clock: Clock) -> list[int]:
+    """`_solve` of one problem given as lists: the column of each row."""
+    k, m = len(bids), len(bids[0])
+    if k < m:  # the problem restricted to each row's k best columns (`_restricted`)
+        best: list[list[int]] = []
+        for row in bids:
+            scored = sorted((-x, c) for c, x in enumerate(row) if x == x)  # not NaN
+            if len(scored) < k:
+                raise ValueError(f"every row needs its {k} best bids scored (not NaN)")
+            best.append([c for _, c in scored[:k]])
+        first = [b[0] for b in best]
+        if k == 1 or (
+            len(set(first)) == k
+            and all(row[b[0]] > row[b[1]] for row, b in zip(bids, best, strict=True))
+        ):
+            return first
+        columns = sorted({c for b in best for c in b})
+        place = {c: x for x, c in enumerate(columns)}
+        problem = [[-math.inf] * len(columns) for _ in range(k)]
+        for line, row, b in zip(problem, bids, best, strict=True):
+            for c in b:
+                line[place[c]] = row[c]
+        cols = _exact(problem, clock)[1]
+        return [columns[c] for c in cols.tolist()]
+    if any(x != x for row in bids for x in row):
+        raise ValueError(f"{k} rows and {m} columns: every bid must be scored (not NaN)")
+    choice = [0] * k
+    left = list(range(k))
+    while left:
+        rows, cols = _exact([bids[r] for r in left], clock)
+        for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
+            choice[left[r]] = c
+        taken = set(rows.tolist())
+        left = [r for x, r in enumerate(left) if x not in taken]
+    return choice
+
+
+def _exact(problem: list[list[float]], clock: Clock) -> tuple[np.ndarray, np.ndarray]:
+    """`linear_sum_assignment(maximize=True)` of a problem given as lists."""
+    n, m = len(problem), len(problem[0])
+    if n * m * min(n, m) <= lsap.SMALL:
+        return lsap.solve_lists(problem, True)
+    return load_solver(clock)(np.array(problem), maximize=True)
 
 
 def _distinct(
@@ -535,22 +658,23 @@ def centralized(
     members = np.ones((B, n), dtype=bool) if members is None else members
     _check(bids[members])
     out = np.full((B, n), -1, dtype=np.int64)
-    seconds = np.zeros((B, 2))
+    wall = np.zeros(B)
+    stage, tick = clock.start(), clock.tick
     count = members.sum(axis=1)
-    for size in np.unique(count[count > 0]):  # trials with as many members together
+    for size in np.unique(count[count > 0]).tolist():  # trials with as many members together
         trials = np.flatnonzero(count == size)
         if trials.size < TOGETHER:  # a few: each alone
-            for b in trials:
+            for b in trials.tolist():
                 rows = np.flatnonzero(members[b])
-                start = clock.start()
+                begun = tick()
                 out[b, rows] = _solve(bids[b, rows], clock)
-                seconds[b] = clock.since(start)
+                wall[b] = tick() - begun
             continue
         who = np.nonzero(members[trials])[1].reshape(-1, size)
-        start = clock.start()
+        begun = tick()
         out[trials[:, None], who] = solve_many(bids[trials[:, None], who], clock=clock)
-        seconds[trials] = clock.since(start) / trials.size
-    return out, seconds
+        wall[trials] = (tick() - begun) / trials.size
+    return out, charged(wall, clock, stage)
 
 
 def greedy(bids: np.ndarray) -> np.ndarray:

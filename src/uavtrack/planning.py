@@ -282,16 +282,14 @@ def plan_top(
     pending = np.arange(rows)
     while pending.size:
         left = []
-        for w in np.unique(width[pending]):
+        whole = width[pending] >= nt
+        if whole.any():  # score these in full, together
+            these = pending[whole]
+            full = plan(flat_uavs[these], flat_mean[these], *args)
+            value[these], action[these], sequence[these] = full.value, full.action, full.sequence
+            pending = pending[~whole]
+        for w in np.unique(width[pending]).tolist():
             these = pending[width[pending] == w]
-            if w >= nt:  # score these in full
-                full = plan(flat_uavs[these], flat_mean[these], *args)
-                value[these], action[these], sequence[these] = (
-                    full.value,
-                    full.action,
-                    full.sequence,
-                )
-                continue
             order = np.argpartition(gap[these], w, axis=1)
             chosen, after = order[:, :w], order[:, w]  # the w nearest, and the next one
             part = plan(flat_uavs[these], flat_mean[these[:, None], chosen], *args)

@@ -5,6 +5,11 @@ thread that plans and assigns (`time.thread_time`), which other programs on the 
 machine do not inflate. Wall time (`time.perf_counter`) is kept beside it; on a loaded
 2-core machine it moved 5 to 20 times while the CPU time did not. Timed stages return
 their seconds with a last axis of two: [..., 0] CPU, [..., 1] wall.
+
+The CPU clock of a thread is a system call (and on a contended machine one that costs
+context switches), so it is read at the start and the end of a stage only, never per UAV
+or per problem: the parts of a stage are timed on the wall clock (`tick`) and take their
+share of the stage's CPU time by it.
 """
 
 # Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
@@ -63,6 +68,13 @@ def since(mark: tuple[float, float, float, float]) -> np.ndarray:
             time.perf_counter() - mark[1] - (tally[1] - mark[3]),
         ]
     )
+
+
+def tick() -> float:
+    """The wall clock alone, without this thread's set-up (seconds from any origin): the
+    cheap reading (`time.perf_counter` is no system call) that times the parts of a
+    stage, whose CPU time `since` reads once for the whole stage (`assignment.charged`)."""
+    return time.perf_counter() - _set_up()[1]
 
 
 @contextmanager

@@ -219,7 +219,7 @@ def central_node(
     if t.size:
         mean = fusion.required(central.mean, "mean")
         value[t, i] = setting.plan(uavs[t, i][None], mean[t][None])[0][0]
-    targets, _ = assignment.centralized(value, heard, clock)
+    targets, _ = assignment.centralized(value, heard, assignment.set_up_only(clock))
     anyone = np.any(heard, axis=1)  # (B,): numpy's stubs type the method as maybe a scalar
     empty = nothing_heard(B, n, m)
     down = fusion.Estimates(
