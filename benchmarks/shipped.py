@@ -2,6 +2,7 @@
 beside another version of the source.
 
     python benchmarks/shipped.py [--before SRC] [--json FILE] [--figure FILE] [--quick]
+                                 [--only CASE ...]
 
 Each case runs ``uavtrack ...`` through the console entry point that the tree's
 pyproject.toml names, in a fresh interpreter with that tree's ``src`` first on the path
@@ -11,6 +12,16 @@ speed hits both alike. Times are medians: wall time (``time.perf_counter`` aroun
 process) and CPU time (user + system of the process and its children, from
 ``getrusage``). The cost of one decision cycle as shipped is the difference between a
 run of S2 and one of S1 steps, divided by S2 - S1, so start-up and set-up cancel.
+Each tree's sources are compiled to bytecode first (``compileall``), as ``pip install``
+does, so that no version pays for compiling its modules in every run.
+
+Besides the commands: the single PettingZoo environment (agent-steps per CPU second of a
+script stepping ``parallel_env`` with random actions, by the same difference of two
+lengths) and the vector environment at 256 trials; the 5 x 4 swarm over Zenoh (one
+process per UAV), its CPU per cycle and each program's start-up (the swarm's CPU
+extrapolated to zero cycles, over its N + 1 programs); and at 1000 x 1000 the minor page
+faults per step (``ru_minflt`` of the process, by the difference of two lengths) and the
+peak resident memory (``ru_maxrss``).
 
 --before SRC: the ``src`` folder of the version to compare with, for example a
 worktree of the commit before a change (``git worktree add /tmp/before <commit>``).
@@ -29,6 +40,7 @@ import sys
 import tempfile
 import time
 import tomllib
+from collections.abc import Callable
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent.parent / "src"
@@ -56,54 +68,134 @@ FRESH = "{fresh}"
 """An argument replaced by a new empty folder for each run (removed after it)."""
 
 
-def once(src: Path, args: list[str]) -> tuple[float, float]:
-    """(wall, CPU) seconds of one ``uavtrack args`` with `src` first on the path."""
+SCRIPT = "{script}"
+"""A first argument that runs the rest as a Python script (``python -c``), not uavtrack."""
+
+
+def once(src: Path, args: list[str]) -> dict[str, float]:
+    """Wall and CPU seconds, minor page faults and peak resident memory of one
+    ``uavtrack args`` (or script: `SCRIPT`) with `src` first on the path. The faults
+    and CPU are of the process and its children; the peak is the largest child's."""
     env = dict(os.environ, PYTHONPATH=str(src))
     with tempfile.TemporaryDirectory() as fresh:
         args = [str(Path(fresh) / "out") if a == FRESH else a for a in args]
+        argv = [sys.executable, "-c", *args[1:]] if args[0] == SCRIPT else command(src, args)
         before = resource.getrusage(resource.RUSAGE_CHILDREN)
         start = time.perf_counter()
-        done = subprocess.run(command(src, args), env=env, capture_output=True, text=True)
+        done = subprocess.run(argv, env=env, capture_output=True, text=True)
         wall = time.perf_counter() - start
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
     if done.returncode != 0:
-        raise SystemExit(f"uavtrack {' '.join(args)} failed in {src}:\n{done.stderr}")
+        raise SystemExit(f"{' '.join(argv[:4])} ... failed in {src}:\n{done.stderr}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return wall, cpu
+    return {
+        "wall_s": wall,
+        "cpu_s": cpu,
+        "minor_faults": after.ru_minflt - before.ru_minflt,
+        "max_rss_mib": after.ru_maxrss / 1024,  # the largest child so far (Linux: KiB)
+    }
 
 
 def case(trees: dict[str, Path], args: list[str], repeats: int) -> dict[str, dict]:
-    """Median wall and CPU seconds of `args` per tree, the trees alternating."""
-    seen: dict[str, list[tuple[float, float]]] = {name: [] for name in trees}
+    """Median wall and CPU seconds (and minor faults) of `args` per tree, the trees
+    alternating, and the peak resident memory."""
+    seen: dict[str, list[dict[str, float]]] = {name: [] for name in trees}
     for _ in range(repeats):
         for name, src in trees.items():
             seen[name].append(once(src, args))
     return {
         name: {
-            "wall_s": statistics.median(w for w, _ in runs),
-            "cpu_s": statistics.median(c for _, c in runs),
+            "wall_s": statistics.median(r["wall_s"] for r in runs),
+            "cpu_s": statistics.median(r["cpu_s"] for r in runs),
+            "minor_faults": statistics.median(r["minor_faults"] for r in runs),
             "runs": len(runs),
         }
         for name, runs in seen.items()
     }
 
 
-def cycle(trees: dict[str, Path], n: int, repeats: int) -> dict[str, dict]:
-    """CPU and wall seconds of one distributed cycle of an n x n team, as shipped."""
-    short, long = (
-        (2, 6) if n >= 1000 else (5, 25) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
-    )
-    team = ["run", "--team", f"{n}x{n}", "--json"]
-    a = case(trees, team + ["--steps", str(short)], repeats)
-    b = case(trees, team + ["--steps", str(long)], repeats)
-    return {
-        name: {
-            "cpu_s": (b[name]["cpu_s"] - a[name]["cpu_s"]) / (long - short),
-            "wall_s": (b[name]["wall_s"] - a[name]["wall_s"]) / (long - short),
-            "steps": [short, long],
+def per_unit(
+    trees: dict[str, Path], make: Callable[[int], list[str]], lengths: tuple[int, int],
+    repeats: int, units: int = 1,
+) -> dict[str, dict]:
+    """CPU and wall seconds (and minor faults) per step, of `make(steps)` run at two
+    lengths, by their difference (start-up and set-up cancel), over `units` per step;
+    and what a run of zero steps would cost (`start_cpu_s`: the start-up)."""
+    short, long = lengths
+    a = case(trees, make(short), repeats)
+    b = case(trees, make(long), repeats)
+    out = {}
+    for name in trees:
+        each = {
+            key: (b[name][key] - a[name][key]) / ((long - short) * units)
+            for key in ("cpu_s", "wall_s", "minor_faults")
         }
-        for name in trees
-    }
+        each["start_cpu_s"] = a[name]["cpu_s"] - each["cpu_s"] * short * units
+        each["steps"] = [short, long]
+        out[name] = each
+    return out
+
+
+ENV_SCRIPT = """
+import time, numpy as np
+from uavtrack.env import {make}
+steps = {steps}
+{setup}
+for _ in range(steps):
+    {step}
+"""
+
+
+def single_env(steps: int) -> list[str]:
+    """A script stepping the single `parallel_env` (5 agents) with random actions."""
+    return [SCRIPT, ENV_SCRIPT.format(
+        make="parallel_env", steps=steps,
+        setup="env = parallel_env(steps=steps + 1); env.reset(seed=0); "
+        "rng = np.random.default_rng(0)",
+        step="env.step({a: int(rng.integers(3)) for a in env.agents})",
+    )]  # fmt: skip
+
+
+def vector_env(steps: int, trials: int = 256) -> list[str]:
+    """A script stepping `vector_env` of `trials` with random actions (paper actions on)."""
+    return [SCRIPT, ENV_SCRIPT.format(
+        make="vector_env", steps=steps,
+        setup=f"v = vector_env({trials}, steps=steps + 1); v.reset(seed=0); "
+        "rng = np.random.default_rng(0)",
+        step=f"v.step(rng.integers(0, 3, size=({trials}, 5)))",
+    )]  # fmt: skip
+
+
+def swarm(steps: int) -> list[str]:
+    """The default 5 x 4 trial as a swarm over Zenoh, one process per UAV."""
+    return ["swarm", "--transport", "zenoh", "--steps", str(steps), "--json"]
+
+
+def cycle(trees: dict[str, Path], n: int, repeats: int) -> dict[str, dict]:
+    """CPU and wall seconds (and minor page faults) of one distributed cycle of an n x n
+    team, as shipped; at 1000 x 1000 also the peak resident memory of the longer run."""
+    lengths = (2, 6) if n >= 1000 else (5, 25) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
+    team = ["run", "--team", f"{n}x{n}", "--json"]
+    out = per_unit(trees, lambda steps: team + ["--steps", str(steps)], lengths, repeats)
+    if n >= 1000:
+        for name, src in trees.items():
+            out[name]["max_rss_mib"] = once(src, team + ["--steps", str(lengths[0])])["max_rss_mib"]
+    return out
+
+
+def compiled(src: Path) -> None:
+    """Compile a tree's sources to bytecode, as an install does."""
+    subprocess.run([sys.executable, "-m", "compileall", "-q", str(src / "uavtrack")], check=True)
+
+
+GROUPS = {
+    "commands": "--version, run --help, the start-up and one default trial",
+    "env": "the single and the vector environment",
+    "swarm": "the 5 x 4 swarm over Zenoh: CPU per cycle and each program's start-up",
+    "teams": "one distributed cycle of 10 x 10 to 1000 x 1000, page faults and peak memory",
+    "reproduce": "uavtrack reproduce, --quick and in full",
+}
+"""The groups of cases (``--only``)."""
 
 
 def main() -> None:
@@ -112,6 +204,10 @@ def main() -> None:
     parser.add_argument("--json", type=Path, help="write the results here")
     parser.add_argument("--figure", type=Path, help="draw the cycle's cost against team size")
     parser.add_argument("--quick", action="store_true", help="fewer repeats, no full reproduce")
+    parser.add_argument(
+        "--only", nargs="+", metavar="CASE", choices=sorted(GROUPS),
+        help=f"these groups of cases alone: {', '.join(sorted(GROUPS))}",
+    )  # fmt: skip
     options = parser.parse_args()
     trees = {"this": HERE}
     if options.before is not None:
@@ -119,6 +215,9 @@ def main() -> None:
             parser.error(f"--before {options.before}: not a src folder holding uavtrack")
         trees = {"before": options.before.resolve(), "this": HERE}
     few = 1 if options.quick else 3
+    for src in trees.values():
+        compiled(src)
+    wanted = set(options.only or GROUPS)
     results: dict = {
         "machine": {
             "cores": os.cpu_count(),
@@ -136,24 +235,41 @@ def main() -> None:
 
     def say(name: str, row: dict) -> None:
         cases[name] = row
-        shown = "; ".join(
-            f"{tree} {v['cpu_s'] * 1e3:.0f} ms CPU, {v['wall_s'] * 1e3:.0f} ms wall"
-            for tree, v in row.items()
-        )
+        def one(v: dict) -> str:
+            text = f"{v['cpu_s'] * 1e3:.4g} ms CPU, {v['wall_s'] * 1e3:.4g} ms wall"
+            if "start_cpu_s" in v:
+                text += f", start-up {v['start_cpu_s'] * 1e3:.4g} ms CPU"
+            if "max_rss_mib" in v:
+                text += f", {v['minor_faults']:.0f} minor faults, peak {v['max_rss_mib']:.0f} MiB"
+            return text
+
+        shown = "; ".join(f"{tree} {one(v)}" for tree, v in row.items())
         print(f"{name}: {shown}", file=sys.stderr)
 
-    say("uavtrack --version", case(trees, ["--version"], 5))
-    say("uavtrack run --help", case(trees, ["run", "--help"], 5))
-    say("uavtrack run (one default trial)", case(trees, ["run", "--json"], few + 2))
-    for n in TEAMS:
-        say(f"distributed cycle, {n}x{n}", cycle(trees, n, few))
-    say("uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few))
-    if not options.quick:
-        say("uavtrack reproduce", case(trees, ["reproduce", "--out", FRESH], 1))
+    if "commands" in wanted:
+        say("uavtrack --version", case(trees, ["--version"], 5))
+        say("uavtrack run --help", case(trees, ["run", "--help"], 5))
+        start = ["run", "--set", "steps=1", "--json"]
+        say("uavtrack run --set steps=1 (start-up)", case(trees, start, few + 4))
+        say("uavtrack run (one default trial)", case(trees, ["run", "--json"], few + 4))
+    if "env" in wanted:
+        say("single parallel_env, per agent-step", per_unit(trees, single_env, (20, 1020), few + 2, 5))
+        say("vector_env 256 trials, per agent-step", per_unit(
+            trees, vector_env, (5, 45), few + 2, 256 * 5
+        ))  # fmt: skip
+    if "swarm" in wanted:
+        say("swarm 5x4 over Zenoh, per cycle", per_unit(trees, swarm, (5, 45), few + 2, 1))
+    if "teams" in wanted:
+        for n in TEAMS:
+            say(f"distributed cycle, {n}x{n}", cycle(trees, n, few))
+    if "reproduce" in wanted:
+        say("uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few))
+        if not options.quick:
+            say("uavtrack reproduce", case(trees, ["reproduce", "--out", FRESH], 1))
     if options.json is not None:
         options.json.write_text(json.dumps(results, indent=1) + "\n")
         print(f"wrote {options.json}", file=sys.stderr)
-    if options.figure is not None:
+    if options.figure is not None and "teams" in wanted:
         figure(results, options.figure)
         print(f"wrote {options.figure}", file=sys.stderr)
 

@@ -446,3 +446,49 @@ def test_set_up_is_not_interrupted_half_way_and_the_interrupt_still_comes(signum
     )
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
     assert out.stdout.splitlines() == ["interrupted after the set-up: True", "True True"]
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [
+        {},
+        {"faults": {"loss": 0.2, "failures": [[1, 10]]}},
+        {"faults": {"delay": 1}},
+        {"tracker": {"model": "imm"}},
+        {"robust": {"gate": 0.99}},
+    ],
+)
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_a_runs_reused_arrays_change_nothing(method, overrides, monkeypatch):
+    """`run` owns its states: it updates them in place and writes its full-size results
+    into arrays it reuses (`numerics.buffers`, every size pooled here); every recorded
+    number equals that of a run that allocates each anew."""
+    from uavtrack.numerics import buffers
+
+    monkeypatch.setattr(buffers, "SMALLEST", 0)
+    scenario = uavtrack.Scenario.model_validate({"steps": 30, **overrides})
+    pooled = uavtrack.run(scenario, method, [0, 1], trace=True)
+    monkeypatch.setattr(simulation, "Buffers", lambda: None)
+    fresh = uavtrack.run(scenario, method, [0, 1], trace=True)
+    assert pooled.metrics.keys() == fresh.metrics.keys()
+    for name, value in pooled.metrics.items():
+        if not name.startswith("decision"):
+            assert np.array_equal(value, fresh.metrics[name], equal_nan=True), name
+    for a, b in zip(pooled.traces, fresh.traces, strict=True):
+        for name, value in a.arrays().items():
+            if not name.startswith("decision"):
+                assert np.array_equal(value, b.arrays()[name], equal_nan=True), name
+
+
+def test_buffers_hand_each_role_two_arrays_in_turn():
+    from uavtrack.numerics.buffers import SMALLEST, Buffers, take
+
+    pool = Buffers()
+    shape = (SMALLEST // 8 + 1,)
+    first, second = pool.take("a", shape), pool.take("a", shape)
+    assert first is not second and not np.shares_memory(first, second)
+    assert pool.take("a", shape) is first and pool.take("a", shape) is second
+    other = pool.take("b", shape)  # another role never gets a's arrays
+    assert other is not first and other is not second
+    assert pool.take("a", (3,)) is not pool.take("a", (3,))  # small: always new
+    assert take(None, "a", shape).shape == shape

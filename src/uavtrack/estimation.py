@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .numerics.buffers import Buffers, take
+
 if TYPE_CHECKING:
     from .config import TrackerModel
 
@@ -67,18 +69,25 @@ def process_noise(dt: float, sigma_1: float, sigma_2: float) -> np.ndarray:
 
 
 def predict(
-    mean: np.ndarray, cov: np.ndarray, A: np.ndarray, Q: np.ndarray
+    mean: np.ndarray,
+    cov: np.ndarray,
+    A: np.ndarray,
+    Q: np.ndarray,
+    buffers: Buffers | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Prediction, eq. (23): s(k|k-1) = A s(k-1), P(k|k-1) = A P(k-1) A^T + Q.
 
     All filters at once: vec(A P A^T) = (A kron A) vec(P), one matrix product per
     block of `BLOCK` filters (the block and its result stay in cache; every filter's
-    numbers are the same whatever the block).
+    numbers are the same whatever the block). buffers: a run's (`numerics.buffers`),
+    into whose "predicted" arrays the results go; new arrays without.
     """
     shape = cov.shape
-    mean = (mean.reshape(-1, 4) @ A.T).reshape(mean.shape)
+    moved = take(buffers, "predicted mean", mean.shape)
+    np.matmul(mean.reshape(-1, 4), A.T, out=moved.reshape(-1, 4))
+    mean = moved
     flat, kron, q = cov.reshape(-1, 16), _kron(A.tobytes()).T, Q.reshape(16)
-    out = np.empty(flat.shape)
+    out = take(buffers, "predicted cov", shape).reshape(flat.shape)
     for start in range(0, flat.shape[0], BLOCK):
         block = out[start : start + BLOCK]
         np.matmul(flat[start : start + BLOCK], kron, out=block)
@@ -135,6 +144,7 @@ def filter_step(
     R: np.ndarray,
     A: np.ndarray | None,
     Q: np.ndarray | None,
+    owned: bool = False,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Algorithm 2, lines 1-13: predict every filter, update those that observed.
 
@@ -143,13 +153,14 @@ def filter_step(
 
     mean (..., 4), cov (..., 4, 4); observed (...) bool; z (K, 2) and R (K, 2, 2) the
     measurements of the K observing pairs, in the order of ``np.nonzero(observed)``.
-    Returns (mean, cov) of the same shapes.
+    Returns (mean, cov) of the same shapes. owned: the caller gives up `mean` and `cov`
+    (a run's last state): without a prediction they are updated in place, not copied.
     """
     if (A is None) != (Q is None):
         raise ValueError("A and Q are given together, or neither")
     if A is not None and Q is not None:
         mean, cov = predict(mean, cov, A, Q)  # new arrays: updated in place below
-    elif z.shape[0]:
+    elif z.shape[0] and not owned:
         mean, cov = mean.copy(), cov.copy()  # the caller's arrays stay as they were
     if z.shape[0]:
         mean[observed], cov[observed] = update(mean[observed], cov[observed], z, R)
@@ -363,9 +374,13 @@ class Tracker:
         observed: np.ndarray,
         z: np.ndarray,
         R: np.ndarray,
+        owned: bool = False,
     ) -> Belief:
+        """Each filter's update on this cycle's measurements (`filter_step`). owned: the
+        caller gives up `mean` and `cov` (a run's last state), which are then updated
+        in place."""
         if modes is None:
-            return (*filter_step(mean, cov, observed, z, R, None, None), None)
+            return (*filter_step(mean, cov, observed, z, R, None, None, owned), None)
         modes = imm_update(modes, observed, z, R)
         return (*combine(modes), modes)
 
@@ -376,9 +391,12 @@ class Tracker:
         modes: Modes | None,
         fused_mean: np.ndarray,
         fused_cov: np.ndarray,
+        buffers: Buffers | None = None,
     ) -> Belief:
+        """The estimates after fusion predicted to the next step (eq. 23; each mode's
+        with the IMM). buffers: a run's, into which a Kalman filter's prediction goes."""
         if modes is None:
-            return (*predict(fused_mean, fused_cov, self.A, self.Q), None)
+            return (*predict(fused_mean, fused_cov, self.A, self.Q, buffers), None)
         if self.transition_matrix is None or self.mode_Q is None:
             raise ValueError("modes given to a tracker without modes (a Kalman filter)")
         changed = (fused_mean != mean).any(axis=-1) | (fused_cov != cov).any(axis=(-2, -1))

@@ -360,6 +360,8 @@ class Tally:
         err = best_mean[..., :2] - truth[..., :2]
         s["squared_error_best"] += np.where(anyone, (err * err).sum(axis=(1, 2)), 0.0)
         s["best"] += anyone * self.n_targets
+        if self._block > 1:  # held past this call: copies, as the caller may reuse its arrays
+            mean, cov = mean.copy(), cov.copy()
         self._pending.append((mean, cov, best_mean, best_cov, truth, None if everyone else alive))
         if len(self._pending) == self._block:
             self._flush()

@@ -36,6 +36,7 @@ from .flight.unicycle import Unicycle
 from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, Tally
+from .numerics.buffers import Buffers
 from .radio import Radio, RadioState
 from .robust import gate
 from .tracks import columns, manage
@@ -105,6 +106,10 @@ class Context:
     """Each trial's draws of missed detections, clutter and scan order
     (`tracks.scan.Draws`), when the sensor misses or sees clutter, or the scans come
     unlabelled; None for the paper's sensor."""
+    buffers: Buffers | None = None
+    """Set by the batch driver (`run`) alone, which owns its states: the full-size
+    arrays its cycles reuse (`numerics.buffers`), and each state's estimates are
+    updated in place. None: a cycle leaves the state it is given untouched."""
 
     @property
     def tracked(self) -> bool:
@@ -420,7 +425,8 @@ def decide(
         polar = polar[detected[observed]]
     b, i, _ = np.nonzero(detected)
     z, R = convert(believed[b, i], polar, scenario)
-    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, detected, z, R)
+    owned = ctx.buffers is not None
+    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, detected, z, R, owned)
     mean, cov = belief[:2]
     inputs = Inputs(
         k=k,
@@ -434,6 +440,7 @@ def decide(
         held=state.held,
         setting=ctx.setting,
         measured=measured(state, detected, z, R, ctx),
+        buffers=ctx.buffers,
     )
     fused = method.fuse(inputs)
     if not plan:
@@ -745,7 +752,7 @@ def finish(
     )
     if pending.tracks is not None:
         return _finish_tracked(state, pending, ctx, cycle, new_uavs)
-    mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov)
+    mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov, ctx.buffers)
     new = State(
         k=pending.k + 1,
         uavs=new_uavs,
@@ -926,6 +933,10 @@ def run(
         raise ValueError("seeds is empty: give at least one seed (one per trial)")
     check_memory(scenario, len(seeds), trace)
     ctx = Context.of(scenario, method, seeds)
+    if not ctx.tracked:  # this loop owns its states: their arrays are reused
+        ctx = replace(ctx, buffers=Buffers())
+        if len(seeds) * scenario.n_uavs * scenario.n_targets * 128 >= LARGE_STATE:
+            _process.keep_freed_memory()
     state, trajectory, sensor_rngs = initial_state(scenario, seeds)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     tally = scores(scenario, B, timed=B == 1)
@@ -940,6 +951,11 @@ def run(
             progress(k + 1)
     traces = rec.traces(trajectory) if rec is not None else None
     return BatchResult(method.name, scenario, tally.summary(), traces)
+
+
+LARGE_STATE = 64 * 2**20
+"""Bytes of covariances from which a run asks the allocator to keep freed memory
+(`_process.keep_freed_memory`): 256 x 256 UAVs and targets in one trial."""
 
 
 def scores(scenario: Scenario, batch: int, timed: bool) -> Scores:

@@ -13,6 +13,7 @@ import numpy as np
 
 from .. import estimation, fusion, network
 from ..config import Scenario
+from ..numerics.buffers import Buffers, take
 from ..radio import Radio, counted
 from ..robust import gate
 from ..tracks import association, manage, team
@@ -81,6 +82,9 @@ class Inputs:
     setting: Setting
     measured: gate.Measured | None = None
     holds: np.ndarray | None = None
+    buffers: Buffers | None = None
+    """A run's arrays reused across cycles (`numerics.buffers`), for the full-size
+    results of fusion; None: every result a new array."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -216,7 +220,9 @@ def consensus(inputs: Inputs) -> Fused:
         tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
         out = fusion.consensus(radio, tuples, rounds, admit=admit)
         source = fusion.required(out.tuples.source, "source")
-        mean, cov = fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+        pool = inputs.buffers
+        mean = fusion.gather(source, inputs.mean, take(pool, "fused mean", inputs.mean.shape))
+        cov = fusion.gather(source, inputs.cov, take(pool, "fused cov", inputs.cov.shape))
         gamma = out.tuples.gamma  # travelled with the source: confidence(cov) exactly
     else:
         tuples = fusion.Estimates(
