@@ -174,7 +174,7 @@ def swarm(steps: int) -> list[str]:
 def cycle(trees: dict[str, Path], n: int, repeats: int) -> dict[str, dict]:
     """CPU and wall seconds (and minor page faults) of one distributed cycle of an n x n
     team, as shipped; at 1000 x 1000 also the peak resident memory of the longer run."""
-    lengths = (2, 6) if n >= 1000 else (5, 25) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
+    lengths = (3, 13) if n >= 1000 else (5, 35) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
     team = ["run", "--team", f"{n}x{n}", "--json"]
     out = per_unit(trees, lambda steps: team + ["--steps", str(steps)], lengths, repeats)
     if n >= 1000:
