@@ -19,9 +19,9 @@ Besides the commands: the single PettingZoo environment (agent-steps per CPU sec
 script stepping ``parallel_env`` with random actions, by the same difference of two
 lengths) and the vector environment at 256 trials; the 5 x 4 swarm over Zenoh (one
 process per UAV), its CPU per cycle and each program's start-up (the swarm's CPU
-extrapolated to zero cycles, over its N + 1 programs); and at 1000 x 1000 the minor page
-faults per step (``ru_minflt`` of the process, by the difference of two lengths) and the
-peak resident memory (``ru_maxrss``).
+extrapolated to zero cycles, over its N + 1 programs); and at 1000 x 1000 one trial's
+steady state (`STEADY_SCRIPT`: CPU, wall and minor page faults per step after its first
+five steps, read by a progress callback) and the peak resident memory of its process.
 
 --before SRC: the ``src`` folder of the version to compare with, for example a
 worktree of the commit before a change (``git worktree add /tmp/before <commit>``).
@@ -73,9 +73,8 @@ SCRIPT = "{script}"
 
 
 def once(src: Path, args: list[str]) -> dict[str, float]:
-    """Wall and CPU seconds, minor page faults and peak resident memory of one
-    ``uavtrack args`` (or script: `SCRIPT`) with `src` first on the path. The faults
-    and CPU are of the process and its children; the peak is the largest child's."""
+    """Wall and CPU seconds and minor page faults of one ``uavtrack args`` (or script:
+    `SCRIPT`) with `src` first on the path, of the process and its children."""
     env = dict(os.environ, PYTHONPATH=str(src))
     with tempfile.TemporaryDirectory() as fresh:
         args = [str(Path(fresh) / "out") if a == FRESH else a for a in args]
@@ -88,12 +87,7 @@ def once(src: Path, args: list[str]) -> dict[str, float]:
     if done.returncode != 0:
         raise SystemExit(f"{' '.join(argv[:4])} ... failed in {src}:\n{done.stderr}")
     cpu = (after.ru_utime - before.ru_utime) + (after.ru_stime - before.ru_stime)
-    return {
-        "wall_s": wall,
-        "cpu_s": cpu,
-        "minor_faults": after.ru_minflt - before.ru_minflt,
-        "max_rss_mib": after.ru_maxrss / 1024,  # the largest child so far (Linux: KiB)
-    }
+    return {"wall_s": wall, "cpu_s": cpu, "minor_faults": after.ru_minflt - before.ru_minflt}
 
 
 def case(trees: dict[str, Path], args: list[str], repeats: int) -> dict[str, dict]:
@@ -176,11 +170,52 @@ def cycle(trees: dict[str, Path], n: int, repeats: int) -> dict[str, dict]:
     team, as shipped; at 1000 x 1000 also the peak resident memory of the longer run."""
     lengths = (3, 13) if n >= 1000 else (5, 35) if n >= 300 else (10, 60) if n >= 100 else (20, 320)
     team = ["run", "--team", f"{n}x{n}", "--json"]
-    out = per_unit(trees, lambda steps: team + ["--steps", str(steps)], lengths, repeats)
-    if n >= 1000:
+    return per_unit(trees, lambda steps: team + ["--steps", str(steps)], lengths, repeats)
+
+
+STEADY_SCRIPT = """
+import json, resource, time, uavtrack
+s = uavtrack.Scenario().scaled({n}, {n}).model_copy(update={{"steps": {steps}}})
+marks = []
+def progress(k):
+    use = resource.getrusage(resource.RUSAGE_SELF)
+    marks.append((time.process_time(), time.perf_counter(), use.ru_minflt))
+begun = (time.process_time(), time.perf_counter())
+uavtrack.run(s, "distributed", [0], progress=progress)
+steady = marks[{warm} - 1:]
+span = len(steady) - 1
+print(json.dumps({{
+    "cpu_s": (steady[-1][0] - steady[0][0]) / span,
+    "wall_s": (steady[-1][1] - steady[0][1]) / span,
+    "minor_faults": (steady[-1][2] - steady[0][2]) / span,
+    "first_steps_cpu_s": marks[{warm} - 1][0] - begun[0],
+    "max_rss_mib": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024,
+}}))
+"""
+"""One trial of n x n through `uavtrack.run` with a progress callback: the CPU and wall
+seconds and minor page faults per step after the first `warm` steps (each version's
+one-time set-up: the first arrays of a run, the solver's load), and the peak resident
+memory of the process."""
+
+
+def steady(trees: dict[str, Path], n: int, repeats: int, steps: int = 20, warm: int = 5) -> dict:
+    """Medians over `repeats` alternating runs of `STEADY_SCRIPT`, per tree."""
+    seen: dict[str, list[dict]] = {name: [] for name in trees}
+    code = STEADY_SCRIPT.format(n=n, steps=steps, warm=warm)
+    for _ in range(repeats):
         for name, src in trees.items():
-            out[name]["max_rss_mib"] = once(src, team + ["--steps", str(lengths[0])])["max_rss_mib"]
-    return out
+            env = dict(os.environ, PYTHONPATH=str(src))
+            done = subprocess.run(
+                [sys.executable, "-c", code], env=env, capture_output=True, text=True
+            )
+            if done.returncode != 0:
+                raise SystemExit(f"the steady-state run of {n}x{n} failed in {src}:\n{done.stderr}")
+            seen[name].append(json.loads(done.stdout))
+    return {
+        name: {key: statistics.median(r[key] for r in runs) for key in runs[0]}
+        | {"runs": len(runs), "steps": steps, "warm": warm}
+        for name, runs in seen.items()
+    }
 
 
 def compiled(src: Path) -> None:
@@ -258,10 +293,11 @@ def main() -> None:
             trees, vector_env, (5, 45), few + 2, 256 * 5
         ))  # fmt: skip
     if "swarm" in wanted:
-        say("swarm 5x4 over Zenoh, per cycle", per_unit(trees, swarm, (5, 45), few + 2, 1))
+        say("swarm 5x4 over Zenoh, per cycle", per_unit(trees, swarm, (5, 205), few + 2, 1))
     if "teams" in wanted:
         for n in TEAMS:
             say(f"distributed cycle, {n}x{n}", cycle(trees, n, few))
+        say("distributed cycle, 1000x1000, steady state", steady(trees, 1000, few))
     if "reproduce" in wanted:
         say("uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few))
         if not options.quick:

@@ -87,8 +87,8 @@ def grid_pairs(pos: np.ndarray, comm_range: float) -> tuple[np.ndarray, np.ndarr
     positions within it in 3-D are within it horizontally, so in the same or touching
     cells. Sorted by cell, each position meets the positions of its cell after it and
     of the touching cells of `_HALF_STENCIL` as index ranges of the sorted order.
-    As fast as scipy's k-d tree from a few hundred positions on (1.0x at 300, 1.2x
-    faster at 1000 to 10,000, on a spread team) and needs no scipy."""
+    It needs no scipy, and costs about what scipy's k-d tree does: 0.2 ms against 0.12
+    ms at 300 positions of a spread team, 1.2x less from 1,000 to 10,000."""
     n = len(pos)
     if n < 2:
         empty = np.zeros(0, dtype=np.intp)
