@@ -302,3 +302,36 @@ def test_the_drivers_time_on_the_callers_clock_and_without_one_give_zeros(monkey
     assignment.auction(large, np.ones((1, 20, 20), dtype=bool), clock=clock)
     assignment.auction(large, np.ones((1, 20, 20), dtype=bool), clock=clock)
     assert clock.set_ups == 1 and len(assignment._SOLVER) == 1
+
+
+def test_the_auction_on_lists_decides_as_the_arrays_do(monkeypatch):
+    """A few UAVs' auction runs on Python lists (`assignment.FEW`); the same problems on
+    the array path give the same targets, ties and unscored (NaN) bids included, and
+    the same refusal when a problem lacks the bids it needs."""
+    rng = np.random.default_rng(11)
+    compared = refused = 0
+    for t in range(1500):
+        B, n, m = int(rng.integers(1, 3)), int(rng.integers(1, 9)), int(rng.integers(1, 9))
+        if t % 3 == 0:
+            bids = rng.integers(0, 3, (B, n, m)).astype(float)  # ties everywhere
+        else:
+            bids = rng.random((B, n, m))
+        if t % 5 == 0:
+            bids[rng.random((B, n, m)) < 0.2] = np.nan
+        members = rng.random((B, n, n)) < 0.5
+        members |= members.transpose(0, 2, 1)
+        out = []
+        for few in (0, assignment.FEW):
+            monkeypatch.setattr(assignment, "FEW", few)
+            try:
+                out.append(assignment.auction(bids, members)[0])
+            except ValueError:
+                out.append(None)
+        monkeypatch.undo()
+        if out[0] is None or out[1] is None:
+            assert out[0] is None and out[1] is None
+            refused += 1
+        else:
+            assert np.array_equal(out[0], out[1])
+            compared += 1
+    assert compared > 1000 and refused > 20

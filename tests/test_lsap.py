@@ -72,7 +72,7 @@ def test_bad_input_and_large_problems():
     rows, cols = lsap.solve(np.zeros((0, 3)))
     assert rows.size == cols.size == 0
     big = np.random.default_rng(2).normal(size=(30, 40))  # past SMALL: scipy's solver
-    assert 30 * 40 * 30 > lsap.SMALL
+    assert not lsap.small(30, 40) and lsap.small(5, 20)
     want = linear_sum_assignment(big)
     got = lsap.solve(big)
     np.testing.assert_array_equal(got[1], want[1])

@@ -79,20 +79,11 @@ NO_CLOCK = _NoClock()
 """The clock of a caller that passes none: the solves' seconds are zeros."""
 
 
-class _SetUpOnly:
+class _SetUpOnly(_NoClock):
     """A caller's clock for its set-up alone: nothing is read, every duration is zero."""
 
     def __init__(self, clock: Clock) -> None:
         self._clock = clock
-
-    def start(self) -> None:
-        return None
-
-    def since(self, mark: Any) -> np.ndarray:
-        return np.zeros(2)
-
-    def tick(self) -> float:
-        return 0.0
 
     def set_up(self) -> AbstractContextManager[None]:
         return self._clock.set_up()
@@ -123,7 +114,7 @@ def linear_sum_assignment(
     one, `scipy.optimize` imported on first use (about half a second: set-up on the
     caller's `clock`, not a decision's time). Batches of trials solve their problems by
     `solve_many`, without it unless bids tie."""
-    if cost.shape[0] * cost.shape[1] * min(cost.shape) <= lsap.SMALL:
+    if lsap.small(*cost.shape):
         return lsap.solve_lists(cost.tolist(), maximize)
     return load_solver(clock)(cost, maximize=maximize)
 
@@ -608,8 +599,7 @@ def _solve_lists(bids: list[list[float]], clock: Clock) -> list[int]:
 
 def _exact(problem: list[list[float]], clock: Clock) -> tuple[np.ndarray, np.ndarray]:
     """`linear_sum_assignment(maximize=True)` of a problem given as lists."""
-    n, m = len(problem), len(problem[0])
-    if n * m * min(n, m) <= lsap.SMALL:
+    if lsap.small(len(problem), len(problem[0])):
         return lsap.solve_lists(problem, True)
     return load_solver(clock)(np.array(problem), maximize=True)
 

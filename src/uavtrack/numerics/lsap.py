@@ -40,6 +40,11 @@ takes about 2 ms here)."""
 INF = math.inf
 
 
+def small(rows: int, columns: int) -> bool:
+    """Whether a problem of this size is `SMALL`: solved here rather than by scipy."""
+    return rows * columns * min(rows, columns) <= SMALL
+
+
 def solve(cost: Any, maximize: bool = False) -> tuple[np.ndarray, np.ndarray]:
     """(rows, columns) of a least-cost (most with `maximize`) assignment of min(n, m)
     pairs of the (n, m) matrix `cost`, rows in increasing order: scipy's
@@ -47,8 +52,7 @@ def solve(cost: Any, maximize: bool = False) -> tuple[np.ndarray, np.ndarray]:
     matrix = np.asarray(cost, dtype=float)
     if matrix.ndim != 2:
         raise ValueError(f"expected a matrix (2-d array), got a {matrix.ndim}-d array")
-    n, m = matrix.shape
-    if n * m * min(n, m) > SMALL:
+    if not small(*matrix.shape):
         from scipy.optimize import linear_sum_assignment  # pyright: ignore[reportMissingTypeStubs]
 
         rows, cols = linear_sum_assignment(matrix, maximize=maximize)
