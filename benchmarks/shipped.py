@@ -109,8 +109,11 @@ def case(trees: dict[str, Path], args: list[str], repeats: int) -> dict[str, dic
 
 
 def per_unit(
-    trees: dict[str, Path], make: Callable[[int], list[str]], lengths: tuple[int, int],
-    repeats: int, units: int = 1,
+    trees: dict[str, Path],
+    make: Callable[[int], list[str]],
+    lengths: tuple[int, int],
+    repeats: int,
+    units: int = 1,
 ) -> dict[str, dict]:
     """CPU and wall seconds (and minor faults) per step, of `make(steps)` run at two
     lengths, by their difference (start-up and set-up cancel), over `units` per step;
@@ -218,6 +221,13 @@ def steady(trees: dict[str, Path], n: int, repeats: int, steps: int = 20, warm: 
     }
 
 
+def write_json(path: Path, results: dict) -> None:
+    """`results` as indented JSON at `path`, replaced whole (a new file renamed over it)."""
+    part = path.with_name(path.name + ".part")
+    part.write_text(json.dumps(results, indent=1) + "\n")
+    part.replace(path)
+
+
 def compiled(src: Path) -> None:
     """Compile a tree's sources to bytecode, as an install does."""
     subprocess.run([sys.executable, "-m", "compileall", "-q", str(src / "uavtrack")], check=True)
@@ -250,9 +260,14 @@ def main() -> None:
             parser.error(f"--before {options.before}: not a src folder holding uavtrack")
         trees = {"before": options.before.resolve(), "this": HERE}
     few = 1 if options.quick else 3
+    wanted = set(options.only or GROUPS)
+    for path in (options.json, options.figure):
+        if path is not None and not path.resolve().parent.is_dir():
+            parser.error(f"{path}: its folder does not exist")
+    if options.figure is not None and "teams" not in wanted:
+        parser.error("--figure draws the teams' cycles: give it with the teams group")
     for src in trees.values():
         compiled(src)
-    wanted = set(options.only or GROUPS)
     results: dict = {
         "machine": {
             "cores": os.cpu_count(),
@@ -270,6 +285,9 @@ def main() -> None:
 
     def say(name: str, row: dict) -> None:
         cases[name] = row
+        if options.json is not None:  # after every case: a later failure loses nothing
+            write_json(options.json, results)
+
         def one(v: dict) -> str:
             text = f"{v['cpu_s'] * 1e3:.4g} ms CPU, {v['wall_s'] * 1e3:.4g} ms wall"
             if "start_cpu_s" in v:
@@ -288,7 +306,10 @@ def main() -> None:
         say("uavtrack run --set steps=1 (start-up)", case(trees, start, few + 4))
         say("uavtrack run (one default trial)", case(trees, ["run", "--json"], few + 4))
     if "env" in wanted:
-        say("single parallel_env, per agent-step", per_unit(trees, single_env, (20, 1020), few + 2, 5))
+        say(
+            "single parallel_env, per agent-step",
+            per_unit(trees, single_env, (20, 1020), few + 2, 5),
+        )
         say("vector_env 256 trials, per agent-step", per_unit(
             trees, vector_env, (5, 45), few + 2, 256 * 5
         ))  # fmt: skip
@@ -299,11 +320,12 @@ def main() -> None:
             say(f"distributed cycle, {n}x{n}", cycle(trees, n, few))
         say("distributed cycle, 1000x1000, steady state", steady(trees, 1000, few))
     if "reproduce" in wanted:
-        say("uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few))
+        say(
+            "uavtrack reproduce --quick", case(trees, ["reproduce", "--quick", "--out", FRESH], few)
+        )
         if not options.quick:
             say("uavtrack reproduce", case(trees, ["reproduce", "--out", FRESH], 1))
     if options.json is not None:
-        options.json.write_text(json.dumps(results, indent=1) + "\n")
         print(f"wrote {options.json}", file=sys.stderr)
     if options.figure is not None and "teams" in wanted:
         figure(results, options.figure)

@@ -56,9 +56,15 @@ def test_optimal_against_brute_force():
         rows, cols = lsap.solve(cost)
         assert len(set(cols.tolist())) == len(cols) == min(n, m)
         if n <= m:
-            best = min(sum(cost[i, c] for i, c in enumerate(p)) for p in itertools.permutations(range(m), n))
+            best = min(
+                sum(cost[i, c] for i, c in enumerate(p))
+                for p in itertools.permutations(range(m), n)
+            )
         else:
-            best = min(sum(cost[r, j] for j, r in enumerate(p)) for p in itertools.permutations(range(n), m))
+            best = min(
+                sum(cost[r, j] for j, r in enumerate(p))
+                for p in itertools.permutations(range(n), m)
+            )
         assert cost[rows, cols].sum() == pytest.approx(best, abs=1e-12)
 
 

@@ -22,8 +22,8 @@ from typing import TYPE_CHECKING, NamedTuple
 import numpy as np
 from numpy.typing import ArrayLike
 
-from .numerics import chisquare, lsap
 from .estimation import confidence, nees
+from .numerics import chisquare, lsap
 
 if TYPE_CHECKING:
     from .simulation import Cycle

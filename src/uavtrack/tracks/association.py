@@ -41,8 +41,8 @@ from functools import lru_cache
 
 import numpy as np
 
-from ..numerics import chisquare, lsap
 from ..estimation import filter_step, update
+from ..numerics import chisquare, lsap
 
 LBP_TOLERANCE = 1e-13
 """Loopy belief propagation stops when no message changes by more than this (relative)."""
@@ -103,8 +103,9 @@ def innovations(mean: np.ndarray, cov: np.ndarray, z: np.ndarray, R: np.ndarray)
 
 @lru_cache(maxsize=32)
 def threshold(gate_probability: float, dim: int = 2) -> float:
-    """The gate gamma = chi2.ppf(P_G, dim) (`chisquare.ppf`): a measurement of the track falls inside
-    d2 <= gamma with probability P_G (d2 is chi-square with dim degrees of freedom)."""
+    """The gate gamma = chi2.ppf(P_G, dim) (`chisquare.ppf`): a measurement of the track
+    falls inside d2 <= gamma with probability P_G (d2 is chi-square with dim degrees of
+    freedom)."""
     _check_gate(gate_probability)
     return chisquare.ppf(gate_probability, dim)
 
