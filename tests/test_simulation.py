@@ -492,3 +492,37 @@ def test_buffers_hand_each_role_two_arrays_in_turn():
     assert other is not first and other is not second
     assert pool.take("a", (3,)) is not pool.take("a", (3,))  # small: always new
     assert take(None, "a", shape).shape == shape
+
+
+def test_a_run_writes_its_predictions_and_fusion_into_two_arrays_in_turn(monkeypatch):
+    """The memory a large run reuses (page faults are measured by
+    benchmarks/shipped.py, not here): from its third step on, the predicted and the
+    fused covariances of every step are written into one of the same two arrays."""
+    from uavtrack import _process, estimation, fusion
+    from uavtrack.numerics import buffers
+
+    monkeypatch.setattr(buffers, "SMALLEST", 0)
+    written: dict[str, list[int]] = {"predicted": [], "fused": []}
+    predict, gather = estimation.predict, fusion.gather
+
+    def spy_predict(*args, **kwargs):
+        out = predict(*args, **kwargs)
+        written["predicted"].append(out[1].__array_interface__["data"][0])
+        return out
+
+    def spy_gather(source, values, out=None):
+        got = gather(source, values, out)
+        if values.ndim == 5:
+            written["fused"].append(got.__array_interface__["data"][0])
+        return got
+
+    monkeypatch.setattr(estimation, "predict", spy_predict)
+    monkeypatch.setattr(fusion, "gather", spy_gather)
+    uavtrack.run(uavtrack.Scenario(steps=12), "distributed", [0])
+    for role, addresses in written.items():
+        assert len(addresses) == 12, role
+        first, second = addresses[0], addresses[1]
+        assert first != second, role
+        assert addresses == [first, second] * 6, role
+    assert _process.keep_freed_memory() == sys.platform.startswith("linux")
+    assert _process.keep_freed_memory() == _process.keep_freed_memory()  # set once

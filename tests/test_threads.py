@@ -135,25 +135,3 @@ def test_help_of_a_command_loads_neither_numpy_nor_the_scenario_model():
     )
     subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
 
-
-def test_a_large_run_faults_no_fresh_page_per_step():
-    """A run of a large state writes into memory it already has: its full-size arrays
-    are reused (`numerics.buffers`) and freed memory is kept (`_process.keep_freed_memory`),
-    so once the heap has grown to the run's needs a step maps no fresh page (thousands
-    per step otherwise). The median step: the heap still grows now and then early on."""
-    code = (
-        "import resource, statistics, uavtrack\n"
-        "s = uavtrack.Scenario().scaled(720, 720).model_copy(update={'steps': 14})\n"
-        "marks = []\n"
-        "progress = lambda k: marks.append(resource.getrusage(resource.RUSAGE_SELF).ru_minflt)\n"
-        "uavtrack.run(s, 'distributed', [0], progress=progress)\n"
-        "print(statistics.median(b - a for a, b in zip(marks[4:], marks[5:])))\n"
-        "print(uavtrack._process.keep_freed_memory())\n"
-    )
-    out = subprocess.run(
-        [sys.executable, "-c", code], capture_output=True, text=True, check=True
-    ).stdout.split()
-    kept = out[1] == "True"
-    assert kept == sys.platform.startswith("linux")
-    if kept:
-        assert float(out[0]) < 200
