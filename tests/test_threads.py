@@ -134,4 +134,3 @@ def test_help_of_a_command_loads_neither_numpy_nor_the_scenario_model():
         "assert not {'numpy', 'uavtrack.config'} & set(sys.modules)\n"
     )
     subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
-
