@@ -107,16 +107,18 @@ def charged(wall: np.ndarray, clock: Clock, stage: Any) -> np.ndarray:
 
 
 def linear_sum_assignment(
-    cost: np.ndarray, maximize: bool = False, clock: Clock | None = None
+    cost: np.ndarray | list[list[float]], maximize: bool = False, clock: Clock | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
     """The exact solver: scipy's `linear_sum_assignment`, computed in plain Python for a
     small problem (`lsap`, the same answers, ties included) and by scipy for a larger
     one, `scipy.optimize` imported on first use (about half a second: set-up on the
-    caller's `clock`, not a decision's time). Batches of trials solve their problems by
-    `solve_many`, without it unless bids tie."""
-    if lsap.small(*cost.shape):
-        return lsap.solve_lists(cost.tolist(), maximize)
-    return load_solver(clock)(cost, maximize=maximize)
+    caller's `clock`, not a decision's time). `cost` an array or a list of rows. Batches
+    of trials solve their problems by `solve_many`, without it unless bids tie."""
+    listed = isinstance(cost, list)
+    shape = (len(cost), len(cost[0])) if listed else cost.shape
+    if lsap.small(*shape):
+        return lsap.solve_lists(cost if listed else cost.tolist(), maximize)
+    return load_solver(clock)(np.asarray(cost, dtype=float), maximize=maximize)
 
 
 Solver = Callable[[np.ndarray], np.ndarray]
@@ -582,26 +584,19 @@ def _solve_lists(bids: list[list[float]], clock: Clock) -> list[int]:
         for line, row, b in zip(problem, bids, best, strict=True):
             for c in b:
                 line[place[c]] = row[c]
-        cols = _exact(problem, clock)[1]
+        cols = linear_sum_assignment(problem, True, clock)[1]
         return [columns[c] for c in cols.tolist()]
     if any(x != x for row in bids for x in row):
         raise ValueError(f"{k} rows and {m} columns: every bid must be scored (not NaN)")
     choice = [0] * k
     left = list(range(k))
     while left:
-        rows, cols = _exact([bids[r] for r in left], clock)
+        rows, cols = linear_sum_assignment([bids[r] for r in left], True, clock)
         for r, c in zip(rows.tolist(), cols.tolist(), strict=True):
             choice[left[r]] = c
         taken = set(rows.tolist())
         left = [r for x, r in enumerate(left) if x not in taken]
     return choice
-
-
-def _exact(problem: list[list[float]], clock: Clock) -> tuple[np.ndarray, np.ndarray]:
-    """`linear_sum_assignment(maximize=True)` of a problem given as lists."""
-    if lsap.small(len(problem), len(problem[0])):
-        return lsap.solve_lists(problem, True)
-    return load_solver(clock)(np.array(problem), maximize=True)
 
 
 def _distinct(

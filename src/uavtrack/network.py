@@ -103,10 +103,10 @@ def grid_pairs(pos: np.ndarray, comm_range: float) -> tuple[np.ndarray, np.ndarr
     order = np.argsort(key, kind="stable")
     sorted_key = key[order]
     everyone = np.arange(n)
-    firsts: list[np.ndarray] = []
-    seconds: list[np.ndarray] = []
+    firsts: list[np.ndarray] = [np.zeros(0, dtype=np.intp)]
+    seconds: list[np.ndarray] = [np.zeros(0, dtype=np.intp)]
     for dx, dy in _HALF_STENCIL:
-        target = key[order] + (dx * width + dy)
+        target = sorted_key + (dx * width + dy)
         if dx == dy == 0:  # the same cell: the positions after this one in the order
             start = everyone + 1
         else:
@@ -119,9 +119,6 @@ def grid_pairs(pos: np.ndarray, comm_range: float) -> tuple[np.ndarray, np.ndarr
         offset = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
         firsts.append(np.repeat(order, count))
         seconds.append(order[np.repeat(start, count) + offset])
-    if not firsts:
-        empty = np.zeros(0, dtype=np.intp)
-        return empty, empty.copy()
     return np.concatenate(firsts), np.concatenate(seconds)
 
 
