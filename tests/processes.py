@@ -18,6 +18,29 @@ def children_of(pid: int) -> list[int]:
     return found
 
 
+def descendants_of(pid: int) -> list[int]:
+    """Pids of the processes below `pid`: its children, theirs, and so on."""
+    found, level = [], children_of(pid)
+    while level:
+        found += level
+        level = [grandchild for child in level for grandchild in children_of(child)]
+    return found
+
+
+def programs_of(pid: int) -> dict[int, int]:
+    """The swarm programs below process `pid`, by program number, from their process
+    names (``uavtrack-<number>``, `uavtrack.agents.launcher.NAME`)."""
+    found = {}
+    for child in descendants_of(pid):
+        try:
+            name = Path(f"/proc/{child}/comm").read_text().strip()
+        except OSError:
+            continue
+        if name.startswith("uavtrack-") and name[len("uavtrack-") :].isdigit() and alive(child):
+            found[int(name[len("uavtrack-") :])] = child
+    return found
+
+
 def alive(pid: int) -> bool:
     """Whether process `pid` exists and is not a zombie."""
     try:

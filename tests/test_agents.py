@@ -18,7 +18,7 @@ from uavtrack.agents.security import WORLD, Envelope, Gate
 from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
 from uavtrack.testing import assert_same_trace
 
-from .processes import alive, children_of, wait_until
+from .processes import alive, descendants_of, programs_of, wait_until
 
 pytestmark = pytest.mark.integration  # the agent form against real deadlines
 
@@ -428,8 +428,8 @@ def test_ctrl_c_stops_every_program(tmp_path):
         stderr=subprocess.PIPE,
         text=True,
     )
-    assert wait_until(lambda: len(children_of(proc.pid)) >= 5)
-    programs = children_of(proc.pid)
+    assert wait_until(lambda: len(programs_of(proc.pid)) >= 5)
+    programs = descendants_of(proc.pid)  # the launcher and its programs
     proc.send_signal(signal.SIGINT)
     _, err = proc.communicate(timeout=120)
     assert proc.returncode == 130 and err.strip().startswith("uavtrack: interrupted")
@@ -443,8 +443,8 @@ def test_a_swarm_killed_while_starting_takes_its_programs_with_it():
         stdout=subprocess.DEVNULL,
         stderr=subprocess.DEVNULL,
     )
-    assert wait_until(lambda: len(children_of(proc.pid)) >= 8)
-    programs = children_of(proc.pid)
+    assert wait_until(lambda: len(programs_of(proc.pid)) >= 8)
+    programs = descendants_of(proc.pid)  # the launcher and its programs
     proc.kill()  # SIGKILL: no cleanup of its own; the programs must notice
     proc.wait()
     # the kernel's parent-death signal ends them at once; the watch within a second

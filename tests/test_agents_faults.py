@@ -20,7 +20,7 @@ import uavtrack
 from uavtrack.agents import run_swarm
 from uavtrack.errors import RunError
 
-from .processes import alive, children_of, wait_until
+from .processes import alive, programs_of, wait_until
 
 pytest.importorskip("zenoh")
 
@@ -28,16 +28,8 @@ pytestmark = pytest.mark.integration  # swarms of programs over Zenoh
 
 
 def program_pids():
-    """This process's spawned programs by number (from their command lines)."""
-    found = {}
-    for pid in children_of(os.getpid()):
-        try:
-            argv = Path(f"/proc/{pid}/cmdline").read_bytes().split(b"\0")
-        except OSError:
-            continue
-        if b"uavtrack.agents" in argv:
-            found[int(argv[argv.index(b"uavtrack.agents") + 2])] = pid
-    return found
+    """This process's spawned programs by number."""
+    return programs_of(os.getpid())
 
 
 def swarm_with(scenario, method="distributed", act=None, at=None, between=False, **options):

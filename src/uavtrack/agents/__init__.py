@@ -13,7 +13,8 @@
 * `security`: keys, message authentication and replay windows (`Gate`);
 * `transport`: the in-process bus and Zenoh (peer mode, optionally TLS), the `Mailbox`;
 * `swarm`: `run_swarm`, which starts and stops everything;
-* `program`: the main loop of one program (``python -m uavtrack.agents``).
+* `program`: the main loop of one program (``python -m uavtrack.agents``);
+* `launcher`: the process that forks a swarm's programs from modules loaded once.
 
 With the same seed, scenario and faults, a swarm's trace equals `uavtrack.simulate`'s.
 """

@@ -1,11 +1,14 @@
-"""``python -m uavtrack.agents RUN PROGRAM``: one program of a swarm over Zenoh, started
-by `uavtrack swarm` (`uavtrack agent` is the documented way to start one by hand).
+"""``python -m uavtrack.agents RUN PROGRAM``: one program of a swarm over Zenoh
+(`uavtrack agent` is the documented way to start one by hand).
 
 Its spec comes as one JSON line on standard input, read before anything heavy is
 imported: the run, the program's number, the endpoints, Zenoh's options, the program's
 key (`security.Credential`) and the pid of the process that started it. It ends with
 that process: at once if it is already gone, otherwise as soon as it goes (the kernel's
 parent-death signal where there is one, and a watch every half second).
+
+``python -m uavtrack.agents --launcher FD PARENT``: the launcher `uavtrack swarm` starts,
+which forks its programs (`launcher`); each runs `run_program` with its spec.
 """
 
 import json
@@ -15,12 +18,22 @@ from .._process import die_with
 
 
 def main() -> int:
+    if len(sys.argv) == 4 and sys.argv[1] == "--launcher":
+        from .launcher import main as launch
+
+        return launch(int(sys.argv[2]), int(sys.argv[3]))
     try:
         spec = json.loads(sys.stdin.readline())
     except (ValueError, OSError):
         print("uavtrack.agents: expected the program's spec on standard input", file=sys.stderr)
         return 2
-    die_with(int(spec["parent"]))
+    return run_program(spec, int(spec["parent"]))
+
+
+def run_program(spec: dict, parent: int) -> int:
+    """Run one program with `spec` (see the module doc) until its run ends; it ends with
+    process `parent`. Its exit code."""
+    die_with(parent)
     from .program import serve
     from .security import Credential
     from .transport import ZenohOptions, ZenohTransport, zenoh_reason

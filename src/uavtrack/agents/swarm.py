@@ -2,8 +2,9 @@
 
 * ``memory``: every program in a thread of this process, on an in-process bus
   (deterministic; for tests and quick runs).
-* ``zenoh``: one OS process per program (``python -m uavtrack.agents``), peer mode on
-  loopback endpoints; the world listens, the programs connect to it. Every process
+* ``zenoh``: one OS process per program, peer mode on loopback endpoints; the world
+  listens, the programs connect to it. The programs are forked by one launcher process
+  that loaded their modules once (`launcher`), so each starts in milliseconds. Every process
   started here is stopped here, by pid: at the end, on an error, on Ctrl-C. A program
   whose parent dies, or whose world is gone, stops by itself.
 
@@ -14,7 +15,6 @@ copies to the machines of the programs), so only the run's members can speak in 
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import secrets
@@ -34,6 +34,7 @@ from ..config import Scenario
 from ..errors import RunError, UsageError, install_hint
 from ..methods import get
 from ..simulation import Result, result_of
+from .launcher import Forked, Launcher
 from .program import serve
 from .security import Keyring
 from .transport import Bus, MemoryTransport, ZenohOptions, ZenohTransport, zenoh_reason
@@ -220,11 +221,14 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
             raise UsageError(f"cannot connect to {where}: {reason}") from None
         raise UsageError(f"cannot listen on {endpoint}: {reason}") from None
     children: list[Child] = []
+    launcher: Launcher | None = None
     written: list[Path] = []
     quoted: set[int] = set()  # programs whose words the error already quotes
     finished = False
     clock = None
     try:
+        if o.spawn:  # loads the programs' modules while the world sets up
+            launcher = Launcher()
         link.announce(f"uavtrack/{run}/alive/world")
         world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup, keyring)
         if o.ros2 is not None:
@@ -236,7 +240,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
             written = write_keys(keyring, programs, o.keys)
         if o.announce is not None:
             o.announce(run, endpoint, written)
-        if o.spawn:
+        if launcher is not None:
             for me in programs:
                 spec = {
                     "run": run,
@@ -247,7 +251,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
                     "parent": os.getpid(),
                     "ros2": o.ros2,
                 }
-                children.append(Child.start(me, spec))
+                children.append(Child.start(me, spec, launcher))
 
         def check() -> None:
             ended = [c for c in children if c.process.poll() is not None]
@@ -272,6 +276,8 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         link.close()  # the programs see the world gone and end
         # after the last cycle they finish by themselves; on an error or Ctrl-C, at once
         stop([c.process for c in children], grace=o.deadline + 3.0 if finished else 0.0)
+        if launcher is not None:
+            launcher.close()
         for path in written:
             path.unlink(missing_ok=True)
         _forward([c for c in children if c.me not in quoted])
@@ -298,30 +304,22 @@ def write_keys(keyring: Keyring, programs: list[int], folder: Path) -> list[Path
 
 @dataclass
 class Child:
-    """A spawned program: its process and the file its standard error goes to (already
-    unlinked: it goes with the last process that holds it, whatever ends this one)."""
+    """A spawned program: its process (forked by the `launcher.Launcher`) and the file its
+    standard error goes to (already unlinked: it goes with the last process that holds
+    it, whatever ends this one)."""
 
     me: int
-    process: subprocess.Popen
+    process: Forked
     log: Any
 
     @classmethod
-    def start(cls, me: int, spec: dict) -> Child:
+    def start(cls, me: int, spec: dict, launcher: Launcher) -> Child:
         log = tempfile.TemporaryFile(prefix="uavtrack-program-")
-        process = subprocess.Popen(
-            [sys.executable, "-m", "uavtrack.agents", spec["run"], str(me)],
-            stdin=subprocess.PIPE,
-            stdout=subprocess.DEVNULL,
-            stderr=log,
-            start_new_session=True,  # Ctrl-C is the swarm's to handle
-        )
-        assert process.stdin is not None  # stdin=PIPE
-        try:  # the program's spec and key, through a pipe only it reads
-            process.stdin.write((json.dumps(spec) + "\n").encode())
-            process.stdin.close()
-        except OSError:  # it died at once; what it printed tells why
-            pass
-        return cls(me, process, log)
+        try:
+            return cls(me, launcher.start(me, spec, log), log)
+        except BaseException:
+            log.close()
+            raise
 
     def printed(self) -> list[str]:
         """The lines the program printed on its standard error."""
@@ -333,11 +331,6 @@ class Child:
         return data.decode(errors="replace").strip().splitlines()
 
     def close(self) -> None:
-        if self.process.stdin is not None and not self.process.stdin.closed:
-            try:
-                self.process.stdin.close()
-            except OSError:
-                pass
         self.log.close()
 
 
@@ -351,7 +344,8 @@ def said_by(children: list[Child]) -> str:
     parts = []
     for text, group in sayings.items():
         who = ", ".join(str(c.me) for c in group)
-        codes = ", ".join(str(code) for code in sorted({c.process.returncode for c in group}))
+        ended = {code for c in group if (code := c.process.returncode) is not None}
+        codes = ", ".join(str(code) for code in sorted(ended)) or "none yet"
         name = "program" if len(group) == 1 else "programs"
         parts.append(
             f"{name} {who} (exit code {codes}) " + (f"said: {text}" if text else "printed nothing")
@@ -359,7 +353,7 @@ def said_by(children: list[Child]) -> str:
     return "; ".join(parts)
 
 
-def wait_for(processes: list[subprocess.Popen], seconds: float) -> None:
+def wait_for(processes: list[Forked], seconds: float) -> None:
     """Wait until every process has ended, or `seconds` have passed."""
     limit = time.monotonic() + seconds
     for process in processes:
@@ -381,7 +375,7 @@ def _forward(children: list[Child], lines: int = 20) -> None:
                 print(f"  {line}", file=sys.stderr)
 
 
-def stop(children: list[subprocess.Popen], grace: float = 5.0) -> None:
+def stop(children: list[Forked], grace: float = 5.0) -> None:
     """Stop the processes started here, by pid: let them finish, then terminate, then kill."""
     wait_for(children, grace)
     for child in children:
