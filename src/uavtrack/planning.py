@@ -263,9 +263,13 @@ def plan_top(
     values (action and sequence -1) where a target was not scored.
     """
     lead, nt = uavs.shape[:-1], mean.shape[-2]
+    top = np.asarray(top)
+    if nt <= PRUNE_SLACK + 1 or bool((top >= nt - PRUNE_SLACK).all()):
+        # every UAV's first pass covers all targets (a small team's always): the full search
+        return plan(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, None, drift)
     rows = int(np.prod(lead))
     flat_uavs, flat_mean = uavs.reshape(rows, 5), mean.reshape(rows, nt, 4)
-    need = np.clip(np.asarray(top).reshape(rows), 1, nt)
+    need = np.clip(top.reshape(rows), 1, nt)
     value = np.full((rows, nt), np.nan)
     action = np.full((rows, nt), -1, dtype=np.int64)
     sequence = np.full((rows, nt), -1, dtype=np.int64)

@@ -5,7 +5,7 @@ pydantic, msgspec, Zenoh and the model before it does anything, and a swarm star
 them. `uavtrack swarm` instead starts one *launcher* (``python -m uavtrack.agents
 --launcher FD``), which imports all of that once and then forks one child per program:
 the children share the loaded modules and start in milliseconds. A child then runs
-exactly what a program started by hand runs (`__main__.run_program`): it opens its own
+exactly what a program started by hand runs (`run_program`): it opens its own
 Zenoh session after the fork (nothing of Zenoh runs in the launcher, which never opens
 one), joins the world and serves.
 
@@ -201,6 +201,49 @@ class Forked:
 # ------------------------------------------------------------------ the launcher process
 
 
+def run_program(spec: dict, parent: int) -> int:
+    """Run one program with `spec` until its run ends (what ``python -m uavtrack.agents``
+    runs, and each forked child): the run, the program's number, the endpoints, Zenoh's
+    options, its key; it ends with process `parent`. Its exit code."""
+    from .._process import die_with
+
+    die_with(parent)
+    from .program import serve
+    from .security import Credential
+    from .transport import ZenohOptions, ZenohTransport, zenoh_reason
+
+    credential = Credential.from_json(spec["credential"]) if spec["credential"] else None
+    options = ZenohOptions(**spec["zenoh"])
+    try:  # this program's own TLS files, named if its peers would refuse them
+        options.check(spec["connect"])
+    except ValueError as exc:
+        print(f"program {spec['program']}: {exc}", file=sys.stderr)
+        return 2
+    try:
+        transport = ZenohTransport([], spec["connect"], options)
+    except Exception as exc:  # the world is already gone, or its endpoint refuses
+        print(f"program {spec['program']}: cannot join: {zenoh_reason(exc)}", file=sys.stderr)
+        return 1
+    try:
+        served = serve(
+            transport,
+            spec["run"],
+            int(spec["program"]),
+            credential=credential,
+            ros2=spec.get("ros2"),
+        )
+    except KeyboardInterrupt:
+        return 130
+    finally:
+        transport.close()
+    if served.end in ("done", "failed"):
+        return 0
+    at = f" at step {served.at}" if served.at >= 0 else ""
+    why = f": {served.why}" if served.why else ""
+    print(f"program {spec['program']}: {served.end}{at}{why}", file=sys.stderr)
+    return 1
+
+
 def main(fd: int, parent: int) -> int:
     """The launcher: load the programs' modules, then fork one per start request until the
     socket `fd` closes. `parent`: the pid of ``uavtrack swarm``, whose end is its own."""
@@ -299,8 +342,6 @@ def _fork(spec: dict, log: int, link: socket.socket, wake: tuple[int, int]) -> i
         os.close(null)
         _name(NAME % int(spec["program"]))
         os.close(named)
-        from .__main__ import run_program
-
         code = run_program(spec, os.getppid())
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else 1
