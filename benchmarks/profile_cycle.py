@@ -16,18 +16,22 @@ import time
 import uavtrack
 from uavtrack.config import parse_value
 
-STAGES = {  # stage: (module, function) of the cycle whose cumulative time is the stage's
+STAGES = {  # stage: (module path, function) of the cycle whose cumulative time is the stage's
     "graph": (("network", "radio_links"),),
-    "sensing": (("simulation", "sense"),),
+    "sensing": (("simulation", "observe"), ("simulation", "convert")),
     "filter": (("estimation", "filter_step"),),
     "confidence": (("estimation", "confidence"),),
-    "fusion": (("methods", "fuse"),),
+    "fusion": (("methods/base", "fuse"), ("methods/centralized", "fuse")),
     "planning": (("simulation", "_plan"),),
-    "auction": (("methods", "assign"),),
-    "control": (("world", "fly"),),
+    "auction": tuple(
+        (f"methods/{name}", "assign") for name in ("distributed", "centralized", "greedy")
+    ),
+    "control": (("flight/unicycle", "fly"), ("flight/jsbsim", "fly")),
+    "prediction": (("estimation", "close"),),
     "metrics": (("metrics", "add"),),
     "noise": (("simulation", "sensor_noise"),),
 }
+"""A module path is relative to the package (``methods/base`` is uavtrack/methods/base.py)."""
 
 
 def profile(

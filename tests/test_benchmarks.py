@@ -79,3 +79,21 @@ def test_sensing_benchmark_prints_the_ratio_and_writes_only_where_asked(tmp_path
         assert row["ratio"] == pytest.approx(row["jpda_cpu_s"] / row["known_cpu_s"])
     bad = run("sensing.py", tmp_path / "c", "--steps", "0")
     assert bad.returncode == 2 and "at least 1" in bad.stderr
+
+
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_the_cycle_profile_finds_every_stage_of_each_method(method, tmp_path):
+    # a stage function renamed or moved would leave its stage at zero and its time in
+    # "other"; the noise stage is the only one a short run may not reach measurably
+    done = run("profile_cycle.py", tmp_path, method, "1", "steps=20")
+    assert done.returncode == 0, done.stderr
+    shown = {
+        line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()[1:]
+    }
+    stages = set(shown) - {"total", "other", "noise"}
+    assert stages == {
+        "graph", "sensing", "filter", "confidence", "fusion", "planning", "auction",
+        "control", "prediction", "metrics",
+    }  # fmt: skip
+    assert all(shown[stage] > 0 for stage in stages), shown
+    assert files_in(tmp_path) == ["benchmarks/profile_cycle.py"]
