@@ -87,9 +87,7 @@ def test_the_cycle_profile_finds_every_stage_of_each_method(method, tmp_path):
     # "other"; the noise stage is the only one a short run may not reach measurably
     done = run("profile_cycle.py", tmp_path, method, "1", "steps=20")
     assert done.returncode == 0, done.stderr
-    shown = {
-        line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()[1:]
-    }
+    shown = {line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()[1:]}
     stages = set(shown) - {"total", "other", "noise"}
     assert stages == {
         "graph", "sensing", "filter", "confidence", "fusion", "planning", "auction",

@@ -11,12 +11,14 @@ from dataclasses import asdict
 
 import pytest
 
-from uavtrack.agents.launcher import NAME, Launcher
+import uavtrack
+from uavtrack.agents import run_swarm
+from uavtrack.agents.launcher import LAUNCHER, NAME, Launcher
 from uavtrack.agents.swarm import free_port
 from uavtrack.agents.transport import ZenohOptions
 from uavtrack.errors import RunError
 
-from .processes import alive, children_of, wait_until
+from .processes import alive, children_of, descendants_of, programs_of, wait_until
 
 pytest.importorskip("zenoh")
 
@@ -121,7 +123,30 @@ def test_a_killed_launcher_takes_its_programs_and_says_so(waiting):
             # its end reaches us as the socket closing; the program's parent-death signal
             assert program.wait(timeout=60) == -signal.SIGKILL
             assert wait_until(lambda: not alive(program.pid), limit=30)
-            with pytest.raises(RunError, match="launcher is gone"):
+            with pytest.raises(RunError, match=r"launcher ended \(killed by SIGKILL\)"):
                 made.start(5, spec(5, [waiting]), log)
     finally:
         made.close()
+
+
+def test_a_swarm_whose_launcher_is_killed_ends_at_once_with_one_line():
+    # every UAV program ends with the launcher: the run cannot go on, and says why
+    seen = {}
+
+    def progress(k):
+        if k == 3:
+            below = descendants_of(os.getpid())
+            seen["programs"] = set(programs_of(os.getpid()).values())
+            names = {pid: open(f"/proc/{pid}/comm", "rb").read().strip() for pid in below}
+            (launcher,) = [pid for pid, name in names.items() if name == LAUNCHER]
+            seen["launcher"] = launcher
+            os.kill(launcher, signal.SIGKILL)
+
+    scenario = uavtrack.Scenario().model_copy(update={"steps": 400})
+    with pytest.raises(RunError) as caught:
+        run_swarm(scenario, transport="zenoh", seed=1, progress=progress)
+    text = str(caught.value)
+    assert text.startswith("the program launcher ended (killed by SIGKILL) at step ")
+    assert "\n" not in text and 3 <= int(text.split("at step ")[1].split(",")[0]) < 20
+    assert len(seen["programs"]) == 5
+    assert wait_until(lambda: not any(alive(p) for p in seen["programs"]), limit=30)

@@ -49,6 +49,8 @@ MESSAGE = 1 << 20
 NAME = b"uavtrack-%d"
 """A forked program's process name (``/proc/PID/comm``, what ``top`` and ``ps -e`` show):
 its command line is the launcher's."""
+LAUNCHER = b"uavtrack-launch"
+"""The launcher's own process name."""
 
 STARTING = 60.0
 """Seconds the launcher may take to load the model and answer the first start."""
@@ -91,7 +93,7 @@ class Launcher:
         try:
             socket.send_fds(self.socket, [request], [log.fileno()])
         except OSError:
-            raise RunError(f"the program launcher is gone: {self.said()}") from None
+            raise RunError(f"the program launcher {self.ended()}{self._quoted()}") from None
         limit = time.monotonic() + STARTING
         with self.answered:
             while me not in self.started and not self.gone:
@@ -100,7 +102,15 @@ class Launcher:
                     break
                 self.answered.wait(left)
             if me not in self.started:
-                raise RunError(f"the program launcher did not start program {me}: {self.said()}")
+                if self.gone:
+                    raise RunError(
+                        f"the program launcher {self.ended()} before starting program {me}"
+                        + self._quoted()
+                    )
+                raise RunError(
+                    f"the program launcher did not start program {me} within {STARTING:g} s"
+                    + self._quoted()
+                )
             pid, why = self.started.pop(me)
             if pid < 0:
                 raise RunError(f"the program launcher could not start program {me}: {why}")
@@ -115,14 +125,31 @@ class Launcher:
             pass
 
     def said(self) -> str:
-        """The last lines the launcher printed, or a note that it printed nothing."""
+        """The last lines the launcher printed ("" if nothing)."""
         try:
             size = os.fstat(self.log.fileno()).st_size
             data = os.pread(self.log.fileno(), min(size, 4096), max(0, size - 4096))
         except (OSError, ValueError):
-            return "it printed nothing"
-        lines = data.decode(errors="replace").strip().splitlines()
-        return " | ".join(lines[-3:]) if lines else "it printed nothing"
+            return ""
+        return " | ".join(data.decode(errors="replace").strip().splitlines()[-3:])
+
+    def _quoted(self) -> str:
+        said = self.said()
+        return f"; it said: {said}" if said else ""
+
+    def ended(self, wait: float = 2.0) -> str:
+        """How the launcher process ended, as words ("ended (killed by SIGKILL)"); waits
+        up to `wait` seconds for it, as its socket closes a moment before it exits."""
+        try:
+            code = self.process.wait(timeout=wait)
+        except subprocess.TimeoutExpired:
+            return "stopped answering"
+        if code < 0:
+            try:
+                return f"ended (killed by {signal.Signals(-code).name})"
+            except ValueError:
+                return f"ended (killed by signal {-code})"
+        return f"ended (exit code {code})"
 
     def _read(self) -> None:
         """Take the launcher's reports until its socket closes."""
@@ -250,6 +277,7 @@ def main(fd: int, parent: int) -> int:
     from .._process import die_with
 
     die_with(parent)
+    _name(LAUNCHER)
     from . import program, security, tracked, transport  # noqa: F401  loaded once, for all
 
     try:

@@ -264,7 +264,15 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
                     f"started: {said_by(ended)}"
                 )
 
+        def supervise(k: int) -> None:
+            if launcher is not None and launcher.gone:
+                raise RunError(
+                    f"the program launcher {launcher.ended()} at step {k}, and every UAV "
+                    "program with it"
+                )
+
         world.check = check if o.spawn else None
+        world.supervise = supervise
         try:
             batch = world.run_trial(trace=o.trace, realtime=o.realtime, progress=o.progress)
         except TimeoutError as exc:

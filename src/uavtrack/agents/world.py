@@ -128,6 +128,9 @@ class WorldProgram:
         transport.watch(self.keys["alive"], self.mailbox.lost)
         self.traffic = Traffic()
         self.check: Callable[[], None] | None = None
+        self.supervise: Callable[[int], None] | None = None
+        """Called as each cycle k begins; raises to end the run (its programs' launcher
+        gone, and every program with it)."""
         self.clock: Callable[[int], None] | None = None
         """Told each step k as it begins, before the step's Sense goes out (the ROS 2 /clock)."""
         self.step = -1
@@ -219,6 +222,8 @@ class WorldProgram:
         for k, noise in enumerate(noises):
             begin = self.began = time.monotonic()
             self.step = k
+            if self.supervise is not None:
+                self.supervise(k)
             if self.clock is not None:
                 self.clock(k)
             self.mailbox.begin(k, k)
