@@ -29,7 +29,7 @@ LAYERS = {
     "model": {
         "world", "network", "faults", "radio", "sensing", "estimation", "fusion", "planning",
         "assignment", "metrics", "simulation", "timing", "testing", "methods", "robust", "flight",
-        "tracks",
+        "tracks", "airspace",
     },
     "forms": {"agents", "env", "io", "viz"},
     "harness": {"experiments"},

@@ -134,6 +134,22 @@ METRICS: dict[str, tuple[str, str]] = {
         "targets per step followed by two or more UAVs while another target has none",
     ),
     "failed": ("", "UAVs failed by the end of the trial (faults; in a swarm, lost programs too)"),
+    "separation_losses": (
+        "",
+        "losses of separation: pairs of living UAVs closer than uav.vertical_separation in "
+        "altitude and closer than uav.separation horizontally, summed over the steps "
+        "(0 without a minimum; `airspace.separation`)",
+    ),
+    "separation_min": (
+        "m",
+        "the smallest horizontal distance between two living UAVs closer than "
+        "uav.vertical_separation in altitude, over the steps; NaN if no such pair came "
+        "within max(r_C, uav.separation) (the paper's layered team)",
+    ),
+    "conflict_time": (
+        "s",
+        "time during which at least one pair of UAVs had lost separation (steps x dt)",
+    ),
     "decision_time_ms": (
         "ms",
         "CPU time per cycle of one UAV's own planning and assignment (distributed, greedy) "

@@ -30,6 +30,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import _process, estimation, flight, fusion, network, planning, sensing, timing, world
+from .airspace.separation import Separation
 from .config import G, Scenario, ScenarioError
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
@@ -961,7 +962,7 @@ LARGE_STATE = 64 * 2**20
 def scores(scenario: Scenario, batch: int, timed: bool) -> Scores:
     """The metrics of a run of `batch` trials (`metrics.Tally`, and with tracks of unknown
     association their scores, `tracks.scoring.Scores`), fed one `Cycle` at a time."""
-    e = scenario.evaluation
+    e, u = scenario.evaluation, scenario.uav
     return Scores(
         tally=Tally(
             batch=batch,
@@ -970,7 +971,14 @@ def scores(scenario: Scenario, batch: int, timed: bool) -> Scores:
             timed=timed,
             cutoff=e.ospa_cutoff,
             order=e.ospa_order,
-        )
+        ),
+        separation=Separation(
+            batch=batch,
+            minimum=u.separation,
+            vertical=u.vertical_separation,
+            reach=max(scenario.comm_range, u.separation),
+            dt=scenario.dt,
+        ),
     )
 
 
@@ -1131,7 +1139,8 @@ class Result:
     nees_inside and their _best twins: the median of the same NEES samples and the
     fraction inside the 95 % chi-square(4) interval; rounds: mean D_i per
     UAV and step; messages and delivered per step; conflicts per step; failed: UAVs
-    failed by the end; decision_time_ms (CPU) and decision_wall_ms per UAV and cycle.
+    failed by the end; separation_losses, separation_min and conflict_time (`airspace.separation`);
+    decision_time_ms (CPU) and decision_wall_ms per UAV and cycle.
     """
 
     method: str
@@ -1170,6 +1179,9 @@ class Result:
     delivered: float
     conflicts: float
     failed: float
+    separation_losses: float
+    separation_min: float
+    conflict_time: float
     decision_time_ms: float
     decision_wall_ms: float
     trace: Trace | None = field(default=None, repr=False)

@@ -175,6 +175,29 @@ class UAVModel(Part):
             "altitude_spacing; length n_uavs; not set by default"
         ),
     )
+    separation: Float = Field(
+        default=0.0,
+        ge=0,
+        le=1000,
+        description=(
+            "minimum horizontal distance between two UAVs closer than "
+            "uav.vertical_separation in altitude [m], [0, 1000]; 0: no minimum (the "
+            "paper's layered team needs none); beyond the paper (its Sec. 8 leaves "
+            "horizontal avoidance out): a pair closer at a step is a loss of separation, "
+            "counted in every run"
+        ),
+    )
+    vertical_separation: Float = Field(
+        default=5.0,
+        gt=0,
+        le=1000,
+        description=(
+            "altitude difference below which two UAVs share an altitude band and must keep "
+            "uav.separation horizontally [m], (0, 1000]; assumed: 5 m, so the paper's "
+            "layers 5 m apart (uav.altitude_spacing) are separated, about twice the "
+            "altitude a small UAV's autopilot holds to"
+        ),
+    )
     start_spread: Float = Field(
         default=20.0,
         ge=0,

@@ -79,11 +79,11 @@ UNDEFINED_ALLOWED = (
     "nees_inside", "nees_best_median", "nees_best_inside", "gospa_localisation",
     "gospa_missed", "gospa_false", "switches", "fragmentations", "false_tracks",
     "false_tracks_per_target", "time_to_confirm", "never_confirmed", "siap_completeness",
-    "siap_ambiguity", "siap_spuriousness",
+    "siap_ambiguity", "siap_spuriousness", "separation_min",
 )  # fmt: skip
 """Metrics that may be NaN: nothing to average (every UAV failed), not measured, or not
 defined for the run (the track metrics with known association, the per-target estimate
-metrics with tracks)."""
+metrics with tracks, the closest approach of a team that never shared an altitude band)."""
 
 
 def check_finite(metrics: dict[str, np.ndarray], what: str) -> None:

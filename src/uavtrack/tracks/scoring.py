@@ -46,6 +46,8 @@ from ..estimation import nees
 if TYPE_CHECKING:
     from ..simulation import Cycle
 
+from ..airspace.separation import NAMES as SEPARATION
+from ..airspace.separation import Separation
 from ..metrics import GOSPA, METRICS, PER_UAV_SETS, NeesSpread, Tally, cut_costs, matching, mean_std
 
 TRACK_METRICS: dict[str, tuple[str, str]] = {
@@ -405,11 +407,14 @@ class Scores:
     labels), whose GOSPA and NEES stand for the tally's per-target ones."""
 
     tally: Tally
+    separation: Separation | None = None
     tracks: TrackScore | None = None
 
     def add(self, cycle: Cycle, truth: np.ndarray) -> None:
         """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
         self.tally.add(cycle, truth)
+        if self.separation is not None:
+            self.separation.add(cycle.uavs, cycle.alive)
         if cycle.label is None or cycle.status is None:
             return
         t = self.tally
@@ -441,6 +446,11 @@ class Scores:
         """Per-trial metrics of `METRICS`, each an array over the batch."""
         out = self.tally.summary()
         nothing = np.full(self.tally.batch, np.nan)
+        out |= (
+            {name: nothing for name in SEPARATION}
+            if self.separation is None
+            else self.separation.summary()
+        )
         if self.tracks is None:
             return out | {name: nothing for name in TRACKS_ONLY}
         return out | {name: nothing for name in REPLACED} | self.tracks.summary()
