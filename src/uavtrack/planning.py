@@ -327,6 +327,41 @@ def _plan(
     g: float,
     drift: np.ndarray | None = None,
 ) -> Plan:
+    score = _scores(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, drift)
+    best = np.argmax(score, axis=-1)  # first maximum = lowest sequence
+    return Plan(value=score.max(axis=-1), action=tree(3, horizon).first[best], sequence=best * 3)
+
+
+def first_values(
+    uavs: np.ndarray,
+    mean: np.ndarray,
+    sensor: SensorModel,
+    bank_angle: float,
+    horizon: int,
+    dt: float,
+    discount: float = 1.0,
+    g: float = G,
+    drift: np.ndarray | None = None,
+) -> np.ndarray:
+    """The best score V_ij of the sequences that start with each action: (..., Nu, Nt,
+    |A|), whose maximum over the last axis is `plan`'s value (what a UAV loses by
+    flying another first action, for a filter that must override it)."""
+    score = _scores(uavs, mean, sensor, bank_angle, horizon, dt, discount, g, drift)
+    return score.reshape(score.shape[:-1] + (3, -1)).max(axis=-1)  # first action leads
+
+
+def _scores(
+    uavs: np.ndarray,
+    mean: np.ndarray,
+    sensor: SensorModel,
+    bank_angle: float,
+    horizon: int,
+    dt: float,
+    discount: float,
+    g: float,
+    drift: np.ndarray | None = None,
+) -> np.ndarray:
+    """The score of each of the L = |A|^(h-1) leaf paths (..., Nu, Nt, L), lexicographic."""
     actions = action_set(bank_angle)
     t = tree(len(actions), horizon)
     east, north = _rollout(uavs, actions, horizon, dt, g)  # (..., Nu, K)
@@ -354,9 +389,7 @@ def _plan(
         score = (score[..., :, None] + level.reshape(level.shape[:-1] + (-1, n))).reshape(
             level.shape
         )
-    # score: (..., Nu, Nt, L), the sum along each of the L = n^(h-1) leaf paths, lexicographic
-    best = np.argmax(score, axis=-1)  # first maximum = lowest sequence
-    return Plan(value=score.max(axis=-1), action=t.first[best], sequence=best * len(actions))
+    return score  # (..., Nu, Nt, L): the sum along each of the L = n^(h-1) leaf paths
 
 
 def plan_exhaustive(

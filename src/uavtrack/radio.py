@@ -114,6 +114,10 @@ class Radio:
         in the next round of `protocol`."""
         self.now.rounds.setdefault(protocol, []).append(content)
 
+    def sending(self, protocol: str) -> bool:
+        """Whether a round of `protocol` was sent this cycle."""
+        return protocol in self.now.rounds
+
     def _sent(self) -> Sent | None:
         """The cycle whose messages arrive now."""
         if self.delay == 0:

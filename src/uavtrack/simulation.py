@@ -30,15 +30,16 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 from . import _process, estimation, flight, fusion, network, planning, sensing, timing, world
+from .airspace import avoidance
 from .airspace.separation import Separation
-from .config import G, Scenario, ScenarioError
+from .config import G, Scenario, ScenarioError, SensorModel
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, Tally
 from .numerics.buffers import Buffers
-from .radio import Radio, RadioState
+from .radio import Radio, RadioState, counted
 from .robust import gate
 from .tracks import columns, manage
 from .tracks import scan as scans
@@ -154,23 +155,30 @@ class Context:
 def _plan(
     uavs: np.ndarray, mean: np.ndarray, scenario: Scenario, top: np.ndarray | None
 ) -> tuple[np.ndarray, ...]:
-    drift = None
-    if scenario.planner.wind and scenario.wind.speed > 0:  # plan in the moving air mass
-        drift = np.array(scenario.wind.velocity())
-        uavs = planning.air_relative(uavs, drift)
-    p = planning.plan(
-        uavs,
-        mean,
-        scenario.sensor,
-        np.radians(scenario.uav.bank_angle_deg),
-        scenario.planner.horizon,
-        scenario.dt,
-        scenario.planner.discount,
-        G,
-        top,
-        drift,
-    )
+    uavs, drift = _air(uavs, scenario)
+    p = planning.plan(uavs, mean, *_planner(scenario), G, top, drift)
     return p.value, p.action
+
+
+def _first_values(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """`planning.first_values` under the scenario, as `_plan` plans."""
+    uavs, drift = _air(uavs, scenario)
+    return planning.first_values(uavs, mean, *_planner(scenario), G, drift)
+
+
+def _air(uavs: np.ndarray, scenario: Scenario) -> tuple[np.ndarray, np.ndarray | None]:
+    """The UAVs as the planner flies them: in the moving air mass with ``planner.wind``."""
+    if scenario.planner.wind and scenario.wind.speed > 0:
+        drift = np.array(scenario.wind.velocity())
+        return planning.air_relative(uavs, drift), drift
+    return uavs, None
+
+
+def _planner(scenario: Scenario) -> tuple[SensorModel, float, int, float, float]:
+    """sensor, bank angle, horizon, dT and discount: `planning.plan`'s settings."""
+    p = scenario.planner
+    bank = np.radians(scenario.uav.bank_angle_deg)
+    return scenario.sensor, bank, p.horizon, scenario.dt, p.discount
 
 
 def _forward(
@@ -237,6 +245,7 @@ class State:
     central: manage.Slots | None = None
     labels: np.ndarray | None = None  # (B, L) the labels of the held bids' columns
     tombs: np.ndarray | None = None  # (B, Nu, T, 2) the tombstones each UAV knows
+    beacons: avoidance.Heard | None = None  # with planner.avoidance: the states heard
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -604,7 +613,12 @@ def _decide_tracked(
 
 
 def _finish_tracked(
-    state: State, pending: Pending, ctx: Context, cycle: Cycle, new_uavs: np.ndarray
+    state: State,
+    pending: Pending,
+    ctx: Context,
+    cycle: Cycle,
+    new_uavs: np.ndarray,
+    beacons: avoidance.Heard | None = None,
 ) -> tuple[State, Cycle]:
     """`finish` with unknown association: every UAV's tracks (and a central node's)
     predicted to the next scan (eq. 23), the labels of the bids held kept beside them."""
@@ -637,6 +651,7 @@ def _finish_tracked(
         central=central,
         labels=pending.labels,
         tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
+        beacons=beacons,
     )
     return new, cycle
 
@@ -710,6 +725,9 @@ def finish(
     )
     target = assigned.target
     actions = pending.own if actions is None else np.where(alive, actions, STRAIGHT)
+    beacons, beaconed = state.beacons, (0, 0)
+    if scenario.planner.avoidance != "none":
+        actions, beacons, beaconed = avoid(state, pending, ctx, actions)
     pilot = state.flight if state.flight is not None else Unicycle(scenario.dt)
     if fly:
         new_uavs = pilot.fly(uavs, const.actions[actions], alive)  # a failed UAV is down
@@ -732,8 +750,8 @@ def finish(
         assignment=target,
         action=const.actions[actions],
         rounds=fused.rounds,
-        messages=fused.sent + assigned.sent,
-        delivered=fused.delivered + assigned.delivered,
+        messages=fused.sent + assigned.sent + beaconed[0],
+        delivered=fused.delivered + assigned.delivered + beaconed[1],
         late=np.zeros((B, len(PROTOCOLS)), dtype=np.int64),
         conflicts=conflicts(
             target if pending.columns is None else pending.columns, alive, pending.width
@@ -752,7 +770,7 @@ def finish(
         scan=pending.scan,
     )
     if pending.tracks is not None:
-        return _finish_tracked(state, pending, ctx, cycle, new_uavs)
+        return _finish_tracked(state, pending, ctx, cycle, new_uavs, beacons)
     mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov, ctx.buffers)
     new = State(
         k=pending.k + 1,
@@ -772,8 +790,53 @@ def finish(
             pending.observed if pending.detected is None else pending.detected,
             state.k,
         ),
+        beacons=beacons,
     )
     return new, cycle
+
+
+def avoid(
+    state: State, pending: Pending, ctx: Context, actions: np.ndarray
+) -> tuple[np.ndarray, avoidance.Heard, tuple[Any, Any]]:
+    """``planner.avoidance``: the actions (B, Nu) filtered by `avoidance.choose` from
+    the beacons each UAV heard. A method that sent no beacon this cycle (centralized,
+    greedy) has one sent now, one message per link, counted as the others (returned as
+    (sent, delivered)); the distributed method's beacon carries the states already."""
+    scenario, radio, alive, k = ctx.scenario, pending.radio, pending.alive, pending.k
+    B, Nu = alive.shape
+    own = not radio.sending("beacon")
+    if own:
+        radio.send("beacon", {"uavs": pending.believed, "stamp": np.full((B, Nu), k)})
+    inbox = radio.receive("beacon")
+    heard = state.beacons if state.beacons is not None else avoidance.Heard.nothing(B, Nu)
+    memory = avoidance.memory_of(ctx.setting.delay, scenario.faults.loss)
+    if inbox is None:  # nothing has arrived yet (the first cycles of a delay)
+        got, sent = np.zeros((B, Nu, Nu), dtype=bool), np.full((B, Nu), -1)
+        heard = heard.update(got, pending.believed, sent, k, memory)
+    else:
+        content = inbox.content
+        got = inbox.delivered.adjacency()
+        heard = heard.update(got, content["uavs"], content["stamp"], k, memory)
+    uav = scenario.uav
+    values = None
+    if pending.columns is None:  # each UAV's scores of its target, by first action
+        target = np.maximum(pending.assigned.target, 0)[..., None, None]
+        mean = np.take_along_axis(pending.fused.mean, target, axis=2)  # (B, Nu, 1, 4)
+        values = _first_values(pending.believed, mean, scenario)[:, :, 0]
+    chosen, _ = avoidance.choose(
+        actions, pending.believed, alive, heard, k, uav.separation, uav.vertical_separation,
+        np.radians(uav.bank_angle_deg), scenario.dt, values=values,
+    )  # fmt: skip
+    counts: tuple[Any, Any] = (0, 0)
+    if own:
+        zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, Nu), dtype=bool)
+        once = alive.astype(np.int64)
+        counts = counted(
+            ctx.setting.delay,
+            lambda: [radio.transmitted("beacon", once, first=0)],
+            [fusion.count(inbox, everyone, zero, zero)] if inbox is not None else [],
+        )
+    return chosen, heard, counts
 
 
 def step(
@@ -1095,10 +1158,10 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
 
 def _neighbours(scenario: Scenario) -> float:
     """Expected radio neighbours of a UAV: the team at its start (a square of side
-    `uav.start_spread`) or spread over the field, whichever is denser; at most all."""
+    `Scenario.start_side`) or spread over the field, whichever is denser; at most all."""
     n, r = scenario.n_uavs, scenario.comm_range
     disk = np.pi * r * r
-    start = max(scenario.uav.start_spread, r) ** 2
+    start = max(scenario.start_side(), r) ** 2
     spread = max(scenario.field_size, r) ** 2
     return min(n - 1, (n - 1) * disk / min(start, spread))
 

@@ -20,6 +20,8 @@ result alone, in a batch, or in another process.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
 from .config import G, ManoeuvreModel, Scenario
@@ -169,8 +171,9 @@ def initial_conditions(
 
     Targets start uniformly in the field with N(0, v0^2) velocity components; UAVs
     start in a square of side `uav.start_spread` at the field centre with uniform
-    headings; every UAV's prior of target j is N(cue_j, P0) with cue_j the true position
-    plus N(0, sigma_p0^2) noise and zero velocity, and P0 = diag(sigma_p0^2, sigma_p0^2,
+    headings (``uav.start = "grid"``: on a grid, heading north, `start_grid`); every
+    UAV's prior of target j is N(cue_j, P0) with cue_j the true position plus
+    N(0, sigma_p0^2) noise and zero velocity, and P0 = diag(sigma_p0^2, sigma_p0^2,
     sigma_v0^2, sigma_v0^2), so the prior is consistent.
 
     Returns uavs (Nu, 5), target trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4).
@@ -186,6 +189,8 @@ def initial_conditions(
     uavs[:, 2] = scenario.altitudes()
     uavs[:, 3] = scenario.uav.speed
     uavs[:, 4] = rng.uniform(-np.pi, np.pi, nu)
+    if scenario.uav.start == "grid":  # drawn above all the same: the later draws stay
+        uavs[:, :2], uavs[:, 4] = start_grid(nu, scenario.uav.start_spread, L), np.pi / 2
     est = scenario.estimation
     prior = np.zeros((nt, 4))
     prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
@@ -196,6 +201,17 @@ def initial_conditions(
     else:
         trajectory = target_trajectories(targets, accel, scenario.dt, L)
     return uavs, trajectory, prior, P0
+
+
+def start_grid(n: int, spacing: float, field_size: float) -> np.ndarray:
+    """Positions (n, 2) of n UAVs on a square grid of `spacing` [m] centred on the
+    field, filled row by row from the south-west."""
+    columns = math.ceil(math.sqrt(n))
+    rows = math.ceil(n / columns)
+    k = np.arange(n)
+    east = (k % columns - (columns - 1) / 2) * spacing
+    north = (k // columns - (rows - 1) / 2) * spacing
+    return field_size / 2 + np.stack([east, north], axis=1)
 
 
 def manoeuvring_trajectories(

@@ -203,8 +203,21 @@ class UAVModel(Part):
         ge=0,
         le=100_000,
         description=(
-            "side of the square around the field centre where UAVs start [m], [0, 100000]; "
+            "side of the square around the field centre where UAVs start [m], [0, 100000] "
+            '(uav.start = "grid": the distance between neighbours of the grid); '
             "assumed: the team takes off together"
+        ),
+    )
+    start: Literal["square", "grid"] = Field(
+        default="square",
+        description=(
+            "how the UAVs start [-], (square, grid); square: uniform positions in the square "
+            "of side uav.start_spread and uniform headings (the random draws of every "
+            "run); grid: a square grid of spacing uav.start_spread at the field centre, "
+            "every UAV heading north, the draws made and set aside (targets and priors "
+            "stay those of square); beyond the paper: a team at one altitude that arrives "
+            "in formation, so that no two start closer than the spacing "
+            "(planner.avoidance needs a start without conflict)"
         ),
     )
     dynamics: Literal["unicycle", "jsbsim"] = Field(
@@ -631,6 +644,22 @@ class PlannerModel(Part):
             "the ground at the ground speed, the paper's model"
         ),
     )
+    avoidance: Literal["none", "loiter"] = Field(
+        default="none",
+        description=(
+            "collision avoidance at one altitude [-], (none, loiter); none: the paper's "
+            "(its UAVs fly at their own altitudes); loiter: each UAV flies its planned "
+            "action only if it keeps uav.separation, by the clearance of loiter circles, "
+            "from the neighbours whose beacons it heard (their age counted), and falls "
+            "back to straight or to the loiter otherwise (airspace.avoidance: what it "
+            "guarantees and under which assumptions); beyond the paper (its Sec. 8)"
+        ),
+    )
+
+    @field_validator("avoidance", mode="before")
+    @classmethod
+    def _none(cls, value: object) -> object:
+        return "none" if value is None else value  # `--set planner.avoidance=none`
 
 
 class FaultModel(Part):

@@ -40,6 +40,14 @@ from .parts import (
 )
 from .toml import describe_errors, dump_toml, read_toml, set_dotted
 
+PRESETS = Path(__file__).with_name("presets")
+"""The shipped scenario presets, one TOML file each (`Scenario.from_toml` by name)."""
+
+
+def presets() -> list[str]:
+    """The names of the shipped presets."""
+    return sorted(p.stem for p in PRESETS.glob("*.toml"))
+
 
 class Scenario(Part):
     """Every parameter of one simulated mission.
@@ -273,7 +281,8 @@ class Scenario(Part):
           UAV meets as many radio neighbours and targets per square metre;
         * the UAVs keep this scenario's altitude band (lowest to highest), their spacing
           shrunk to fit the team;
-        * the UAVs start spread over the whole field (``uav.start_spread`` = the field):
+        * the UAVs start spread over the whole field (``uav.start_spread`` = the field;
+          a start on a grid keeps its spacing):
           a team taking off from one small square, as the 5 UAVs of the paper do, would
           start with every UAV in radio range of a hundred others at 1000 UAVs.
 
@@ -295,10 +304,20 @@ class Scenario(Part):
                 "uav.altitudes": None,
                 "uav.altitude": (max(heights) + min(heights)) / 2,
                 "uav.altitude_spacing": band / (n_uavs - 1) if n_uavs > 1 else 0.0,
-                "uav.start_spread": field_size,
+                # a grid keeps its spacing; a square grows to the field
+                "uav.start_spread": self.uav.start_spread
+                if self.uav.start == "grid"
+                else field_size,
             },
             origin=f"team {n_uavs}x{n_targets}",
         )
+
+    def start_side(self) -> float:
+        """The side of the square the UAVs start in [m]: ``uav.start_spread``, or for
+        ``uav.start = "grid"`` the grid's (columns - 1 spacings)."""
+        if self.uav.start == "grid":
+            return self.uav.start_spread * (math.ceil(math.sqrt(self.n_uavs)) - 1)
+        return self.uav.start_spread
 
     def altitudes(self) -> list[float]:
         """Altitude h_i of each UAV [m], centred on `uav.altitude`."""
@@ -313,7 +332,15 @@ class Scenario(Part):
 
     @classmethod
     def from_toml(cls, path: str | Path) -> Scenario:
-        """Load a scenario from a TOML file; missing fields keep their defaults."""
+        """Load a scenario from a TOML file; missing fields keep their defaults. A bare
+        name that is no file names a shipped preset (`presets`): "one-altitude"."""
+        path = Path(path)
+        shipped = PRESETS / f"{path.name}.toml"
+        if not path.exists() and path.name == str(path) and shipped.is_file():
+            return cls.from_dict(read_toml(shipped), origin=f"preset {path.name}")
+        if not path.exists():
+            names = ", ".join(presets())
+            raise ScenarioError(f"no config file {path} (nor a preset of that name: {names})")
         return cls.from_dict(read_toml(path), origin=str(path))
 
     @classmethod

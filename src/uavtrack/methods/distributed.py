@@ -49,7 +49,7 @@ class Distributed(Method):
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         s, radio, k = inputs.setting, inputs.radio, inputs.k
         B, n, m = bids.shape
-        radio.send("beacon", {})
+        radio.send("beacon", {"uavs": inputs.believed, "stamp": np.full((B, n), k)})
         radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
         zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, n), dtype=bool)

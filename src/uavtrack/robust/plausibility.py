@@ -95,7 +95,7 @@ class Bounds:
         uav_speed = 2.0 * (scenario.uav.speed + scenario.wind.speed)
         error = worst_accuracy(scenario) + scenario.faults.position_std  # one measurement's
         speed = target_speed(scenario) + math.sqrt(2.0) * SIGMAS * error / scenario.dt
-        spread = max(0.0, scenario.uav.start_spread - scenario.field_size) / 2
+        spread = max(0.0, scenario.start_side() - scenario.field_size) / 2
         margin = (
             max(uav_speed, speed) * T
             + spread

@@ -1,0 +1,298 @@
+"""Collision avoidance at one altitude: a decentralized filter on each UAV's action that
+keeps ``uav.separation`` from the neighbours it has heard (``planner.avoidance = "loiter"``).
+
+The idea is a backup manoeuvre every UAV can always fall back on: the *loiter*, the
+action +phi held for ever. Under eq. (1) it flies a regular polygon: the position moves
+L = V dT along the heading, then the heading turns by Delta = g dT tan(phi) / V, so the
+positions are vertices of a polygon of circumradius R = L / (2 sin(Delta/2)) around a
+fixed centre c (`loiter`). Write u = p - c (|u| = R; it turns with the heading).
+
+Two UAVs i and q that both loiter from now on keep the same centres while their u turn
+at the same rate (equal speeds), so their distance |(c_i - c_q) + (u_i - u_q)| never
+falls below
+
+    Lambda(i, q) = | |c_i - c_q| - |u_i - u_q| |                          (`clearance`)
+
+at any step. **Invariant**: Lambda >= s for every pair of one altitude band (s the
+separation). It bounds the distance: |p_i - p_q| >= Lambda >= s.
+
+**Rule** (each UAV, every cycle, from the states its neighbours broadcast): the loiter
+is always allowed. Another action a is allowed if, for every neighbour q heard,
+
+* q of higher priority (a lower index): Lambda(i after a, q after b) >= s + A for
+  every action b q might take;
+* q of lower priority: Lambda(i after a, q after the loiter) >= s + A;
+
+where q's state is its last broadcast, flown forward on the loiter for its age
+(`predicted`), and A = `allowance(age)` bounds how far q can be from that prediction
+after age unknown steps (`deviation`: an action other than the loiter moves the centre
+and turns u by at most delta = 2 R sin(|Delta_b - Delta| / 2) each; Lambda is
+1-Lipschitz in the centres and offsets). The planned action flies if allowed; if not,
+-phi falls back to straight when that is allowed, and otherwise to the loiter.
+
+**Why the invariant holds** (by induction over steps, pair by pair, i of lower priority
+than q): both loiter: Lambda is unchanged. i loiters, q moves: q checked its move
+against i's loiter. i moves, q loiters or moves: i checked every action of q. The
+allowance covers what a stale broadcast does not say.
+
+**Assumptions** (what the guarantee needs): the invariant holds at step 0 (a start such
+as ``uav.start = "grid"``: one heading, neighbours at least s apart); equal speeds
+(unequal speeds make the relative phase drift: Lambda is then not kept by two loiters);
+the unicycle of eq. (1) (JSBSim's aircraft bank over time: the margin it needs is
+measured, not proven); the states as each UAV believes them (a position error moves
+the true distance by up to the two errors); every UAV within reach is heard, with a
+known age: a beacon lost while a pair is close voids the guarantee for that pair, and
+a UAV never heard is taken to be far. The radio range bounds this: a UAV out of range
+has Lambda > r_C - 4R, so the rule is sound whenever r_C >= 4R + s + 2 A(d + 1)
+(`sound_range`, d the delay). The paper's r_C = 50 m is below it (161 m at
+V = 15 m/s, phi = 45 deg, s = 10 m): a pair can enter radio range already in
+conflict. The filter then steers such a UAV to the action that most increases its
+worst clearance (*recovery*), and the experiment (`uavtrack separation`) measures
+what remains.
+
+Between steps the aircraft fly the chords of the polygon; the separation is measured
+at the steps, as every metric of a run is.
+"""
+
+# Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
+# types, as numpy resolves an overloaded call with an argument of type Any (every array
+# shape is tuple[Any, ...]) to Unknown.
+# pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
+# pyright: reportUnknownVariableType=false
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..config import G
+from ..world import HEADING, H, V, X, Y
+
+MODES = ("none", "loiter")
+"""The values of ``planner.avoidance``."""
+
+LOITER = 2
+"""The index of +phi in the action set (-phi, 0, +phi): the backup manoeuvre."""
+
+STRAIGHT = 1
+"""The index of the zero bank angle."""
+
+ROUND_OFF = 1e-9
+"""Relative slack of the recovery's test: a clearance kept at exactly s reads a few
+ulps below it after the loiter's rotations, which is no conflict."""
+
+MEMORY = 20
+"""Steps a neighbour's broadcast is kept without a newer one when beacons can be lost
+[steps]; assumed: 10 s at dT = 0.5 s, longer than the loss bursts of the
+Gilbert-Elliott channel at the defaults of ``faults``."""
+
+
+def memory_of(delay: int, loss: float) -> int:
+    """Steps a broadcast is kept: with no loss a UAV whose beacon of d steps ago did not
+    arrive was out of radio range (or down) then, which the range assumption covers, so
+    a record older than the delay d says nothing more; with loss, `MEMORY` (at least d)."""
+    return max(delay, MEMORY) if loss > 0 else delay
+
+
+@dataclass(frozen=True)
+class Heard:
+    """The last broadcast state each UAV heard of each other: state (B, N, N, 5)
+    [trial, receiver, sender] as the sender believed it, and the step it was sent,
+    stamp (B, N, N) (-1: never heard, or forgotten after `MEMORY` steps)."""
+
+    state: np.ndarray
+    stamp: np.ndarray
+
+    @classmethod
+    def nothing(cls, batch: int, n: int) -> Heard:
+        return cls(np.zeros((batch, n, n, 5)), np.full((batch, n, n), -1, dtype=np.int64))
+
+    def update(
+        self, got: np.ndarray, state: np.ndarray, stamp: np.ndarray, k: int, memory: int
+    ) -> Heard:
+        """After this cycle's beacons: got (B, N, N) [receiver, sender] those that
+        arrived, carrying the senders' states (B, N, 5) sent at stamp (B, N). Records
+        older than `memory` steps at k are forgotten (`memory_of`)."""
+        newer = got & (stamp[:, None, :] > self.stamp)
+        held = np.where(newer[..., None], state[:, None], self.state)
+        stamps = np.where(newer, stamp[:, None, :], self.stamp)
+        stamps = np.where(k - stamps > memory, -1, stamps)
+        return Heard(held, stamps)
+
+
+@dataclass(frozen=True)
+class Turn:
+    """The loiter's geometry for UAVs of speed V (any shape): step L = V dT [m], turn
+    per step Delta [rad], circumradius R [m], and delta (3,) [m] how far each action
+    moves the centre (and turns u) against the loiter's next state."""
+
+    step: np.ndarray
+    turn: np.ndarray
+    radius: np.ndarray
+    delta: np.ndarray
+
+    @classmethod
+    def of(cls, speed: np.ndarray, bank: float, dt: float, g: float = G) -> Turn:
+        speed = np.asarray(speed, dtype=float)
+        turn = g * dt * np.tan(bank) / speed
+        radius = speed * dt / (2.0 * np.sin(turn / 2.0))
+        banks = np.tan(np.array([-bank, 0.0, bank]))
+        turns = g * dt * banks / speed[..., None]  # (..., 3)
+        delta = 2.0 * radius[..., None] * np.abs(np.sin((turns - turn[..., None]) / 2.0))
+        return cls(speed * dt, turn, radius, delta)
+
+
+def loiter(uavs: np.ndarray, bank: float, dt: float, g: float = G) -> tuple[np.ndarray, np.ndarray]:
+    """The centre c and offset u = p - c (each (..., 2)) of the polygon that UAVs
+    (..., 5) fly when they hold +phi from now on (eq. 1)."""
+    t = Turn.of(uavs[..., V], bank, dt, g)
+    psi = uavs[..., HEADING]
+    along, across = t.step / 2.0, t.step / (2.0 * np.tan(t.turn / 2.0))
+    u = np.empty(uavs.shape[:-1] + (2,))
+    u[..., 0] = -(along * np.cos(psi) - across * np.sin(psi))
+    u[..., 1] = -(along * np.sin(psi) + across * np.cos(psi))
+    c = uavs[..., [X, Y]] - u
+    return c, u
+
+
+def clearance(ci: np.ndarray, ui: np.ndarray, cq: np.ndarray, uq: np.ndarray) -> np.ndarray:
+    """Lambda = | |c_i - c_q| - |u_i - u_q| |: the closest two UAVs of equal speed come
+    when both loiter from now on (centres c, offsets u, each (..., 2))."""
+    centres = np.hypot(*np.moveaxis(ci - cq, -1, 0))
+    offsets = np.hypot(*np.moveaxis(ui - uq, -1, 0))
+    return np.abs(centres - offsets)
+
+
+def allowance(age: np.ndarray, turn: Turn) -> tuple[np.ndarray, np.ndarray]:
+    """How far a neighbour last heard `age` steps ago can be from its state flown on the
+    loiter (`predicted`), in clearance: A_move after its next action, whichever it is
+    (for the checks against every action), and A_now at this step. Each unknown step
+    adds delta to the centre's and the offset's error and turns the offset's error into
+    the centre's by at most m = max delta / R (c' - c = (Rot(Delta) - Rot(Delta_b)) u).
+    age (...,) and turn of the neighbours' speeds, broadcast together."""
+    delta = turn.delta.max(axis=-1)
+    m = delta / turn.radius
+    centre = np.zeros(np.broadcast(age, delta).shape)
+    offset = np.zeros_like(centre)
+    age = np.broadcast_to(age, centre.shape)
+    for _ in range(int(age.max(initial=0))):
+        more = age > 0
+        centre = np.where(more, centre + m * offset + delta, centre)
+        offset = np.where(more, offset + delta, offset)
+        age = age - 1
+    return centre + m * offset + offset, centre + offset
+
+
+def sound_range(separation: float, speed: float, bank: float, dt: float, delay: int = 0) -> float:
+    """The radio range [m] above which a UAV never heard cannot break the invariant
+    within the next step: out of range at the step its beacon would have been sent, it
+    has Lambda > r_C - 4R, and each side may take d + 1 steps unknown to the other
+    (`allowance`)."""
+    turn = Turn.of(np.asarray(speed), bank, dt)
+    unknown = allowance(np.asarray(delay + 1), turn)[1]
+    return float(4.0 * turn.radius + separation + 2.0 * unknown)
+
+
+def predicted(
+    state: np.ndarray, age: np.ndarray, bank: float, dt: float, g: float = G
+) -> np.ndarray:
+    """States (..., 5) flown on the loiter for age (...,) steps, in closed form: the
+    centre stays, u and the heading turn by age Delta."""
+    c, u = loiter(state, bank, dt, g)
+    turn = Turn.of(state[..., V], bank, dt, g).turn * age
+    cos, sin = np.cos(turn), np.sin(turn)
+    out = state.copy()
+    out[..., X] = c[..., 0] + cos * u[..., 0] - sin * u[..., 1]
+    out[..., Y] = c[..., 1] + sin * u[..., 0] + cos * u[..., 1]
+    out[..., HEADING] = state[..., HEADING] + turn
+    return out
+
+
+def successors(uavs: np.ndarray, bank: float, dt: float, g: float = G) -> np.ndarray:
+    """The states (..., 3, 5) after each action (-phi, 0, +phi) of eq. (1)."""
+    step = uavs[..., V] * dt
+    out = np.repeat(uavs[..., None, :], 3, axis=-2)
+    out[..., X] += (step * np.cos(uavs[..., HEADING]))[..., None]
+    out[..., Y] += (step * np.sin(uavs[..., HEADING]))[..., None]
+    banks = np.tan(np.array([-bank, 0.0, bank]))
+    out[..., HEADING] += g * dt * banks / uavs[..., V, None]
+    return out
+
+
+def choose(
+    desired: np.ndarray,
+    believed: np.ndarray,
+    alive: np.ndarray,
+    heard: Heard,
+    k: int,
+    separation: float,
+    vertical: float,
+    bank: float,
+    dt: float,
+    g: float = G,
+    values: np.ndarray | None = None,
+) -> tuple[np.ndarray, np.ndarray]:
+    """The actions (B, N) each living UAV flies under the rule of this module, from the
+    actions it would fly (desired, indices into (-phi, 0, +phi)), its own believed state
+    (B, N, 5) and the broadcasts it heard (`Heard`) at step k. Returns (actions,
+    overridden (B, N) bool: where the action differs from the desired one).
+
+    A desired action that is not allowed is replaced by the allowed one of the highest
+    value (B, N, 3) when given (the planner's best score of the sequences that start
+    with each action, `planning.first_values`; the lowest index on ties), otherwise by
+    straight after -phi and by the loiter after straight.
+
+    Only neighbours heard within `MEMORY` steps and within ``vertical`` in altitude
+    count. A UAV that certainly breaks the invariant with one of them already (its
+    clearance, less the allowance of the record's age, below s) takes the action that
+    maximises its worst clearance instead (recovery; ties: the desired action, then the
+    loiter)."""
+    B, n = alive.shape
+    out = np.array(desired, dtype=np.int64, copy=True)
+    trial, me, other = np.nonzero(heard.stamp >= 0)
+    mine = believed[trial, me]
+    theirs = heard.state[trial, me, other]
+    keep = alive[trial, me] & (me != other) & (np.abs(mine[:, H] - theirs[:, H]) < vertical)
+    trial, me, other, mine, theirs = trial[keep], me[keep], other[keep], mine[keep], theirs[keep]
+    if not trial.size:
+        return out, np.zeros((B, n), dtype=bool)
+    age = k - heard.stamp[trial, me, other]
+    now = predicted(theirs, age, bank, dt, g)  # (P, 5) the neighbour if it loitered since
+    move, held = allowance(age, Turn.of(theirs[:, V], bank, dt, g))
+    ci, ui = loiter(successors(mine, bank, dt, g), bank, dt, g)  # (P, 3, 2)
+    cq, uq = loiter(successors(now, bank, dt, g), bank, dt, g)  # (P, 3, 2)
+    lam = clearance(ci[:, :, None], ui[:, :, None], cq[:, None], uq[:, None])  # (P, a, b)
+    higher = other < me  # a lower index has priority
+    every = lam.min(axis=2) - move[:, None]  # against each action of the neighbour
+    loitering = lam[:, :, LOITER] - held[:, None]  # against its loiter
+    worst = np.where(higher[:, None], every, loitering)  # (P, 3)
+    # per UAV: the worst over its neighbours, and whether it is certainly in conflict
+    flat = trial * n + me
+    least = np.full((B * n, 3), np.inf)
+    np.minimum.at(least, flat, worst)
+    c_now, u_now = loiter(mine, bank, dt, g)
+    cq_now, uq_now = loiter(now, bank, dt, g)
+    conflict = np.zeros(B * n, dtype=bool)
+    now_clear = clearance(c_now, u_now, cq_now, uq_now) + held
+    conflict[flat[now_clear < separation - ROUND_OFF * (1.0 + separation)]] = True
+    least, conflict = least.reshape(B, n, 3), conflict.reshape(B, n)
+    allowed = least >= separation
+    allowed[..., LOITER] = True
+    pick = np.take_along_axis(allowed, out[..., None], axis=-1)[..., 0]
+    if values is None:  # -phi falls back to straight, straight to the loiter
+        fallback = np.where((out == 0) & allowed[..., STRAIGHT], STRAIGHT, LOITER)
+    else:
+        fallback = np.argmax(np.where(allowed, np.nan_to_num(values, nan=-np.inf), -np.inf), -1)
+    out = np.where(pick, out, fallback)
+    # recovery: the largest worst clearance; the desired action, then the loiter, on ties
+    best = least.max(axis=-1, keepdims=True)
+    top = least >= best
+    rescue = np.where(
+        np.take_along_axis(top, desired[..., None], axis=-1)[..., 0],
+        desired,
+        np.where(top[..., LOITER], LOITER, np.argmax(top, axis=-1)),
+    )
+    out = np.where(conflict, rescue, out)
+    out = np.where(alive, out, desired)
+    return out, out != desired

@@ -1,0 +1,298 @@
+"""Collision avoidance at one altitude (`airspace.avoidance`): the loiter's geometry,
+the allowance of a stale beacon, the invariant kept by the filter whatever the planner
+asks (the guarantee of the module's docstring, under its assumptions), and the filter
+in a run of every method."""
+
+import json
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import uavtrack
+from uavtrack.airspace import avoidance as av
+from uavtrack.world import fly
+
+BANKS = st.floats(np.radians(15), np.radians(60))
+SPEEDS = st.floats(8.0, 40.0)
+DTS = st.sampled_from([0.25, 0.5, 1.0])
+
+
+def states(rng, n, speed, spread=150.0):
+    out = np.zeros((n, 5))
+    out[:, :2] = rng.uniform(0, spread, (n, 2))
+    out[:, 2], out[:, 3] = 400.0, speed
+    out[:, 4] = rng.uniform(-np.pi, np.pi, n)
+    return out
+
+
+def actions(bank):
+    return np.array([-bank, 0.0, bank])
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), bank=BANKS, speed=SPEEDS, dt=DTS)
+def test_the_loiter_keeps_its_centre_and_other_actions_move_it_by_delta(seed, bank, speed, dt):
+    rng = np.random.default_rng(seed)
+    uav = states(rng, 1, speed)[0]
+    c, u = av.loiter(uav, bank, dt)
+    turn = av.Turn.of(np.asarray(speed), bank, dt)
+    assert np.hypot(*u) == pytest.approx(turn.radius, rel=1e-12)
+    flown = uav
+    for _ in range(25):  # held +phi: the same centre, every position on the circle
+        flown = fly(flown, np.asarray(bank), dt)
+        c2, u2 = av.loiter(flown, bank, dt)
+        assert np.allclose(c2, c, atol=1e-9 * (1 + turn.radius))
+        assert np.hypot(*(flown[:2] - c)) == pytest.approx(turn.radius, rel=1e-9)
+    loitered = av.loiter(fly(uav, np.asarray(bank), dt), bank, dt)
+    for a, phi in enumerate(actions(bank)):  # against the loiter's next state
+        after = av.loiter(fly(uav, np.asarray(phi), dt), bank, dt)
+        moved = np.hypot(*(after[0] - loitered[0]))
+        turned = np.hypot(*(after[1] - loitered[1]))
+        assert moved == pytest.approx(turn.delta[a], rel=1e-9, abs=1e-9)
+        assert turned == pytest.approx(turn.delta[a], rel=1e-9, abs=1e-9)
+    assert np.allclose(av.successors(uav, bank, dt)[..., :2], fly(
+        np.repeat(uav[None], 3, 0), actions(bank), dt)[..., :2])  # fmt: skip
+
+
+@settings(max_examples=40, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), bank=BANKS, speed=SPEEDS, dt=DTS)
+def test_clearance_bounds_the_distance_of_two_loiters_at_every_step(seed, bank, speed, dt):
+    rng = np.random.default_rng(seed)
+    pair = states(rng, 2, speed, spread=80.0)
+    c, u = av.loiter(pair, bank, dt)
+    bound = av.clearance(c[0], u[0], c[1], u[1])
+    distances = []
+    for _ in range(400):
+        distances.append(np.hypot(*(pair[0, :2] - pair[1, :2])))
+        pair = fly(pair, np.full(2, bank), dt)
+    assert min(distances) >= bound - 1e-9 * (1 + bound)
+    # and it is the closest they come, up to the polygon's sampling of the circle
+    turn = av.Turn.of(np.asarray(speed), bank, dt)
+    assert min(distances) <= bound + 2 * turn.radius * np.sin(turn.turn / 2) + 1e-9
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    bank=BANKS,
+    speed=SPEEDS,
+    dt=DTS,
+    age=st.integers(0, 4),
+)
+def test_the_allowance_covers_what_a_stale_beacon_does_not_say(seed, bank, speed, dt, age):
+    rng = np.random.default_rng(seed)
+    me, them = states(rng, 2, speed)
+    heard = them.copy()
+    for _ in range(age):  # the neighbour flies on, unheard
+        them = fly(them, np.asarray(rng.choice(actions(bank))), dt)
+    guess = av.predicted(heard, np.asarray(age), bank, dt)
+    turn = av.Turn.of(np.asarray(speed), bank, dt)
+    move, now = av.allowance(np.asarray(age), turn)
+    mine = av.loiter(av.successors(me, bank, dt), bank, dt)  # (3, 2) each
+    for b in range(3):  # whatever it does next, and with whatever I do
+        true = av.loiter(av.successors(them, bank, dt)[b], bank, dt)
+        pred = av.loiter(av.successors(guess, bank, dt)[b], bank, dt)
+        gap = np.abs(av.clearance(mine[0], mine[1], *true) - av.clearance(mine[0], mine[1], *pred))
+        assert (gap <= move + 1e-9 * (1 + move)).all()
+    here = av.loiter(me, bank, dt)
+    gap = abs(
+        av.clearance(*here, *av.loiter(them, bank, dt))
+        - av.clearance(*here, *av.loiter(guess, bank, dt))
+    )
+    assert gap <= now + 1e-9 * (1 + now)
+    assert move >= now >= 0.0
+    if age == 0:
+        assert move == now == 0.0
+
+
+def clear_start(rng, n, speed, bank, dt, separation):
+    """A team whose every pair has clearance >= separation (the invariant at step 0)."""
+    while True:
+        team = states(rng, n, speed, spread=(25.0 + separation) * n)
+        c, u = av.loiter(team, bank, dt)
+        i, q = np.triu_indices(n, 1)
+        if (av.clearance(c[i], u[i], c[q], u[q]) >= separation).all():
+            return team
+
+
+def fly_team(team, steps, rng, bank, dt, separation, delay, filtered=True):
+    """Random desired actions for `steps` steps, through the filter when `filtered`,
+    every UAV hearing every other with `delay` steps of age (a beacon of before the
+    start standing for the first ones). Returns the smallest clearance and distance."""
+    n = len(team)
+    history = [team]
+    i, q = np.triu_indices(n, 1)
+    least_clear = least_distance = np.inf
+    for k in range(steps):
+        sent = max(k - delay, 0)
+        heard = av.Heard(
+            np.broadcast_to(history[sent][None, None], (1, n, n, 5)).copy(),
+            np.full((1, n, n), sent),
+        )
+        desired = rng.integers(0, 3, (1, n))
+        if filtered:
+            chosen, _ = av.choose(
+                desired, team[None], np.ones((1, n), bool), heard, k, separation, 5.0, bank, dt
+            )
+        else:
+            chosen = desired
+        team = fly(team, actions(bank)[chosen[0]], dt)
+        history.append(team)
+        c, u = av.loiter(team, bank, dt)
+        least_clear = min(least_clear, av.clearance(c[i], u[i], c[q], u[q]).min())
+        least_distance = min(least_distance, np.hypot(*(team[i, :2] - team[q, :2]).T).min())
+    return least_clear, least_distance
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(2, 6),
+    bank=BANKS,
+    speed=SPEEDS,
+    dt=DTS,
+    separation=st.floats(2.0, 30.0),
+    delay=st.integers(0, 2),
+)
+def test_the_filter_keeps_every_pair_separated_whatever_the_planner_asks(
+    seed, n, bank, speed, dt, separation, delay
+):
+    rng = np.random.default_rng(seed)
+    team = clear_start(rng, n, speed, bank, dt, separation)
+    clear, distance = fly_team(team, 60, rng, bank, dt, separation, delay)
+    slack = 1e-7 * (1 + separation)
+    assert clear >= separation - slack
+    assert distance >= separation - slack
+
+
+def test_without_the_filter_the_same_teams_lose_separation():
+    """The property above is not vacuous: the same random flights, unfiltered, come
+    closer than the separation in a quarter of these teams."""
+    bank, dt, separation = np.radians(45), 0.5, 10.0
+    lost = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        team = clear_start(rng, 5, 15.0, bank, dt, separation)
+        lost += fly_team(team, 60, rng, bank, dt, separation, 0, filtered=False)[1] < separation
+    assert lost >= 3
+
+
+def test_the_radio_range_that_makes_the_rule_sound():
+    bank, dt = np.radians(45), 0.5
+    turn = av.Turn.of(np.asarray(15.0), bank, dt)
+    assert turn.radius == pytest.approx(23.04, abs=0.01)
+    # out of range at r_C: clearance > r_C - 4R; one step of each side moves it by 2 delta
+    delta = turn.delta.max()
+    assert av.sound_range(10.0, 15.0, bank, dt) == pytest.approx(4 * turn.radius + 10 + 4 * delta)
+    assert av.sound_range(10.0, 15.0, bank, dt, delay=1) > av.sound_range(10.0, 15.0, bank, dt)
+
+
+ONE_ALTITUDE = {
+    "uav.altitude_spacing": 0.0,
+    "uav.separation": 10.0,
+    "uav.start": "grid",
+    "uav.start_spread": 25.0,
+    "steps": 200,
+}
+
+
+@pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
+def test_a_run_at_one_altitude_within_the_sound_range_loses_no_separation(method):
+    scenario = uavtrack.Scenario().with_overrides({**ONE_ALTITUDE, "comm_range": 170.0})
+    assert scenario.comm_range >= av.sound_range(10.0, 15.0, np.radians(45), 0.5)
+    seeds = list(range(4))
+    off = uavtrack.run(scenario, method, seeds=seeds).metrics
+    on = uavtrack.run(
+        scenario.with_overrides({"planner.avoidance": "loiter"}), method, seeds=seeds
+    ).metrics
+    assert off["separation_losses"].sum() > 0
+    assert on["separation_losses"].sum() == 0
+    assert (on["separation_min"] >= 10.0).all()
+
+
+def test_the_filter_reads_the_distributed_beacon_and_sends_one_for_the_others():
+    everyone = {**ONE_ALTITUDE, "comm_range": 10_000.0, "steps": 20}  # every pair linked
+    n = uavtrack.Scenario().n_uavs
+    for method, extra in (
+        ("distributed", 0),
+        ("centralized", n * (n - 1)),
+        ("greedy", n * (n - 1)),
+    ):
+        scenario = uavtrack.Scenario().with_overrides(everyone)
+        off = uavtrack.run(scenario, method).metrics["messages"]
+        on = uavtrack.run(scenario.with_overrides({"planner.avoidance": "loiter"}), method).metrics[
+            "messages"
+        ]
+        assert on == pytest.approx(off + extra), method
+
+
+def test_a_grid_start_keeps_every_draw_of_the_square_start():
+    square = uavtrack.Scenario().with_overrides({"steps": 5})
+    grid = square.with_overrides({"uav.start": "grid", "uav.start_spread": 25.0})
+    a = uavtrack.simulate(square, trace=True).trace
+    b = uavtrack.simulate(grid, trace=True).trace
+    np.testing.assert_array_equal(a.targets, b.targets)  # the truth is the same
+    first = b.uavs[0]
+    assert np.allclose(first[:, 4], np.pi / 2)
+    gaps = np.hypot(*(first[:, None, :2] - first[None, :, :2]).transpose(2, 0, 1))
+    assert gaps[np.triu_indices(len(first), 1)].min() == pytest.approx(25.0)
+    rows = first[:, 1].round(6)  # 3 columns, rows filled from the south-west
+    assert sorted(np.unique(rows).tolist()) == pytest.approx(
+        [square.field_size / 2 - 12.5, square.field_size / 2 + 12.5]
+    )
+    assert first[:3, 0] == pytest.approx(square.field_size / 2 + np.array([-25.0, 0.0, 25.0]))
+
+
+def test_the_setting_names_its_choices():
+    with pytest.raises(uavtrack.ScenarioError, match="avoidance"):
+        uavtrack.Scenario().with_overrides({"planner.avoidance": "swerve"})
+    with pytest.raises(uavtrack.ScenarioError, match="start"):
+        uavtrack.Scenario().with_overrides({"uav.start": "line"})
+
+
+def test_an_environments_actions_are_filtered_as_the_methods_are():
+    """`simulation.finish` flies actions handed in (an environment's agents) through the
+    same filter: random actions at one altitude keep the separation."""
+    from uavtrack import simulation
+    from uavtrack.airspace.separation import close_pairs
+
+    scenario = uavtrack.Scenario().with_overrides(
+        {**ONE_ALTITUDE, "comm_range": 170.0, "planner.avoidance": "loiter"}
+    )
+    seeds = [np.random.SeedSequence(s) for s in range(3)]
+    ctx = simulation.Context.of(scenario, uavtrack.methods.get("distributed"), seeds)
+    state, trajectory, rngs = simulation.initial_state(scenario, seeds)
+    noises = simulation.sensor_noise(rngs, scenario.n_uavs, scenario.n_targets, 150)
+    rng = np.random.default_rng(7)
+    closest, overridden = np.inf, 0
+    for k, noise in enumerate(noises):
+        wanted = rng.integers(0, 3, (3, scenario.n_uavs))
+        state, cycle = simulation.step(state, trajectory[:, k], noise, ctx, actions=wanted)
+        flown = np.searchsorted([-0.5, 0.5], cycle.action)  # bank angle -> action index
+        overridden += int((flown != wanted).sum())
+        distance = close_pairs(state.uavs, state.alive, 5.0, 1e6)[3]
+        closest = min(closest, distance.min())
+    assert closest >= 10.0
+    assert overridden > 0  # the filter had work to do
+
+
+def test_the_one_altitude_preset_by_name_from_the_api_and_the_cli(capsys):
+    from uavtrack import cli
+
+    scenario = uavtrack.Scenario.from_toml("one-altitude")
+    assert len(set(scenario.altitudes())) == 1
+    assert scenario.uav.separation == 10.0 and scenario.planner.avoidance == "loiter"
+    assert scenario.uav.start == "grid"
+    assert "one-altitude" in uavtrack.config.scenario.presets()
+    code = cli.main(["run", "--config", "one-altitude", "--steps", "30", "--json"])
+    assert code == 0
+    out = json.loads(capsys.readouterr().out)
+    metrics = out.get("metrics", out)
+    assert metrics["separation_min"] >= 10.0 or np.isnan(metrics["separation_min"])
+    code = cli.main(["run", "--config", "one-altitud"])
+    err = capsys.readouterr().err
+    assert code == 2 and err.count("\n") == 1 and "one-altitude" in err
+    code = cli.main(["run", "--config", "one-altitude", "--set", "planner.avoidance=none"])
+    assert code == 0
