@@ -167,6 +167,44 @@ def test_the_filter_keeps_every_pair_separated_whatever_the_planner_asks(
     assert distance >= separation - slack
 
 
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1),
+    n=st.integers(3, 6),
+    liar=st.integers(0, 5),
+    bank=BANKS,
+    dt=DTS,
+    separation=st.floats(2.0, 30.0),
+)
+def test_a_lying_member_breaks_no_pair_of_honest_ones(seed, n, liar, bank, dt, separation):
+    """One UAV's beacons say anything (a state beside a random honest UAV, any heading;
+    it flies at random): the honest pairs keep their guarantee, as the pairs out of the
+    rule (in conflict with the liar) are handled apart."""
+    liar = liar % n
+    rng = np.random.default_rng(seed)
+    speed = 15.0
+    team = clear_start(rng, n, speed, bank, dt, separation)
+    honest = np.array([q for q in range(n) if q != liar])
+    i, q = np.triu_indices(len(honest), 1)
+    i, q = honest[i], honest[q]
+    for k in range(50):
+        told = team.copy()
+        victim = rng.choice(honest)
+        told[liar, :2] = team[victim, :2] + rng.normal(0.0, separation, 2)
+        told[liar, 4] = rng.uniform(-np.pi, np.pi)
+        heard = av.Heard(
+            np.broadcast_to(told[None, None], (1, n, n, 5)).copy(), np.full((1, n, n), k)
+        )
+        desired = rng.integers(0, 3, (1, n))
+        chosen, _ = av.choose(
+            desired, team[None], np.ones((1, n), bool), heard, k, separation, 5.0, bank, dt
+        )
+        chosen[0, liar] = desired[0, liar]
+        team = fly(team, actions(bank)[chosen[0]], dt)
+        c, u = av.loiter(team, bank, dt)
+        assert (av.clearance(c[i], u[i], c[q], u[q]) >= separation - 1e-7 * (1 + separation)).all()
+
+
 def test_without_the_filter_the_same_teams_lose_separation():
     """The property above is not vacuous: the same random flights, unfiltered, come
     closer than the separation in a quarter of these teams."""
@@ -296,3 +334,63 @@ def test_the_one_altitude_preset_by_name_from_the_api_and_the_cli(capsys):
     assert code == 2 and err.count("\n") == 1 and "one-altitude" in err
     code = cli.main(["run", "--config", "one-altitude", "--set", "planner.avoidance=none"])
     assert code == 0
+
+
+# ------------------------------------------------------------------ the agent form
+
+AGENT_CASES = [
+    ("distributed", {}),
+    ("centralized", {}),
+    ("greedy", {}),
+    ("distributed", {"faults.loss": 0.3}),
+    ("centralized", {"faults.loss": 0.3, "faults.delay": 1}),
+    ("distributed", {"tracker.association": "gnn"}),
+    ("centralized", {"tracker.association": "gnn"}),
+]
+
+
+@pytest.mark.integration  # a swarm of programs against real deadlines
+@pytest.mark.parametrize("method,overrides", AGENT_CASES, ids=str)
+def test_the_swarm_filters_as_the_simulator_does(method, overrides):
+    """Each UAV program filters its action from the beacons it received (the beacon
+    carries its sender's state): the swarm's run equals the simulator's, step by step,
+    and the filter changed what the UAVs flew."""
+    from uavtrack.agents import run_swarm
+    from uavtrack.testing import assert_same_trace
+
+    scenario = uavtrack.Scenario.from_toml("one-altitude").with_overrides(
+        {"steps": 30, **overrides}
+    )
+    swarm = run_swarm(scenario, method, seed=2, transport="memory")
+    reference = uavtrack.simulate(scenario, method, seed=2)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.dropped == 0
+    unfiltered = uavtrack.simulate(
+        scenario.with_overrides({"planner.avoidance": "none"}), method, seed=2
+    )
+    assert not np.array_equal(unfiltered.trace.action, reference.trace.action)
+
+
+@pytest.mark.integration  # a swarm of programs against real deadlines
+def test_every_bad_beacon_from_a_member_stops_no_honest_program(monkeypatch):
+    """A member with valid keys sends its beacon (the state the filter reads) with every
+    field at every bad value: each is refused by reason and every honest program ends
+    the run; the honest UAVs keep their separation from each other."""
+    from .test_hostile import BAD, assert_honest_programs_finished, attacked, fields_of
+
+    scenario = uavtrack.Scenario.from_toml("one-altitude").with_overrides(
+        {"steps": 60, "comm_range": 170.0}
+    )
+    swarm, member = attacked(monkeypatch, scenario, "distributed", 1)
+    assert_honest_programs_finished(swarm, member, scenario.steps)
+    sent = fields_of(member.sent)
+    assert set(BAD) <= sent[("radio:beacon+bids", "beacon.uav")]
+    assert swarm.traffic.drops.get("malformed", 0) > 0
+    for reason in ("heading out of range", "speed out of bounds", "position out of bounds"):
+        assert swarm.traffic.drops.get(reason, 0) > 0, reason  # the state's own checks
+    uavs = swarm.result.trace.uavs  # (T, N, 5)
+    honest = [q for q in range(scenario.n_uavs) if q != member.me]
+    i, q = np.triu_indices(len(honest), 1)
+    i, q = np.array(honest)[i], np.array(honest)[q]
+    gaps = np.hypot(uavs[:, i, 0] - uavs[:, q, 0], uavs[:, i, 1] - uavs[:, q, 1])
+    assert gaps.min() >= 10.0

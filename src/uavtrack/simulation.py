@@ -160,8 +160,9 @@ def _plan(
     return p.value, p.action
 
 
-def _first_values(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> np.ndarray:
-    """`planning.first_values` under the scenario, as `_plan` plans."""
+def first_values(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> np.ndarray:
+    """`planning.first_values` under the scenario, as a run plans: uavs (..., Nu, 5),
+    mean (..., Nu, Nt, 4) -> (..., Nu, Nt, 3)."""
     uavs, drift = _air(uavs, scenario)
     return planning.first_values(uavs, mean, *_planner(scenario), G, drift)
 
@@ -822,9 +823,10 @@ def avoid(
     if pending.columns is None:  # each UAV's scores of its target, by first action
         target = np.maximum(pending.assigned.target, 0)[..., None, None]
         mean = np.take_along_axis(pending.fused.mean, target, axis=2)  # (B, Nu, 1, 4)
-        values = _first_values(pending.believed, mean, scenario)[:, :, 0]
+        values = first_values(pending.believed, mean, scenario)[:, :, 0]
     chosen, _ = avoidance.choose(
-        actions, pending.believed, alive, heard, k, uav.separation, uav.vertical_separation,
+        actions, pending.believed, alive, heard, k, avoidance.minimum(scenario),
+        uav.vertical_separation,
         np.radians(uav.bank_angle_deg), scenario.dt, values=values,
     )  # fmt: skip
     counts: tuple[Any, Any] = (0, 0)

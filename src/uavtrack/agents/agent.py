@@ -32,6 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import assignment, estimation, fusion, network, simulation, timing
+from ..airspace import avoidance
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -217,6 +218,8 @@ class UavAgent:
                 "Distributed, Greedy or Centralized"
             )
         self.central = isinstance(self.method, Centralized)
+        self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
+        self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
 
     # ------------------------------------------------------------ the cycle
 
@@ -258,6 +261,11 @@ class UavAgent:
         else:
             target, solve_seconds, more = self.auction(k, bids, alive)
         action = int(best[target])
+        if self.spec.avoid:  # each action's best score for its target breaks the ties
+            values = simulation.first_values(believed[None], fused_mean[None, None, target], s)
+            values = values[0, 0]
+            action, beaconed = self.avoided(k, action, values)
+            more = (more[0] + beaconed[0], more[1] + beaconed[1])
         self.target = target
         cpu, wall = (1e3 * (plan_seconds + solve_seconds)).tolist()
         report = Report(
@@ -463,20 +471,60 @@ class UavAgent:
         """Beacon and bids (the parts given) to the neighbours in one message; returns
         what arrived of both and the messages (sent, delivered)."""
         s = self.setting
-        self.radio.send(
-            k,
-            [
-                part("beacon", 0, {"position": self.believed[:3]}),  # who, where, when
-                part("bids", 0, bids_part),
-            ],
-        )
+        self.radio.send(k, [part("beacon", 0, self.beacon_content()), part("bids", 0, bids_part)])
         beacon, inbox = self.radio.receive(k, "beacon", 0), self.radio.receive(k, "bids", 0)
+        self.beacon = (k, beacon)
         sent, delivered = counted(
             s.delay,
             lambda: (self.radio.transmitted(k, p, 1, first=0) for p in ("beacon", "bids")),
             ((a.sent, a.delivered) for a in (beacon, inbox) if a is not None),
         )
         return beacon, inbox, (sent, delivered)
+
+    def beacon_content(self) -> dict[str, np.ndarray]:
+        """Who, where, when (`messages.Spec`): the position, or with avoidance the state."""
+        if self.spec.avoid:
+            return {"uav": self.believed}
+        return {"position": self.believed[:3]}
+
+    def avoided(
+        self, k: int, action: int, values: np.ndarray | None
+    ) -> tuple[int, tuple[int, int]]:
+        """``planner.avoidance``: the action `avoidance.choose` lets this UAV fly, from
+        the beacons it heard, as `simulation.avoid` filters the batch's (values (3,):
+        each first action's best score for its target, or None). A cycle that sent no
+        beacon (centralized, greedy) sends one now, counted as there. Returns (action,
+        messages (sent, delivered))."""
+        s, n, me = self.scenario, self.n, self.me
+        counts = (0, 0)
+        if self.beacon is not None and self.beacon[0] == k:
+            beacon = self.beacon[1]
+        else:
+            self.radio.send(k, [part("beacon", 0, self.beacon_content())])
+            beacon = self.radio.receive(k, "beacon", 0)
+            counts = counted(
+                self.setting.delay,
+                lambda: [self.radio.transmitted(k, "beacon", 1, first=0)],
+                [(beacon.sent, beacon.delivered)] if beacon is not None else [],
+            )
+        got = np.zeros((1, n, n), dtype=bool)
+        states, stamps = np.zeros((1, n, 5)), np.full((1, n), -1)
+        for q, content in ({} if beacon is None else beacon.contents).items():
+            got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], k - self.setting.delay
+        memory = avoidance.memory_of(self.setting.delay, s.faults.loss)
+        self.beacons = self.beacons.update(got, states, stamps, k, memory)
+        desired = np.full((1, n), simulation.STRAIGHT)
+        believed, alive = np.zeros((1, n, 5)), np.zeros((1, n), dtype=bool)
+        desired[0, me], believed[0, me], alive[0, me] = action, self.believed, True
+        scores = None
+        if values is not None:
+            scores = np.zeros((1, n, 3))
+            scores[0, me] = values
+        chosen, _ = avoidance.choose(
+            desired, believed, alive, self.beacons, k, avoidance.minimum(s),
+            s.uav.vertical_separation, np.radians(s.uav.bank_angle_deg), s.dt, values=scores,
+        )  # fmt: skip
+        return int(chosen[0, me]), (int(counts[0]), int(counts[1]))
 
     def solve(self, view: np.ndarray, members: np.ndarray, alive: np.ndarray, bids: np.ndarray):
         """This UAV's auction (`assignment.local`) over the bids it holds, view (N, M)

@@ -283,6 +283,9 @@ class Spec:
     labels: int = 0
     """With unknown association, the labels of the run are below this: a UAV starts at
     most K tracks a scan, each under a label of its own (`tracks.manage`)."""
+    avoid: bool = False
+    """With ``planner.avoidance``: the beacon carries the sender's whole state (x, y,
+    altitude, speed, heading), which the avoidance filter reads."""
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
@@ -304,6 +307,7 @@ class Spec:
             scan=scenario.n_targets + 50 + 10 * math.ceil(scenario.sensor.clutter_rate)
             if tracked
             else 0,
+            avoid=scenario.planner.avoidance != "none",
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -322,7 +326,7 @@ class Spec:
             "presence": {"heard": (B, (self.programs,), "flags")},
             "flood": {"known": (B, (n,), "known")},
             "consensus": {**tuples, "origin": (I, (m,), "uav index")},
-            "beacon": {"position": (F, (3,), "position")},
+            "beacon": self._beacon(),
             "bids": {"bids": (F, (m,), "bids"), "stamp": (I, (), "cycle")},
             "upload": {**tuples, "uav": (F, (5,), "uav state")},
             "download": {
@@ -331,6 +335,12 @@ class Spec:
                 "target": (I, (), "target or none"),
             },
         }.get(protocol)
+
+    def _beacon(self) -> dict[str, tuple[str, tuple[int, ...], str]]:
+        """Who, where: the sender's position, or with avoidance its whole state."""
+        if self.avoid:
+            return {"uav": (F, (5,), "uav state")}
+        return {"position": (F, (3,), "position")}
 
     def _tracked(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
         """`contents` with unknown association: the consensus carries a UAV's track
@@ -351,7 +361,7 @@ class Spec:
                 "stamp": (I, (K,), "track stamp"),
                 "tombs": (I, (K, 2), "tombstones"),
             },
-            "beacon": {"position": (F, (3,), "position")},
+            "beacon": self._beacon(),
             "bids": {
                 "bids": (F, (K,), "slot bids"),
                 "label": (I, (K,), "bid labels"),

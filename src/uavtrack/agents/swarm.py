@@ -132,11 +132,6 @@ def run_swarm(
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
     get(method)  # refuses an unknown method now
-    if scenario.planner.avoidance != "none":
-        raise UsageError(
-            "planner.avoidance: the swarm does not run the avoidance filter yet; "
-            "run it in the simulator (uavtrack run)"
-        )
     if sign and not spawn and keys is None:
         raise UsageError(
             "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "

@@ -46,9 +46,10 @@ a UAV never heard is taken to be far. The radio range bounds this: a UAV out of 
 has Lambda > r_C - 4R, so the rule is sound whenever r_C >= 4R + s + 2 A(d + 1)
 (`sound_range`, d the delay). The paper's r_C = 50 m is below it (161 m at
 V = 15 m/s, phi = 45 deg, s = 10 m): a pair can enter radio range already in
-conflict. The filter then steers such a UAV to the action that most increases its
-worst clearance (*recovery*), and the experiment (`uavtrack separation`) measures
-what remains.
+conflict. Such a pair is left out of the rule: each of the two keeps the rule with
+everyone else and, among what that allows, takes the action that most increases its
+clearance to the other (*recovery*, best effort); every other pair keeps its
+guarantee, also beside a member whose beacons lie.
 
 Between steps the aircraft fly the chords of the polygon; the separation is measured
 at the steps, as every metric of a run is.
@@ -66,7 +67,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..config import G
+from ..config import G, Scenario
 from ..world import HEADING, H, V, X, Y
 
 MODES = ("none", "loiter")
@@ -86,6 +87,12 @@ MEMORY = 20
 """Steps a neighbour's broadcast is kept without a newer one when beacons can be lost
 [steps]; assumed: 10 s at dT = 0.5 s, longer than the loss bursts of the
 Gilbert-Elliott channel at the defaults of ``faults``."""
+
+
+def minimum(scenario: Scenario) -> float:
+    """The separation the filter keeps [m]: ``uav.separation`` plus
+    ``planner.avoidance_margin`` (for flight that differs from eq. (1))."""
+    return scenario.uav.separation + scenario.planner.avoidance_margin
 
 
 def memory_of(delay: int, loss: float) -> int:
@@ -243,11 +250,14 @@ def choose(
     with each action, `planning.first_values`; the lowest index on ties), otherwise by
     straight after -phi and by the loiter after straight.
 
-    Only neighbours heard within `MEMORY` steps and within ``vertical`` in altitude
-    count. A UAV that certainly breaks the invariant with one of them already (its
-    clearance, less the allowance of the record's age, below s) takes the action that
-    maximises its worst clearance instead (recovery; ties: the desired action, then the
-    loiter)."""
+    Only neighbours heard within `memory_of` steps and within ``vertical`` in altitude
+    count. A pair that certainly breaks the invariant already (its clearance plus the
+    allowance of the record's age below s: met in conflict beyond the sound range, or
+    a neighbour that lies) is out of the rule's reach: the UAV keeps the rule with
+    every other neighbour, and among the actions that allows takes the one of the
+    largest worst clearance to those in conflict (recovery; ties: the desired action,
+    then the loiter). So the invariant of every other pair holds whatever the pairs in
+    conflict do."""
     B, n = alive.shape
     out = np.array(desired, dtype=np.int64, copy=True)
     trial, me, other = np.nonzero(heard.stamp >= 0)
@@ -267,17 +277,21 @@ def choose(
     every = lam.min(axis=2) - move[:, None]  # against each action of the neighbour
     loitering = lam[:, :, LOITER] - held[:, None]  # against its loiter
     worst = np.where(higher[:, None], every, loitering)  # (P, 3)
-    # per UAV: the worst over its neighbours, and whether it is certainly in conflict
-    flat = trial * n + me
-    least = np.full((B * n, 3), np.inf)
-    np.minimum.at(least, flat, worst)
+    # a pair certainly in conflict already (its clearance less the record's allowance
+    # below s) is out of the rule's reach: the UAV keeps the rule with every other
+    # neighbour and, among what that allows, takes the action that most increases its
+    # worst clearance to those (recovery)
     c_now, u_now = loiter(mine, bank, dt, g)
     cq_now, uq_now = loiter(now, bank, dt, g)
-    conflict = np.zeros(B * n, dtype=bool)
     now_clear = clearance(c_now, u_now, cq_now, uq_now) + held
-    conflict[flat[now_clear < separation - ROUND_OFF * (1.0 + separation)]] = True
-    least, conflict = least.reshape(B, n, 3), conflict.reshape(B, n)
-    allowed = least >= separation
+    conflict = now_clear < separation - ROUND_OFF * (1.0 + separation)
+    flat = trial * n + me
+    kept = np.full((B * n, 3), np.inf)  # the worst over the pairs the rule holds for
+    np.minimum.at(kept, flat[~conflict], worst[~conflict])
+    broken = np.full((B * n, 3), np.inf)  # and over the pairs in conflict
+    np.minimum.at(broken, flat[conflict], worst[conflict])
+    kept, broken = kept.reshape(B, n, 3), broken.reshape(B, n, 3)
+    allowed = kept >= separation
     allowed[..., LOITER] = True
     pick = np.take_along_axis(allowed, out[..., None], axis=-1)[..., 0]
     if values is None:  # -phi falls back to straight, straight to the loiter
@@ -286,13 +300,13 @@ def choose(
         fallback = np.argmax(np.where(allowed, np.nan_to_num(values, nan=-np.inf), -np.inf), -1)
     out = np.where(pick, out, fallback)
     # recovery: the largest worst clearance; the desired action, then the loiter, on ties
-    best = least.max(axis=-1, keepdims=True)
-    top = least >= best
+    score = np.where(allowed, broken, -np.inf)
+    top = score >= score.max(axis=-1, keepdims=True)
     rescue = np.where(
         np.take_along_axis(top, desired[..., None], axis=-1)[..., 0],
         desired,
         np.where(top[..., LOITER], LOITER, np.argmax(top, axis=-1)),
     )
-    out = np.where(conflict, rescue, out)
+    out = np.where(np.isfinite(broken).any(axis=-1), rescue, out)
     out = np.where(alive, out, desired)
     return out, out != desired

@@ -208,9 +208,10 @@ def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | Non
     if "steps" in overrides:
         given["--set steps"] = overrides["steps"]
     from ..config import read_toml
+    from ..config.scenario import config_file
 
-    if config is not None and "steps" in read_toml(config):
-        given[f"{config} steps"] = read_toml(config)["steps"]
+    if config is not None and "steps" in read_toml(config_file(config)):
+        given[f"{config} steps"] = read_toml(config_file(config))["steps"]
     values = list(given.items())
     for (name, value), (other, was) in zip(values[1:], values, strict=False):
         if value != was:

@@ -56,11 +56,15 @@ def flight(
     moderate turbulence; and the two winds with planner.wind (the planner knows the
     wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps."""
     from ..config import Scenario, flatten, read_toml
+    from ..config.scenario import config_file
     from ..experiments import flight as experiment
     from .app import parse_overrides
 
     own = ("wind.", "uav.dynamics", "planner.wind")
-    given = [*parse_overrides(set_ or []), *(flatten(read_toml(config)) if config else {})]
+    given = [
+        *parse_overrides(set_ or []),
+        *(flatten(read_toml(config_file(config))) if config else {}),
+    ]
     for name in given:  # before the scenario is checked, whose advice would differ
         if name.startswith(own):
             raise UsageError(

@@ -656,6 +656,19 @@ class PlannerModel(Part):
         ),
     )
 
+    avoidance_margin: Float = Field(
+        default=0.0,
+        ge=0,
+        le=1000,
+        description=(
+            "distance the avoidance filter adds to uav.separation [m], [0, 1000]; 0: the "
+            "unicycle of eq. (1), for which the filter's guarantee is proven; an aircraft "
+            'that banks over time (uav.dynamics = "jsbsim") leaves the planner\'s '
+            "polygon and needs a margin, measured in the docs (One altitude); beyond the "
+            "paper"
+        ),
+    )
+
     @field_validator("avoidance", mode="before")
     @classmethod
     def _none(cls, value: object) -> object:

@@ -49,6 +49,20 @@ def presets() -> list[str]:
     return sorted(p.stem for p in PRESETS.glob("*.toml"))
 
 
+def config_file(path: str | Path) -> Path:
+    """The file a config names: the path itself, or for a bare name (no folder, no
+    suffix) that is no file the shipped preset of that name; a one-line `ScenarioError`
+    when neither exists."""
+    path = Path(path)
+    if path.exists() or path.name != str(path) or path.suffix:
+        return path  # a file (`read_toml` says why one cannot be read)
+    shipped = PRESETS / f"{path.name}.toml"
+    if shipped.is_file():
+        return shipped
+    names = ", ".join(presets())
+    raise ScenarioError(f"no config file {path} (nor a preset of that name: {names})")
+
+
 class Scenario(Part):
     """Every parameter of one simulated mission.
 
@@ -334,14 +348,9 @@ class Scenario(Part):
     def from_toml(cls, path: str | Path) -> Scenario:
         """Load a scenario from a TOML file; missing fields keep their defaults. A bare
         name that is no file names a shipped preset (`presets`): "one-altitude"."""
-        path = Path(path)
-        shipped = PRESETS / f"{path.name}.toml"
-        if not path.exists() and path.name == str(path) and shipped.is_file():
-            return cls.from_dict(read_toml(shipped), origin=f"preset {path.name}")
-        if not path.exists():
-            names = ", ".join(presets())
-            raise ScenarioError(f"no config file {path} (nor a preset of that name: {names})")
-        return cls.from_dict(read_toml(path), origin=str(path))
+        file = config_file(path)
+        origin = str(path) if file == Path(path) else f"preset {path}"
+        return cls.from_dict(read_toml(file), origin=origin)
 
     @classmethod
     def from_dict(cls, data: dict[str, Any], origin: str = "scenario") -> Scenario:
