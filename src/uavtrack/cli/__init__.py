@@ -7,7 +7,17 @@ interrupted (Ctrl-C; finished work is kept, no partial file is left); 143 the sa
 after SIGTERM.
 """
 
-from . import benchmark, experiments, export, flight, robustness, sensing, swarm, trackers  # noqa: F401
+from . import (  # noqa: F401
+    benchmark,
+    experiments,
+    export,
+    flight,
+    robustness,
+    sensing,
+    separation,
+    swarm,
+    trackers,
+)
 from .app import app, entry, main
 
 __all__ = ["app", "entry", "main"]
