@@ -333,7 +333,8 @@ def test_the_one_altitude_preset_by_name_from_the_api_and_the_cli(capsys):
     err = capsys.readouterr().err
     assert code == 2 and err.count("\n") == 1 and "one-altitude" in err
     code = cli.main(["run", "--config", "one-altitude", "--set", "planner.avoidance=none"])
-    assert code == 0
+    table = capsys.readouterr().out
+    assert code == 0 and "losses of separation" in table and "closest two UAVs" in table
 
 
 # ------------------------------------------------------------------ the agent form

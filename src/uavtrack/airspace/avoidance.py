@@ -28,7 +28,9 @@ where q's state is its last broadcast, flown forward on the loiter for its age
 after age unknown steps (`deviation`: an action other than the loiter moves the centre
 and turns u by at most delta = 2 R sin(|Delta_b - Delta| / 2) each; Lambda is
 1-Lipschitz in the centres and offsets). The planned action flies if allowed; if not,
--phi falls back to straight when that is allowed, and otherwise to the loiter.
+the UAV flies the allowed action the planner scores best for its target
+(`planning.first_values`); where no such scores are at hand (tracks of unknown
+association), -phi falls back to straight when that is allowed, otherwise the loiter.
 
 **Why the invariant holds** (by induction over steps, pair by pair, i of lower priority
 than q): both loiter: Lambda is unchanged. i loiters, q moves: q checked its move
@@ -192,7 +194,9 @@ def allowance(age: np.ndarray, turn: Turn) -> tuple[np.ndarray, np.ndarray]:
 
 
 def sound_range(separation: float, speed: float, bank: float, dt: float, delay: int = 0) -> float:
-    """The radio range [m] above which a UAV never heard cannot break the invariant
+    """The radio range [m] above which a UAV never heard cannot break the invariant, for
+    a separation [m], a speed [m/s], a bank angle [rad], a step dT [s] and a delay
+    [steps]
     within the next step: out of range at the step its beacon would have been sent, it
     has Lambda > r_C - 4R, and each side may take d + 1 steps unknown to the other
     (`allowance`)."""

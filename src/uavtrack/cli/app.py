@@ -86,7 +86,8 @@ ConfigOpt = Annotated[
     typer.Option(
         "--config",
         metavar="FILE",
-        help="scenario TOML file (missing fields keep their defaults)",
+        help="scenario TOML file, or a shipped preset by name: one-altitude (missing "
+        "fields keep their defaults)",
     ),
 ]
 SetOpt = Annotated[
@@ -268,6 +269,13 @@ FAULT_ROWS = (
     ("conflicts", "conflicts per step (doubled targets while one is free)", "{:.3f}"),
     ("failed", "UAVs failed by the end", "{:.0f}"),
 )
+
+SEPARATION_ROWS = (
+    ("separation_losses", "losses of separation (pair-steps below uav.separation)", "{:.0f}"),
+    ("separation_min", "closest two UAVs of one altitude band came [m]", "{:.2f}"),
+    ("conflict_time", "time with a loss of separation [s]", "{:.1f}"),
+)
+"""The rows of a run with a separation to keep (``uav.separation`` > 0)."""
 
 
 MANY_TARGETS = 12
@@ -475,6 +483,9 @@ def show(
     # FaultModel's defaults are given to Field positionally, which pyright does not read
     if scenario.faults != type(scenario.faults)():
         for key, label, fmt in FAULT_ROWS:
+            table.add_row(escape(label), number(fmt, summary[key]))
+    if scenario.uav.separation > 0:
+        for key, label, fmt in SEPARATION_ROWS:
             table.add_row(escape(label), number(fmt, summary[key]))
     for label, value in rows or []:
         table.add_row(escape(label), escape(value))

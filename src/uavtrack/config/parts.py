@@ -650,9 +650,10 @@ class PlannerModel(Part):
             "collision avoidance at one altitude [-], (none, loiter); none: the paper's "
             "(its UAVs fly at their own altitudes); loiter: each UAV flies its planned "
             "action only if it keeps uav.separation, by the clearance of loiter circles, "
-            "from the neighbours whose beacons it heard (their age counted), and falls "
-            "back to straight or to the loiter otherwise (airspace.avoidance: what it "
-            "guarantees and under which assumptions); beyond the paper (its Sec. 8)"
+            "from the neighbours whose beacons it heard (their age counted), and otherwise "
+            "flies the allowed action the planner scores best (the loiter is always "
+            "allowed; airspace.avoidance: what it guarantees and under which "
+            "assumptions); beyond the paper (its Sec. 8)"
         ),
     )
 

@@ -237,7 +237,8 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
         "",
         f"Command: `{info['command']}`  ",
         f"{first['none']['trials']} trials per cell, side and method, {scenario.steps} "
-        f"steps, seed {info['seed']}; {info['workers']} workers; {info['seconds']:.0f} s "
+        f"steps, seed {info['seed']}; {info['workers']} worker"
+        f"{'s' if info['workers'] != 1 else ''}; {info['seconds']:.0f} s "
         f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
         "",
         f"Separation {avoidance.minimum(scenario):g} m between UAVs closer than "
