@@ -74,8 +74,8 @@ def hold(monkeypatch, sender: int, step: int, protocols: set[str], seconds: floa
             if isinstance(message, messages.Radio) and message.k == step and parts & protocols:
                 held.append(receiver)
                 threading.Timer(seconds, send, (link, receiver, body)).start()
-                return
-        send(link, receiver, body)
+                return len(link.gate.seal(receiver, body))  # its size when it goes
+        return send(link, receiver, body)
 
     monkeypatch.setattr(Link, "send_body", send_body)
     return held
@@ -300,8 +300,8 @@ def test_after_a_stop_the_world_asks_again_for_what_the_closed_sessions_lost(mon
                 swallowed.append(message.k)
                 if len(swallowed) == 1:
                     stops.saw(15.0, time.monotonic())  # the world ran again just now
-                    return
-        send(link, receiver, body)
+                    return 0
+        return send(link, receiver, body)
 
     monkeypatch.setattr(Link, "send_body", send_body)
     scenario = uavtrack.Scenario(steps=6)
@@ -362,20 +362,29 @@ def test_the_session_lease_and_reconnection_are_uavtracks_unless_a_file_sets_the
     assert json.loads(conf.get_json("transport/link/tx/lease")) == 3000
 
 
-def test_a_trace_of_format_1_is_read_with_no_late_messages(tmp_path):
+def test_traces_of_formats_1_and_2_are_read_with_no_late_messages_and_no_bytes(tmp_path):
+    import dataclasses
+
     from uavtrack.io import trace as trace_file
 
     result = uavtrack.simulate(uavtrack.Scenario(steps=5), seed=1)
+    assert result.trace is not None
     trace_file.write(tmp_path / "new.npz", result)
     with np.load(tmp_path / "new.npz") as data:
-        arrays = {name: data[name] for name in data.files if name != "late"}
-    assert int(arrays.pop("format")) == trace_file.FORMAT == 2
+        arrays = {name: data[name] for name in data.files if name not in ("late", "bytes")}
+        late = data["late"]
+    assert int(arrays.pop("format")) == trace_file.FORMAT == 3
     np.savez(tmp_path / "old.npz", format=np.array(1), **arrays)
     np.savez(tmp_path / "unnumbered.npz", **arrays)
-    for name in ("old.npz", "unnumbered.npz"):
+    np.savez(tmp_path / "two.npz", format=np.array(2), late=late, **arrays)
+    nothing = np.zeros_like(result.trace.bytes)
+    for name in ("old.npz", "unnumbered.npz", "two.npz"):
         read = trace_file.read(tmp_path / name).trace
         assert read.late.shape == (5, len(PROTOCOLS)) and not read.late.any()
-        assert differences(read, result.trace) == []
+        assert read.bytes.shape == (5, 6) and not read.bytes.any()
+        expected = dataclasses.replace(result.trace, bytes=nothing)
+        assert differences(read, expected) == []
+    assert result.trace.bytes.any()
 
 
 # ------------------------------------------------------------ real processes, over Zenoh

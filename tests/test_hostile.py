@@ -171,10 +171,10 @@ class Member:
         self.lock = threading.Lock()
 
     def wrap(self, original):
-        def send_body(link: Link, receiver: int, body: bytes) -> None:
+        def send_body(link: Link, receiver: int, body: bytes) -> int:
             if link.gate.me == self.me:
                 self.attack(original, link, receiver, body)
-            original(link, receiver, body)
+            return original(link, receiver, body)
 
         return send_body
 

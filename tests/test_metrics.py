@@ -106,6 +106,7 @@ def consistent_cycle(rng, truth, n_uavs, alive):
         rounds=zeros,
         messages=np.zeros(B),
         delivered=np.zeros(B),
+        bytes=np.zeros((B, n_uavs + 1), dtype=np.int64),
         conflicts=np.zeros(B),
         decision_time_ms=zeros + np.nan,
         decision_wall_ms=zeros + np.nan,

@@ -11,7 +11,16 @@ import pytest
 import uavtrack
 from uavtrack.agents import messages, run_swarm
 from uavtrack.agents.messages import VERSION, Array, Part, Radio, Report, Sense, Spec, encode
-from uavtrack.agents.security import EVERYONE, WINDOW, WORLD, Credential, Envelope, Gate, Keyring
+from uavtrack.agents.security import (
+    EVERYONE,
+    WINDOW,
+    WORLD,
+    Credential,
+    Envelope,
+    Gate,
+    Keyring,
+    tag_of,
+)
 from uavtrack.agents.transport import Bus, Mailbox, MemoryTransport
 from uavtrack.testing import assert_same_trace
 
@@ -456,14 +465,16 @@ def decode_any(payload):
 
 
 def forge(envelope, message, seq_offset=10**6, **change):
-    """The message changed, in a new envelope that claims the same sender (no valid tag)."""
+    """The message changed, in a new envelope that claims the same sender, with the
+    checksum anyone can make (no valid MAC)."""
     body = encode(msgspec.structs.replace(message, **change))
+    sender, receiver, seq = envelope.sender, envelope.receiver, envelope.seq + seq_offset
     forged = Envelope(
-        sender=envelope.sender,
-        receiver=envelope.receiver,
-        seq=envelope.seq + seq_offset,
+        sender=sender,
+        receiver=receiver,
+        seq=seq,
         body=body,
-        tag=b"",
+        tag=tag_of(b"", message.run, sender, receiver, seq, body),
     )
     return msgspec.msgpack.encode(forged)
 

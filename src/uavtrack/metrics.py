@@ -129,6 +129,13 @@ METRICS: dict[str, tuple[str, str]] = {
         "a receiver reads it d cycles later is not known then)",
     ),
     "delivered": ("", "radio messages per step that arrive (messages minus those lost)"),
+    "bytes": (
+        "B",
+        "radio bytes per UAV and step: every frame the UAVs (and the central node) sent in "
+        "the cycle, as the agent form puts it on the wire (MessagePack in an envelope with "
+        "a 16-byte tag, one frame per receiver and round), over the team's UAVs; the "
+        "transport's own headers are not counted",
+    ),
     "conflicts": (
         "",
         "targets per step followed by two or more UAVs while another target has none",
@@ -311,8 +318,8 @@ class Tally:
         self.observed = np.zeros((self.batch, self.n_targets))
         names = (
             "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
-            "delivered", "conflicts", "decision", "wall", "decided", "pairs", "best", "alive",
-            "in_view_sq", "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
+            "delivered", "bytes", "conflicts", "decision", "wall", "decided", "pairs", "best",
+            "alive", "in_view_sq", "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
         )  # fmt: skip
         self.sums = {name: np.zeros(self.batch) for name in names}
         self.spread = {name: NeesSpread(self.batch) for name in ("nees", "nees_best")}
@@ -341,6 +348,7 @@ class Tally:
         s["alive"] += anyone
         s["messages"] += cycle.messages
         s["delivered"] += cycle.delivered
+        s["bytes"] += cycle.bytes.sum(axis=1) / self.n_uavs
         s["conflicts"] += cycle.conflicts
         for name, key in (("decision_time_ms", "decision"), ("decision_wall_ms", "wall")):
             decision = getattr(cycle, name)
@@ -485,6 +493,7 @@ class Tally:
             "rounds": s["rounds"] / np.where(s["alive"] > 0, s["alive"], np.nan),
             "messages": s["messages"] / self.steps,
             "delivered": s["delivered"] / self.steps,
+            "bytes": s["bytes"] / self.steps,
             "conflicts": s["conflicts"] / self.steps,
             "failed": self.failed,
             "decision_time_ms": decision,

@@ -23,6 +23,7 @@ of cycle k arrives in round r of cycle k over the links of k.
 
 from __future__ import annotations
 
+import functools
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, NamedTuple
@@ -108,6 +109,9 @@ class Radio:
         self.k, self.faults, self.delay = k, faults, faults.model.delay
         self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
         self.history = state.history
+        B, n = alive.shape
+        self.bytes = np.zeros((B, n + 1), dtype=np.int64)  # sent, by UAV; the node's last
+        self._reach: tuple[np.ndarray, np.ndarray] | None = None
 
     def send(self, protocol: str, content: Any) -> None:
         """Every UAV transmits `content` (arrays (B, N, ...) by name, in a dict or a record)
@@ -195,7 +199,295 @@ class Radio:
         lost = self.faults.lost(self.k, protocol, 0, trial, sender, receiver, self.now.bad)
         return alive.sum(axis=1), (alive & ~lost).sum(axis=1)
 
+    def reach(self) -> tuple[np.ndarray, np.ndarray]:
+        """Each UAV's receivers in range now (B, N) and the bytes their numbers take in
+        the frames' envelopes (B, N)."""
+        if self._reach is None:
+            links, (B, n) = self.now.links, self.now.alive.shape
+            if links.edges:
+                other = ~links.own
+                trial, receiver, sender = (x[other] for x in links.edge_list)
+                where = trial * n + sender
+                count = np.bincount(where, minlength=B * n).reshape(B, n)
+                named = np.bincount(where, int_bytes(receiver), B * n).reshape(B, n)
+            else:
+                into = links.adjacency() & _others(n)  # [trial, receiver, sender]
+                count = into.sum(axis=1)
+                named = count if n <= 128 else np.einsum("brs,r->bs", into, int_bytes(_senders(n)))
+            self._reach = count.astype(np.int64), named.astype(np.int64)
+        return self._reach
+
+    def on_air(
+        self, parts: Any, count: int, senders: np.ndarray, node: bool = False, frames: Any = 1
+    ) -> None:
+        """Count frames: each UAV where `senders` (B, N) sends `frames` (B, N, or 1)
+        frames of `count` parts of `parts` bytes in all (`part_bytes`; an array (B, N)
+        or a number) to each UAV in range now, or with `node` to the central node."""
+        n = senders.shape[1]
+        frame = frame_bytes(self.k, _senders(n), parts, count)
+        if node:
+            sent = frame + int_bytes(n)
+        else:
+            receivers, named = self.reach()
+            sent = receivers * frame + named
+        self.bytes[:, :n] += np.where(senders, frames * sent, 0)
+
+    def from_node(self, parts: Any, count: int, receivers: np.ndarray) -> None:
+        """Count the central node's frames: one of `count` parts of `parts` bytes (B, N)
+        to each UAV where `receivers` (B, N)."""
+        n = receivers.shape[1]
+        frame = frame_bytes(self.k, n, parts, count) + int_bytes(_senders(n))
+        self.bytes[:, n] += np.where(receivers, frame, 0).sum(axis=1)
+
+    def rounds_on_air(
+        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: int, alive: np.ndarray
+    ) -> None:
+        """Count the frames of the D_i flooding with the consensus, as an agent bundles
+        them (`agents.agent.UavAgent.rounds`): a UAV that stopped the flooding in round R
+        (`ran`) and runs C consensus rounds (`rounds`) sends rounds 1 .. max(R, C) + 1;
+        round r carries the flooding's set (`flood` bytes of content) while r <= R + 1
+        (final in R + 1) and the consensus tuples (`tuples`) in every round, final in the
+        last, which carries no tuples when R > C (those of round C + 1 were final).
+
+        So a UAV sends R + 1 frames of both parts and C - R of the tuples alone when
+        R <= C, and R frames of both and one of the set and an empty final part when
+        R > C. Each part's size depends on its round only through MessagePack's size of
+        the round numbers, one byte below 128 rounds; beyond, frame by frame."""
+        last = np.maximum(ran, rounds) + 1
+        if int(np.where(alive, last, 0).max(initial=0)) >= 128:
+            return self._rounds_one_by_one(ran, rounds, flood, tuples, alive)
+        set_part = part_bytes("flood", 1, -1, flood)
+        tuple_part = part_bytes("consensus", 1, -1, tuples)
+        empty_part = part_bytes("consensus", 1, -1, None)
+        late = ran > rounds  # the last frame: the set and an empty final part
+        both = np.where(late, ran, ran + 1)
+        alone = np.where(late, 0, rounds - ran)
+        k, who = self.k, _senders(alive.shape[1])
+        per_receiver = (
+            both * frame_bytes(k, who, set_part + tuple_part, 2)
+            + alone * frame_bytes(k, who, tuple_part, 1)
+            + late * frame_bytes(k, who, set_part + empty_part, 2)
+        )
+        receivers, named = self.reach()
+        sent = receivers * per_receiver + named * (both + alone + late)
+        self.bytes[:, : alive.shape[1]] += np.where(alive, sent, 0)
+
+    def _rounds_one_by_one(
+        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: int, alive: np.ndarray
+    ) -> None:
+        """`rounds_on_air` frame by frame (round numbers of any size)."""
+        last = np.maximum(ran, rounds) + 1
+        for r in range(1, int(np.where(alive, last, 0).max(initial=0)) + 1):
+            on = alive & (r <= last)
+            flood_final = np.where(r == ran + 1, r, -1)
+            flooding = np.where(r <= ran + 1, part_bytes("flood", r, flood_final, flood), 0)
+            closing = (r == last) & (ran > rounds)
+            final = np.where(r == last, np.where(closing, rounds + 1, r), -1)
+            consensus = np.where(
+                closing,
+                part_bytes("consensus", r, final, None),
+                part_bytes("consensus", r, final, tuples),
+            )
+            for count in (1, 2):  # frames of the tuples alone, and of both parts
+                both = r <= ran + 1
+                self.on_air(flooding + consensus, count, on & (both == (count == 2)))
+
     def close(self) -> RadioState:
         """The state to carry into the next cycle."""
         history = (*self.history, self.now)[-self.delay :] if self.delay else ()
         return RadioState(history, self.now.bad)
+
+
+# ---------------------------------------------------------------- bytes on the air
+#
+# The agent form (`agents`) sends one frame per receiver and round: an envelope
+# (`agents.security.Envelope`: sender, receiver, sequence number, body, tag) around a
+# `agents.messages.Radio` (version, run, cycle k, sender, its parts), each part one
+# protocol's (`agents.messages.Part`: protocol, round, final, content), the content a map
+# of arrays (`agents.messages.Array`: dtype, shape, data), all MessagePack. The batch
+# counts the same bytes from the same layout with MessagePack's size rules below, so a
+# run's bytes equal what the agents put on the wire (a test checks the rules against
+# the encoder, another a swarm's bytes against `uavtrack run`'s). The transport's own
+# framing (Zenoh's headers and key) is not counted.
+
+WIRE_VERSION = 7
+"""Schema version of the agent form's messages (`agents.messages.VERSION`)."""
+RUN_CHARS = 12
+"""Characters of a run's identifier (a random hex token, `agents.swarm`)."""
+TAG_BYTES = 16
+"""Bytes of every envelope's tag: the keyed BLAKE2b MAC of an authenticated swarm, an
+unkeyed BLAKE2b checksum of the same bytes otherwise (`agents.security.Gate.seal`), so a
+frame's size does not depend on the setting."""
+SEQ_START = 2**32
+"""A program's first sequence number is SEQ_START + 1: every envelope's sequence number is
+then a MessagePack uint64 (9 bytes), and a frame's size does not depend on how many
+messages its sender sent before."""
+
+
+@functools.cache
+def _others(n: int) -> np.ndarray:
+    """(n, n) True off the diagonal (read only)."""
+    out = ~np.eye(n, dtype=bool)
+    out.flags.writeable = False
+    return out
+
+
+@functools.cache
+def _senders(n: int) -> Any:
+    """The programs 0 .. n - 1 (read only) as far as their size goes: 0 when every
+    number takes one byte."""
+    if n <= 128:
+        return 0
+    out = np.arange(n)
+    out.flags.writeable = False
+    return out
+
+
+Layout = dict[str, tuple[str, tuple[int, ...]]]
+"""A content's arrays: name -> (dtype as numpy writes it, shape)."""
+
+F8, I8, B1 = "<f8", "<i8", "|b1"
+
+
+def layout(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -> Layout:
+    """The arrays of a protocol's content in the agent form, `n` UAVs, `m` targets, K =
+    `slots` track slots per UAV with unknown association (0: known), and with
+    ``planner.avoidance`` (`avoid`) a beacon that carries the sender's whole state. The
+    shapes `agents.messages.Spec.contents` admits (a test holds the two equal); (-1, ...)
+    is a scan's Z measurements."""
+    beacon = {"uav": (F8, (5,))} if avoid else {"position": (F8, (3,))}
+    if slots:
+        K = slots
+        tracks = {"mean": (F8, (K, 4)), "cov": (F8, (K, 4, 4)), "label": (I8, (K,))}
+        tracks |= {"status": (I8, (K,)), "stamp": (I8, (K,))}
+        counts = {"hits": (I8, (K,)), "scans": (I8, (K,)), "misses": (I8, (K,))}
+        return {
+            "flood": {"known": (B1, (n,))},
+            "consensus": {**tracks, "tombs": (I8, (K, 2))},
+            "beacon": beacon,
+            "bids": {"bids": (F8, (K,)), "label": (I8, (K,)), "stamp": (I8, ())},
+            "upload": {"z": (F8, (-1, 2)), "R": (F8, (-1, 2, 2)), "uav": (F8, (5,))},
+            "download": {**tracks, **counts, "serial": (I8, ()), "target": (I8, ())},
+        }[protocol]
+    tuples = {"gamma": (F8, (m,)), "mean": (F8, (m, 4)), "cov": (F8, (m, 4, 4))}
+    tuples |= {"stamp": (I8, (m,))}
+    return {
+        "flood": {"known": (B1, (n,))},
+        "consensus": {**tuples, "origin": (I8, (m,))},
+        "beacon": beacon,
+        "bids": {"bids": (F8, (m,)), "stamp": (I8, ())},
+        "upload": {**tuples, "uav": (F8, (5,))},
+        "download": {**tuples, "target": (I8, ())},
+    }[protocol]
+
+
+_POSITIVE = (np.array([128, 256, 65536, 2**32]), np.array([1, 2, 3, 5, 9]))
+_NEGATIVE = (np.array([-(2**31), -32768, -128, -32]), np.array([9, 5, 3, 2, 1]))
+
+
+def int_bytes(value: Any) -> Any:
+    """MessagePack bytes of integers: fixint, then 1, 2, 4 or 8 bytes more (an int for
+    an int, else an int64 array)."""
+    if isinstance(value, int | np.integer):
+        v = int(value)
+        if v >= 0:
+            return 1 if v < 128 else 2 if v < 256 else 3 if v < 65536 else 5 if v < 2**32 else 9
+        return (
+            1 if v >= -32 else 2 if v >= -128 else 3 if v >= -32768 else 5 if v >= -(2**31) else 9
+        )
+    v = np.asarray(value, dtype=np.int64)
+    limits, sizes = _POSITIVE
+    positive = sizes[np.searchsorted(limits, v, side="right")]
+    if v.size == 0 or v.min() >= 0:
+        return positive
+    limits, sizes = _NEGATIVE
+    return np.where(v >= 0, positive, sizes[np.searchsorted(limits, v, side="right")])
+
+
+def _sized(n: Any, limits: tuple[int, ...], heads: tuple[int, ...]) -> Any:
+    """The header bytes of a length `n` (heads[i] below limits[i], the last beyond)."""
+    if isinstance(n, int | np.integer):
+        return next((h for limit, h in zip(limits, heads, strict=False) if n < limit), heads[-1])
+    return np.asarray(heads)[np.searchsorted(limits, np.asarray(n, dtype=np.int64), "right")]
+
+
+def str_bytes(chars: Any) -> Any:
+    """MessagePack bytes of strings of `chars` (ASCII) characters."""
+    return _sized(chars, (32, 256, 65536), (1, 2, 3, 5)) + chars
+
+
+def bin_bytes(size: Any) -> Any:
+    """MessagePack bytes of binaries of `size` bytes."""
+    return _sized(size, (256, 65536), (2, 3, 5)) + size
+
+
+def head_bytes(count: Any) -> Any:
+    """MessagePack bytes of the header of an array or a map of `count` entries."""
+    return _sized(count, (16, 65536), (1, 3, 5))
+
+
+@functools.cache
+def _key(name: str) -> int:
+    return int(str_bytes(len(name)))
+
+
+def array_bytes(dtype: str, shape: Any, rows: Any = None) -> np.ndarray:
+    """An array on the wire, `agents.messages.Array` (dtype, shape, data): of `shape`, or
+    of `rows` (vectorised) by shape[1:] where shape[0] is -1."""
+    dims = np.asarray(shape[1:] if shape[:1] == (-1,) else shape, dtype=np.int64)
+    size = np.dtype(dtype).itemsize * int(np.prod(dims))
+    fixed = 1 + _key(dtype) + int(head_bytes(len(shape))) + int(int_bytes(dims).sum())
+    if shape[:1] == (-1,):
+        rows = np.asarray(rows, dtype=np.int64)
+        return fixed + int_bytes(rows) + bin_bytes(size * rows)
+    return fixed + bin_bytes(size)
+
+
+def content_bytes(layout: Layout, rows: Any = None) -> np.ndarray:
+    """A part's content: the map of `layout`'s arrays (`rows`: of the variable ones)."""
+    total = head_bytes(len(layout))
+    for name, (dtype, shape) in layout.items():
+        total = total + _key(name) + array_bytes(dtype, shape, rows)
+    return np.asarray(total, dtype=np.int64)
+
+
+def part_bytes(protocol: str, round_: Any, final: Any, content: Any) -> Any:
+    """One protocol's part of a frame (`agents.messages.Part`), vectorised over the
+    round, the final round (-1: not final) and the content's bytes (None: no content)."""
+    content = 1 if content is None else content  # nil
+    return 1 + _key(protocol) + int_bytes(round_) + int_bytes(final) + content
+
+
+_BODY = (
+    1  # a tagged map of 6 entries: the tag, then the 5 fields
+    + _key("type") + _key("radio")
+    + _key("version") + int_bytes(WIRE_VERSION)
+    + _key("run") + str_bytes(RUN_CHARS)
+    + _key("k") + _key("sender") + _key("parts")
+)  # fmt: skip
+"""The bytes of a `agents.messages.Radio` body besides the values of k, the sender and
+the parts."""
+
+
+@functools.cache
+def layout_bytes(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -> int:
+    """`content_bytes` of a fixed `layout` (no scan in it)."""
+    return int(content_bytes(layout(protocol, n, m, slots, avoid)))
+
+
+def frame_bytes(k: int, sender: Any, parts: Any, count: Any) -> Any:
+    """One frame from `sender` (vectorised) of `count` parts of `parts` bytes in all, to
+    one receiver, less the receiver's number (`int_bytes` of it, added by the caller)."""
+    k_bytes, sender_bytes = int_bytes(k), int_bytes(sender)
+    if isinstance(sender_bytes, int) and isinstance(parts, int | np.integer):
+        return _frame(k_bytes, sender_bytes, int(parts), count)  # a number: cached
+    return _frame.__wrapped__(k_bytes, sender_bytes, parts, count)
+
+
+@functools.lru_cache(maxsize=4096)
+def _frame(k: Any, sender: Any, parts: Any, count: Any) -> Any:
+    """`frame_bytes` from the bytes that k and the sender's number take."""
+    body = _BODY + k + sender + head_bytes(count) + parts
+    # the envelope: an array of 5, sender, (receiver), sequence number, body, tag
+    seq = int_bytes(SEQ_START + 1)
+    return head_bytes(5) + sender + seq + bin_bytes(body) + bin_bytes(TAG_BYTES)

@@ -39,7 +39,7 @@ from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, Tally
 from .numerics.buffers import Buffers
-from .radio import Radio, RadioState, counted
+from .radio import Radio, RadioState, counted, layout_bytes, part_bytes
 from .robust import gate
 from .tracks import columns, manage
 from .tracks import scan as scans
@@ -304,6 +304,12 @@ class Cycle:
         "radio messages the fault model delivers that had not arrived when their receiver "
         "stopped waiting, by protocol (" + ", ".join(PROTOCOLS) + "): late, or never sent "
         "(their sender stopped or gone); always 0 in the simulator, whose radio is on time",
+        np.int64,
+    )
+    bytes: np.ndarray = _record(
+        "(Nu+1,)",
+        "radio bytes each UAV sent, the central node's last (see the documentation, "
+        "Performance: bytes): its frames as the agent form puts them on the wire",
         np.int64,
     )
     conflicts: np.ndarray = _record(
@@ -754,6 +760,7 @@ def finish(
         messages=fused.sent + assigned.sent + beaconed[0],
         delivered=fused.delivered + assigned.delivered + beaconed[1],
         late=np.zeros((B, len(PROTOCOLS)), dtype=np.int64),
+        bytes=pending.radio.bytes,
         conflicts=conflicts(
             target if pending.columns is None else pending.columns, alive, pending.width
         ),
@@ -808,6 +815,8 @@ def avoid(
     own = not radio.sending("beacon")
     if own:
         radio.send("beacon", {"uavs": pending.believed, "stamp": np.full((B, Nu), k)})
+        beacon = layout_bytes("beacon", Nu, 0, avoid=True)
+        radio.on_air(part_bytes("beacon", 0, -1, beacon), 1, alive)
     inbox = radio.receive("beacon")
     heard = state.beacons if state.beacons is not None else avoidance.Heard.nothing(B, Nu)
     memory = avoidance.memory_of(ctx.setting.delay, scenario.faults.loss)
@@ -1203,9 +1212,10 @@ class Result:
     estimate; rmse_best and nees_best of the team's best estimate; nees_median,
     nees_inside and their _best twins: the median of the same NEES samples and the
     fraction inside the 95 % chi-square(4) interval; rounds: mean D_i per
-    UAV and step; messages and delivered per step; conflicts per step; failed: UAVs
-    failed by the end; separation_losses, separation_min and conflict_time (`airspace.separation`);
-    decision_time_ms (CPU) and decision_wall_ms per UAV and cycle.
+    UAV and step; messages and delivered per step; bytes per UAV and step; conflicts
+    per step; failed: UAVs failed by the end; separation_losses, separation_min and
+    conflict_time (`airspace.separation`); decision_time_ms (CPU) and decision_wall_ms
+    per UAV and cycle.
     """
 
     method: str
@@ -1242,6 +1252,7 @@ class Result:
     rounds: float
     messages: float
     delivered: float
+    bytes: float
     conflicts: float
     failed: float
     separation_losses: float

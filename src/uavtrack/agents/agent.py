@@ -81,10 +81,11 @@ class AgentRadio:
         self.central: dict[int, bool] = {}  # cycle -> the central node is alive
         self.bad: dict[int, np.ndarray | None] = {}  # cycle -> (N+1, N+1) link states
         self.late: dict[str, int] = {}  # this cycle's messages that missed it, by protocol
+        self.bytes = 0  # this cycle's frames on the wire (`radio.frame_bytes`)
 
     def begin(self, k: int, links: np.ndarray, alive: np.ndarray, central: bool = True) -> None:
         self.links[k], self.alive[k], self.central[k] = links, alive, central
-        self.late = {}
+        self.late, self.bytes = {}, 0
         previous = self.bad.get(k - 1)
         states = self.faults.link_states(k, None if previous is None else previous[None])
         self.bad[k] = None if states is None else states[0]
@@ -99,7 +100,7 @@ class AgentRadio:
         body = encode(Radio(version=VERSION, run=self.run, k=k, sender=self.me, parts=parts))
         for q in receivers:
             if q != self.me:
-                self.link.send_body(int(q), body)
+                self.bytes += self.link.send_body(int(q), body)
 
     def lost(self, k: int, protocol: str, round_: int, sender: np.ndarray, receiver) -> np.ndarray:
         bad = self.bad.get(k)
@@ -284,6 +285,7 @@ class UavAgent:
             decision_ms=cpu,
             decision_wall_ms=wall,
             late=dict(self.radio.late),
+            radio_bytes=self.radio.bytes,
         )
         self.mean, self.cov, self.modes = tracker.close(*belief, fused_mean, fused_cov)
         return report
@@ -713,4 +715,5 @@ class CentralAgent:
             version=VERSION, run=self.run, k=k, uav=n, action=-1, target=-1,
             mean=empty, cov=empty, bids=empty, rounds=0, sent=sent, delivered=delivered,
             decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
+            radio_bytes=self.radio.bytes,
         )  # fmt: skip

@@ -37,9 +37,10 @@ import numpy as np
 
 from .. import estimation
 from ..faults import PROTOCOLS
+from ..radio import WIRE_VERSION
 from ..robust.plausibility import CONSISTENT, Bounds
 
-VERSION = 6
+VERSION = WIRE_VERSION
 """Schema version; a message of another version is dropped."""
 
 
@@ -148,6 +149,7 @@ class Report(msgspec.Struct, tag="report", frozen=True, kw_only=True):
     received: int = 0
     drops: dict[str, int] = {}
     late: dict[str, int] = {}  # messages of this cycle that missed it, by protocol
+    radio_bytes: int = 0  # the frames it sent to other programs this cycle, on the wire
     label: Array | None = None  # with unknown association: each slot's team label
     status: Array | None = None  # and its status (0 empty, 1 tentative, 2 confirmed)
 
@@ -615,7 +617,7 @@ class Spec:
     def report(self, message: Report) -> dict[str, np.ndarray] | str:
         """A Report's arrays if the run admits it, else the reason not."""
         counts = (message.rounds, message.sent, message.delivered, message.published)
-        counts += (message.bytes, message.received)
+        counts += (message.bytes, message.received, message.radio_bytes)
         if not all(0 <= c <= COUNT for c in counts) or message.rounds > self.rounds:
             return "count out of range"
         if len(message.drops) > 64 or not all(

@@ -43,11 +43,14 @@ def document() -> str:
         "",
         "Every payload is a MessagePack array `[sender, receiver, seq, body, tag]`: "
         f"`sender` and `receiver` are program numbers (the world is {security.WORLD}, "
-        f"everyone {security.EVERYONE}), `seq` the sender's sequence number (it only grows; "
-        f"receivers drop a number seen before or older than the last {security.WINDOW}), "
-        "`body` the encoded message, `tag` its authentication: a keyed BLAKE2b from the pair's "
-        "X25519 agreement, an Ed25519 signature for the world's broadcast, empty when the swarm "
-        "does not authenticate (`--no-sign`). See `uavtrack.agents.security`.",
+        f"everyone {security.EVERYONE}), `seq` the sender's sequence number (it starts above "
+        f"2^32, so it is always a uint64, and only grows; receivers drop a number seen before "
+        f"or older than the last {security.WINDOW}), `body` the encoded message, `tag` its "
+        f"authentication: a keyed BLAKE2b ({security.TAG_BYTES} bytes) from the pair's X25519 "
+        "agreement, an Ed25519 signature for the world's broadcast; when the swarm does not "
+        "authenticate (`--no-sign`), an unkeyed BLAKE2b checksum of the same bytes. A radio "
+        "frame's size thus depends on neither (`uavtrack.radio.frame_bytes` counts it). See "
+        "`uavtrack.agents.security`.",
         "",
         "## Messages",
         "",

@@ -25,6 +25,11 @@ keys cost one keyed hash per message instead of a public-key signature (about 2 
 against 130 us to verify Ed25519 on the 2-core machine; see the docs, the agent form,
 Trust).
 
+A swarm that does not authenticate (``--no-sign``) tags each envelope with an unkeyed
+BLAKE2b checksum of the same bytes instead: it catches a corrupted message (dropped as
+malformed), not a forged one, and keeps every frame the size `radio.TAG_BYTES` counts.
+Sequence numbers start above `radio.SEQ_START` for the same reason.
+
 What this does not do: hide the messages from the network (use TLS, `--tls-*`: mutual
 TLS lets only holders of a certificate of the swarm's CA connect at all), or keep a
 program whose key is stolen from speaking as itself. A key file is refused when others
@@ -45,6 +50,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import msgspec
+
+from ..radio import SEQ_START, TAG_BYTES
 
 if TYPE_CHECKING:  # cryptography is loaded on first use (`_crypto`)
     from cryptography.hazmat.primitives.asymmetric.ed25519 import Ed25519PrivateKey
@@ -81,6 +88,14 @@ def peek_sender(payload: bytes) -> int | None:
         return _decode(payload).sender
     except (msgspec.DecodeError, msgspec.ValidationError, TypeError, ValueError):
         return None
+
+
+def tag_of(key: bytes, run: str, sender: int, receiver: int, seq: int, body: bytes) -> bytes:
+    """An envelope's tag: BLAKE2b under `key` over the run, sender, receiver, sequence
+    number and body; with no key (b""), the checksum of a swarm that does not
+    authenticate, which anyone can make."""
+    head = f"{run}|{sender}|{receiver}|{seq}|".encode()
+    return hashlib.blake2b(head + body, key=key, digest_size=TAG_BYTES, person=_PERSON).digest()
 
 
 def _crypto():
@@ -280,7 +295,7 @@ class Gate:
     _publics: list[bytes] | None = None
     _keys: dict[tuple[int, int], bytes] = field(default_factory=dict)
     _windows: dict[int, Window] = field(default_factory=dict)
-    _seq: int = 0
+    _seq: int = SEQ_START
 
     @property
     def authenticates(self) -> bool:
@@ -319,12 +334,13 @@ class Gate:
 
     def _mac(self, key: bytes, sender: int, receiver: int, seq: int, body: bytes) -> bytes:
         head = f"{self.run}|{sender}|{receiver}|{seq}|".encode()
-        return hashlib.blake2b(head + body, key=key, digest_size=16, person=_PERSON).digest()
+        return hashlib.blake2b(head + body, key=key, digest_size=TAG_BYTES, person=_PERSON).digest()
 
     def seal(self, receiver: int, body: bytes) -> bytes:
         """The envelope of `body` (an encoded message) from this program to `receiver`."""
         self._seq += 1
-        seq, tag = self._seq, b""
+        seq = self._seq
+        tag = tag_of(b"", self.run, self.me, receiver, seq, body)  # without keys, a checksum
         if self.credential is not None:
             if receiver == EVERYONE:
                 if self.signing is None:
@@ -356,7 +372,11 @@ class Gate:
             return "unknown sender"
         if not 0 < envelope.seq < 2**62:
             return "malformed"
-        if self.credential is not None and not self._authentic(envelope):
+        if self.credential is None:
+            checksum = tag_of(b"", self.run, sender, receiver, envelope.seq, envelope.body)
+            if not hmac.compare_digest(envelope.tag, checksum):
+                return "malformed"  # corrupted on the way
+        elif not self._authentic(envelope):
             return "not authentic"
         window = self._windows.setdefault(sender, Window())
         if not window.fresh(envelope.seq):

@@ -33,6 +33,7 @@ from typing import Any
 from ..config import Scenario
 from ..errors import RunError, UsageError, install_hint
 from ..methods import get
+from ..radio import RUN_CHARS
 from ..simulation import Result, result_of
 from .launcher import Forked, Launcher
 from .program import serve
@@ -146,7 +147,7 @@ def run_swarm(
             from ..io import ros2 as _  # noqa: F401
         except ImportError as exc:
             raise UsageError(f"--ros2: {exc}") from None
-    run = secrets.token_hex(6)
+    run = secrets.token_hex(RUN_CHARS // 2)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
     options = Options(

@@ -110,6 +110,7 @@ class TrackedUav(UavAgent):
             bids=packed({"x": slot_bids})["x"], rounds=rounds,
             sent=int(counts[0]), delivered=int(counts[1]),
             decision_ms=cpu, decision_wall_ms=wall, late=dict(self.radio.late),
+            radio_bytes=self.radio.bytes,
             label=packed({"x": labels})["x"],
             status=packed({"x": book.status[0, 0].astype(np.int64)})["x"],
         )  # fmt: skip

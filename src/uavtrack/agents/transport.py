@@ -365,9 +365,12 @@ class Link:
     def send(self, receiver: int, message: Message) -> None:
         self.send_body(receiver, encode(message))
 
-    def send_body(self, receiver: int, body: bytes) -> None:
-        """An encoded message to `receiver` (a program, or `WORLD`)."""
-        self.transport.publish(inbox_key(self.run, receiver), self.gate.seal(receiver, body))
+    def send_body(self, receiver: int, body: bytes) -> int:
+        """An encoded message to `receiver` (a program, or `WORLD`); returns its bytes
+        on the wire (the envelope's)."""
+        payload = self.gate.seal(receiver, body)
+        self.transport.publish(inbox_key(self.run, receiver), payload)
+        return len(payload)
 
     def hello(self, message: Hello) -> None:
         self.transport.publish(keys(self.run)["hello"], self.gate.seal(EVERYONE, encode(message)))

@@ -403,7 +403,9 @@ class WorldProgram:
         decision, wall = np.full((1, Nu), np.nan), np.full((1, Nu), np.nan)
         sent = delivered = 0
         missed = np.zeros(len(PROTOCOLS), dtype=np.int64)
+        on_air = np.zeros((1, Nu + 1), dtype=np.int64)  # the node's last
         for i, (report, arrays) in reports.items():
+            on_air[0, i] = report.radio_bytes
             sent += report.sent
             delivered += report.delivered
             for protocol, count in report.late.items():
@@ -432,6 +434,7 @@ class WorldProgram:
             messages=np.array([sent]),
             delivered=np.array([delivered]),
             late=missed[None],
+            bytes=on_air,
             conflicts=self._conflicts(target, alive, label, status),
             alive=alive.copy(),
             decision_time_ms=decision,

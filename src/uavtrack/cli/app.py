@@ -235,6 +235,7 @@ RUN_ROWS = (
     ("gospa", "GOSPA, every UAV's estimates [m] (as tracks are scored)", "{:.2f}"),
     ("rounds", "consensus rounds per UAV and step", "{:.2f}"),
     ("messages", "messages per step", "{:.2f}"),
+    ("bytes", "radio bytes per UAV and step (the agent form's frames)", "{:.0f}"),
     ("decision_time_ms", "decision time per UAV and cycle [ms of CPU time]", "{:.3f}"),
     ("decision_wall_ms", "the same in wall time [ms]", "{:.3f}"),
 )
@@ -473,7 +474,7 @@ def show(
     central = get(summary["method"]).central
     rows_shown = RUN_ROWS
     if scenario.tracker.association != "known":
-        keep = ("rounds", "messages", "decision_time_ms", "decision_wall_ms")
+        keep = ("rounds", "messages", "bytes", "decision_time_ms", "decision_wall_ms")
         rows_shown = TRACK_ROWS + tuple(r for r in RUN_ROWS if r[0] in keep)
         table.caption = TRACK_CAPTION
     for key, label, fmt in rows_shown:
@@ -504,6 +505,7 @@ COMPARE_ROWS = (
     ("gospa_best", "GOSPA, best estimates [m]", "{:.2f}"),
     ("rounds", "rounds per UAV and step", "{:.2f}"),
     ("messages", "messages per step", "{:.1f}"),
+    ("bytes", "radio bytes per UAV and step", "{:.0f}"),
     ("decision_time_ms", "decision time [ms of CPU]", "{:.3f}"),
 )
 

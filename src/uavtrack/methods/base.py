@@ -14,7 +14,7 @@ import numpy as np
 from .. import estimation, fusion, network
 from ..config import Scenario
 from ..numerics.buffers import Buffers, take
-from ..radio import Radio, counted
+from ..radio import Radio, content_bytes, counted, layout, layout_bytes
 from ..robust import gate
 from ..tracks import association, manage, team
 
@@ -206,6 +206,27 @@ def fusion_rounds(inputs: Inputs) -> tuple[fusion.Depth, np.ndarray]:
     return depth, rounds
 
 
+def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.ndarray | int:
+    """The bytes of `protocol`'s content as the agent form sends it (`radio.layout`),
+    for this cycle's team and the run's trackers and avoidance (`rows`: a scan's
+    measurements, (B, N))."""
+    n = inputs.alive.shape[1]
+    scenario = inputs.setting.scenario
+    known = scenario is None or scenario.tracker.association == "known"
+    slots = 0 if known or scenario is None else scenario.track_slots
+    avoid = scenario is not None and scenario.planner.avoidance != "none"
+    m = inputs.gamma.shape[-1]
+    if rows is not None:
+        return content_bytes(layout(protocol, n, m, slots, avoid), rows)
+    return layout_bytes(protocol, n, m, slots, avoid)
+
+
+def rounds_on_air(inputs: Inputs, depth: fusion.Depth, rounds: np.ndarray) -> None:
+    """The frames of the D_i flooding with the consensus (`radio.Radio.rounds_on_air`)."""
+    flood, tuples = wire(inputs, "flood"), wire(inputs, "consensus")
+    inputs.radio.rounds_on_air(depth.ran, rounds, int(flood), int(tuples), inputs.alive)
+
+
 def consensus(inputs: Inputs) -> Fused:
     """The paper's fusion (Algorithm 2 lines 15-25) over the cycle's radio.
 
@@ -215,6 +236,7 @@ def consensus(inputs: Inputs) -> Fused:
     """
     s, radio = inputs.setting, inputs.radio
     depth, rounds = fusion_rounds(inputs)
+    rounds_on_air(inputs, depth, rounds)
     admit = gated(inputs)
     if s.delay == 0 and s.rule == "max_consensus":
         tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
@@ -307,6 +329,7 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         inputs.believed, alive, scenario, local.modes, local.tracker, inputs.k,
     )  # fmt: skip
     depth, rounds = fusion_rounds(inputs)
+    rounds_on_air(inputs, depth, rounds)
     book = scanned.book
     own = scanned_tracks(scanned, local.tombs, inputs.k)
     threshold = association.threshold(scenario.tracker.gate_probability, 4)

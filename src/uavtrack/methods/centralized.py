@@ -19,10 +19,10 @@ from __future__ import annotations
 import numpy as np
 
 from .. import assignment, fusion, timing
-from ..radio import counted
+from ..radio import counted, part_bytes
 from ..robust import gate
 from ..tracks import manage
-from .base import Assigned, Fused, FusedTracks, Inputs, Local, Method, Setting
+from .base import Assigned, Fused, FusedTracks, Inputs, Local, Method, Setting, wire
 
 
 class Centralized(Method):
@@ -31,7 +31,18 @@ class Centralized(Method):
     name = "centralized"
     central = True
 
+    @staticmethod
+    def on_air(inputs: Inputs, rows: np.ndarray | None = None) -> None:
+        """The frames of a cycle as the agent form sends them: each living UAV uploads
+        one to the central node (with tracks its scan of `rows` measurements (B, N)),
+        the node sends each one its download."""
+        radio, alive = inputs.radio, inputs.alive
+        up, down = wire(inputs, "upload", rows), wire(inputs, "download")
+        radio.on_air(part_bytes("upload", 0, -1, up), 1, alive, node=True)
+        radio.from_node(part_bytes("download", 0, -1, down), 1, alive)
+
     def fuse(self, inputs: Inputs) -> Fused:
+        self.on_air(inputs)
         if not inputs.setting.faulty:
             return self._perfect(inputs)
         return self._over_links(inputs)
@@ -113,6 +124,7 @@ class Centralized(Method):
         if scenario is None or local.central is None:
             raise ValueError("the central tracker needs the scenario and its own tracks")
         B, n = alive.shape
+        self.on_air(inputs, local.valid.sum(axis=-1))
         heard, take = alive, alive
         sent = delivered = np.full(B, 2 * n if n > 1 else 0, dtype=np.int64)
         if s.faulty:

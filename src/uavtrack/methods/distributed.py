@@ -17,8 +17,8 @@ from __future__ import annotations
 import numpy as np
 
 from .. import assignment, fusion, timing
-from ..radio import counted
-from .base import Assigned, Fused, Held, Inputs, Method, Setting
+from ..radio import counted, part_bytes
+from .base import Assigned, Fused, Held, Inputs, Method, Setting, wire
 
 
 class Distributed(Method):
@@ -52,6 +52,8 @@ class Distributed(Method):
         radio.send("beacon", {"uavs": inputs.believed, "stamp": np.full((B, n), k)})
         radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
+        parts = sum(part_bytes(p, 0, -1, wire(inputs, p)) for p in ("beacon", "bids"))
+        radio.on_air(parts, 2, inputs.alive)  # one frame: the beacon with the bids
         zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, n), dtype=bool)
         once = inputs.alive.astype(np.int64)
         sent, delivered = counted(
