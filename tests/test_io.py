@@ -168,12 +168,15 @@ def test_tidy_tables_read_back_by_pandas(tmp_path, saved, capsys, result):
         ("uavs", "bank_angle"): b"rad", ("uavs", "decision_time_ms"): b"ms",
         ("steps", "time"): b"s", ("targets", "best_vy"): b"m/s", ("pairs", "est_y"): b"m",
         ("pairs", "P_x_x"): b"m^2", ("pairs", "P_x_vy"): b"m^2/s", ("pairs", "P_vx_vy"): b"m^2/s^2",
+        ("uavs", "bytes"): b"byte", ("steps", "node_bytes"): b"byte",
     }  # fmt: skip
     for (table, column), unit in units.items():
         assert schema[table].field(column).metadata[b"unit"] == unit, (table, column)
     for table, column in (("steps", "messages"), ("uavs", "alive"), ("pairs", "in_view")):
         assert not schema[table].field(column).metadata  # counts and flags have none
     assert frames["pairs"].attrs["units"]["P_y_vx"] == "m^2/s"  # pandas keeps them too
+    on_air = frames["uavs"]["bytes"].sum() + frames["steps"]["node_bytes"].sum()
+    assert on_air == result.trace.bytes.sum() > 0
     csv = tmp_path / "csv"
     assert run_cli(capsys, "export", saved, "--format", "csv", "--out", csv)[0] == 0
     back = pd.read_csv(csv / "pairs.csv")

@@ -60,7 +60,8 @@ UAV_STATE = ("x", "y", "altitude", "speed", "heading")
 TARGET_STATE = ("x", "y", "vx", "vy")
 UNITS = {"x": "m", "y": "m", "altitude": "m", "speed": "m/s", "heading": "rad", "vx": "m/s",
          "vy": "m/s", "time": "s", "bank_angle": "rad", "decision_time_ms": "ms",
-         "decision_wall_ms": "ms", "range": "m", "bearing": "rad"}  # fmt: skip
+         "decision_wall_ms": "ms", "range": "m", "bearing": "rad", "bytes": "byte",
+         "node_bytes": "byte"}  # fmt: skip
 """The unit of every table column that has one (estimates and covariance entries: see
 `unit`); netCDF variables and Parquet fields carry the same strings (UDUNITS syntax)."""
 TABLES = ("steps", "uavs", "targets", "pairs")
@@ -157,6 +158,9 @@ def to_xarray(
     )  # fmt: skip
     for name in ("messages", "delivered", "conflicts"):
         variables[name] = (step, getattr(trace, name), {"long_name": docs[name]})
+    variables["bytes"] = (su, trace.bytes[:, :-1], {"long_name": docs["bytes"], "units": "byte"})
+    node = {"long_name": "radio bytes the central node sent", "units": "byte"}
+    variables["node_bytes"] = (step, trace.bytes[:, -1], node)
     if tracked:
         _track_variables(variables, trace, sut)
     attrs = {
@@ -242,6 +246,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
             "messages": trace.messages,
             "delivered": trace.delivered,
             "conflicts": trace.conflicts,
+            "node_bytes": trace.bytes[:, -1],
             "in_view": trace.observed.any(axis=1).mean(axis=1),
             "alive_uavs": trace.alive.sum(axis=1),
         }
@@ -255,6 +260,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
         assignment=trace.assignment.ravel(),
         bank_angle=trace.action.ravel(),
         rounds=trace.rounds.ravel(),
+        bytes=trace.bytes[:, :-1].ravel(),
         decision_time_ms=trace.decision_time_ms.ravel(),
         decision_wall_ms=trace.decision_wall_ms.ravel(),
     )
