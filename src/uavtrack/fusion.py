@@ -35,6 +35,7 @@ a plain graph with a perfect radio. All functions broadcast over a leading trial
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass, fields
 
@@ -402,14 +403,77 @@ def count(
     return sent + now, delivered + np.einsum("bn,bn->b", inbox.delivered.incoming(), receiving)
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Outcome:
     """Outcome of the consensus rounds: the tuples each UAV holds (`Estimates`), sent and
-    delivered (B,) messages."""
+    delivered (B,) messages, and with `Sending` the tuples each UAV's message of round r
+    carried, carried[r - 1] (B, N), and the confidence of the last tuple each UAV sent of
+    each target this cycle, last (B, N, M) (NaN: none)."""
 
     tuples: Estimates
     sent: np.ndarray
     delivered: np.ndarray
+    carried: list[np.ndarray] | None = None
+    last: np.ndarray | None = None
+
+
+@dataclass(frozen=True)
+class Sending:
+    """Which tuples a UAV's consensus messages carry (``fusion.trigger``, ``radio.encoding``
+    compact): in round 1 those of `first` (B, N, M) bool (None: all); in a later round,
+    with `changes`, only those that changed since its previous round (else all); past its
+    rounds (from rounds + 1) it repeats its last round's message, as an agent's final
+    message does. A tuple not carried is offered with confidence -inf: never adopted.
+
+    Without losses this loses nothing in the later rounds: a tuple that did not change
+    since the previous round was offered then, and max-consensus only ever raises a
+    receiver's confidence, so it cannot win now what it did not win then: every UAV ends
+    with the confidence sending everything gives, and with the same tuple unless
+    confidences tie exactly (a re-offered tuple of equal confidence from a lower index
+    would have taken the receiver's place). A property test holds both. What the first
+    round leaves out (`triggered`) is never offered in the cycle: its receivers keep what
+    they hold."""
+
+    first: np.ndarray | None = None
+    changes: bool = False
+    view: Callable[[Estimates], tuple[np.ndarray, ...]] | None = None
+    """What of a tuple counts as its change (arrays (B, N, M, ...)): by default every
+    field; the batch's tuples by index give the values they stand for."""
+
+    def mask(self, r: int, tuples: Estimates, previous: Estimates | None) -> np.ndarray:
+        """The tuples carried in round r from the current and the previous round's: only
+        those with an estimate (a confidence above -inf)."""
+        gamma = required(tuples.gamma, "gamma")
+        has = np.isfinite(gamma)
+        if r == 1 or previous is None:
+            return has if self.first is None else self.first & has
+        if not self.changes:
+            return has
+        view = self.view or (lambda t: tuple(value for _, value in t.items()))
+        changed = np.zeros(gamma.shape, dtype=bool)
+        for now, before in zip(view(tuples), view(previous), strict=True):
+            changed |= (now != before).reshape(gamma.shape + (-1,)).any(axis=-1)
+        return changed & has
+
+
+def triggered(
+    gamma: np.ndarray, told: np.ndarray | None, k: int, trigger: float, refresh: int
+) -> np.ndarray | None:
+    """``fusion.trigger``: the tuples (..., M) a UAV sends in a cycle's first round, those
+    whose confidence `gamma` moved by more than `trigger` of the confidence it last sent,
+    `told` (NaN: never sent); None (all) in a refresh cycle (k a multiple of `refresh`)
+    or before anything was sent."""
+    if told is None or k % refresh == 0:
+        return None
+    with np.errstate(invalid="ignore"):  # -inf - -inf: no estimate then and now
+        moved = np.abs(gamma - told) > trigger * np.abs(told)
+    return np.isnan(told) | moved
+
+
+def carrying(tuples: Estimates, mask: np.ndarray) -> Estimates:
+    """The tuples as a message carries them: those not in `mask` with confidence -inf."""
+    gamma = required(tuples.gamma, "gamma")
+    return dataclasses.replace(tuples, gamma=np.where(mask, gamma, -np.inf))
 
 
 def consensus(
@@ -420,6 +484,7 @@ def consensus(
     receive: Callable[[Estimates], Estimates] | None = None,
     rule: str = "max_consensus",
     admit: Callable[[Estimates, Estimates, network.Links], np.ndarray] | None = None,
+    sending: Sending | None = None,
 ) -> Outcome:
     """Run the max-consensus update (27), UAV i for rounds[i] rounds, over the radio.
 
@@ -433,15 +498,35 @@ def consensus(
     turns what arrives into what is compared and adopted (default: as it is). rule
     "covariance_intersection" fuses instead (`intersect_round`; the tuples then carry
     mean and cov). admit(own, offered, links): which offered tuples each receiver
-    may adopt (`gate.admitted`; None: all).
+    may adopt (`gate.admitted`; None: all). sending: which tuples the messages carry
+    (`Sending`; None: all, the paper's).
     """
     score = score or (lambda t: required(t.gamma, "gamma"))
     B, n = rounds.shape
     if rule not in ("max_consensus", "covariance_intersection"):
         raise ValueError(f"unknown fusion rule {rule!r}")
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
-    for r in range(1, int(rounds.max(initial=0)) + 1):
-        radio.send("consensus", tuples)
+    carried: list[np.ndarray] = []
+    previous: Estimates | None = None
+    frozen = last = None
+    top = int(rounds.max(initial=0))
+    for r in range(1, top + 2):
+        content = tuples
+        if sending is not None:
+            mask = sending.mask(r, tuples, previous)
+            if frozen is not None:  # past its rounds: its last round's message again
+                mask = np.where(np.greater(r, rounds + 1)[..., None], frozen, mask)
+            final = np.equal(r, rounds + 1)[..., None]
+            frozen = mask if frozen is None else np.where(final, mask, frozen)
+            gamma = required(tuples.gamma, "gamma")
+            on_air = mask & np.less_equal(r, rounds + 1)[..., None]
+            last = np.full(gamma.shape, np.nan) if last is None else last
+            last = np.where(on_air, gamma, last)
+            carried.append(mask.sum(axis=-1))
+            previous, content = tuples, carrying(tuples, mask)
+        radio.send("consensus", content)  # after the last round: the final tuples
+        if r > top:  # (for later rounds, with delay)
+            break
         inbox = radio.receive("consensus", r)
         active = rounds >= r
         if inbox is None:
@@ -472,8 +557,9 @@ def consensus(
         else:
             best = np.where(active[..., None], best, np.arange(n)[:, None])
             tuples = pick(tuples, offered, best)
-    radio.send("consensus", tuples)  # the final tuples, for later rounds (with delay)
-    return Outcome(tuples=tuples, sent=sent, delivered=delivered)
+    if sending is None:
+        return Outcome(tuples=tuples, sent=sent, delivered=delivered)
+    return Outcome(tuples=tuples, sent=sent, delivered=delivered, carried=carried, last=last)
 
 
 # ------------------------------------------------------------------ on a plain graph

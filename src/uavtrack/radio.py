@@ -240,7 +240,7 @@ class Radio:
         self.bytes[:, n] += np.where(receivers, frame, 0).sum(axis=1)
 
     def rounds_on_air(
-        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: int, alive: np.ndarray
+        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: Any, alive: np.ndarray
     ) -> None:
         """Count the frames of the D_i flooding with the consensus, as an agent bundles
         them (`agents.agent.UavAgent.rounds`): a UAV that stopped the flooding in round R
@@ -252,9 +252,11 @@ class Radio:
         So a UAV sends R + 1 frames of both parts and C - R of the tuples alone when
         R <= C, and R frames of both and one of the set and an empty final part when
         R > C. Each part's size depends on its round only through MessagePack's size of
-        the round numbers, one byte below 128 rounds; beyond, frame by frame."""
+        the round numbers, one byte below 128 rounds; beyond, frame by frame. `tuples`
+        is the bytes of every round's tuples, or a list of them by round (B, N) each
+        (``fusion.trigger``, compact encoding): then frame by frame too."""
         last = np.maximum(ran, rounds) + 1
-        if int(np.where(alive, last, 0).max(initial=0)) >= 128:
+        if isinstance(tuples, list) or int(np.where(alive, last, 0).max(initial=0)) >= 128:
             return self._rounds_one_by_one(ran, rounds, flood, tuples, alive)
         set_part = part_bytes("flood", 1, -1, flood)
         tuple_part = part_bytes("consensus", 1, -1, tuples)
@@ -273,11 +275,14 @@ class Radio:
         self.bytes[:, : alive.shape[1]] += np.where(alive, sent, 0)
 
     def _rounds_one_by_one(
-        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: int, alive: np.ndarray
+        self, ran: np.ndarray, rounds: np.ndarray, flood: int, tuples: Any, alive: np.ndarray
     ) -> None:
-        """`rounds_on_air` frame by frame (round numbers of any size)."""
+        """`rounds_on_air` frame by frame (round numbers of any size, tuples by round)."""
         last = np.maximum(ran, rounds) + 1
+        every = tuples
         for r in range(1, int(np.where(alive, last, 0).max(initial=0)) + 1):
+            if isinstance(every, list):  # a UAV's tuples of round r (r <= C + 1)
+                tuples = every[min(r, len(every)) - 1]
             on = alive & (r <= last)
             flood_final = np.where(r == ran + 1, r, -1)
             flooding = np.where(r <= ran + 1, part_bytes("flood", r, flood_final, flood), 0)
@@ -349,12 +354,27 @@ Layout = dict[str, tuple[str, tuple[int, ...]]]
 F8, I8, B1 = "<f8", "<i8", "|b1"
 
 
-def layout(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -> Layout:
+def layout(
+    protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False, tuples: str = "full"
+) -> Layout:
     """The arrays of a protocol's content in the agent form, `n` UAVs, `m` targets, K =
     `slots` track slots per UAV with unknown association (0: known), and with
     ``planner.avoidance`` (`avoid`) a beacon that carries the sender's whole state. The
     shapes `agents.messages.Spec.contents` admits (a test holds the two equal); (-1, ...)
-    is a scan's Z measurements."""
+    is a scan's Z measurements, or the targets a consensus message carries.
+
+    tuples: how the consensus carries its tuples: "full", every target's in float64;
+    "listed" (``fusion.trigger``), the same for the targets it lists; "compact"
+    (``radio.encoding``), the targets it lists in float32, the covariance's upper
+    triangle (`wire_cov`), without the confidence (its receiver computes it)."""
+    if protocol == "consensus" and tuples != "full" and not slots:
+        if tuples == "compact":
+            return {
+                "targets": ("<u2", (-1,)), "mean": ("<f4", (-1, 4)), "cov": ("<f4", (-1, 10)),
+                "stamp": ("<i4", (-1,)), "origin": ("<u2", (-1,)),
+            }  # fmt: skip
+        listed = {"gamma": (F8, (-1,)), "mean": (F8, (-1, 4)), "cov": (F8, (-1, 4, 4))}
+        return {"targets": (I8, (-1,)), **listed, "stamp": (I8, (-1,)), "origin": (I8, (-1,))}
     beacon = {"uav": (F8, (5,))} if avoid else {"position": (F8, (3,))}
     if slots:
         K = slots
@@ -369,15 +389,15 @@ def layout(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -
             "upload": {"z": (F8, (-1, 2)), "R": (F8, (-1, 2, 2)), "uav": (F8, (5,))},
             "download": {**tracks, **counts, "serial": (I8, ()), "target": (I8, ())},
         }[protocol]
-    tuples = {"gamma": (F8, (m,)), "mean": (F8, (m, 4)), "cov": (F8, (m, 4, 4))}
-    tuples |= {"stamp": (I8, (m,))}
+    known: Layout = {"gamma": (F8, (m,)), "mean": (F8, (m, 4)), "cov": (F8, (m, 4, 4))}
+    known |= {"stamp": (I8, (m,))}
     return {
         "flood": {"known": (B1, (n,))},
-        "consensus": {**tuples, "origin": (I8, (m,))},
+        "consensus": {**known, "origin": (I8, (m,))},
         "beacon": beacon,
         "bids": {"bids": (F8, (m,)), "stamp": (I8, ())},
-        "upload": {**tuples, "uav": (F8, (5,))},
-        "download": {**tuples, "target": (I8, ())},
+        "upload": {**known, "uav": (F8, (5,))},
+        "download": {**known, "target": (I8, ())},
     }[protocol]
 
 
@@ -473,6 +493,21 @@ the parts."""
 def layout_bytes(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -> int:
     """`content_bytes` of a fixed `layout` (no scan in it)."""
     return int(content_bytes(layout(protocol, n, m, slots, avoid)))
+
+
+def wire_mean(mean: np.ndarray) -> np.ndarray:
+    """Estimates as the compact encoding delivers them: rounded to float32."""
+    return mean.astype(np.float32).astype(np.float64)
+
+
+_UPPER = np.triu(np.ones((4, 4), dtype=bool))
+
+
+def wire_cov(cov: np.ndarray) -> np.ndarray:
+    """Covariances (..., 4, 4) as the compact encoding delivers them: the upper triangle
+    rounded to float32, mirrored below the diagonal."""
+    rounded = cov.astype(np.float32).astype(np.float64)
+    return np.where(_UPPER, rounded, np.swapaxes(rounded, -1, -2))
 
 
 def frame_bytes(k: int, sender: Any, parts: Any, count: Any) -> Any:

@@ -122,6 +122,13 @@ class Context:
     def of(
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
+        listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
+        if method.central and listed:
+            raise ScenarioError(
+                "radio.encoding = compact and fusion.trigger act on the consensus of the "
+                f"distributed and greedy methods; method {method.name} uploads and downloads "
+                "whole tables, which they do not encode yet: leave both unset"
+            )
         const = Constants.of(scenario)
         keys = np.stack([trial_key(world.children(s)[2]) for s in seeds])
         faults = Faults(scenario.faults, keys, scenario.n_uavs)
@@ -138,6 +145,9 @@ class Context:
             rule=scenario.fusion.rule,
             gate=None if robust.gate is None else gate.threshold(robust.gate),
             scenario=scenario,
+            trigger=scenario.fusion.trigger,
+            refresh=scenario.fusion.refresh,
+            compact=scenario.radio.encoding == "compact",
         )
         detection = None
         if not scenario.sensor.ideal or scenario.tracker.association != "known":
@@ -247,6 +257,7 @@ class State:
     labels: np.ndarray | None = None  # (B, L) the labels of the held bids' columns
     tombs: np.ndarray | None = None  # (B, Nu, T, 2) the tombstones each UAV knows
     beacons: avoidance.Heard | None = None  # with planner.avoidance: the states heard
+    told: np.ndarray | None = None  # with fusion.trigger: the confidence each UAV last sent
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):
@@ -458,6 +469,7 @@ def decide(
         setting=ctx.setting,
         measured=measured(state, detected, z, R, ctx),
         buffers=ctx.buffers,
+        told=state.told,
     )
     fused = method.fuse(inputs)
     if not plan:
@@ -791,6 +803,7 @@ def finish(
         held=assigned.held,
         flight=state.flight,
         modes=modes,
+        told=fused.told,
         seen=None
         if ctx.setting.gate is None
         else gate.seen(

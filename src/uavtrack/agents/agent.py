@@ -179,6 +179,54 @@ def closed(ids: list[int], me: int) -> tuple[int, network.Links]:
     return where, network.Links(batch=1, n=len(ids), dense=dense)
 
 
+_UPPER = np.triu_indices(4)
+
+
+def listing(t: fusion.Estimates, mask: np.ndarray, compact: bool) -> dict[str, np.ndarray]:
+    """A consensus round's content with only the tuples of `mask` (M,), listed by target
+    (`radio.layout`, "listed"; with `compact`, "compact": float32, the covariance's upper
+    triangle, no confidence)."""
+    targets = np.flatnonzero(mask)
+    mean, cov = fusion.required(t.mean, "mean")[targets], fusion.required(t.cov, "cov")[targets]
+    stamp, origin = fusion.required(t.stamp, "stamp"), fusion.required(t.origin, "origin")
+    if compact:
+        return {
+            "targets": targets.astype("<u2"), "mean": mean.astype("<f4"),
+            "cov": cov[:, *_UPPER].astype("<f4"), "stamp": stamp[targets].astype("<i4"),
+            "origin": origin[targets].astype("<u2"),
+        }  # fmt: skip
+    gamma = fusion.required(t.gamma, "gamma")[targets]
+    return {
+        "targets": targets.astype(np.int64), "gamma": gamma, "mean": mean, "cov": cov,
+        "stamp": stamp[targets], "origin": origin[targets],
+    }  # fmt: skip
+
+
+def listed(content: dict[str, np.ndarray], m: int, k: int, sender: int) -> dict[str, np.ndarray]:
+    """A consensus content as every target's tuples (`listing` undone): a target not
+    listed has no estimate (confidence -inf, mean 0, covariance I, stamp k); a compact
+    content's covariances are mirrored from their upper triangle and its confidences
+    computed from them, as `radio.wire_cov` and the batch do. A full content is as it is."""
+    if "targets" not in content:
+        return content
+    targets = content["targets"].astype(np.int64)
+    gamma = np.full(m, -np.inf)
+    mean, cov = np.zeros((m, 4)), np.broadcast_to(np.eye(4), (m, 4, 4)).copy()
+    stamp, origin = np.full(m, k, dtype=np.int64), np.full(m, sender, dtype=np.int64)
+    mean[targets] = content["mean"].astype(np.float64)
+    if "gamma" in content:
+        cov[targets], gamma[targets] = content["cov"], content["gamma"]
+    else:
+        upper = content["cov"].astype(np.float64)
+        full = np.zeros((len(targets), 4, 4))
+        full[:, *_UPPER] = upper
+        full[:, _UPPER[1], _UPPER[0]] = upper
+        cov[targets] = full
+        gamma[targets] = estimation.confidence(full)
+    stamp[targets], origin[targets] = content["stamp"], content["origin"]
+    return {"gamma": gamma, "mean": mean, "cov": cov, "stamp": stamp, "origin": origin}
+
+
 def part(protocol: str, round_: int, content: dict | None, final: int = -1) -> Part:
     return Part(protocol, round_, final, None if content is None else packed(content))
 
@@ -220,6 +268,7 @@ class UavAgent:
             )
         self.central = isinstance(self.method, Centralized)
         self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
+        self.told: np.ndarray | None = None  # with fusion.trigger: the confidences last sent
         self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
 
     # ------------------------------------------------------------ the cycle
@@ -312,14 +361,43 @@ class UavAgent:
         )
 
         def adopt(state: fusion.Estimates, contents: dict[int, dict]) -> fusion.Estimates:
-            offered = {q: fusion.Estimates.of(self._plausible(t)) for q, t in contents.items()}
+            offered = {
+                q: fusion.Estimates.of(self._plausible(listed(t, self.m, k, q)))
+                for q, t in contents.items()
+            }
             if s.stale:
                 offered = {q: s.forward(t, k) for q, t in offered.items()}
             return self._adopt(state, offered)
 
-        state, rounds, sent, delivered = self.rounds(k, state, lambda t: dict(t.items()), adopt)
+        content = self._content(k, state)
+        state, rounds, sent, delivered = self.rounds(k, state, content, adopt)
         mean, cov = fusion.required(state.mean, "mean"), fusion.required(state.cov, "cov")
         return mean, cov, rounds, sent, delivered
+
+    def _content(self, k: int, state: fusion.Estimates):
+        """content(state): what each consensus round sends of the tuples, all of them or,
+        with ``fusion.trigger`` or the compact encoding, those `fusion.Sending` picks
+        (as the batch's `methods.base.sending`), listed (`listing`); keeps `told`."""
+        s = self.setting
+        if s.trigger is None and not s.compact:
+            return lambda t: dict(t.items())
+        first = None
+        if s.trigger is not None:
+            gamma = fusion.required(state.gamma, "gamma")
+            first = fusion.triggered(gamma, self.told, k, s.trigger, s.refresh)
+        how = fusion.Sending(first=first, changes=True)
+        told = np.full(self.m, np.nan) if self.told is None else self.told.copy()
+        sent: list[fusion.Estimates] = []  # the tuples of each round so far
+
+        def content(t: fusion.Estimates) -> dict[str, np.ndarray]:
+            mask = how.mask(len(sent) + 1, t, sent[-1] if sent else None)
+            sent.append(t)
+            told[mask] = fusion.required(t.gamma, "gamma")[mask]
+            if s.trigger is not None:
+                self.told = told
+            return listing(t, mask, s.compact)
+
+        return content
 
     def rounds(self, k: int, state, content, adopt):
         """The D_i protocol with the consensus rounds of `consensus` over any state:
@@ -428,7 +506,12 @@ class UavAgent:
                 fusion.required(candidates.mean, "mean"),
                 fusion.required(candidates.cov, "cov"),
             )
-            admitted = gate.admitted(links, estimates, estimates, measured, self.setting.gate)
+            claimed = None
+            if self.setting.trigger is not None or self.setting.compact:  # listed targets
+                claimed = np.isfinite(fusion.required(candidates.gamma, "gamma"))
+            admitted = gate.admitted(
+                links, estimates, estimates, measured, self.setting.gate, claimed
+            )
         if self.setting.rule == "covariance_intersection":
             picked = fusion.intersect_round(candidates, candidates, links, admitted)
         else:

@@ -249,6 +249,10 @@ DOMAINS = {
     "measurement covariance": "as covariance, of a measurement (2 x 2)",
     "ground positions": "x and y within the field plus the run's margin",
     "counts": "a count in [0, the run's largest label]",
+    "targets": "the targets a consensus message lists, each once, 0 to M - 1 (up to M of "
+    "them); the other fields' rows are theirs",
+    "covariance triangle": "each row the upper triangle (row by row) of a covariance, "
+    "which must be as covariance once mirrored",
 }
 """What the values of a field may be, beyond its dtype and shape (`Spec.contents`); the
 run's numbers are `plausibility.Bounds`."""
@@ -288,6 +292,9 @@ class Spec:
     avoid: bool = False
     """With ``planner.avoidance``: the beacon carries the sender's whole state (x, y,
     altitude, speed, heading), which the avoidance filter reads."""
+    tuples: str = "full"
+    """How the consensus carries its tuples (`radio.layout`): "full", "listed"
+    (``fusion.trigger``: the targets it lists) or "compact" (``radio.encoding``)."""
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
@@ -310,6 +317,11 @@ class Spec:
             if tracked
             else 0,
             avoid=scenario.planner.avoidance != "none",
+            tuples="compact"
+            if scenario.radio.encoding == "compact"
+            else "listed"
+            if scenario.fusion.trigger is not None
+            else "full",
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -324,10 +336,28 @@ class Spec:
             "cov": (F, (m, 4, 4), "covariance"),
             "stamp": (I, (m,), "stamp"),
         }
+        listed = {
+            "targets": (I, (-1,), "targets"),
+            "gamma": (F, (-1,), "confidence or none"),
+            "mean": (F, (-1, 4), "estimate"),
+            "cov": (F, (-1, 4, 4), "covariance"),
+            "stamp": (I, (-1,), "stamp"),
+            "origin": (I, (-1,), "uav index"),
+        }
+        if self.tuples == "compact":
+            listed = {
+                "targets": ("<u2", (-1,), "targets"),
+                "mean": ("<f4", (-1, 4), "estimate"),
+                "cov": ("<f4", (-1, 10), "covariance triangle"),
+                "stamp": ("<i4", (-1,), "stamp"),
+                "origin": ("<u2", (-1,), "uav index"),
+            }
         return {
             "presence": {"heard": (B, (self.programs,), "flags")},
             "flood": {"known": (B, (n,), "known")},
-            "consensus": {**tuples, "origin": (I, (m,), "uav index")},
+            "consensus": {**tuples, "origin": (I, (m,), "uav index")}
+            if self.tuples == "full"
+            else listed,
             "beacon": self._beacon(),
             "bids": {"bids": (F, (m,), "bids"), "stamp": (I, (), "cycle")},
             "upload": {**tuples, "uav": (F, (5,), "uav state")},
@@ -389,12 +419,14 @@ class Spec:
         }.get(protocol)
 
     def arrays(
-        self, content: dict[str, Array], kinds: dict, k: int = 0, sender: int = 0
+        self, content: dict[str, Array], kinds: dict, k: int = 0, sender: int = 0, most: int = -1
     ) -> dict[str, np.ndarray] | str:
         """The arrays of `content` if they are exactly `kinds` and within their
         domains (of a message of cycle k from `sender`), else the reason not. Every
         field's shape, type and finiteness is checked before any domain, and
-        covariances before what is computed from them."""
+        covariances before what is computed from them. Fields whose first axis is -1
+        hold up to `most` rows (-1: a scan's, `scan`)."""
+        most = self.scan if most < 0 else most
         if content.keys() != kinds.keys():
             return "unexpected fields"
         out = {}
@@ -403,7 +435,7 @@ class Spec:
             wire = content[name]
             if shape[:1] == (-1,) and len(wire.shape) == len(shape) and wire.shape:
                 rows = wire.shape[0] if rows is None else rows
-                shape = (rows if 0 <= rows <= self.scan else -1, *shape[1:])
+                shape = (rows if 0 <= rows <= most else -1, *shape[1:])
             if wire.dtype != dtype or tuple(wire.shape) != shape:
                 return "wrong shape or type"
             try:
@@ -465,6 +497,15 @@ class Spec:
             return _confidence(value, arrays["cov"], domain == "confidence")
         if domain == "covariance":
             return _covariance(value[live], b)
+        if domain == "covariance triangle":  # (rows, 10): the upper triangle of each
+            full = np.zeros((len(value), 4, 4))
+            full[:, *np.triu_indices(4)] = value
+            full[:, np.triu_indices(4)[1], np.triu_indices(4)[0]] = value
+            return _covariance(full, b)
+        if domain == "targets":
+            distinct = len(np.unique(value)) == len(value)
+            inside = ((value >= 0) & (value < self.m)).all()
+            return None if distinct and inside else "index out of range"
         if domain == "uav state":
             return self._uav(value)
         if b is None:
@@ -580,7 +621,8 @@ class Spec:
                 return "round out of range"
             content = None
             if part.content is not None:
-                content = self.arrays(part.content, kinds, message.k, message.sender)
+                most = self.m if part.protocol == "consensus" else -1  # targets listed
+                content = self.arrays(part.content, kinds, message.k, message.sender, most)
                 if isinstance(content, str):
                     return content
             elif part.final < 0:

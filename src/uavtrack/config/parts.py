@@ -552,6 +552,55 @@ class FusionModel(Part):
             "(centralized has no consensus: its node takes each target's best upload)"
         ),
     )
+    trigger: Float | None = Field(
+        default=None,
+        ge=0,
+        le=10,
+        description=(
+            "event-triggered consensus [-], 0 to 10; beyond the paper: a UAV sends a "
+            "target's tuple in a cycle's first round only when its confidence changed by "
+            "more than this fraction since the UAV last sent that target (or every "
+            "fusion.refresh cycles), and in later rounds only when the tuple changed since "
+            "its previous round; a tuple not sent is not offered, its receivers keep what "
+            "they hold; not set: the paper's exchange, every tuple in every round"
+        ),
+    )
+    refresh: Int = Field(
+        default=10,
+        ge=1,
+        le=1_000_000,
+        description=(
+            "with fusion.trigger, a UAV sends all its tuples every this many cycles "
+            "[cycles], 1 to 10^6; assumed: 10 (5 s at dT = 0.5 s), so that a UAV that met "
+            "a new neighbour, or whose messages were lost, is brought up to date within a "
+            "few seconds; 1: every cycle (the trigger acts in later rounds only)"
+        ),
+    )
+
+    @model_validator(mode="after")
+    def _refresh(self) -> FusionModel:
+        if self.trigger is None and self.refresh != 10:
+            raise ValueError(
+                f"fusion.refresh {self.refresh} needs fusion.trigger (it does nothing "
+                "otherwise); set fusion.trigger or leave fusion.refresh unset"
+            )
+        return self
+
+
+class RadioModel(Part):
+    """What the radio carries and how (not in the paper, which assumes an ideal radio)."""
+
+    encoding: Literal["full", "compact"] = Field(
+        default="full",
+        description=(
+            "how estimates travel [-], (full, compact); full: float64 states, the whole "
+            "covariance, every target in every round (the agent form as it was, beyond the "
+            "paper, which does not say); compact, beyond the paper: float32 states, the "
+            "covariance's upper triangle (10 of 16 numbers), the confidence recomputed by the "
+            "receiver from the covariance it got, and in a cycle's later consensus rounds only "
+            "the targets whose tuple changed since the sender's previous round"
+        ),
+    )
 
 
 class EvaluationModel(Part):

@@ -31,6 +31,7 @@ from .parts import (
     Int,
     Part,
     PlannerModel,
+    RadioModel,
     RobustModel,
     SensorModel,
     TargetModel,
@@ -120,6 +121,9 @@ class Scenario(Part):
         default_factory=TrackerModel, description="local filters (eq. 22-25)"
     )
     fusion: FusionModel = Field(default_factory=FusionModel, description="fusion (eq. 26-27)")
+    radio: RadioModel = Field(
+        default_factory=RadioModel, description="the radio's encoding (not in the paper)"
+    )
     planner: PlannerModel = Field(
         default_factory=PlannerModel, description="planning (Algorithm 1)"
     )
@@ -190,6 +194,12 @@ class Scenario(Part):
             raise ValueError(
                 f"robust.gate reads measurements by target; with tracker.association = "
                 f"{self.tracker.association} the tracks' own gates apply: leave robust.gate unset"
+            )
+        if self.radio.encoding != "full" or self.fusion.trigger is not None:
+            raise ValueError(
+                f"radio.encoding = compact and fusion.trigger send tuples of known targets; "
+                f"with tracker.association = {self.tracker.association} the consensus carries "
+                "track slots, which they do not encode yet: leave both unset"
             )
         return self
 

@@ -5,6 +5,7 @@ distributed and greedy methods (`consensus`, with the robust gate, `gated`).
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
 from typing import ClassVar
@@ -14,7 +15,7 @@ import numpy as np
 from .. import estimation, fusion, network
 from ..config import Scenario
 from ..numerics.buffers import Buffers, take
-from ..radio import Radio, content_bytes, counted, layout, layout_bytes
+from ..radio import Radio, content_bytes, counted, layout, layout_bytes, wire_cov, wire_mean
 from ..robust import gate
 from ..tracks import association, manage, team
 
@@ -33,7 +34,8 @@ class Setting:
     rule: the fusion rule of each consensus round (``fusion.rule``). gate: the
     measurement gate's threshold on a squared Mahalanobis distance (``robust.gate``,
     `gate.threshold`; None: off). scenario: the run's (the trackers of unknown
-    association read their settings there).
+    association read their settings there). trigger and refresh: ``fusion.trigger`` and
+    ``fusion.refresh``; compact: ``radio.encoding`` compact.
     """
 
     faulty: bool
@@ -47,6 +49,14 @@ class Setting:
     rule: str = "max_consensus"
     gate: float | None = None
     scenario: Scenario | None = None
+    trigger: float | None = None
+    refresh: int = 10
+    compact: bool = False
+
+    @property
+    def tuples(self) -> str:
+        """How the consensus messages carry their tuples (`radio.layout`)."""
+        return "compact" if self.compact else "listed" if self.trigger is not None else "full"
 
 
 @dataclass(frozen=True)
@@ -85,6 +95,9 @@ class Inputs:
     buffers: Buffers | None = None
     """A run's arrays reused across cycles (`numerics.buffers`), for the full-size
     results of fusion; None: every result a new array."""
+    told: np.ndarray | None = None
+    """With ``fusion.trigger``: the confidence each UAV last sent of each target (B, N,
+    M) (NaN: never)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -103,6 +116,7 @@ class Fused:
     target: np.ndarray | None = None
     largest: np.ndarray | None = None
     gamma: np.ndarray | None = None  # 1 / trace(cov), when the fusion already has it
+    told: np.ndarray | None = None  # with fusion.trigger: `Inputs.told` after this cycle
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -221,10 +235,44 @@ def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.nd
     return layout_bytes(protocol, n, m, slots, avoid)
 
 
-def rounds_on_air(inputs: Inputs, depth: fusion.Depth, rounds: np.ndarray) -> None:
-    """The frames of the D_i flooding with the consensus (`radio.Radio.rounds_on_air`)."""
+def rounds_on_air(
+    inputs: Inputs, depth: fusion.Depth, rounds: np.ndarray, carried: list[np.ndarray] | None
+) -> None:
+    """The frames of the D_i flooding with the consensus (`radio.Radio.rounds_on_air`):
+    every round's tuples, or with `carried` (`fusion.Outcome.carried`) those listed."""
     flood, tuples = wire(inputs, "flood"), wire(inputs, "consensus")
-    inputs.radio.rounds_on_air(depth.ran, rounds, int(flood), int(tuples), inputs.alive)
+    if carried is not None:
+        n, m = inputs.gamma.shape[1:]
+        listed = layout("consensus", n, m, tuples=inputs.setting.tuples)
+        tuples = [content_bytes(listed, rows) for rows in carried]
+    inputs.radio.rounds_on_air(depth.ran, rounds, int(flood), tuples, inputs.alive)
+
+
+def sending(
+    inputs: Inputs, view: Callable[[fusion.Estimates], tuple[np.ndarray, ...]] | None = None
+) -> fusion.Sending | None:
+    """Which tuples the consensus messages carry: with ``fusion.trigger`` a target's in
+    the first round when its confidence changed by more than the trigger since the UAV
+    last sent it, or it never did, or the cycle is a refresh (k a multiple of
+    ``fusion.refresh``), and in later rounds what changed; with the compact encoding
+    alone, everything in the first round and what changed in the later ones; None: the
+    paper's, everything in every round. view: what of a tuple counts as its change
+    (`fusion.Sending.view`)."""
+    s = inputs.setting
+    if s.trigger is None and not s.compact:
+        return None
+    first = None
+    if s.trigger is not None:
+        first = fusion.triggered(inputs.gamma, inputs.told, inputs.k, s.trigger, s.refresh)
+    return fusion.Sending(first=first, changes=True, view=view)
+
+
+def told_after(inputs: Inputs, out: fusion.Outcome) -> np.ndarray | None:
+    """`Inputs.told` after this cycle's consensus (None without the trigger)."""
+    if inputs.setting.trigger is None or out.last is None:
+        return None
+    before = np.full(out.last.shape, np.nan) if inputs.told is None else inputs.told
+    return np.where(np.isnan(out.last), before, out.last)
 
 
 def consensus(inputs: Inputs) -> Fused:
@@ -232,36 +280,48 @@ def consensus(inputs: Inputs) -> Fused:
 
     Without delay the tuples travel as the index of the UAV whose local estimate they
     are; with delay they travel by value with their time stamps (estimates of earlier
-    cycles), predicted forward before use when ``robust.stale``.
+    cycles), predicted forward before use when ``robust.stale``. With the compact
+    encoding a tuple that travelled holds the values it arrived with (`radio.wire_mean`,
+    `radio.wire_cov`) and their confidence: by index, N + i stands for UAV i's estimate
+    so delivered (`Held`).
     """
     s, radio = inputs.setting, inputs.radio
     depth, rounds = fusion_rounds(inputs)
-    rounds_on_air(inputs, depth, rounds)
-    admit = gated(inputs)
+    held = Arrived(inputs)
+    admit = gated(inputs, held)
     if s.delay == 0 and s.rule == "max_consensus":
         tuples = fusion.Estimates(gamma=inputs.gamma, source=fusion.identity(inputs.gamma.shape))
-        out = fusion.consensus(radio, tuples, rounds, admit=admit)
+        how = sending(inputs, held.view)
+        receive = held.arrived if s.compact else None
+        out = fusion.consensus(radio, tuples, rounds, admit=admit, receive=receive, sending=how)
         source = fusion.required(out.tuples.source, "source")
         pool = inputs.buffers
-        mean = fusion.gather(source, inputs.mean, take(pool, "fused mean", inputs.mean.shape))
-        cov = fusion.gather(source, inputs.cov, take(pool, "fused cov", inputs.cov.shape))
+        mean = held.gather(source, "mean", take(pool, "fused mean", inputs.mean.shape))
+        cov = held.gather(source, "cov", take(pool, "fused cov", inputs.cov.shape))
         gamma = out.tuples.gamma  # travelled with the source: confidence(cov) exactly
     else:
+        how = sending(inputs)  # its change: a change of any field, whose the tuple is too
         tuples = fusion.Estimates(
             gamma=inputs.gamma,
             mean=inputs.mean,
             cov=inputs.cov,
             stamp=np.full(inputs.gamma.shape, inputs.k),
+            origin=None if how is None else fusion.identity(inputs.gamma.shape),
         )
 
-        def forward(t: fusion.Estimates) -> fusion.Estimates:  # to this cycle's step
-            return s.forward(t, inputs.k)
+        def arrive(t: fusion.Estimates) -> fusion.Estimates:  # as it arrives, to now
+            t = delivered(t) if s.compact else t
+            return s.forward(t, inputs.k) if s.stale else t
 
-        receive = forward if s.stale else None
-        out = fusion.consensus(radio, tuples, rounds, receive=receive, rule=s.rule, admit=admit)
+        on = s.stale or s.compact
+        out = fusion.consensus(
+            radio, tuples, rounds, receive=arrive if on else None, rule=s.rule,
+            admit=admit, sending=how,
+        )  # fmt: skip
         mean, cov = fusion.required(out.tuples.mean, "mean"), fusion.required(out.tuples.cov, "cov")
         gamma = None
-    sent, delivered = counted(
+    rounds_on_air(inputs, depth, rounds, out.carried)
+    sent, delivered_ = counted(
         s.delay,
         lambda: (radio.transmitted("flood", depth.ran), radio.transmitted("consensus", rounds)),
         ((depth.sent, depth.delivered), (out.sent, out.delivered)),
@@ -271,10 +331,72 @@ def consensus(inputs: Inputs) -> Fused:
         cov=cov,
         rounds=rounds,
         sent=sent,
-        delivered=delivered,
+        delivered=delivered_,
         largest=depth.largest,
         gamma=gamma,
+        told=told_after(inputs, out),
     )
+
+
+def delivered(t: fusion.Estimates) -> fusion.Estimates:
+    """Tuples by value as the compact encoding delivers them: float32 values, the
+    covariance's upper triangle, the confidence computed from what arrived (-inf, no
+    estimate, stays)."""
+    cov = wire_cov(fusion.required(t.cov, "cov"))
+    gamma = fusion.required(t.gamma, "gamma")
+    gamma = np.where(np.isneginf(gamma), gamma, estimation.confidence(cov))
+    return dataclasses.replace(
+        t, mean=wire_mean(fusion.required(t.mean, "mean")), cov=cov, gamma=gamma
+    )
+
+
+class Arrived:
+    """A cycle's local estimates by index (`fusion.Estimates.source`), as the UAVs hold
+    them and as the compact encoding delivers them: source i < N is UAV i's estimate as
+    it is, N + i the same as it arrives (`radio.wire_mean`, `radio.wire_cov`, its
+    confidence computed from what arrived). Without the compact encoding every source is
+    below N."""
+
+    def __init__(self, inputs: Inputs) -> None:
+        self.inputs, self.n = inputs, inputs.gamma.shape[1]
+        self._wired: dict[str, np.ndarray] = {}
+
+    def wired(self, name: str) -> np.ndarray:
+        """The local estimates' `name` (mean, cov, gamma) as they arrive."""
+        if name not in self._wired:
+            if name == "mean":
+                self._wired[name] = wire_mean(self.inputs.mean)
+            elif name == "cov":
+                self._wired[name] = wire_cov(self.inputs.cov)
+            else:
+                self._wired[name] = estimation.confidence(self.wired("cov"))
+        return self._wired[name]
+
+    def arrived(self, t: fusion.Estimates) -> fusion.Estimates:
+        """Tuples by index as a receiver gets them over the compact encoding."""
+        source, gamma = fusion.required(t.source, "source"), fusion.required(t.gamma, "gamma")
+        fresh = source < self.n  # not through the radio before
+        wired = fusion.gather(source % self.n, self.wired("gamma")[..., None])[..., 0]
+        gamma = np.where(fresh & ~np.isneginf(gamma), wired, gamma)
+        return dataclasses.replace(t, gamma=gamma, source=np.where(fresh, source + self.n, source))
+
+    def view(self, t: fusion.Estimates) -> tuple[np.ndarray, ...]:
+        """What a tuple by index holds, as an agent's tuple by value does: confidence,
+        whose estimate, the estimate and its covariance (`fusion.Sending.view`)."""
+        source = fusion.required(t.source, "source")
+        gamma = fusion.required(t.gamma, "gamma")
+        return gamma, source % self.n, self.gather(source, "mean"), self.gather(source, "cov")
+
+    def gather(self, source: np.ndarray, name: str, out: np.ndarray | None = None) -> np.ndarray:
+        """`fusion.gather` of the estimates' `name` (mean, cov) that the sources stand for."""
+        values = getattr(self.inputs, name)
+        through = source >= self.n
+        if not through.any():
+            return fusion.gather(source, values, out)
+        held = fusion.gather(source % self.n, values, out)
+        arrived = fusion.gather(source % self.n, self.wired(name))
+        np.copyto(held, arrived, where=through.reshape(through.shape + (1,) * (held.ndim - 3)))
+        return held
 
 
 Admit = Callable[[fusion.Estimates, fusion.Estimates, network.Links], np.ndarray]
@@ -282,11 +404,12 @@ Admit = Callable[[fusion.Estimates, fusion.Estimates, network.Links], np.ndarray
 layout of `links` (`fusion.consensus`)."""
 
 
-def gated(inputs: Inputs) -> Admit | None:
+def gated(inputs: Inputs, held: Arrived | None = None) -> Admit | None:
     """The consensus's admit(own, offered, links) under the measurement gate
     (``robust.gate``, `gate.admitted`), or None without it. Tuples that travel as the
     index of the UAV whose estimate they are (`fusion.Estimates.source`) are looked up
-    in the local estimates."""
+    in the local estimates (`held`: as they are held, or arrived)."""
+    held = Arrived(inputs) if held is None else held
     threshold, measured = inputs.setting.gate, inputs.measured
     if threshold is None or measured is None:
         return None
@@ -294,11 +417,15 @@ def gated(inputs: Inputs) -> Admit | None:
     def estimates(tuples: fusion.Estimates) -> tuple[np.ndarray, np.ndarray]:
         if tuples.source is not None:
             source = tuples.source
-            return fusion.gather(source, inputs.mean), fusion.gather(source, inputs.cov)
+            return held.gather(source, "mean"), held.gather(source, "cov")
         return fusion.required(tuples.mean, "mean"), fusion.required(tuples.cov, "cov")
 
+    listed = inputs.setting.trigger is not None or inputs.setting.compact
+
     def admit(own: fusion.Estimates, offered: fusion.Estimates, links: network.Links) -> np.ndarray:
-        return gate.admitted(links, estimates(own), estimates(offered), measured, threshold)
+        claimed = np.isfinite(fusion.required(offered.gamma, "gamma")) if listed else None
+        mine, theirs = estimates(own), estimates(offered)
+        return gate.admitted(links, mine, theirs, measured, threshold, claimed)
 
     return admit
 
@@ -329,7 +456,7 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         inputs.believed, alive, scenario, local.modes, local.tracker, inputs.k,
     )  # fmt: skip
     depth, rounds = fusion_rounds(inputs)
-    rounds_on_air(inputs, depth, rounds)
+    rounds_on_air(inputs, depth, rounds, None)
     book = scanned.book
     own = scanned_tracks(scanned, local.tombs, inputs.k)
     threshold = association.threshold(scenario.tracker.gate_probability, 4)

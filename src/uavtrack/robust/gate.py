@@ -118,6 +118,7 @@ def admitted(
     offered: tuple[np.ndarray, np.ndarray],
     measured: Measured,
     gate: float,
+    claimed: np.ndarray | None = None,
 ) -> np.ndarray:
     """Per link (receiver i, sender q) and target j, whether i may adopt q's estimate
     of j: it agrees with i's measurement of j within `gate`; where i did not measure j
@@ -126,8 +127,10 @@ def admitted(
     The self-link carries the receiver's own current estimate.
 
     own, offered: (mean (B, N, M, 4), cov (B, N, M, 4, 4)), the receivers' current
-    estimates and what the senders offered. Returns (B, N, N, M) in the dense form,
-    (E, M) in the edge form."""
+    estimates and what the senders offered; claimed (B, N, M): which offered estimates a
+    sender claims (None: all; a target a listed message leaves out, ``fusion.trigger`` or
+    the compact encoding, is no claim and cannot catch its sender). Returns (B, N, N, M)
+    in the dense form, (E, M) in the edge form."""
     t, i, q = links.pairs()
     self_link = links.own[:, None] if links.edges else (i == q)[..., None]
     mine_mean, mine_cov = own[0][t, i], own[1][t, i]
@@ -138,5 +141,7 @@ def admitted(
     # measured recently: against its own estimate, the position covariances summed
     apart = distance(mean, cov, mine_mean[..., :2], mine_cov[..., :2, :2]) > gate
     caught = ((observed & far) | (measured.recent[t, i] & apart)) & ~self_link
+    if claimed is not None:
+        caught &= claimed[t, q]
     # a sender caught on one target is believed on none this round
     return ~(caught.any(axis=-1, keepdims=True) | (observed & far))
