@@ -158,9 +158,10 @@ def test_two_swarms_at_once_do_not_hear_each_other():
 
 def test_foreign_and_old_messages_do_not_decode():
     run = "abc123abc123"
-    good = messages.Tick(messages.VERSION, run, 3, messages.Array.of(np.ones(2, dtype=bool)))
-    foreign = messages.Tick(messages.VERSION, "other", 3, good.alive)
-    old = messages.Tick(messages.VERSION + 1, run, 3, good.alive)
+    alive = messages.Array.of(np.ones(2, dtype=bool))
+    good = messages.Tick(version=messages.VERSION, run=run, k=3, alive=alive)
+    foreign = messages.Tick(version=messages.VERSION, run="other", k=3, alive=alive)
+    old = messages.Tick(version=messages.VERSION + 1, run=run, k=3, alive=alive)
     assert messages.decode(messages.encode(good), run) == good
     for payload in (messages.encode(foreign), messages.encode(old), b"", b"\x93garbage"):
         assert messages.decode(payload, run) is None

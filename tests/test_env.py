@@ -57,6 +57,26 @@ def test_paper_actions_through_the_env_are_simulate(method):
         assert getattr(ours, name) == getattr(reference, name)
 
 
+@pytest.mark.parametrize(
+    ("method", "radio"),
+    [
+        ("distributed", {"encoding": "compact", "bandwidth_bps": 2e5}),
+        ("greedy", {"encoding": "compact"}),
+        ("centralized", {"bandwidth_bps": 2e5}),
+    ],
+)
+def test_a_radio_with_a_byte_budget_through_the_env_is_simulate(method, radio):
+    fusion = {"trigger": 0.1} if method != "centralized" else {}
+    env = parallel_env(method_for_others=method, steps=40, radio=radio, fusion=fusion)
+    fly(env, paper, seed=4)
+    ours = env.result()
+    scenario = uavtrack.Scenario(steps=40, radio=radio, fusion=fusion)
+    reference = uavtrack.simulate(scenario, method, seed=4)
+    assert ours.trace is not None and reference.trace is not None
+    assert_same_trace(ours.trace, reference.trace)  # the bytes among the counters
+    assert ours.bytes == reference.bytes > 0
+
+
 def test_agents_left_out_fly_the_method():
     env = parallel_env(steps=30)
     fly(env, paper, seed=1)

@@ -131,7 +131,7 @@ def forged(run: str, k: int, me: int, n: int, m: int) -> list:
             links=flags,
             alive=flags,
         ),
-        Tick(VERSION, run, k, flags),
+        Tick(version=VERSION, run=run, k=k, alive=flags),
         Hello(
             version=VERSION,
             run=run,

@@ -219,3 +219,93 @@ def test_links_of_no_one_send_no_bytes_whatever_the_encoding():
     alone = alone.model_copy(update={"comm_range": 1e-3})
     result = uavtrack.simulate(alone, "distributed", seed=0)
     assert result.bytes == 0
+
+
+# ------------------------------------------------------------ a radio of limited capacity
+
+
+def test_a_radio_with_no_room_is_no_radio():
+    # nothing fits: every UAV decides alone, as with nobody in range
+    for method in ("distributed", "greedy", "centralized"):
+        starved = uavtrack.simulate(scenario(**{"radio.bandwidth_bps": 1.0}), method, seed=1)
+        alone = uavtrack.simulate(
+            scenario().model_copy(update={"comm_range": 1e-3}), method, seed=1
+        )
+        assert starved.trace is not None and alone.trace is not None
+        assert starved.trace.bytes.sum() == 0
+        if method != "centralized":  # (the centralized counts as messages what it offered)
+            assert starved.trace.messages.sum() == 0
+            assert differences(starved.trace, alone.trace, atol=0.0) == []
+
+
+def test_an_ample_radio_changes_nothing():
+    for method in ("distributed", "centralized"):
+        paper = uavtrack.simulate(scenario(), method, seed=1)
+        ample = uavtrack.simulate(scenario(**{"radio.bandwidth_bps": 1e9}), method, seed=1)
+        assert paper.trace is not None and ample.trace is not None
+        assert differences(ample.trace, paper.trace, atol=0.0) == []
+
+
+@settings(max_examples=25, deadline=None)
+@given(
+    bps=st.floats(1e3, 1e6),
+    method=st.sampled_from(["distributed", "greedy", "centralized"]),
+    seed=st.integers(0, 1000),
+    compact=st.booleans(),
+)
+def test_no_program_sends_more_than_its_share(bps, method, seed, compact):
+    from uavtrack import network
+
+    overrides = {"radio.bandwidth_bps": bps}
+    if compact and method != "centralized":
+        overrides["radio.encoding"] = "compact"
+    case = uavtrack.Scenario(steps=15).with_overrides(overrides)
+    result = uavtrack.simulate(case, method, seed=seed)
+    assert result.trace is not None
+    channel = bps * case.dt / 8
+    for k in range(case.steps):
+        adjacency = network.adjacency(result.trace.uavs[k], case.comm_range)
+        receivers = (adjacency & ~np.eye(case.n_uavs, dtype=bool)).sum(axis=0)
+        contenders = case.n_uavs + 1 if method == "centralized" else receivers + 1
+        share = np.floor(channel / contenders)
+        sent = result.trace.bytes[k]
+        assert (sent[:-1] <= share).all(), (k, sent, share)
+        assert sent[-1] <= np.floor(channel / (case.n_uavs + 1))  # the node's
+
+
+SHARES = [
+    {"radio.bandwidth_bps": 1e5},
+    {"radio.bandwidth_bps": 2e5, "faults.loss": 0.2},
+    {"radio.bandwidth_bps": 3e5, "faults.delay": 1},
+]
+TRIGGERED = {"radio.bandwidth_bps": 1e5, "fusion.trigger": 0.1, "radio.encoding": "compact"}
+
+
+@pytest.mark.integration  # a swarm of programs
+@pytest.mark.parametrize(
+    ("method", "overrides"),
+    [(m, o) for m in ("distributed", "greedy", "centralized") for o in SHARES]
+    + [(m, TRIGGERED) for m in ("distributed", "greedy")],
+)
+def test_a_swarm_keeps_the_same_shares_as_the_batch(method, overrides):
+    from uavtrack.agents import run_swarm
+
+    case = uavtrack.Scenario(steps=12).with_overrides(overrides)
+    batch = uavtrack.simulate(case, method, seed=3)
+    swarm = run_swarm(case, method, seed=3, transport="memory")
+    assert batch.trace is not None and swarm.result.trace is not None
+    assert_same_trace(swarm.result.trace, batch.trace)
+    assert swarm.traffic.drops == {}
+    assert not swarm.result.trace.late.any()  # nobody waited for a frame never sent
+
+
+def test_the_refusals_of_a_limited_radio():
+    with pytest.raises(ScenarioError, match="bandwidth_bps"):
+        scenario(**{"radio.bandwidth_bps": 0})
+    with pytest.raises(ScenarioError, match="track consensus"):
+        scenario(**{"radio.bandwidth_bps": 1e5, "tracker.association": "gnn"})
+    one = {"radio.bandwidth_bps": 1e5, "planner.avoidance": "loiter"}
+    one |= {"uav.altitude_spacing": 0, "uav.separation": 10}
+    with pytest.raises(ScenarioError, match="beacons outside"):
+        uavtrack.simulate(scenario(**one), "greedy", seed=0)
+    assert uavtrack.simulate(scenario(**one), "distributed", seed=0).bytes > 0

@@ -439,6 +439,10 @@ class Sending:
     view: Callable[[Estimates], tuple[np.ndarray, ...]] | None = None
     """What of a tuple counts as its change (arrays (B, N, M, ...)): by default every
     field; the batch's tuples by index give the values they stand for."""
+    until: np.ndarray | None = None
+    """The rounds (B, N) each UAV's share of a limited radio lets it send
+    (`radio.Budget`): what it would have sent after them does not count as sent
+    (`Outcome.last`); None: all."""
 
     def mask(self, r: int, tuples: Estimates, previous: Estimates | None) -> np.ndarray:
         """The tuples carried in round r from the current and the previous round's: only
@@ -520,6 +524,8 @@ def consensus(
             frozen = mask if frozen is None else np.where(final, mask, frozen)
             gamma = required(tuples.gamma, "gamma")
             on_air = mask & np.less_equal(r, rounds + 1)[..., None]
+            if sending.until is not None:
+                on_air &= np.less_equal(r, sending.until)[..., None]
             last = np.full(gamma.shape, np.nan) if last is None else last
             last = np.where(on_air, gamma, last)
             carried.append(mask.sum(axis=-1))

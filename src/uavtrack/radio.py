@@ -43,6 +43,7 @@ class Sent:
     bad: np.ndarray | None
     alive: np.ndarray
     rounds: dict[str, list[Any]] = field(default_factory=dict)
+    budget: Budget | None = None  # with radio.bandwidth_bps: what each UAV's share affords
 
 
 class Inbox(NamedTuple):
@@ -100,11 +101,77 @@ def counted(
     return sent, delivered
 
 
+UNLIMITED = 2**31 - 1
+"""The rounds a UAV's share affords when the radio has no limit (or it has no receiver)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Limit:
+    """A radio of limited capacity (``radio.bandwidth_bps``) and the frames it schedules:
+    the bytes per cycle a channel carries (capacity x dT / 8), the first-priority frame
+    per copy (the beacon with the bids; the centralized upload; 0: none), the largest
+    frame a round of D_i flooding and consensus can be (every target's tuple in it), the
+    central node's download, and whether every UAV talks to the central node (then all
+    share one channel)."""
+
+    bytes_per_cycle: float
+    first: int
+    round: int
+    download: int = 0
+    central: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class Budget:
+    """What each program's share of a limited radio affords in one cycle (`Limit`).
+
+    share (B, N): the bytes of each UAV, the channel's bytes over its closed
+    neighbourhood (itself and the UAVs in range), or with a central node over every
+    living UAV and the node; first (B, N): whether its first-priority frame fits (to
+    every receiver); rounds (B, N): the rounds of flooding and consensus it can send
+    after it, each reserved at `Limit.round` per receiver (`UNLIMITED` with no receiver);
+    served (B, N): whether the central node's share reaches the UAV's download (the
+    living UAVs in index order)."""
+
+    share: np.ndarray
+    first: np.ndarray
+    rounds: np.ndarray
+    served: np.ndarray
+
+    @classmethod
+    def of(cls, limit: Limit, receivers: np.ndarray, alive: np.ndarray) -> Budget:
+        """The budget of a cycle whose UAVs have `receivers` (B, N) in range."""
+        B, n = alive.shape
+        if limit.central:
+            contenders = np.broadcast_to(alive.sum(axis=1, keepdims=True) + 1, (B, n))
+            copies = np.ones((B, n), dtype=np.int64)  # the upload, to the node
+        else:
+            contenders, copies = receivers + 1, receivers
+        share = np.floor(limit.bytes_per_cycle / contenders).astype(np.int64)
+        cost = limit.first * copies
+        first = cost <= share
+        left = share - np.where(first, cost, 0)
+        per_round = np.maximum(limit.round * receivers, 1)
+        rounds = np.where(receivers > 0, left // per_round, UNLIMITED)
+        served = np.ones((B, n), dtype=bool)
+        if limit.central and limit.download:
+            node = np.floor(limit.bytes_per_cycle / (alive.sum(axis=1) + 1)).astype(np.int64)
+            order = np.cumsum(alive, axis=1)  # the living UAVs in index order
+            served = alive & (order * limit.download <= node[:, None])
+        return cls(share=share, first=first, rounds=rounds, served=served)
+
+
 class Radio:
     """One cycle of the radio for a batch of trials."""
 
     def __init__(
-        self, k: int, links: Links, alive: np.ndarray, faults: Faults, state: RadioState
+        self,
+        k: int,
+        links: Links,
+        alive: np.ndarray,
+        faults: Faults,
+        state: RadioState,
+        limit: Limit | None = None,
     ) -> None:
         self.k, self.faults, self.delay = k, faults, faults.model.delay
         self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
@@ -112,6 +179,8 @@ class Radio:
         B, n = alive.shape
         self.bytes = np.zeros((B, n + 1), dtype=np.int64)  # sent, by UAV; the node's last
         self._reach: tuple[np.ndarray, np.ndarray] | None = None
+        if limit is not None:  # what each UAV's share affords this cycle
+            self.now.budget = Budget.of(limit, self.reach()[0], alive)
 
     def send(self, protocol: str, content: Any) -> None:
         """Every UAV transmits `content` (arrays (B, N, ...) by name, in a dict or a record)
@@ -139,12 +208,26 @@ class Radio:
             return None
         contents = sent.rounds[protocol]
         content = contents[min(max(round_, 1), len(contents)) - 1]
-        faults = self.faults
+        faults, links = self.faults, self._sent_on(sent, protocol, round_)
         if faults.model.loss <= 0:
-            return Inbox(content, sent.links, sent.links)
-        trial, receiver, sender = sent.links.pairs()
+            return Inbox(content, links, links)
+        trial, receiver, sender = links.pairs()
         lost = faults.lost(sent.k, protocol, round_, trial, sender, receiver, sent.bad)
-        return Inbox(content, sent.links, sent.links.keep(~lost))
+        return Inbox(content, links, links.keep(~lost))
+
+    @staticmethod
+    def _sent_on(sent: Sent, protocol: str, round_: int) -> Links:
+        """The links a round of `protocol` was sent on: those of its cycle, less the
+        senders whose share did not afford it (`Budget`)."""
+        budget = sent.budget
+        if budget is None or protocol not in ("flood", "consensus", "beacon", "bids"):
+            return sent.links
+        trial, _, sender = sent.links.pairs()
+        if protocol in ("beacon", "bids"):
+            afforded = budget.first[trial, sender]
+        else:
+            afforded = budget.rounds[trial, sender] >= round_
+        return sent.links.keep(afforded)
 
     def receive_central(self, protocol: str):
         """(content, delivered (B, N) bool) of an upload (UAV i -> central, delivered[i])
@@ -158,7 +241,24 @@ class Radio:
         central = np.full_like(uav, n)
         sender, receiver = (uav, central) if protocol == "upload" else (central, uav)
         lost = self.faults.lost(sent.k, protocol, 0, trial, sender, receiver, sent.bad)
-        return content, sent.alive & ~lost
+        return content, self._central_sent(sent, protocol) & ~lost
+
+    @staticmethod
+    def _central_sent(sent: Sent, protocol: str) -> np.ndarray:
+        """(B, N) the uploads (of each UAV) or downloads (to each) sent: the living
+        UAVs', less what the shares did not afford (`Budget`)."""
+        budget = sent.budget
+        if budget is None:
+            return sent.alive
+        return sent.alive & (budget.first if protocol == "upload" else budget.served)
+
+    def afforded(self, senders: np.ndarray, what: str = "first") -> np.ndarray:
+        """`senders` (B, N) less those whose share does not afford `what` this cycle:
+        "first", their first-priority frame; "served", the node's download to them."""
+        budget = self.now.budget
+        if budget is None:
+            return senders
+        return senders & getattr(budget, what)
 
     def transmitted(
         self, protocol: str, rounds: np.ndarray, first: int = 1
@@ -175,6 +275,12 @@ class Radio:
         else:
             trial, receiver, sender = np.nonzero(links.adjacency())
         count = rounds[trial, sender]
+        budget = self.now.budget
+        if budget is not None:  # what the senders' shares afford
+            if protocol in ("beacon", "bids"):
+                count = count * budget.first[trial, sender]
+            else:
+                count = np.minimum(count, budget.rounds[trial, sender])
         B = links.batch
         sent = np.bincount(trial, weights=count, minlength=B).astype(np.int64)
         if self.faults.model.loss <= 0:
@@ -197,6 +303,7 @@ class Radio:
         central = np.full_like(uav, n)
         sender, receiver = (uav, central) if protocol == "upload" else (central, uav)
         lost = self.faults.lost(self.k, protocol, 0, trial, sender, receiver, self.now.bad)
+        alive = self._central_sent(self.now, protocol)
         return alive.sum(axis=1), (alive & ~lost).sum(axis=1)
 
     def reach(self) -> tuple[np.ndarray, np.ndarray]:
@@ -256,7 +363,14 @@ class Radio:
         is the bytes of every round's tuples, or a list of them by round (B, N) each
         (``fusion.trigger``, compact encoding): then frame by frame too."""
         last = np.maximum(ran, rounds) + 1
-        if isinstance(tuples, list) or int(np.where(alive, last, 0).max(initial=0)) >= 128:
+        budget = self.now.budget
+        if budget is not None:  # the rounds each share affords: the frames beyond are not sent
+            last = np.minimum(last, budget.rounds)
+        if (
+            isinstance(tuples, list)
+            or budget is not None
+            or int(np.where(alive, last, 0).max(initial=0)) >= 128
+        ):
             return self._rounds_one_by_one(ran, rounds, flood, tuples, alive)
         set_part = part_bytes("flood", 1, -1, flood)
         tuple_part = part_bytes("consensus", 1, -1, tuples)
@@ -284,6 +398,8 @@ class Radio:
             if isinstance(every, list):  # a UAV's tuples of round r (r <= C + 1)
                 tuples = every[min(r, len(every)) - 1]
             on = alive & (r <= last)
+            if self.now.budget is not None:
+                on &= r <= self.now.budget.rounds
             flood_final = np.where(r == ran + 1, r, -1)
             flooding = np.where(r <= ran + 1, part_bytes("flood", r, flood_final, flood), 0)
             closing = (r == last) & (ran > rounds)

@@ -35,11 +35,22 @@ from .airspace.separation import Separation
 from .config import G, Scenario, ScenarioError, SensorModel
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
-from .methods import Assigned, Fused, Held, Inputs, Method, Setting, get
+from .methods import Assigned, Distributed, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, Tally
 from .numerics.buffers import Buffers
-from .radio import Radio, RadioState, counted, layout_bytes, part_bytes
+from .radio import (
+    Limit,
+    Radio,
+    RadioState,
+    content_bytes,
+    counted,
+    frame_bytes,
+    int_bytes,
+    layout,
+    layout_bytes,
+    part_bytes,
+)
 from .robust import gate
 from .tracks import columns, manage
 from .tracks import scan as scans
@@ -123,6 +134,17 @@ class Context:
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
         listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
+        bandwidth = scenario.radio.bandwidth_bps is not None
+        if (
+            bandwidth
+            and scenario.planner.avoidance != "none"
+            and not isinstance(method, Distributed)
+        ):
+            raise ScenarioError(
+                f"radio.bandwidth_bps with planner.avoidance: method {method.name} sends its "
+                "beacons outside the radio's shares; leave one of them unset (the distributed "
+                "method sends them with its bids)"
+            )
         if method.central and listed:
             raise ScenarioError(
                 "radio.encoding = compact and fusion.trigger act on the consensus of the "
@@ -134,7 +156,7 @@ class Context:
         faults = Faults(scenario.faults, keys, scenario.n_uavs)
         f, robust = scenario.faults, scenario.robust
         setting = Setting(
-            faulty=faults.active,
+            faulty=faults.active or scenario.radio.bandwidth_bps is not None,
             delay=f.delay,
             budget=f.round_budget,
             extra_rounds=robust.extra_rounds,
@@ -503,7 +525,37 @@ def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray, Radio]:
     alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
     believed = world.believed(state.uavs, faults.position_error(k))
     links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
-    return alive, believed, Radio(k, links, alive, faults, state.radio)
+    return alive, believed, Radio(k, links, alive, faults, state.radio, limit(ctx, k))
+
+
+def limit(ctx: Context, k: int) -> Limit | None:
+    """``radio.bandwidth_bps``: the channel and the frames its shares are counted in at
+    cycle k (`radio.Limit`), each at its largest (every UAV number at its largest, every
+    target's tuple in a round); None: unlimited."""
+    scenario, method = ctx.scenario, ctx.method
+    bps = scenario.radio.bandwidth_bps
+    if bps is None:
+        return None
+    n, m = scenario.n_uavs, scenario.n_targets
+    avoid = scenario.planner.avoidance != "none"
+    tuples = ctx.setting.tuples
+
+    def largest(parts: int, count: int) -> int:
+        return int(frame_bytes(k, n, parts, count) + int_bytes(n))
+
+    def part(protocol: str, listing: str = "full", rows: int | None = None) -> int:
+        content = content_bytes(layout(protocol, n, m, avoid=avoid, tuples=listing), rows)
+        return int(part_bytes(protocol, 1, -1, int(content)))
+
+    rounds = largest(part("flood") + part("consensus", tuples, m), 2)
+    if method.central:
+        upload, download = largest(part("upload"), 1), largest(part("download"), 1)
+        return Limit(
+            bytes_per_cycle=bps * scenario.dt / 8, first=upload, round=rounds,
+            download=download, central=True,
+        )  # fmt: skip
+    first = largest(part("beacon") + part("bids"), 2) if isinstance(method, Distributed) else 0
+    return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds)
 
 
 def measure_scan(

@@ -80,22 +80,50 @@ class AgentRadio:
         self.alive: dict[int, np.ndarray] = {}  # cycle -> (N,) alive
         self.central: dict[int, bool] = {}  # cycle -> the central node is alive
         self.bad: dict[int, np.ndarray | None] = {}  # cycle -> (N+1, N+1) link states
+        self.afford: dict[int, np.ndarray | None] = {}  # cycle -> (N, 3) `radio.Budget`
         self.late: dict[str, int] = {}  # this cycle's messages that missed it, by protocol
         self.bytes = 0  # this cycle's frames on the wire (`radio.frame_bytes`)
 
-    def begin(self, k: int, links: np.ndarray, alive: np.ndarray, central: bool = True) -> None:
+    def begin(
+        self,
+        k: int,
+        links: np.ndarray,
+        alive: np.ndarray,
+        central: bool = True,
+        afford: np.ndarray | None = None,
+    ) -> None:
         self.links[k], self.alive[k], self.central[k] = links, alive, central
+        self.afford[k] = afford
         self.late, self.bytes = {}, 0
         previous = self.bad.get(k - 1)
         states = self.faults.link_states(k, None if previous is None else previous[None])
         self.bad[k] = None if states is None else states[0]
         for old in [c for c in self.links if c < k - self.delay - 1]:
-            for table in (self.links, self.alive, self.central, self.bad):
+            for table in (self.links, self.alive, self.central, self.bad, self.afford):
                 table.pop(old)
         self.mailbox.begin(k, k - self.delay - 1)
 
+    def affords(self, k: int, q: int, protocol: str, round_: int = 0) -> bool:
+        """Whether the share of program q affords a message of `protocol`'s round at
+        cycle k (`radio.Budget`, as the world says; always, on an unlimited radio): the
+        first-priority frame (beacon, bids, upload), the rounds of flooding and
+        consensus, the central node's download to UAV q."""
+        afford = self.afford.get(k)
+        if afford is None:
+            return True
+        if protocol in ("beacon", "bids", "upload"):
+            return bool(afford[q, 0])
+        if protocol == "download":
+            return bool(afford[q, 2])
+        return bool(afford[q, 1] >= round_)
+
     def send(self, k: int, parts: list[Part], to=None) -> None:
-        """One message of these parts to each UAV in range at cycle k (or to `to`)."""
+        """One message of these parts to each UAV in range at cycle k (or to `to`), if
+        this program's share affords it."""
+        first = parts[0]
+        to_check = self.me if to is None or first.protocol != "download" else int(to)
+        if not self.affords(k, to_check, first.protocol, first.round):
+            return
         receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
         body = encode(Radio(version=VERSION, run=self.run, k=k, sender=self.me, parts=parts))
         for q in receivers:
@@ -114,6 +142,11 @@ class AgentRadio:
         `first` to each UAV in range (or to `to`). Returns (sent, delivered)."""
         receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
         receivers = receivers[receivers != self.me]
+        if protocol == "download":  # the node's share: to the UAVs it reaches
+            receivers = np.array([q for q in receivers if self.affords(k, int(q), protocol)])
+            receivers = receivers.astype(np.int64)
+        elif self.afford.get(k) is not None:
+            rounds = sum(self.affords(k, self.me, protocol, first + r) for r in range(rounds))
         delivered = sum(
             int((~self.lost(k, protocol, first + r, np.array(self.me), receivers)).sum())
             for r in range(rounds)
@@ -126,7 +159,14 @@ class AgentRadio:
         if sent_at < 0 or sent_at not in self.links:
             return None
         senders = np.flatnonzero(self.links[sent_at])
-        senders = senders[senders != self.me]
+        senders = np.array(
+            [
+                q
+                for q in senders
+                if q != self.me and self.affords(sent_at, int(q), protocol, round_)
+            ],
+            dtype=np.int64,
+        )
         lost = self.lost(sent_at, protocol, round_, senders, self.me)
         expected = [int(q) for q in senders[~lost]]
         mailbox = self.mailbox
@@ -279,7 +319,7 @@ class UavAgent:
         s = self.scenario
         believed = self.believed = sense["believed"]
         alive = sense["alive"]
-        self.radio.begin(k, sense["links"], alive, central)
+        self.radio.begin(k, sense["links"], alive, central, sense.get("afford"))
         observed = sense["observed"]
         z = sense["z"]
         zc, R = simulation.convert(np.repeat(believed[None], len(z), axis=0), z, s)
@@ -389,12 +429,15 @@ class UavAgent:
         told = np.full(self.m, np.nan) if self.told is None else self.told.copy()
         sent: list[fusion.Estimates] = []  # the tuples of each round so far
 
+        if s.trigger is not None:
+            self.told = told
+
         def content(t: fusion.Estimates) -> dict[str, np.ndarray]:
-            mask = how.mask(len(sent) + 1, t, sent[-1] if sent else None)
+            r = len(sent) + 1
+            mask = how.mask(r, t, sent[-1] if sent else None)
             sent.append(t)
-            told[mask] = fusion.required(t.gamma, "gamma")[mask]
-            if s.trigger is not None:
-                self.told = told
+            if self.radio.affords(k, self.me, "consensus", r):  # what the share sends
+                told[mask] = fusion.required(t.gamma, "gamma")[mask]
             return listing(t, mask, s.compact)
 
         return content
@@ -687,6 +730,7 @@ class UavAgent:
         lost = bool(self.radio.lost(sent_at, "download", 0, np.array(central), self.me))
         expect = bool(self.radio.alive[sent_at][self.me]) and not lost
         expect = expect and self.radio.central[sent_at]
+        expect = expect and self.radio.affords(sent_at, self.me, "download")
         if expect:  # two rounds: the node waits up to a round's deadline for the uploads
             mailbox.wait(  # before it sends the downloads
                 lambda: (
@@ -722,7 +766,7 @@ class CentralAgent:
         """One cycle: fuse and assign the uploads of `delay` cycles ago, send downloads."""
         s, n, m = self.setting, self.n, self.m
         alive = tick["alive"]
-        self.radio.begin(k, np.zeros(n, dtype=bool), alive)
+        self.radio.begin(k, np.zeros(n, dtype=bool), alive, afford=tick.get("afford"))
         start = timing.start()
         down, targets = nothing_heard(1, n, m), np.full((1, n), -1, dtype=np.int64)
         uploads, offered = self.uploads(k)
@@ -758,7 +802,7 @@ class CentralAgent:
         alive_then = self.radio.alive[sent_at]
         uavs = np.flatnonzero(alive_then)
         lost = self.radio.lost(sent_at, "upload", 0, uavs, np.array(n))
-        expected = [int(q) for q in uavs[~lost]]
+        expected = [int(q) for q in uavs[~lost] if self.radio.affords(sent_at, int(q), "upload")]
         mailbox = self.mailbox
         mailbox.wait(
             lambda: all(mailbox.content(sent_at, "upload", q, 0) is not None for q in expected),

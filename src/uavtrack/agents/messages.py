@@ -93,7 +93,12 @@ class Sense(msgspec.Struct, tag="sense", frozen=True, kw_only=True):
     who is alive (N,) bool, and whether the central node is (centralized method).
     alive[uav] False tells the agent it has failed. With unknown association
     (``tracker.association`` gnn or jpda) the scan comes unlabelled: observed is empty
-    (0,) and z (Z, 2) holds the detections and clutter in the order the sensor gave them."""
+    (0,) and z (Z, 2) holds the detections and clutter in the order the sensor gave them.
+    With ``radio.bandwidth_bps`` the world, which emulates the radio, says what every
+    UAV's share affords this cycle, afford (N, 3): its first-priority frame (0 or 1), its
+    rounds of flooding and consensus, and whether the central node's download reaches it
+    (0 or 1) (`radio.Budget`): a program sends only what its share affords, and waits only
+    for what its senders' do."""
 
     version: int
     run: str
@@ -105,15 +110,18 @@ class Sense(msgspec.Struct, tag="sense", frozen=True, kw_only=True):
     links: Array
     alive: Array
     central: bool = True
+    afford: Array | None = None  # with radio.bandwidth_bps: (N, 3), `radio.Budget`
 
 
-class Tick(msgspec.Struct, tag="tick", frozen=True):
-    """One cycle for the central node: who is alive (N,)."""
+class Tick(msgspec.Struct, tag="tick", frozen=True, kw_only=True):
+    """One cycle for the central node: who is alive (N,), and with a limited radio what
+    every share affords (as in `Sense`)."""
 
     version: int
     run: str
     k: int
     alive: Array
+    afford: Array | None = None  # with radio.bandwidth_bps: (N, 3), `radio.Budget`
 
 
 class Ready(msgspec.Struct, tag="ready", frozen=True):
@@ -253,6 +261,8 @@ DOMAINS = {
     "them); the other fields' rows are theirs",
     "covariance triangle": "each row the upper triangle (row by row) of a covariance, "
     "which must be as covariance once mirrored",
+    "afford": "per UAV: its first-priority frame (0 or 1), its rounds (0 or more), whether "
+    "the central node's download reaches it (0 or 1)",
 }
 """What the values of a field may be, beyond its dtype and shape (`Spec.contents`); the
 run's numbers are `plausibility.Bounds`."""
@@ -295,6 +305,8 @@ class Spec:
     tuples: str = "full"
     """How the consensus carries its tuples (`radio.layout`): "full", "listed"
     (``fusion.trigger``: the targets it lists) or "compact" (``radio.encoding``)."""
+    limited: bool = False
+    """With ``radio.bandwidth_bps``: Sense and Tick carry what the shares afford."""
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
@@ -322,6 +334,7 @@ class Spec:
             else "listed"
             if scenario.fusion.trigger is not None
             else "full",
+            limited=scenario.radio.bandwidth_bps is not None,
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -502,6 +515,9 @@ class Spec:
             full[:, *np.triu_indices(4)] = value
             full[:, np.triu_indices(4)[1], np.triu_indices(4)[0]] = value
             return _covariance(full, b)
+        if domain == "afford":
+            flags = np.isin(value[:, [0, 2]], (0, 1)).all()
+            return None if flags and (value[:, 1] >= 0).all() else "count out of range"
         if domain == "targets":
             distinct = len(np.unique(value)) == len(value)
             inside = ((value >= 0) & (value < self.m)).all()
@@ -650,11 +666,17 @@ class Spec:
             "links": (B, (n,), "flags"),
             "alive": (B, (n,), "flags"),
         }
-        wire = {name: getattr(message, name) for name in kinds}
+        if self.limited:
+            kinds["afford"] = (I, (n, 3), "afford")
+        wire = {name: v for name in kinds if (v := getattr(message, name)) is not None}
         return self.arrays(wire, kinds)
 
     def tick(self, message: Tick) -> dict[str, np.ndarray] | str:
-        return self.arrays({"alive": message.alive}, {"alive": (B, (self.n,), "flags")})
+        kinds: dict[str, tuple[str, tuple[int, ...], str]] = {"alive": (B, (self.n,), "flags")}
+        if self.limited:
+            kinds["afford"] = (I, (self.n, 3), "afford")
+        wire = {name: v for name in kinds if (v := getattr(message, name)) is not None}
+        return self.arrays(wire, kinds)
 
     def report(self, message: Report) -> dict[str, np.ndarray] | str:
         """A Report's arrays if the run admits it, else the reason not."""

@@ -39,6 +39,7 @@ from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
 from ..methods import get
+from ..radio import Budget
 from ..tracks import columns
 from ..tracks.team import CONFIRMED
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
@@ -319,12 +320,25 @@ class WorldProgram:
             f"than the Zenoh session's lease ({LEASE:g} s)"
         )
 
+    def afford(self, k: int, graph: np.ndarray, alive: np.ndarray) -> Array | None:
+        """With ``radio.bandwidth_bps``, what every share affords at cycle k (`Sense`,
+        `radio.Budget` of the radio graph (N, N) the cycle's links are), as the batch's
+        radio counts it; None: an unlimited radio."""
+        limit = simulation.limit(self.ctx, k)
+        if limit is None:
+            return None
+        others = graph & ~np.eye(len(graph), dtype=bool)
+        budget = Budget.of(limit, others.sum(axis=0)[None], alive[None])
+        columns = (budget.first, budget.rounds, budget.served)
+        return Array.of(np.stack([np.asarray(c[0], dtype=np.int64) for c in columns], axis=1))
+
     def send(self, k, believed, observed, z, graph, alive, told, scan=None) -> None:
         """Each UAV told last cycle its Sense (a UAV no longer alive learns it has failed),
         and the central node its Tick. With a scan (unknown association) a UAV is told its
         measurements unlabelled, in the order of its scan, and no target's index."""
         rows = np.nonzero(observed)[0]  # the UAV of each measurement, in order
         alive_array = Array.of(alive)
+        afford = self.afford(k, graph, alive)
         self.asked = {}
         for i in np.flatnonzero(told):
             seen, mine = observed[i], z[rows == i]
@@ -341,12 +355,15 @@ class WorldProgram:
                 links=Array.of(graph[i]),
                 alive=alive_array,
                 central=self.central_alive,
+                afford=afford,
             )
             self.link.send(int(i), message)
             self.asked[int(i)] = message
         if self.central_alive:
             n = self.scenario.n_uavs
-            self.asked[n] = Tick(VERSION, self.run, k, alive_array)
+            self.asked[n] = Tick(
+                version=VERSION, run=self.run, k=k, alive=alive_array, afford=afford
+            )
             self.link.send(n, self.asked[n])
 
     def collect(self, k, uavs, observed, alive, scan=None):

@@ -8,6 +8,7 @@ after SIGTERM.
 """
 
 from . import (  # noqa: F401
+    bandwidth,
     benchmark,
     experiments,
     export,

@@ -601,6 +601,21 @@ class RadioModel(Part):
             "the targets whose tuple changed since the sender's previous round"
         ),
     )
+    bandwidth_bps: Float | None = Field(
+        default=None,
+        gt=0,
+        le=1e10,
+        description=(
+            "the radio channel's capacity [bit/s], (0, 10^10]; beyond the paper: UAVs in "
+            "range of each other share it, each an equal part of it per cycle (capacity x dT "
+            "/ 8 bytes over its closed neighbourhood; with the centralized method every UAV "
+            "and the central node share one channel); what does not fit is not sent: first "
+            "the beacon with the bids (the centralized upload), then the rounds of D_i "
+            "flooding and consensus in order, each reserved at the largest a round can be, "
+            "the central node's downloads in UAV order; not set: unlimited (the paper's "
+            "ideal radio)"
+        ),
+    )
 
 
 class EvaluationModel(Part):

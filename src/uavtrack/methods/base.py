@@ -264,7 +264,9 @@ def sending(
     first = None
     if s.trigger is not None:
         first = fusion.triggered(inputs.gamma, inputs.told, inputs.k, s.trigger, s.refresh)
-    return fusion.Sending(first=first, changes=True, view=view)
+    budget = inputs.radio.now.budget
+    until = None if budget is None else budget.rounds
+    return fusion.Sending(first=first, changes=True, view=view, until=until)
 
 
 def told_after(inputs: Inputs, out: fusion.Outcome) -> np.ndarray | None:

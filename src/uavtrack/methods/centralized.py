@@ -38,8 +38,8 @@ class Centralized(Method):
         the node sends each one its download."""
         radio, alive = inputs.radio, inputs.alive
         up, down = wire(inputs, "upload", rows), wire(inputs, "download")
-        radio.on_air(part_bytes("upload", 0, -1, up), 1, alive, node=True)
-        radio.from_node(part_bytes("download", 0, -1, down), 1, alive)
+        radio.on_air(part_bytes("upload", 0, -1, up), 1, radio.afforded(alive), node=True)
+        radio.from_node(part_bytes("download", 0, -1, down), 1, radio.afforded(alive, "served"))
 
     def fuse(self, inputs: Inputs) -> Fused:
         self.on_air(inputs)

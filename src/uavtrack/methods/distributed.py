@@ -53,7 +53,7 @@ class Distributed(Method):
         radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
         parts = sum(part_bytes(p, 0, -1, wire(inputs, p)) for p in ("beacon", "bids"))
-        radio.on_air(parts, 2, inputs.alive)  # one frame: the beacon with the bids
+        radio.on_air(parts, 2, radio.afforded(inputs.alive))  # one frame: beacon, bids
         zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, n), dtype=bool)
         once = inputs.alive.astype(np.int64)
         sent, delivered = counted(

@@ -1,0 +1,105 @@
+"""`uavtrack bandwidth`: the three methods on a radio of limited capacity, with and
+without the compact encoding and the event trigger, paired."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Annotated
+
+import typer
+
+from .app import ConfigOpt, SetOpt, app, console, load_scenario, parse_overrides
+from .experiments import (
+    AddressOpt,
+    EngineName,
+    EngineOpt,
+    ProgressOpt,
+    SeedOpt,
+    StepsOpt,
+    WorkersOpt,
+    run_experiment,
+)
+
+
+@app.command()
+def bandwidth(
+    out: Annotated[
+        Path | None,
+        typer.Option(
+            "--out",
+            metavar="DIR",
+            help="results folder [results/bandwidth; results/bandwidth-quick with --quick]",
+        ),
+    ] = None,
+    trials: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="trials per cell and method [50]")
+    ] = None,
+    steps: StepsOpt = None,
+    quick: Annotated[
+        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 40 steps")
+    ] = False,
+    workers: WorkersOpt = None,
+    engine: EngineOpt = EngineName.local,
+    address: AddressOpt = None,
+    seed: SeedOpt = 0,
+    config: ConfigOpt = None,
+    set_: SetOpt = None,
+    progress: ProgressOpt = None,
+) -> None:
+    """The three methods on a radio of 1 kbit/s to 1 Mbit/s and unlimited (the channel
+    shared by each UAV's neighbourhood), distributed and greedy also with the compact
+    encoding, the event trigger and both: observation rate, bytes per UAV and step, the
+    cost paired against the unlimited paper exchange, and the capacity that keeps 95 %
+    of it; into a folder."""
+    from ..errors import UsageError
+    from ..experiments import bandwidth as experiment
+
+    mine = ("radio.bandwidth_bps", "radio.encoding", "fusion.trigger", "fusion.refresh")
+    given = [k for k in parse_overrides(set_ or []) if k in mine]
+    if given:
+        raise UsageError(
+            f"bandwidth sets {given[0]} itself (every capacity, encoding and trigger); "
+            "leave it out of --set"
+        )
+    scenario = load_scenario(config, set_)
+    if scenario.tracker.association != "known" or scenario.planner.avoidance != "none":
+        raise UsageError(
+            "bandwidth runs the consensus of known targets without avoidance: leave "
+            "tracker.association and planner.avoidance at their defaults"
+        )
+    options = dict(locals())  # the command's options, by name
+    summary, out, info = run_experiment(
+        "bandwidth",
+        experiment,
+        scenario,
+        options,
+        lambda jobs: ["bandwidth.png"],
+        lambda summary, out: experiment.figure(summary, out / "bandwidth.png"),
+        experiment.report,
+    )
+    _print(summary, out, info)
+
+
+def _print(summary: dict, out: Path, info: dict) -> None:
+    from rich.table import Table
+
+    from ..experiments.bandwidth import BANDWIDTHS, name
+
+    table = Table(title="bandwidth: observation rate (bytes per UAV and step)")
+    table.add_column("method, variant")
+    for b in BANDWIDTHS:
+        table.add_column(name(b), justify="right")
+    for method, rows in summary["methods"].items():
+        for variant, row in rows.items():
+            cells = [row[name(b)] for b in BANDWIDTHS]
+            table.add_row(
+                f"{method}, {variant}",
+                *(f"{c['observation_rate']['mean']:.3f} ({c['bytes']['mean']:.0f})" for c in cells),
+            )
+    console().print(table)
+    met = sum(g["met"] for g in summary["goals"])
+    typer.echo(
+        f"goals met: {met} of {len(summary['goals'])} (report.md); wrote {out}/summary.json, "
+        f"report.md, bandwidth.png ({info['jobs_run']} jobs run, {info['jobs_skipped']} "
+        f"reused, {info['seconds']:.1f} s)"
+    )

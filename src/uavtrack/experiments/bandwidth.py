@@ -1,0 +1,278 @@
+"""A radio with a byte budget (`uavtrack bandwidth`): the observation rate of the three
+methods against the channel's capacity (``radio.bandwidth_bps``, 1 kbit/s to 1 Mbit/s and
+unlimited), the distributed and greedy methods also with the compact encoding
+(``radio.encoding``), the event trigger (``fusion.trigger``) and both.
+
+Every cell runs the same trials (common random numbers), so each is paired trial by trial
+with its method's unlimited run of the paper's exchange. The bytes are those the agent
+form puts on the wire (`radio.frame_bytes`), per UAV and step.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from ..config import Scenario
+from .jobs import Job, collect, difference, label_of, trial_jobs, unique
+from .statistics import ci95, describe, paired
+
+METHODS = ("distributed", "centralized", "greedy")
+BANDWIDTHS = (None, 1e3, 3e3, 1e4, 3e4, 1e5, 3e5, 1e6)
+"""The channel capacities [bit/s] (None: unlimited)."""
+TRIGGER = 0.1
+"""The event trigger of the variants that have one: a target's tuple is sent again when its
+confidence moved by a tenth since it was last sent. Assumed: between the 0 that sends all
+and a half, which leaves most of the consensus out; measured against none here."""
+VARIANTS = {
+    "paper": {},
+    "compact": {"radio.encoding": "compact"},
+    "trigger": {"fusion.trigger": TRIGGER},
+    "both": {"radio.encoding": "compact", "fusion.trigger": TRIGGER},
+}
+"""How the consensus is sent: the paper's exchange, and the ways to send less."""
+SCORED = ("observation_rate", "bytes", "messages", "rmse_best", "ospa_best")
+"""The metrics the summary keeps per cell (mean and std over the trials)."""
+
+CUT = 0.60
+"""The goal: bytes per UAV and step cut by at least this by the encoding and the trigger."""
+COST = 0.01
+"""... at a paired cost in observation rate of at most this."""
+KEEP = 0.95
+"""The fraction of its unlimited observation rate a method must keep at the bandwidth
+quoted for it."""
+
+
+@dataclass(frozen=True)
+class Profile:
+    """The size of a bandwidth run."""
+
+    trials: int = 50
+    steps: int = 500
+    chunk: int = 10
+
+    @classmethod
+    def quick(cls) -> Profile:
+        """A smoke-test profile: 2 trials of 40 steps."""
+        return cls(trials=2, steps=40, chunk=2)
+
+    def to_dict(self) -> dict[str, Any]:
+        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+
+
+def variants(method: str) -> list[str]:
+    """The variants a method runs: the centralized method uploads and downloads whole
+    tables, which the encoding and the trigger do not act on."""
+    return ["paper"] if method == "centralized" else list(VARIANTS)
+
+
+def overrides(variant: str, bandwidth: float | None) -> dict[str, Any]:
+    """The fields of one cell against the base."""
+    out = dict(VARIANTS[variant])
+    if bandwidth is not None:
+        out["radio.bandwidth_bps"] = bandwidth
+    return out
+
+
+def cells(method: str) -> list[tuple[str, float | None]]:
+    """Every (variant, bandwidth) of a method."""
+    return [(v, b) for v in variants(method) for b in BANDWIDTHS]
+
+
+def plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
+    """Every job, grouped by method."""
+    base = base.with_overrides({"steps": profile.steps})
+    return {
+        method: [
+            job
+            for variant, bandwidth in cells(method)
+            for job in trial_jobs(
+                base, overrides(variant, bandwidth), method, profile.trials, profile.chunk, seed
+            )
+        ]
+        for method in METHODS
+    }
+
+
+def name(bandwidth: float | None) -> str:
+    """A capacity as the report writes it (1 kbit/s, 300 kbit/s, 1 Mbit/s, unlimited)."""
+    if bandwidth is None:
+        return "unlimited"
+    if bandwidth >= 1e6:
+        return f"{bandwidth / 1e6:g} Mbit/s"
+    return f"{bandwidth / 1e3:g} kbit/s"
+
+
+def summarize(
+    jobs: dict[str, list[Job]], results: dict[str, dict], profile: Profile, base: Scenario
+) -> dict[str, Any]:
+    """summary.json: per method, variant and capacity the metrics, each paired with the
+    method's unlimited run of the paper's exchange; the capacity that keeps 95 % of it;
+    and the goals."""
+    base = base.with_overrides({"steps": profile.steps})
+    data = collect(unique(j for group in jobs.values() for j in group), results)
+
+    def metrics(method: str, variant: str, bandwidth: float | None) -> dict:
+        scenario = base.with_overrides(overrides(variant, bandwidth))
+        return data[(label_of(difference(base, scenario)), method)]
+
+    out: dict[str, Any] = {"methods": {}, "bandwidths": [name(b) for b in BANDWIDTHS]}
+    out["bits_per_second"] = [b for b in BANDWIDTHS]
+    for method in METHODS:
+        reference = metrics(method, "paper", None)
+        rows: dict[str, Any] = {}
+        for variant in variants(method):
+            row: dict[str, Any] = {}
+            for bandwidth in BANDWIDTHS:
+                m = metrics(method, variant, bandwidth)
+                d = describe(m)
+                cell: dict[str, Any] = {"trials": d["trials"], "ci95": ci95(m["observation_rate"])}
+                for field in SCORED:
+                    cell[field] = (
+                        {"mean": d["mean"], "std": d["std"]}
+                        if field == "observation_rate"
+                        else d[field]
+                    )
+                cell["cost"] = paired(reference["observation_rate"], m["observation_rate"])
+                row[name(bandwidth)] = cell
+            unlimited = row["unlimited"]["observation_rate"]["mean"]
+            row["keeps"] = keeps(row, unlimited)
+            rows[variant] = row
+        out["methods"][method] = rows
+    out["goals"] = goals(out)
+    return out
+
+
+def keeps(row: dict[str, Any], unlimited: float) -> str | None:
+    """The smallest capacity of the grid from which on the variant keeps `KEEP` of its
+    own unlimited rate at every larger capacity (None: none of the limited ones)."""
+    found = None
+    for bandwidth in reversed(BANDWIDTHS[1:]):
+        if row[name(bandwidth)]["observation_rate"]["mean"] >= KEEP * unlimited:
+            found = name(bandwidth)
+        else:
+            break
+    return found
+
+
+def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
+    """The goals for the distributed method, unlimited: the bytes the encoding and the
+    trigger cut together, at their cost; and every method's 95 % capacity (reported)."""
+    rows = summary["methods"]["distributed"]
+    paper, both = rows["paper"]["unlimited"], rows["both"]["unlimited"]
+    cut = 1.0 - both["bytes"]["mean"] / paper["bytes"]["mean"] if paper["bytes"]["mean"] else 0.0
+    out = [
+        ("distributed: bytes per UAV and step cut by compact + trigger", cut, ">=", CUT),
+        ("distributed: their cost in observation rate (paired)", both["cost"]["mean"], "<=", COST),
+    ]
+    for method in METHODS:
+        found = summary["methods"][method]["paper"]["keeps"]
+        value = (
+            math.nan if found is None else BANDWIDTHS[[name(b) for b in BANDWIDTHS].index(found)]
+        )
+        out.append((f"{method}: capacity keeping 95% of its unlimited rate [bit/s]", value,
+                    "found", 0.0))  # fmt: skip
+    return [
+        {"goal": goal, "value": value, "op": op, "bound": bound,
+         "met": bool(np.isfinite(value) and (value >= bound if op == ">=" else value <= bound
+                                              if op == "<=" else True))}
+        for goal, value, op, bound in out
+    ]  # fmt: skip
+
+
+def figure(summary: dict[str, Any], path) -> None:
+    """bandwidth.png: the observation rate (95 % CI) and the bytes per UAV and step of
+    each method and variant against the capacity; the unlimited value at the right."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    limited = [b for b in BANDWIDTHS if b is not None]
+    x = np.array([*limited, limited[-1] * 4.0])  # unlimited drawn one step beyond
+    colours = {"distributed": "tab:blue", "centralized": "tab:green", "greedy": "tab:red"}
+    styles = {"paper": "-", "compact": "--", "trigger": ":", "both": "-."}
+    fig, axes = plt.subplots(1, 2, figsize=(13, 5))
+    for method, rows in summary["methods"].items():
+        for variant, row in rows.items():
+            cells = [row[name(b)] for b in (*limited, None)]
+            rate = [c["observation_rate"]["mean"] for c in cells]
+            err = [c["ci95"] for c in cells]
+            load = [max(c["bytes"]["mean"], 1.0) for c in cells]
+            style = {"color": colours[method], "linestyle": styles[variant]}
+            axes[0].errorbar(x, rate, yerr=err, capsize=2, marker="o", ms=3,
+                             label=f"{method}, {variant}", **style)  # fmt: skip
+            axes[1].plot(x, load, marker="o", ms=3, **style)
+    for ax in axes:
+        ax.set_xscale("log")
+        ax.set_xticks(x, [name(b).replace(" ", "\n") for b in (*limited, None)], fontsize=7)
+        ax.set_xlabel("channel capacity, shared by each UAV's neighbourhood")
+        ax.grid(alpha=0.3)
+    axes[0].set_ylabel("observation rate (95% CI)")
+    axes[0].set_ylim(0.0, 1.05)
+    axes[0].legend(fontsize=7, ncol=2, loc="lower right")
+    axes[1].set_ylabel("radio bytes per UAV and step (1 drawn for 0)")
+    axes[1].set_yscale("log")
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
+def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> str:
+    """report.md of `uavtrack bandwidth`."""
+    first = summary["methods"]["distributed"]["paper"]["unlimited"]
+    out = [
+        "# Bandwidth: a radio with a byte budget",
+        "",
+        f"Command: `{info['command']}`  ",
+        f"{first['trials']} trials per cell and method, {scenario.steps} steps, seed "
+        f"{info['seed']}; {info['workers']} worker{'s' if info['workers'] != 1 else ''}; "
+        f"{info['seconds']:.0f} s ({info['jobs_run']} jobs run, {info['jobs_skipped']} "
+        "already done).",
+        "",
+        f"The channel's capacity is shared: each UAV gets capacity x dT / 8 bytes a cycle "
+        f"(dT = {scenario.dt:g} s) over its closed neighbourhood (with the centralized "
+        "method, over every UAV and the central node); what does not fit is not sent, in "
+        "the order: the beacon with the bids (the upload), then the rounds of D_i flooding "
+        "and consensus, each reserved at its largest, the node's downloads in UAV order "
+        "(`radio.Budget`). Bytes are the agent form's frames on the wire, per UAV and step. "
+        f"Variants: compact = `radio.encoding=compact`; trigger = `fusion.trigger={TRIGGER}` "
+        "(refresh every 10 cycles); both. Cost = the method's unlimited paper rate minus "
+        "the cell's, paired trial by trial.",
+        "",
+        "## Goals",
+        "",
+        "| goal | measured | bound | met |",
+        "|---|---|---|---|",
+    ]
+    for g in summary["goals"]:
+        value = g["value"]
+        shown = "none in the grid" if not np.isfinite(value) else f"{value:.4g}"
+        bound = "found" if g["op"] == "found" else f"{g['op']} {g['bound']:g}"
+        out.append(f"| {g['goal']} | {shown} | {bound} | {'yes' if g['met'] else '**no**'} |")
+    out.append("")
+    for method, rows in summary["methods"].items():
+        out += [
+            f"## {method}",
+            "",
+            "| variant | capacity | rate (95% CI) | cost (95% CI) | bytes per UAV and step |",
+            "|---|---|---|---|---|",
+        ]
+        for variant, row in rows.items():
+            for bandwidth in BANDWIDTHS:
+                c = row[name(bandwidth)]
+                cost = c["cost"]
+                out.append(
+                    f"| {variant} | {name(bandwidth)} | "
+                    f"{c['observation_rate']['mean']:.3f} ± {c['ci95']:.3f} | "
+                    f"{cost['mean']:+.3f} ({cost['ci_low']:+.3f}, {cost['ci_high']:+.3f}) | "
+                    f"{c['bytes']['mean']:.0f} |"
+                )
+        keeps_ = ", ".join(f"{v}: {row['keeps'] or 'none'}" for v, row in rows.items())
+        out += ["", f"Capacity from which each variant keeps 95 % of its unlimited rate: "
+                f"{keeps_}.", ""]  # fmt: skip
+    out += ["![bandwidth](bandwidth.png)", ""]
+    return "\n".join(out)
