@@ -274,5 +274,17 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
         keeps_ = ", ".join(f"{v}: {row['keeps'] or 'none'}" for v, row in rows.items())
         out += ["", f"Capacity from which each variant keeps 95 % of its unlimited rate: "
                 f"{keeps_}.", ""]  # fmt: skip
+        least = rows["paper"][name(BANDWIDTHS[1])]
+        if least["bytes"]["mean"] == 0:  # nothing fits: the rate without a radio
+            alone = least["observation_rate"]["mean"]
+            need = KEEP * rows["paper"]["unlimited"]["observation_rate"]["mean"]
+            verdict = (
+                "above it: here 95 % says little, the radio adds less than 5 %"
+                if alone >= need
+                else "below it"
+            )
+            out += [f"Without a radio ({name(BANDWIDTHS[1])} carries nothing) the rate is "
+                    f"{alone:.3f}; 95 % of the unlimited paper rate is {need:.3f}, {verdict}.",
+                    ""]  # fmt: skip
     out += ["![bandwidth](bandwidth.png)", ""]
     return "\n".join(out)
