@@ -371,18 +371,21 @@ def test_traces_of_formats_1_and_2_are_read_with_no_late_messages_and_no_bytes(t
     assert result.trace is not None
     trace_file.write(tmp_path / "new.npz", result)
     with np.load(tmp_path / "new.npz") as data:
-        arrays = {name: data[name] for name in data.files if name not in ("late", "bytes")}
+        added = ("late", "bytes", "node_bytes")
+        arrays = {name: data[name] for name in data.files if name not in added}
         late = data["late"]
     assert int(arrays.pop("format")) == trace_file.FORMAT == 3
     np.savez(tmp_path / "old.npz", format=np.array(1), **arrays)
     np.savez(tmp_path / "unnumbered.npz", **arrays)
     np.savez(tmp_path / "two.npz", format=np.array(2), late=late, **arrays)
     nothing = np.zeros_like(result.trace.bytes)
+    no_node = np.zeros_like(result.trace.node_bytes)
     for name in ("old.npz", "unnumbered.npz", "two.npz"):
         read = trace_file.read(tmp_path / name).trace
         assert read.late.shape == (5, len(PROTOCOLS)) and not read.late.any()
-        assert read.bytes.shape == (5, 6) and not read.bytes.any()
-        expected = dataclasses.replace(result.trace, bytes=nothing)
+        assert read.bytes.shape == (5, 5) and not read.bytes.any()
+        assert read.node_bytes.shape == (5,) and not read.node_bytes.any()
+        expected = dataclasses.replace(result.trace, bytes=nothing, node_bytes=no_node)
         assert differences(read, expected) == []
     assert result.trace.bytes.any()
 

@@ -176,7 +176,7 @@ def test_tidy_tables_read_back_by_pandas(tmp_path, saved, capsys, result):
         assert not schema[table].field(column).metadata  # counts and flags have none
     assert frames["pairs"].attrs["units"]["P_y_vx"] == "m^2/s"  # pandas keeps them too
     on_air = frames["uavs"]["bytes"].sum() + frames["steps"]["node_bytes"].sum()
-    assert on_air == result.trace.bytes.sum() > 0
+    assert on_air == result.trace.bytes.sum() + result.trace.node_bytes.sum() > 0
     csv = tmp_path / "csv"
     assert run_cli(capsys, "export", saved, "--format", "csv", "--out", csv)[0] == 0
     back = pd.read_csv(csv / "pairs.csv")

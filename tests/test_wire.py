@@ -118,15 +118,16 @@ def test_bytes_follow_the_team_and_its_links():
     scenario = uavtrack.Scenario(steps=5)
     central = uavtrack.simulate(scenario, "centralized", seed=0)
     assert central.trace is not None
-    up = central.trace.bytes[:, :-1]
+    up = central.trace.bytes
     n, m = scenario.n_uavs, scenario.n_targets
     content = radio.content_bytes(radio.layout("upload", n, m))
     frame = radio.frame_bytes(0, 0, radio.part_bytes("upload", 0, -1, content), 1)
     assert (up == frame + radio.int_bytes(n)).all()  # cycle 0 and 1-byte ints throughout
     content = radio.content_bytes(radio.layout("download", n, m))
     frame = radio.frame_bytes(0, n, radio.part_bytes("download", 0, -1, content), 1)
-    assert (central.trace.bytes[:, -1] == n * (frame + 1)).all()  # one to each UAV
-    assert central.bytes == pytest.approx(central.trace.bytes.sum(axis=1).mean() / n)
+    assert (central.trace.node_bytes == n * (frame + 1)).all()  # one to each UAV
+    every = central.trace.bytes.sum(axis=1) + central.trace.node_bytes
+    assert central.bytes == pytest.approx(every.mean() / n)
 
 
 @pytest.mark.integration  # a swarm of programs
@@ -141,7 +142,9 @@ def test_a_swarms_frames_on_the_wire_are_the_bytes_the_batch_counts(method):
     assert batch.trace.bytes.sum() > 0
     assert np.array_equal(swarm.result.trace.bytes, batch.trace.bytes)
     # the radio is most of what the programs publish (the rest: reports to the world)
-    assert 0.5 * swarm.traffic.bytes < batch.trace.bytes.sum() <= swarm.traffic.bytes
+    assert np.array_equal(swarm.result.trace.node_bytes, batch.trace.node_bytes)
+    on_air = batch.trace.bytes.sum() + batch.trace.node_bytes.sum()
+    assert 0.5 * swarm.traffic.bytes < on_air <= swarm.traffic.bytes
 
 
 @settings(max_examples=60, deadline=None)

@@ -348,7 +348,7 @@ class Tally:
         s["alive"] += anyone
         s["messages"] += cycle.messages
         s["delivered"] += cycle.delivered
-        s["bytes"] += cycle.bytes.sum(axis=1) / self.n_uavs
+        s["bytes"] += (cycle.bytes.sum(axis=1) + cycle.node_bytes) / self.n_uavs
         s["conflicts"] += cycle.conflicts
         for name, key in (("decision_time_ms", "decision"), ("decision_wall_ms", "wall")):
             decision = getattr(cycle, name)

@@ -340,11 +340,12 @@ class Cycle:
         np.int64,
     )
     bytes: np.ndarray = _record(
-        "(Nu+1,)",
-        "radio bytes each UAV sent, the central node's last (see the documentation, "
-        "Performance: bytes): its frames as the agent form puts them on the wire",
+        "(Nu,)",
+        "radio bytes each UAV sent (see the trace format, Bytes): its frames as the agent "
+        "form puts them on the wire",
         np.int64,
     )
+    node_bytes: np.ndarray = _record("()", "radio bytes the central node sent", np.int64)
     conflicts: np.ndarray = _record(
         "()", "targets followed by two or more UAVs while another has none", np.int64
     )
@@ -824,7 +825,8 @@ def finish(
         messages=fused.sent + assigned.sent + beaconed[0],
         delivered=fused.delivered + assigned.delivered + beaconed[1],
         late=np.zeros((B, len(PROTOCOLS)), dtype=np.int64),
-        bytes=pending.radio.bytes,
+        bytes=pending.radio.bytes[:, :Nu],
+        node_bytes=pending.radio.bytes[:, Nu],
         conflicts=conflicts(
             target if pending.columns is None else pending.columns, alive, pending.width
         ),

@@ -26,7 +26,7 @@ EXACT = ("targets", "uavs", "observed", "assignment", "action", "alive") + (
     "scan_origin",  # with unknown association
 )
 CLOSE = ("mean", "cov", "bids", "scan_polar", "scan_z")
-COUNTERS = ("rounds", "messages", "delivered", "late", "bytes", "conflicts")
+COUNTERS = ("rounds", "messages", "delivered", "late", "bytes", "node_bytes", "conflicts")
 
 
 def differences(a: object, b: object, atol: float = 1e-9, counters: bool = True) -> list[str]:

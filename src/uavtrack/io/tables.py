@@ -158,9 +158,9 @@ def to_xarray(
     )  # fmt: skip
     for name in ("messages", "delivered", "conflicts"):
         variables[name] = (step, getattr(trace, name), {"long_name": docs[name]})
-    variables["bytes"] = (su, trace.bytes[:, :-1], {"long_name": docs["bytes"], "units": "byte"})
-    node = {"long_name": "radio bytes the central node sent", "units": "byte"}
-    variables["node_bytes"] = (step, trace.bytes[:, -1], node)
+    variables["bytes"] = (su, trace.bytes, {"long_name": docs["bytes"], "units": "byte"})
+    node = {"long_name": docs["node_bytes"], "units": "byte"}
+    variables["node_bytes"] = (step, trace.node_bytes, node)
     if tracked:
         _track_variables(variables, trace, sut)
     attrs = {
@@ -246,7 +246,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
             "messages": trace.messages,
             "delivered": trace.delivered,
             "conflicts": trace.conflicts,
-            "node_bytes": trace.bytes[:, -1],
+            "node_bytes": trace.node_bytes,
             "in_view": trace.observed.any(axis=1).mean(axis=1),
             "alive_uavs": trace.alive.sum(axis=1),
         }
@@ -260,7 +260,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
         assignment=trace.assignment.ravel(),
         bank_angle=trace.action.ravel(),
         rounds=trace.rounds.ravel(),
-        bytes=trace.bytes[:, :-1].ravel(),
+        bytes=trace.bytes.ravel(),
         decision_time_ms=trace.decision_time_ms.ravel(),
         decision_wall_ms=trace.decision_wall_ms.ravel(),
     )

@@ -37,9 +37,9 @@ from ..simulation import RECORDED, TRACKED, Result, Trace
 FORMAT = 3
 """The trace format this uavtrack writes and reads. It changes only when an array is
 added, removed or changes meaning; uavtrack versions that write the same format read
-each other's traces. Format 2 added ``late``, format 3 ``bytes``."""
+each other's traces. Format 2 added ``late``, format 3 ``bytes`` and ``node_bytes``."""
 
-ADDED = {"late": 2, "bytes": 3}
+ADDED = {"late": 2, "bytes": 3, "node_bytes": 3}
 """Arrays added after format 1, with the format that added them: a file of an older
 format is read with them at zero (nothing of theirs was counted then)."""
 
@@ -183,7 +183,6 @@ def _sizes(scenario: Scenario) -> dict[str, int]:
     known = scenario.tracker.association == "known"
     return {
         "Nu": scenario.n_uavs,
-        "Nu+1": scenario.n_uavs + 1,
         "Nt": scenario.n_targets,
         "K": scenario.n_targets if known else scenario.track_slots,
     }
