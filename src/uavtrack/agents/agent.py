@@ -701,7 +701,9 @@ class UavAgent:
         # downloads); fault-free a UAV alone exchanges nothing, as in `methods.Centralized`
         offered = []
         if download is not None:
-            mine = int(self.radio.alive[k - self.radio.delay][self.me]) if s.faulty else one
+            then = k - self.radio.delay
+            mine = int(self.radio.alive[then][self.me]) if s.faulty else one
+            mine *= int(self.radio.affords(then, self.me, "download"))  # sent to it at all
             offered.append((mine, mine * int(download[1][0, 0])))
         sent, delivered = counted(
             s.delay, lambda: [self.radio.transmitted(k, "upload", 1, 0, to=self.n)], offered
@@ -816,7 +818,8 @@ class CentralAgent:
                 continue
             uploads[q] = content
         if s.faulty:
-            offered = [(int(alive_then.sum()), len(uploads))]
+            sent = [q for q in uavs if self.radio.affords(sent_at, int(q), "upload")]
+            offered = [(len(sent), len(uploads))]
         else:  # every upload arrives, but one that was late; a UAV alone sends none
             one = int(n > 1)
             offered = [(n * one, len(uploads) * one)]

@@ -58,7 +58,8 @@ def bandwidth(
     given = [k for k in parse_overrides(set_ or []) if k in mine]
     if given:
         raise UsageError(
-            f"bandwidth sets {given[0]} itself (every capacity, encoding and trigger); "
+            f"bandwidth sets {given[0]} itself (it runs every capacity from 1 kbit/s to 1 "
+            "Mbit/s and unlimited, with and without the compact encoding and the trigger); "
             "leave it out of --set"
         )
     scenario = load_scenario(config, set_)
@@ -86,7 +87,7 @@ def _print(summary: dict, out: Path, info: dict) -> None:
     from ..experiments.bandwidth import BANDWIDTHS, name
 
     table = Table(title="bandwidth: observation rate (bytes per UAV and step)")
-    table.add_column("method, variant")
+    table.add_column("method, variant", no_wrap=True, min_width=24)
     for b in BANDWIDTHS:
         table.add_column(name(b), justify="right")
     for method, rows in summary["methods"].items():

@@ -70,7 +70,8 @@ class Centralized(Method):
         tuples = fusion.Estimates(
             gamma=inputs.gamma, mean=inputs.mean, cov=inputs.cov, stamp=np.full((B, n, m), k)
         )
-        radio.send("upload", {"estimates": tuples, "uavs": inputs.believed, "alive": inputs.alive})
+        sent = radio.afforded(inputs.alive)  # the uploads sent: what the shares afford
+        radio.send("upload", {"estimates": tuples, "uavs": inputs.believed, "alive": sent})
         upload, up_ok = radio.receive_central("upload")
         arrived: list[
             tuple[np.ndarray, np.ndarray]
@@ -86,7 +87,8 @@ class Centralized(Method):
                 upload["estimates"], up_ok, upload["uavs"], s, k, timing
             )
             seconds += timing.since(start) / B
-        radio.send("download", {"estimates": down, "target": down_target, "alive": inputs.alive})
+        served = radio.afforded(inputs.alive, "served")  # the downloads the node's share sends
+        radio.send("download", {"estimates": down, "target": down_target, "alive": served})
         download, down_ok = radio.receive_central("download")
         mean, cov = inputs.mean, inputs.cov
         target = None
