@@ -616,14 +616,26 @@ def wire_mean(mean: np.ndarray) -> np.ndarray:
     return mean.astype(np.float32).astype(np.float64)
 
 
-_UPPER = np.triu(np.ones((4, 4), dtype=bool))
+_UPPER = np.triu_indices(4)
+
+
+def upper(cov: np.ndarray) -> np.ndarray:
+    """The upper triangle (..., 10) of covariances (..., 4, 4), row by row."""
+    return cov[..., _UPPER[0], _UPPER[1]]
+
+
+def mirrored(triangle: np.ndarray) -> np.ndarray:
+    """Covariances (..., 4, 4), float64, from their upper triangle (..., 10) (`upper`)."""
+    full = np.zeros((*triangle.shape[:-1], 4, 4))
+    full[..., _UPPER[0], _UPPER[1]] = triangle
+    full[..., _UPPER[1], _UPPER[0]] = triangle
+    return full
 
 
 def wire_cov(cov: np.ndarray) -> np.ndarray:
     """Covariances (..., 4, 4) as the compact encoding delivers them: the upper triangle
     rounded to float32, mirrored below the diagonal."""
-    rounded = cov.astype(np.float32).astype(np.float64)
-    return np.where(_UPPER, rounded, np.swapaxes(rounded, -1, -2))
+    return mirrored(upper(cov).astype(np.float32))
 
 
 def frame_bytes(k: int, sender: Any, parts: Any, count: Any) -> Any:

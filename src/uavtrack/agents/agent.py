@@ -47,7 +47,7 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
-from ..radio import counted
+from ..radio import counted, mirrored, upper
 from ..robust import gate
 from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
@@ -219,9 +219,6 @@ def closed(ids: list[int], me: int) -> tuple[int, network.Links]:
     return where, network.Links(batch=1, n=len(ids), dense=dense)
 
 
-_UPPER = np.triu_indices(4)
-
-
 def listing(t: fusion.Estimates, mask: np.ndarray, compact: bool) -> dict[str, np.ndarray]:
     """A consensus round's content with only the tuples of `mask` (M,), listed by target
     (`radio.layout`, "listed"; with `compact`, "compact": float32, the covariance's upper
@@ -232,7 +229,7 @@ def listing(t: fusion.Estimates, mask: np.ndarray, compact: bool) -> dict[str, n
     if compact:
         return {
             "targets": targets.astype("<u2"), "mean": mean.astype("<f4"),
-            "cov": cov[:, *_UPPER].astype("<f4"), "stamp": stamp[targets].astype("<i4"),
+            "cov": upper(cov).astype("<f4"), "stamp": stamp[targets].astype("<i4"),
             "origin": origin[targets].astype("<u2"),
         }  # fmt: skip
     gamma = fusion.required(t.gamma, "gamma")[targets]
@@ -257,10 +254,7 @@ def listed(content: dict[str, np.ndarray], m: int, k: int, sender: int) -> dict[
     if "gamma" in content:
         cov[targets], gamma[targets] = content["cov"], content["gamma"]
     else:
-        upper = content["cov"].astype(np.float64)
-        full = np.zeros((len(targets), 4, 4))
-        full[:, *_UPPER] = upper
-        full[:, _UPPER[1], _UPPER[0]] = upper
+        full = mirrored(content["cov"])
         cov[targets] = full
         gamma[targets] = estimation.confidence(full)
     stamp[targets], origin[targets] = content["stamp"], content["origin"]

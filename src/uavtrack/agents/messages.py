@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import estimation
 from ..faults import PROTOCOLS
-from ..radio import WIRE_VERSION
+from ..radio import WIRE_VERSION, mirrored
 from ..robust.plausibility import CONSISTENT, Bounds
 
 VERSION = WIRE_VERSION
@@ -511,10 +511,7 @@ class Spec:
         if domain == "covariance":
             return _covariance(value[live], b)
         if domain == "covariance triangle":  # (rows, 10): the upper triangle of each
-            full = np.zeros((len(value), 4, 4))
-            full[:, *np.triu_indices(4)] = value
-            full[:, np.triu_indices(4)[1], np.triu_indices(4)[0]] = value
-            return _covariance(full, b)
+            return _covariance(mirrored(value), b)
         if domain == "afford":
             flags = np.isin(value[:, [0, 2]], (0, 1)).all()
             return None if flags and (value[:, 1] >= 0).all() else "count out of range"
