@@ -398,6 +398,40 @@ def test_a_members_lies_about_its_tracks_are_dropped_by_reason(monkeypatch, how)
     assert swarm.result.gospa < 2 * reference.gospa
 
 
+def every_label_at_one_point(content: dict) -> dict:
+    """Every slot confirmed under the labels 0 .. K-1, every track at one point with a
+    covariance of the sender's own: well formed, within the bounds, each label once."""
+    mean, cov, status = (content[n].array() for n in ("mean", "cov", "status"))
+    K = status.size
+    live = np.flatnonzero(status != 0)
+    point = mean[live[0]] if live.size else np.array([200.0, 200.0, 0.0, 0.0])
+    P = cov[live[0]] if live.size else 25.0 * np.eye(4)
+    changed = {
+        "mean": np.tile(point, (K, 1)), "cov": np.broadcast_to(P, (K, 4, 4)).copy(),
+        "label": np.arange(K), "status": np.full(K, 2),
+    }  # fmt: skip
+    return dict(content, **{name: Array.of(value) for name, value in changed.items()})
+
+
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+def test_a_member_offering_every_label_at_one_point_stops_no_honest_program(monkeypatch):
+    """Labels 0 .. K-1 include labels the honest UAVs give their next births: taken,
+    an honest UAV held one twice and its own messages were refused (2 of 4 honest
+    programs lost at step 5 of seed 2). They are left out and counted."""
+    member_alters(monkeypatch, "consensus", every_label_at_one_point)
+    scenario = uavtrack.Scenario(steps=30).with_overrides(
+        {"tracker.association": "jpda", **TRACKED}
+    )
+    swarm = run_swarm(scenario, "distributed", seed=2, transport="memory", deadline=0.5)
+    assert swarm.traffic.lost == {}
+    assert swarm.traffic.drops.get("label not issued", 0) > 0, swarm.traffic.drops
+    assert "labels not distinct" not in swarm.traffic.drops
+    trace = swarm.result.trace
+    for step, row in np.ndindex(trace.label.shape[:2]):
+        held = trace.label[step, row][trace.status[step, row] != 0]
+        assert np.unique(held).size == held.size, (step, row, held)
+
+
 # ------------------------------------------------------------------ a member that lies well
 
 

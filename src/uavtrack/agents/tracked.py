@@ -44,6 +44,7 @@ class TrackedUav(UavAgent):
         self.tombs = np.full((1, 1, K, 2), -1, dtype=np.int64)
         self.threshold = association.threshold(scenario.tracker.gate_probability, 4)
         self.target = -1  # the team label followed
+        self.serial = 0  # its births so far: its labels n_targets + s n + me, s < serial
         self.kept: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
         """The bids held of each neighbour (labels, bids, step sent), when messages get
         lost: `Held` by label."""
@@ -63,6 +64,7 @@ class TrackedUav(UavAgent):
             np.ones((1, 1, len(raw)), dtype=bool), believed[None, None], one, s,
             self.modes, tracker, k, (self.me, self.n),
         )  # fmt: skip
+        self.serial = int(scanned.book.serial[0, 0])  # the labels it has issued
         own = scanned_tracks(scanned, self.tombs, k)
         state = (own, np.zeros(own.status.shape, dtype=np.int8))
         (agreed, changed), rounds, sent, delivered = self.rounds(
@@ -195,13 +197,14 @@ class TrackedUav(UavAgent):
     def _agree(self, state, contents: dict[int, dict]):
         """One round of `team.agree_round` over this UAV's closed neighbourhood: itself
         and the senders whose tracks arrived, in index order (the senders' tracks beyond
-        the run's plausibility bounds left out, `messages.Spec.tracks`)."""
+        the run's plausibility bounds left out, `messages.Spec.tracks`, and those under a
+        label of this UAV's own it has not issued, `_issued`)."""
         own, changed = state
         offered = {}
         for q, content in contents.items():
             content, reasons = self.spec.tracks(content)
             dropped(self.mailbox, reasons)
-            offered[q] = content
+            offered[q] = self._issued(content)
         ids = sorted({self.me, *offered})
         where = ids.index(self.me)
 
@@ -231,6 +234,20 @@ class TrackedUav(UavAgent):
             tombs=None if out.tombs is None else out.tombs[:, where : where + 1],
         )
         return mine, now[:, where : where + 1]
+
+    def _issued(self, content: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+        """A sender's tracks without those under a label of this UAV's it has not issued
+        (taken as empty slots, counted as "label not issued"): holding one, this UAV
+        would issue it again at a later birth and hold it twice, which its own
+        messages' check refuses. So whatever it adopts, its labels stay distinct."""
+        label = content["label"]
+        team = (self.me, self.n)
+        bad = manage.unissued(label, self.serial, self.scenario.n_targets, team)
+        if not bad.any():
+            return content
+        dropped(self.mailbox, {"label not issued": int(bad.sum())})
+        status = np.where(bad, 0, content["status"])
+        return dict(content, status=status, label=np.where(bad, -1, label))
 
     # ------------------------------------------------------------ assignment
 

@@ -459,6 +459,16 @@ def _births(
     return new_book, mean.reshape(B, N, K, 4), cov.reshape(B, N, K, 4, 4), born.reshape(B, N, K)
 
 
+def unissued(label: np.ndarray, serial: int, n_targets: int, team: tuple[int, int]) -> np.ndarray:
+    """Which labels (...,) are UAV i's own that it has not issued yet: n_targets + s n + i
+    with s >= serial (team: (i, n)). No honest UAV holds one, since only i issues them,
+    and a UAV that took one would issue it again at a later birth, holding it twice: a
+    receiver leaves such offered tracks out (the agent form, `agents.tracked`)."""
+    me, n = team
+    own = (label >= n_targets) & ((label - n_targets) % n == me)
+    return own & ((label - n_targets) // n >= serial)
+
+
 def after_fusion(
     book: Book,
     label: np.ndarray,
