@@ -128,6 +128,51 @@ def test_malformed_config_file(capsys, tmp_path):
     assert code == 2 and "unknown field 'n_uav'" in err
 
 
+HOSTILE_CONFIGS = {
+    "tables nested 3000 deep": ("a = " + "{b = " * 3000 + "1" + "}" * 3000, "nested deeper"),
+    "arrays nested 3000 deep": ("a = " + "[" * 3000 + "]" * 3000, "nested deeper"),
+    "a header 3000 keys deep": ("[" + ".".join(["a"] * 3000) + "]\nx = 1", "nested deeper"),
+    "a 5000-digit integer": ("steps = " + "9" * 5000, "a number of more than 4300 digits"),
+}
+
+
+@pytest.mark.parametrize("name", list(HOSTILE_CONFIGS))
+def test_a_hostile_config_file_or_value_is_refused_in_one_line(capsys, tmp_path, name):
+    text, message = HOSTILE_CONFIGS[name]
+    config = tmp_path / "hostile.toml"
+    config.write_text(text)
+    trace = tmp_path / "t.npz"
+    value = text.split(" = ", 1)[1] if not text.startswith("[") else None
+    tries = [["--config", str(config)]] + ([["--set", f"steps={value}"]] if value else [])
+    for args in tries:
+        code, out, err = run_cli(capsys, "run", *args, "--trace", str(trace))
+        assert code == 2 and message in err, err[:300]
+        assert err.count("\n") == 1 and len(err) < 300 and "Traceback" not in err + out
+    assert not trace.exists()
+
+
+def test_a_config_file_is_read_up_to_a_limit(capsys, tmp_path):
+    """/dev/zero and a runaway file: refused after 1 MiB, not read whole."""
+    from uavtrack.config import toml
+
+    big = tmp_path / "big.toml"
+    big.write_text("# " + "x" * toml.MAX_BYTES + "\nsteps = 5\n")
+    for path in (big, Path("/dev/zero")):
+        if not path.exists():
+            continue
+        code, _, err = run_cli(capsys, "run", "--config", str(path))
+        assert code == 2 and "larger than 1024 KiB" in err and err.count("\n") == 1
+    small = tmp_path / "small.toml"
+    small.write_text("# " + "x" * (toml.MAX_BYTES - 100) + "\nsteps = 5\n")
+    assert uavtrack.Scenario.from_toml(small).steps == 5  # up to the limit, read
+
+
+def test_an_error_shows_a_long_value_cut(capsys):
+    code, _, err = run_cli(capsys, "run", "--set", "steps=" + "9" * 4000)
+    assert code == 2 and "less than or equal to" in err and "(4000 chars)" in err
+    assert len(err) < 300
+
+
 def test_trace_into_missing_directory(capsys, tmp_path):
     code, _, err = run_cli(
         capsys, "run", "--set", "steps=5", "--trace", str(tmp_path / "no" / "t.npz")

@@ -4,6 +4,7 @@ the command line, and one-line messages for pydantic's validation errors.
 
 from __future__ import annotations
 
+import sys
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
@@ -15,18 +16,68 @@ from pydantic import (
 
 from ..errors import ScenarioError
 
+MAX_BYTES = 1 << 20
+"""The largest config file read [bytes]: a scenario with every field set and commented
+(`uavtrack params --toml`) takes about 20 KiB; a device or a runaway file is refused
+after this many bytes, not read whole."""
+
+MAX_DEPTH = 16
+"""The deepest nesting of tables and arrays a config holds: a scenario nests three
+levels; deeper input is refused before anything recurses through it."""
+
 
 def read_toml(path: str | Path) -> dict[str, Any]:
-    """Parse a TOML file into a dict, with one-line errors."""
+    """Parse a TOML file into a dict, with one-line errors: a file larger than
+    `MAX_BYTES` or nested deeper than `MAX_DEPTH` is refused."""
     try:
-        text = Path(path).read_text(encoding="utf-8")
+        with open(path, "rb") as file:
+            raw = file.read(MAX_BYTES + 1)
+        if len(raw) > MAX_BYTES:
+            raise ScenarioError(
+                f"config file {path} is larger than {MAX_BYTES // 1024} KiB; "
+                "a scenario takes a few KiB"
+            )
+        text = raw.decode("utf-8")
     except (OSError, UnicodeDecodeError) as exc:
         reason = exc.strerror if isinstance(exc, OSError) and exc.strerror else str(exc)
         raise ScenarioError(f"cannot read config file {path}: {reason}") from None
+    return loads(text, f"config file {path}")
+
+
+def loads(text: str, where: str) -> dict[str, Any]:
+    """`tomllib.loads` with one-line errors naming `where`: invalid TOML, numbers of
+    more digits than Python converts, nesting deeper than `MAX_DEPTH`."""
     try:
-        return tomllib.loads(text)
+        data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as exc:
-        raise ScenarioError(f"config file {path} is not valid TOML: {exc}") from None
+        raise ScenarioError(f"{where} is not valid TOML: {exc}") from None
+    except RecursionError:
+        raise ScenarioError(f"{where} is nested deeper than {MAX_DEPTH} levels") from None
+    except ValueError:  # an integer of more digits than int() converts (4300)
+        raise ScenarioError(
+            f"{where} holds a number of more than {sys.get_int_max_str_digits()} digits"
+        ) from None
+    if _depth(data) > MAX_DEPTH:
+        raise ScenarioError(f"{where} is nested deeper than {MAX_DEPTH} levels")
+    return data
+
+
+def _depth(value: object) -> int:
+    """How deeply tables and arrays nest in a parsed TOML value (a scalar: 0), found
+    without recursion."""
+    deepest, stack = 0, [(value, 0)]
+    while stack:
+        node, depth = stack.pop()
+        children = (
+            node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
+        )
+        if children is None:
+            continue
+        deepest = max(deepest, depth + 1)
+        if deepest > MAX_DEPTH:
+            return deepest
+        stack.extend((child, depth + 1) for child in children)
+    return deepest
 
 
 def _is_table(value: object) -> TypeGuard[dict[str, Any]]:
@@ -101,9 +152,15 @@ def describe_errors(exc: ValidationError, fields: dict[str, Any] | None = None) 
             continue
         msg = err["msg"].removeprefix("Value error, ")
         got = err.get("input")
-        shown = "" if isinstance(got, dict) or got is None else f" (got {got!r})"
+        shown = "" if isinstance(got, dict) or got is None else f" (got {_short(got)})"
         parts.append(f"{loc}: {msg}{shown}" if loc else f"{msg}{shown}")
     return "; ".join(parts)
+
+
+def _short(value: object, most: int = 60) -> str:
+    """repr(value), cut to `most` characters: an error line stays one readable line."""
+    text = repr(value)
+    return text if len(text) <= most else f"{text[: most - 12]}... ({len(text)} chars)"
 
 
 def parse_value(text: str, where: str = "value") -> Any:
@@ -118,9 +175,14 @@ def parse_value(text: str, where: str = "value") -> Any:
     if text.strip() == "none":  # TOML has no null: `none` unsets an optional field
         return None
     try:
-        return tomllib.loads(f"v = {text}")["v"]
+        data = tomllib.loads(f"v = {text}")
     except tomllib.TOMLDecodeError:
         return text
+    except (RecursionError, ValueError):  # too deep, or too many digits: `loads` says which
+        data = loads(f"v = {text}", where)
+    if _depth(data) > MAX_DEPTH:
+        raise ScenarioError(f"{where} is nested deeper than {MAX_DEPTH} levels")
+    return data["v"]
 
 
 def dump_toml(
