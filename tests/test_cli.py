@@ -103,6 +103,9 @@ BAD = [
     (["params", "--team", "9x9", "--set", "n_targets=3"], "do not --set n_targets too"),
     (["sweep", "n_uavs", "10", "30", "--team", "20x20"], "do not sweep n_uavs too"),
     (["run", "--set", "n_uavs=300", "--set", "n_targets=300"], "--team 300x300"),
+    (["sweep", "comm_range", "50", "--trials", "100000000"], "less than or equal to 100000"),
+    (["sensing", "--trials", "100001"], "less than or equal to 100000"),
+    (["compare", "--trials", "100001"], "less than or equal to 100000"),
 ]
 
 

@@ -110,3 +110,13 @@ def test_resized_team_keeps_the_altitude_spread():
     )
     assert len(set(big.altitudes())) == 21
     assert reproduce.resized(base, 5, 4) == base
+
+
+def test_an_experiment_of_more_trials_than_it_can_hold_is_refused_before_planning():
+    from uavtrack.config import MAX_TRIALS
+    from uavtrack.experiments.jobs import trial_jobs
+
+    scenario = uavtrack.Scenario(steps=5)
+    assert len(trial_jobs(scenario, {}, "greedy", MAX_TRIALS, 10, 0)) == MAX_TRIALS // 10
+    with pytest.raises(uavtrack.ScenarioError, match="give 1 to 100,000"):
+        trial_jobs(scenario, {}, "greedy", 10**8, 10, 0)

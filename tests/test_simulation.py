@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import _process, estimation, network, sensing, simulation
+from uavtrack import _process, estimation, network, sensing, simulation, world
 from uavtrack.testing import assert_same_trace
 
 from . import reference as reference_check
@@ -133,7 +133,7 @@ def test_unknown_method_and_bad_scenario():
 
 def test_initial_conditions_layout():
     scenario = uavtrack.Scenario()
-    uavs, trajectory, prior, P0 = simulation.initial_conditions(scenario, np.random.default_rng(0))
+    uavs, trajectory, prior, P0 = world.initial_conditions(scenario, np.random.default_rng(0))
     assert np.all(np.abs(uavs[:, :2] - 100.0) <= 10.0)
     assert trajectory.shape == (500, 4, 4)
     assert np.allclose(np.diag(P0), [25.0, 25.0, 1.0, 1.0])
@@ -246,7 +246,14 @@ def test_a_run_that_cannot_fit_is_refused_naming_the_field(monkeypatch):
         uavtrack.simulate(big)
     long = uavtrack.Scenario(steps=2_000_000)
     with pytest.raises(uavtrack.ScenarioError, match="reduce steps"):
-        uavtrack.run(long, "distributed", [0, 1])
+        uavtrack.run(long, "distributed", [0, 1], trace=True)
+    # without a trace the targets are drawn a block at a time: steps cost no memory,
+    # except for manoeuvring targets, drawn whole
+    estimate = simulation.memory_estimate
+    assert estimate(long, 2) == estimate(uavtrack.Scenario(steps=2_000), 2)
+    turning = long.with_overrides({"target.motion": "manoeuvring"})
+    with pytest.raises(uavtrack.ScenarioError, match="reduce steps"):
+        uavtrack.run(turning, "distributed", [0, 1])
 
 
 def test_no_faults_reproduce_the_stored_results():

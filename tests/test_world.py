@@ -190,3 +190,47 @@ def test_manoeuvring_leaves_the_papers_draws_alone():
     assert not np.array_equal(a[1], b[1])
     c = world.initial_conditions(m, world.streams(0)[0])
     assert np.array_equal(b[1], c[1])  # deterministic
+
+
+@pytest.mark.parametrize(
+    "overrides",
+    [{}, {"n_targets": 7, "field_size": 60.0}, {"target.motion": "manoeuvring"}, {"steps": 1}],
+    ids=["paper", "many-walls", "manoeuvring", "one-step"],
+)
+@pytest.mark.parametrize("block", [1, 7, 1024])
+def test_targets_drawn_a_block_at_a_time_are_the_whole_run_bit_for_bit(
+    monkeypatch, overrides, block
+):
+    """`world.Targets` continues the closed form's sums block to block: the states equal
+    `target_trajectories` on the accelerations drawn at once, for every block size."""
+    monkeypatch.setattr(world.Targets, "BLOCK", block)
+    scenario = uavtrack.Scenario(steps=100).with_overrides(overrides)
+    seeds = [np.random.SeedSequence(3), np.random.SeedSequence(4)]
+    whole = np.stack([world.initial_conditions(scenario, world.streams(s)[0])[1] for s in seeds])
+    rngs = [world.streams(s)[0] for s in seeds]
+    starts = [world.draw_start(scenario, rng)[0] for rng in rngs]
+    streamed = world.Targets(np.stack(starts), rngs, scenario)  # keeps one block
+    steps = np.stack([streamed.at(k) for k in range(scenario.steps)], axis=1)
+    assert np.array_equal(steps, whole)
+    if scenario.steps > block + 1:
+        with pytest.raises(IndexError, match="keep no steps|gone"):
+            streamed.whole()
+
+
+def test_a_run_without_a_trace_holds_no_more_memory_for_more_steps(monkeypatch):
+    """Without a trace the targets are drawn a block at a time: 8 times the steps, the
+    same peak of memory (the whole run would hold 8 times the targets' states)."""
+    import tracemalloc
+
+    monkeypatch.setattr(world.Targets, "BLOCK", 50)
+    small = uavtrack.Scenario(n_uavs=2, n_targets=40, steps=200)
+    uavtrack.simulation.run(small, "greedy", [0])  # what a first run imports and caches
+    peaks = []
+    for steps in (200, 1600):
+        tracemalloc.start()
+        uavtrack.simulation.run(small.with_overrides({"steps": steps}), "greedy", [0])
+        peaks.append(tracemalloc.get_traced_memory()[1])
+        tracemalloc.stop()
+    grown = peaks[1] - peaks[0]
+    whole = (1600 - 200) * 40 * 4 * 8  # the targets' states of the steps added, at least
+    assert grown < 0.25 * whole, peaks

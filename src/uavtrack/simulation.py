@@ -55,7 +55,7 @@ from .robust import gate
 from .tracks import columns, manage
 from .tracks import scan as scans
 from .tracks.scoring import Scores
-from .world import detection_stream, initial_conditions, streams
+from .world import Targets, detection_stream, draw_start, streams
 from .world import trial_seed as trial_seed  # public here too
 
 NOISE_BLOCK = 64
@@ -997,14 +997,23 @@ def initial_state(
 ) -> tuple[State, np.ndarray, list[np.random.Generator]]:
     """The state at step 0 of each trial, the target trajectories (B, T, Nt, 4) and the
     sensor-noise generators, from each trial's truth and sensor streams."""
+    state, targets, sensor_rngs = initial_stream(scenario, seeds, keep=True)
+    return state, targets.whole(), sensor_rngs
+
+
+def initial_stream(
+    scenario: Scenario, seeds: Sequence[np.random.SeedSequence], keep: bool = False
+) -> tuple[State, Targets, list[np.random.Generator]]:
+    """`initial_state` with the targets drawn as the run reaches them (`world.Targets`,
+    `Targets.at(k)`), keeping the steps passed only if `keep` (as a trace needs): the
+    memory of a run without a trace does not grow with its steps."""
     B, Nu, Nt = len(seeds), scenario.n_uavs, scenario.n_targets
     truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
-    drawn = [initial_conditions(scenario, rng) for rng in truth_rngs]
-    uavs = np.stack([d[0] for d in drawn])
-    trajectory = np.stack([d[1] for d in drawn])
+    drawn = [draw_start(scenario, rng) for rng in truth_rngs]
+    targets = Targets(np.stack([d[0] for d in drawn]), list(truth_rngs), scenario, keep)
+    uavs = np.stack([d[1] for d in drawn])
     mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
     cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
-    del drawn  # the per-trial copies of the trajectories
     held = None
     if scenario.faults.loss > 0:
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
@@ -1036,7 +1045,7 @@ def initial_state(
         labels=labels,
         tombs=tombs,
     )
-    return state, trajectory, list(sensor_rngs)
+    return state, targets, list(sensor_rngs)
 
 
 # ---------------------------------------------------------------- runs
@@ -1079,19 +1088,20 @@ def run(
         ctx = replace(ctx, buffers=Buffers())
         if len(seeds) * scenario.n_uavs * scenario.n_targets * 128 >= LARGE_STATE:
             _process.keep_freed_memory()
-    state, trajectory, sensor_rngs = initial_state(scenario, seeds)
+    state, targets, sensor_rngs = initial_stream(scenario, seeds, keep=trace)
     B, T, Nu, Nt = len(seeds), scenario.steps, scenario.n_uavs, scenario.n_targets
     tally = scores(scenario, B, timed=B == 1)
     rec = Recorder(T, timed=B == 1) if trace else None
     noises = sensor_noise(sensor_rngs, Nu, Nt, T)
     for k, noise in enumerate(noises):
-        state, cycle = step(state, trajectory[:, k], noise, ctx)
-        tally.add(cycle, trajectory[:, k])
+        truth = targets.at(k)
+        state, cycle = step(state, truth, noise, ctx)
+        tally.add(cycle, truth)
         if rec is not None:
             rec.record(k, cycle)
         if progress is not None:
             progress(k + 1)
-    traces = rec.traces(trajectory) if rec is not None else None
+    traces = rec.traces(targets.whole()) if rec is not None else None
     return BatchResult(method.name, scenario, tally.summary(), traces)
 
 
@@ -1198,7 +1208,8 @@ class Recorder:
 def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> dict[str, float]:
     """Bytes a batch of `batch` trials needs at its peak, by the field that drives each part.
 
-    The parts are the target trajectories (steps x n_targets), the planner's tree of
+    The parts are the target trajectories (steps x n_targets, or a block of steps without
+    a trace: `world.Targets`), the planner's tree of
     3^h sequences, the radio (n_uavs^2 bits of the flooding and the auction, and the
     consensus tuples on each radio link, whose number is estimated from the UAVs'
     density at the start and over the field; with lost or late messages each UAV's
@@ -1219,8 +1230,12 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
         radio += batch * Nu * (1 + _neighbours(scenario)) * Nt * f * 6
     if scenario.faults.loss > 0 or scenario.faults.delay > 0:  # each UAV's view of the bids
         radio += batch * Nu * Nu * Nt * f * 3
+    # the targets' states and their draws: a block of steps (`world.Targets`), or every
+    # step when kept for a trace or drawn whole (manoeuvring targets)
+    whole = trace or scenario.target.motion == "manoeuvring"
+    drawn = T if whole else min(T, Targets.BLOCK + 1)
     parts = {
-        "steps": batch * T * Nt * 4 * f * 2 + T * Nt * 2 * f * 8,
+        "steps": batch * drawn * Nt * 4 * f * 2 + drawn * Nt * 2 * f * 8,
         "planner.horizon": planning.memory(batch * Nu, Nt, 3, scenario.planner.horizon),
         "n_uavs": radio,
         "n_targets": pairs * f * 20 * 6 * history + 2 * noise,

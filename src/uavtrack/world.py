@@ -167,7 +167,17 @@ def trial_seed(seed: int, trial: int) -> np.random.SeedSequence:
 def initial_conditions(
     scenario: Scenario, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
-    """Draw one trial's truth and prior (all assumed; see the parameter table).
+    """One trial's start (`draw_start`) and its whole target trajectories: uavs (Nu, 5),
+    trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4)."""
+    targets, uavs, prior, P0 = draw_start(scenario, rng)
+    trajectory = Targets(targets[None], [rng], scenario, keep=True).whole()[0]
+    return uavs, trajectory, prior, P0
+
+
+def draw_start(
+    scenario: Scenario, rng: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """Draw one trial's start and prior (all assumed; see the parameter table).
 
     Targets start uniformly in the field with N(0, v0^2) velocity components; UAVs
     start in a square of side `uav.start_spread` at the field centre with uniform
@@ -176,7 +186,8 @@ def initial_conditions(
     N(0, sigma_p0^2) noise and zero velocity, and P0 = diag(sigma_p0^2, sigma_p0^2,
     sigma_v0^2, sigma_v0^2), so the prior is consistent.
 
-    Returns uavs (Nu, 5), target trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4).
+    Returns the targets at step 0 (Nt, 4), uavs (Nu, 5), prior mean (Nt, 4), P0 (4, 4);
+    the targets' accelerations are the stream's next draws (`Targets`).
     """
     nu, nt, L = scenario.n_uavs, scenario.n_targets, scenario.field_size
     tgt = scenario.target
@@ -195,12 +206,124 @@ def initial_conditions(
     prior = np.zeros((nt, 4))
     prior[:, :2] = targets[:, :2] + rng.normal(0.0, est.initial_position_std, (nt, 2))
     P0 = np.diag([est.initial_position_std**2] * 2 + [est.initial_velocity_std**2] * 2)
-    accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * scenario.acceleration_std()
-    if tgt.motion == "manoeuvring":  # its draws come after the paper's: those stay the same
-        trajectory = manoeuvring_trajectories(targets, accel, scenario.dt, L, tgt.manoeuvre, rng)
-    else:
-        trajectory = target_trajectories(targets, accel, scenario.dt, L)
-    return uavs, trajectory, prior, P0
+    return targets, uavs, prior, P0
+
+
+class Targets:
+    """The targets of a batch of trials over a run, (B, T, Nt, 4), drawn and moved a
+    block of `BLOCK` steps at a time as the run reaches them, so that a run without a
+    trace holds one block, whatever its length.
+
+    Each trial's accelerations (eq. 15) are the last draws of its truth stream, in step
+    order: drawn a block at a time they are the numbers drawn at once, and the closed
+    form of `target_trajectories`, continued from the sums it carries, gives the same
+    states bit for bit. Manoeuvring targets draw their manoeuvres after every
+    acceleration, so their run is drawn whole at the first step.
+
+    initial (B, Nt, 4) the states at step 0; rngs each trial's truth stream, after the
+    draws of its start; keep: whether the steps passed stay (for `whole`)."""
+
+    BLOCK = 1024
+    """Steps drawn at once [steps]."""
+
+    def __init__(
+        self,
+        initial: np.ndarray,
+        rngs: list[np.random.Generator],
+        scenario: Scenario,
+        keep: bool = False,
+    ) -> None:
+        self.scenario, self.rngs, self.keep = scenario, rngs, keep
+        self.steps = scenario.steps
+        self.std = np.asarray(scenario.acceleration_std())
+        self.p0, self.v0 = initial[..., :2], initial[..., 2:]
+        self.speed_sum = np.zeros(self.v0.shape)  # the accelerations summed so far
+        self.move_sum = np.zeros(self.p0.shape)  # the free moves summed so far
+        self.velocity = self.v0  # the free velocity at the next step's start
+        self.blocks = [self._fold(self.p0[:, None], self.v0[:, None])]  # (B, n, Nt, 4) each
+        self.made = 1  # steps drawn
+        self.start = 0  # the step of blocks[-1][:, 0]
+
+    def at(self, k: int) -> np.ndarray:
+        """The targets at step k (B, Nt, 4). Without `keep`, only steps of the current
+        block or later can be asked for."""
+        if not 0 <= k < self.steps:
+            raise IndexError(f"step {k} of a run of {self.steps} steps")
+        while k >= self.made:
+            self._next()
+        if k >= self.start:
+            return self.blocks[-1][:, k - self.start]
+        return self.whole(k + 1)[:, k]
+
+    def whole(self, steps: int | None = None) -> np.ndarray:
+        """The first `steps` steps (default: all the run's) of every trial,
+        (B, steps, Nt, 4); only with `keep`."""
+        steps = self.steps if steps is None else steps
+        if not self.keep:
+            raise IndexError("these targets keep no steps passed (keep=False)")
+        while steps > self.made:
+            self._next()
+        if len(self.blocks) > 1:
+            self.blocks, self.start = [np.concatenate(self.blocks, axis=1)], 0
+        return self.blocks[0][:, :steps]
+
+    def _next(self) -> None:
+        """Draw and move the next block of steps."""
+        if self.scenario.target.motion == "manoeuvring":
+            block = self._manoeuvring()
+        else:
+            n, nt = min(self.BLOCK, self.steps - self.made), self.p0.shape[-2]
+            accel = np.stack([rng.standard_normal((n, nt, 2)) for rng in self.rngs]) * self.std
+            block = self._free(accel, first=self.made == 1)
+        if self.keep:
+            self.blocks.append(block)
+        else:
+            self.blocks = [block]
+        self.start, self.made = self.made, self.made + block.shape[1]
+
+    def _free(self, accel: np.ndarray, first: bool) -> np.ndarray:
+        """The states after the accelerations (B, n, Nt, 2): `target_trajectories`'
+        closed form, its cumulative sums continued from those carried."""
+        dt = self.scenario.dt
+        speed = np.cumsum(accel, axis=1) if first else _continued(self.speed_sum, accel)
+        vel = self.v0[:, None] + dt * speed  # the velocity after each acceleration
+        before = np.concatenate([self.velocity[:, None], vel[:, :-1]], axis=1)
+        moves = before * dt + 0.5 * dt**2 * accel
+        moved = np.cumsum(moves, axis=1) if first else _continued(self.move_sum, moves)
+        self.speed_sum, self.move_sum, self.velocity = speed[:, -1], moved[:, -1], vel[:, -1]
+        return self._fold(self.p0[:, None] + moved, vel)
+
+    def _fold(self, free: np.ndarray, vel: np.ndarray) -> np.ndarray:
+        """Free positions and velocities folded into the field (the walls are mirrors)."""
+        L = self.scenario.field_size
+        folded = np.mod(free, 2.0 * L)
+        pos = np.where(folded > L, 2.0 * L - folded, folded)
+        mirrored = np.mod(np.floor_divide(free, L), 2) == 1
+        return np.concatenate([pos, np.where(mirrored, -vel, vel)], axis=-1)
+
+    def _manoeuvring(self) -> np.ndarray:
+        """Steps 1 .. T-1 of every trial's manoeuvring run, drawn whole."""
+        s, nt = self.scenario, self.p0.shape[-2]
+        initial = np.concatenate([self.p0, self.v0], axis=-1)
+        runs = [
+            manoeuvring_trajectories(
+                initial[b],
+                rng.standard_normal((self.steps - 1, nt, 2)) * self.std,
+                s.dt,
+                s.field_size,
+                s.target.manoeuvre,
+                rng,
+            )  # fmt: skip
+            for b, rng in enumerate(self.rngs)
+        ]
+        return np.stack(runs)[:, 1:]
+
+
+def _continued(carried: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """np.cumsum(values, axis=-3) continued from `carried` (B, Nt, 2): the sums a whole
+    cumsum gives there, bit for bit (an accumulation adds in order)."""
+    both = np.concatenate([carried[:, None], values], axis=1)
+    return np.cumsum(both, axis=1)[:, 1:]
 
 
 def start_grid(n: int, spacing: float, field_size: float) -> np.ndarray:

@@ -209,7 +209,7 @@ class WorldProgram:
     ) -> simulation.BatchResult:
         """Run every cycle; returns the trial's metrics and trace as `simulation.run` does."""
         s, ctx = self.scenario, self.ctx
-        state, trajectory, sensor_rngs = simulation.initial_state(s, self.seeds)
+        state, trajectory, sensor_rngs = simulation.initial_stream(s, self.seeds, keep=trace)
         uavs, alive = state.uavs, state.alive
         self.prior = (state.mean[0, 0, : s.n_targets], state.cov[0, 0, 0])  # the briefed
         pilot = state.flight if state.flight is not None else Unicycle(s.dt)
@@ -238,7 +238,7 @@ class WorldProgram:
             self._lose(k, alive, dict.fromkeys(self._gone(), self._gone_why()))
             believed = world.believed(uavs, ctx.faults.position_error(k))
             graph = simulation.graph(uavs, alive, s)
-            targets = trajectory[:, k]
+            targets = trajectory.at(k)
             observed, z = simulation.observe(uavs, targets, noise, alive, s)
             scan = None
             if ctx.tracked:  # each UAV's unlabelled scan: detections and clutter
@@ -267,7 +267,7 @@ class WorldProgram:
         for drops in (self.mailbox.reasons(), *self.traffic.program_drops.values()):
             for reason, count in drops.items():
                 self.traffic.drops[reason] = self.traffic.drops.get(reason, 0) + count
-        traces = recorder.traces(trajectory) if recorder is not None else None
+        traces = recorder.traces(trajectory.whole()) if recorder is not None else None
         return simulation.BatchResult(self.method.name, s, tally.summary(), traces)
 
     def _answer_joins(self) -> None:

@@ -19,6 +19,7 @@ from typer.exceptions import TyperException
 from .. import __version__, _process
 from .._files import check_distinct, check_new_folder, check_output, dumps
 from .._progress import bar
+from ..config import MAX_TRIALS
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
 from ..methods import registry
 
@@ -523,7 +524,7 @@ def compare(
         ),
     ] = None,
     trials: Annotated[
-        int, typer.Option(min=1, metavar="N", help="Monte Carlo trials per method")
+        int, typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="Monte Carlo trials per method")
     ] = 50,
     steps: Annotated[
         int | None, typer.Option(min=1, metavar="N", help="steps per trial [the scenario's]")

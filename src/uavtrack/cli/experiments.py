@@ -12,6 +12,7 @@ from typing import Annotated, Any
 import typer
 
 from .._files import check_output, check_outputs, write_json, write_text
+from ..config import MAX_TRIALS
 from ..errors import Interrupted, ScenarioError, UsageError
 from .app import (
     ConfigOpt,
@@ -230,7 +231,8 @@ def reproduce(
         ),
     ] = None,
     trials: Annotated[
-        int | None, typer.Option(min=1, metavar="N", help="trials per configuration [50]")
+        int | None,
+        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per configuration [50]"),
     ] = None,
     steps: StepsOpt = None,
     workers: WorkersOpt = None,
@@ -336,7 +338,10 @@ def sweep(
         ),
     ] = None,
     trials: Annotated[
-        int, typer.Option(min=1, metavar="N", help="trials per value (or cell) and method")
+        int,
+        typer.Option(
+            min=1, max=MAX_TRIALS, metavar="N", help="trials per value (or cell) and method"
+        ),
     ] = 20,
     steps: StepsOpt = None,
     out: Annotated[

@@ -7,6 +7,7 @@ from typing import Annotated
 
 import typer
 
+from ..config import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
@@ -32,7 +33,7 @@ def robustness(
         ),
     ] = None,
     trials: Annotated[
-        int | None, typer.Option(min=1, metavar="N", help="trials per point [50]")
+        int | None, typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per point [50]")
     ] = None,
     steps: StepsOpt = None,
     quick: Annotated[

@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from ..config import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
@@ -33,7 +34,8 @@ def sensing(
         ),
     ] = None,
     trials: Annotated[
-        int | None, typer.Option(min=1, metavar="N", help="trials per cell and method [50]")
+        int | None,
+        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [50]"),
     ] = None,
     steps: StepsOpt = None,
     quick: Annotated[

@@ -8,6 +8,7 @@ from typing import Annotated
 
 import typer
 
+from ..config import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, app, console, load_scenario, parse_overrides
 from .experiments import (
     AddressOpt,
@@ -35,7 +36,10 @@ def separation(
         ),
     ] = None,
     trials: Annotated[
-        int | None, typer.Option(min=1, metavar="N", help="trials per cell, side and method [50]")
+        int | None,
+        typer.Option(
+            min=1, max=MAX_TRIALS, metavar="N", help="trials per cell, side and method [50]"
+        ),
     ] = None,
     steps: StepsOpt = None,
     quick: Annotated[

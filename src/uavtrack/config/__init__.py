@@ -11,6 +11,7 @@ its errors: a scenario is built and read without numpy, JSBSim or any engine.
 from ..errors import ScenarioError
 from .parts import (
     MAX_ALTITUDE,
+    MAX_TRIALS,
     Bool,
     EstimationModel,
     EvaluationModel,
@@ -50,6 +51,7 @@ __all__ = [  # noqa: RUF022
     "G",
     "Int",
     "MAX_ALTITUDE",
+    "MAX_TRIALS",
     "ManoeuvreModel",
     "PlannerModel",
     "RadioModel",

@@ -19,7 +19,7 @@ from ..simulation import (
     decide,
     finish,
     graph,
-    initial_state,
+    initial_stream,
     scores,
     sensor_noise,
 )
@@ -50,7 +50,7 @@ class Episodes:
         self.method, self.spaces, self.reward, self.seeds = method, spaces, reward, list(seeds)
         self.plan = plan
         self.ctx = Context.of(s, method, self.seeds)
-        self.state, self.trajectory, rngs = initial_state(s, self.seeds)
+        self.state, self.trajectory, rngs = initial_stream(s, self.seeds, keep=record)
         self.noises = sensor_noise(rngs, s.n_uavs, s.n_targets, s.steps)
         B = len(self.seeds)
         self.seen = np.zeros((B, s.n_targets))  # steps each target was in some UAV's view
@@ -92,7 +92,7 @@ class Episodes:
         self.state, cycle = finish(self.state, pending, self.ctx, actions)
         self.seen += pending.observed.any(axis=1)
         if self.tally is not None and self.recorder is not None:  # record=True: both
-            self.tally.add(cycle, self.trajectory[:, k])
+            self.tally.add(cycle, self.trajectory.at(k))
             self.recorder.record(k, cycle)
         self.pending = self._decide()
         if self.pending is None:
@@ -157,14 +157,14 @@ class Episodes:
         """The steps flown as `simulation.run` reports them (record=True only)."""
         if self.tally is None or self.recorder is None:
             raise RuntimeError("these episodes keep no record (record=False)")
-        traces = self.recorder.traces(self.trajectory[:, : self.k])
+        traces = self.recorder.traces(self.trajectory.whole(self.k))
         return BatchResult(self.method.name, self.scenario, self.tally.summary(), traces)
 
     def _decide(self) -> Pending | None:
         k = self.state.k
         if k >= self.scenario.steps:
             return None
-        return decide(self.state, self.trajectory[:, k], next(self.noises), self.ctx, self.plan)
+        return decide(self.state, self.trajectory.at(k), next(self.noises), self.ctx, self.plan)
 
 
 def in_view_now(

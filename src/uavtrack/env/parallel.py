@@ -240,7 +240,7 @@ class UAVTrackingEnv(ParallelEnv):
         if run.k == 0:  # after reset: the first cycle as the method would close it
             recorder = Recorder(1, timed=True)
             recorder.record(0, finish(run.state, run.current, run.ctx, fly=False)[1])
-            return recorder.traces(run.trajectory[:, :1])[0], 0
+            return recorder.traces(run.trajectory.at(0)[:, None])[0], 0
         trace = self.result().trace
         assert trace is not None  # the episodes keep a record
         return trace, run.k - 1

@@ -28,7 +28,7 @@ from ..errors import install_hint
 from ..methods import get
 from ..simulation import (
     Context,
-    initial_state,
+    initial_stream,
     memory_estimate,
     run,
     sensor_noise,
@@ -247,11 +247,11 @@ def mid_run(scenario: Scenario, k: int = 20):
     spread out)."""
     seeds = [trial_seed(0, 0)]
     ctx = Context.of(scenario, get("distributed"), seeds)
-    state, trajectory, rngs = initial_state(scenario, seeds)
+    state, targets, rngs = initial_stream(scenario, seeds)
     noises = sensor_noise(rngs, scenario.n_uavs, scenario.n_targets, k + 1)
     for j, noise in zip(range(k), noises, strict=False):
-        state, _ = step(state, trajectory[:, j], noise, ctx)
-    return state, trajectory[:, k], next(noises)
+        state, _ = step(state, targets.at(j), noise, ctx)
+    return state, targets.at(k), next(noises)
 
 
 def cycle_cases(sizes, methods, repeats: int, scaled: bool = False) -> list[dict[str, Any]]:

@@ -23,7 +23,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Scenario, ScenarioError, flatten
+from ..config import MAX_TRIALS, Scenario, ScenarioError, flatten
 from ..simulation import run, trial_seed
 from .statistics import describe, paired
 
@@ -125,7 +125,10 @@ def trial_jobs(
     seed: int,
     origin: str = "override",
 ) -> list[Job]:
-    """Jobs covering trials 0 .. trials-1 of base+overrides with one method."""
+    """Jobs covering trials 0 .. trials-1 of base+overrides with one method; more than
+    `config.MAX_TRIALS` trials are refused before a job is made."""
+    if not 1 <= trials <= MAX_TRIALS:
+        raise ScenarioError(f"trials {trials}: give 1 to {MAX_TRIALS:,} per configuration")
     scenario = base.with_overrides(overrides, origin=origin)
     label = label_of(difference(base, scenario))  # equal scenarios, equal labels (label_for)
     return [
