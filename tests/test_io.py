@@ -342,6 +342,62 @@ def test_a_trace_whose_arrays_disagree_is_refused_in_one_line(tmp_path, saved, c
     assert not (tmp_path / "t.nc").exists() and not (tmp_path / "t").exists()
 
 
+def lying_header(path, source, name: str, shape: tuple[int, ...]):
+    """A copy of `source` whose array `name` declares `shape` in its .npy header, its
+    data left as it was: what `numpy.load` would allocate whole before any check."""
+    import zipfile
+
+    with zipfile.ZipFile(source) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
+        for info in zin.infolist():
+            raw = zin.read(info)
+            if info.filename == f"{name}.npy":
+                array = np.load(__import__("io").BytesIO(raw))
+                head = __import__("io").BytesIO()
+                np.lib.format.write_array_header_1_0(
+                    head, {"descr": array.dtype.str, "fortran_order": False, "shape": shape}
+                )
+                raw = (
+                    np.lib.format.magic(1, 0) + head.getvalue()[8:] + raw[len(raw) - array.nbytes :]
+                )
+            zout.writestr(info.filename, raw)
+    return path
+
+
+def test_a_trace_is_checked_from_its_headers_before_any_array_is_read(tmp_path, saved, capsys):
+    """An extra array, an array declaring a billion steps (7.5 GB), an array whose bytes
+    are not what its header says: each refused in one line, with no more memory than a
+    small trace takes (the data are never read)."""
+    import tracemalloc
+
+    with np.load(saved) as data:
+        steps = data["targets"].shape[0]
+    extra = np.zeros((200_000, 1))  # 1.6 MB, compressed to a few KiB
+    cases = [
+        (rewrite(tmp_path / "extra.npz", saved, more=extra), "unknown array 'more'"),
+        (
+            lying_header(tmp_path / "huge.npz", saved, "cov", (10**9, 5, 4, 4, 4)),
+            "bytes where its header declares",
+        ),
+        (
+            lying_header(tmp_path / "steps.npz", saved, "targets", (steps + 1, 4, 4)),
+            "bytes where its header declares",
+        ),
+    ]
+    for path, message in cases:
+        tracemalloc.start()
+        code, stdout, err = run_cli(capsys, "export", path, "--out", tmp_path / "t.nc")
+        peak = tracemalloc.get_traced_memory()[1]
+        tracemalloc.stop()
+        assert code == 2 and stdout == "" and len(err.strip().splitlines()) == 1, err
+        assert message in err, err
+        assert peak < 20 * 2**20, peak  # far below a read of the arrays' declared sizes
+    assert not (tmp_path / "t.nc").exists()
+    # a header that agrees with its bytes, but not with the scenario's steps
+    long = rewrite(tmp_path / "long.npz", saved, targets=np.zeros((10**4, 4, 4)))
+    code, _, err = run_cli(capsys, "export", long, "--out", tmp_path / "t.nc")
+    assert code == 2 and "targets has 10000 steps, its scenario 30" in err, err
+
+
 def test_export_to_a_link_to_nothing_is_refused_naming_it(tmp_path, saved, capsys):
     for name in ("gone.nc", "gone"):
         link = tmp_path / f"link-{name}"

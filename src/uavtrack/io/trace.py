@@ -96,7 +96,10 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
         raise UsageError(f"{path}: not a uavtrack trace file (not a NumPy .npz archive)")
     try:
         with np.load(path, allow_pickle=False) as data:
-            arrays = {name: data[name] for name in data.files}
+            headers = _headers(path, data.zip)
+            arrays = {name: data[name] for name in headers if name in META}
+            _check_headers(path, headers, arrays)
+            arrays.update({name: data[name] for name in headers if name not in META})
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{path}: not a uavtrack trace file ({exc})") from None
     version = str(arrays["uavtrack"]) if "uavtrack" in arrays else "unknown"
@@ -132,6 +135,88 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
     return TraceFile(
         trace=trace, scenario=scenario, method=str(arrays["method"]), seed=seed, version=version
     )
+
+
+META_CHARS = 1 << 20
+"""The longest text a trace's metadata may hold (its scenario's JSON takes a few KiB)."""
+
+
+def _headers(path: Path, archive: zipfile.ZipFile) -> dict[str, tuple[np.dtype, tuple[int, ...]]]:
+    """Each array's dtype and shape, read from its .npy header in the archive without
+    reading its data; an entry that is not a trace's array, or whose bytes are not what
+    its header declares, is refused."""
+    known = {"targets", *META, *(f.name for f in RECORDED), *TRACKED}
+    out = {}
+    for info in archive.infolist():
+        name = info.filename.removesuffix(".npy")
+        if name not in known or not info.filename.endswith(".npy"):
+            raise UsageError(f"{path}: not a uavtrack trace file (unknown array {name[:60]!r})")
+        with archive.open(info) as file:
+            major, _ = np.lib.format.read_magic(file)
+            read_header = (
+                np.lib.format.read_array_header_1_0
+                if major == 1
+                else np.lib.format.read_array_header_2_0
+            )
+            shape, fortran, dtype = read_header(file, max_header_size=10_000)
+            start = file.tell()
+        if dtype.hasobject:
+            raise UsageError(f"{path}: {name} holds Python objects, not numbers")
+        size = int(np.prod(shape, dtype=np.int64)) * dtype.itemsize
+        if info.file_size != start + size:
+            raise UsageError(
+                f"{path}: not a uavtrack trace file ({name} holds {info.file_size - start} "
+                f"bytes where its header declares {size})"
+            )
+        out[name] = (dtype, tuple(shape))
+    return out
+
+
+def _check_headers(
+    path: Path, headers: dict[str, tuple[np.dtype, tuple[int, ...]]], meta: dict[str, np.ndarray]
+) -> None:
+    """Refuse, before any array's data is read, metadata that is not short text or one
+    number, and arrays larger than the scenario's team and steps allow."""
+    for name in META:
+        if name in headers:
+            dtype, shape = headers[name]
+            text = dtype.kind == "U" and dtype.itemsize // 4 <= META_CHARS
+            if shape != () or not (text or dtype.kind in "iuf"):
+                raise UsageError(f"{path}: not a uavtrack trace file ({name} is not metadata)")
+    if "scenario" not in meta or "targets" not in headers:
+        return  # `read` names what is missing
+    try:
+        scenario = Scenario.from_dict(json.loads(str(meta["scenario"])), origin=str(path))
+    except (json.JSONDecodeError, ScenarioError) as exc:
+        raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
+    steps = headers["targets"][1][0] if headers["targets"][1] else 0
+    if steps > scenario.steps:
+        raise UsageError(
+            f"{path}: its arrays disagree: targets has {steps} steps, its scenario {scenario.steps}"
+        )
+    sizes = _sizes(scenario)
+    expected = {"targets": (steps, scenario.n_targets, 4)}
+    expected.update({f.name: _shape(f, sizes, steps) for f in RECORDED})
+    scans = scenario.n_targets + 50 + 10 * int(np.ceil(scenario.sensor.clutter_rate))
+    for name, (dtype, shape) in headers.items():
+        if name in META:
+            continue
+        if not (np.issubdtype(dtype, np.number) or dtype.kind == "b"):
+            raise UsageError(f"{path}: {name} holds {dtype}, not numbers")
+        if name in TRACKED:  # (T, Nu, K) or (T, Nu, Z, ...) with Z at most a scan's
+            lead, width = shape[:2], shape[2] if len(shape) > 2 else 0
+            most = sizes["K"] if name in ("label", "status") else scans
+            if lead != (steps, scenario.n_uavs) or width > most:
+                raise UsageError(
+                    f"{path}: its arrays disagree: {name} is {shape}, beyond its scenario's "
+                    f"{steps} steps of {scenario.n_uavs} UAVs and {most} per UAV"
+                )
+        elif shape != expected[name]:
+            raise UsageError(
+                f"{path}: its arrays disagree: {name} is {shape}, where its scenario "
+                f"({scenario.n_uavs} UAVs, {scenario.n_targets} targets) and the {steps} "
+                f"steps of targets give {expected[name]}"
+            )
 
 
 def _check_format(path: Path, entry: np.ndarray | None, version: str) -> int:
