@@ -82,9 +82,14 @@ def track_content(draw, spec: Spec, k: int, serial: int, points: np.ndarray):
     tombs[: len(tombed), 1] = draw(st.lists(st.integers(0, k), min_size=K, max_size=K))[
         : len(tombed)
     ]
+    stamp = np.where(status != 0, stamp, 0)
+    # a sender buries what its tombstones name (`team.bury`), or its message is refused
+    step = dict(zip(tombs[:, 0].tolist(), tombs[:, 1].tolist(), strict=True))
+    buried = np.array([step.get(int(lb), -1) > st for lb, st in zip(label, stamp, strict=True)])
+    status, label = np.where(buried, 0, status), np.where(buried, -1, label)
     return {
-        "mean": mean, "cov": cov, "label": label, "status": status,
-        "stamp": np.where(status != 0, stamp, 0), "tombs": tombs,
+        "mean": mean, "cov": cov, "label": label, "status": status, "stamp": stamp,
+        "tombs": tombs,
     }  # fmt: skip
 
 
@@ -191,3 +196,31 @@ def test_a_label_of_the_receivers_own_it_has_not_issued_is_left_out_and_counted(
     assert manage.unissued(np.array([m + ME, mine, m + n + 1, 3]), 1, m, (ME, n)).tolist() == [
         False, True, False, False,
     ]  # fmt: skip
+
+
+def test_tombstones_of_a_track_the_sender_holds_refuse_its_message():
+    """An honest sender buries the tracks its tombstones name (`team.bury`): a message
+    holding one with an older stamp is a lie about the deletion, or about the track."""
+    spec = Spec.of(SCENARIO, False)
+    K, k = spec.slots, 6
+    status, label, stamp = np.zeros(K, np.int64), np.full(K, -1), np.zeros(K, np.int64)
+    status[:2], label[:2], stamp[:2] = 2, [0, 3], [4, 6]
+    tombs = np.full((K, 2), -1)
+    content = {
+        "mean": np.tile([200.0, 200.0, 0.0, 0.0], (K, 1)),
+        "cov": np.broadcast_to(9.0 * np.eye(4), (K, 4, 4)).copy(),
+        "label": label, "status": status, "stamp": stamp, "tombs": tombs,
+    }  # fmt: skip
+
+    def reason(deleted):
+        tombs[:] = -1
+        if deleted:
+            tombs[: len(deleted)] = deleted
+        out = spec.radio(consensus_message(content, k, 1), k)
+        return out if isinstance(out, str) else None
+
+    assert reason([]) is None
+    assert reason([(0, 5)]) == "tombstone of a track it holds"  # deleted after its stamp 4
+    assert reason([(0, 4), (3, 6)]) is None  # met at the deletion's step: it knows better
+    assert reason([(5, 6), (3, 6)]) is None  # a label it does not hold
+    assert reason([(5, 6), (3, 7 - 1), (0, 6)]) == "tombstone of a track it holds"

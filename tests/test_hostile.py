@@ -432,6 +432,22 @@ def test_a_member_offering_every_label_at_one_point_stops_no_honest_program(monk
         assert np.unique(held).size == held.size, (step, row, held)
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+def test_a_member_tombstoning_every_track_it_holds_is_refused_and_counted():
+    """`examples/quiet_lies.py --lie tombstones`: every label it holds, deleted at each
+    cycle, with its tracks. An honest sender buries what it deletes before it sends,
+    so the message is refused whole, counted, and the honest programs finish."""
+    import runpy
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "examples" / "quiet_lies.py"
+    example = runpy.run_path(str(path), run_name="quiet_lies")
+    scenario = example["scenario_of"]("tombstones", 5)
+    rates, drops = example["lying_runs"]("tombstones", scenario, 1)
+    assert drops.get("tombstone of a track it holds", 0) >= 5, drops
+    assert np.isfinite(rates).all()
+
+
 # ------------------------------------------------------------------ a member that lies well
 
 

@@ -345,14 +345,15 @@ def test_a_trace_whose_arrays_disagree_is_refused_in_one_line(tmp_path, saved, c
 def lying_header(path, source, name: str, shape: tuple[int, ...]):
     """A copy of `source` whose array `name` declares `shape` in its .npy header, its
     data left as it was: what `numpy.load` would allocate whole before any check."""
+    import io
     import zipfile
 
     with zipfile.ZipFile(source) as zin, zipfile.ZipFile(path, "w", zipfile.ZIP_DEFLATED) as zout:
         for info in zin.infolist():
             raw = zin.read(info)
             if info.filename == f"{name}.npy":
-                array = np.load(__import__("io").BytesIO(raw))
-                head = __import__("io").BytesIO()
+                array = np.load(io.BytesIO(raw))
+                head = io.BytesIO()
                 np.lib.format.write_array_header_1_0(
                     head, {"descr": array.dtype.str, "fortran_order": False, "shape": shape}
                 )

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import assignment, estimation, fusion, network, simulation, timing
-from ..airspace import avoidance
+from ..airspace import avoidance, beacons
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -302,6 +302,7 @@ class UavAgent:
             )
         self.central = isinstance(self.method, Centralized)
         self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
+        self.limits = beacons.Limits.of(scenario)  # what an honest beacon can do
         self.told: np.ndarray | None = None  # with fusion.trigger: the confidences last sent
         self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
 
@@ -631,8 +632,13 @@ class UavAgent:
             )
         got = np.zeros((1, n, n), dtype=bool)
         states, stamps = np.zeros((1, n, 5)), np.full((1, n), -1)
+        sent = k - self.setting.delay
         for q, content in ({} if beacon is None else beacon.contents).items():
-            got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], k - self.setting.delay
+            reason = self._believable(q, content["uav"], sent)
+            if reason is not None:  # not heard: no honest UAV sends it
+                dropped(self.mailbox, {reason: 1})
+                continue
+            got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], sent
         memory = avoidance.memory_of(self.setting.delay, s.faults.loss)
         self.beacons = self.beacons.update(got, states, stamps, k, memory)
         desired = np.full((1, n), simulation.STRAIGHT)
@@ -647,6 +653,13 @@ class UavAgent:
             s.uav.vertical_separation, np.radians(s.uav.bank_angle_deg), s.dt, values=scores,
         )  # fmt: skip
         return int(chosen[0, me]), (int(counts[0]), int(counts[1]))
+
+    def _believable(self, q: int, state: np.ndarray, sent: int) -> str | None:
+        """Why q's beacon sent at step `sent` is one no honest UAV sends, against the last
+        this UAV kept of q (`airspace.beacons.believable`), or None."""
+        when = int(self.beacons.stamp[0, self.me, q])
+        before = (self.beacons.state[0, self.me, q], when) if when >= 0 else None
+        return beacons.believable(self.limits, q, state, sent, before, self.believed)
 
     def solve(self, view: np.ndarray, members: np.ndarray, alive: np.ndarray, bids: np.ndarray):
         """This UAV's auction (`assignment.local`) over the bids it holds, view (N, M)

@@ -250,7 +250,7 @@ DOMAINS = {
     "finite); a confirmed track's below the run's floor is not used",
     "track stamp": "for the slots with a track, a cycle in [0, k]",
     "tombstones": "rows (label, cycle): label -1 (none) or a team label with a cycle in [0, k], "
-    "each label once",
+    "each label once, none naming a track the sender holds with an older stamp",
     "slot bids": "for a confirmed slot, in [0, the run's largest bid]; NaN elsewhere",
     "bid labels": "the label of each confirmed slot a bid is for, -1 for none, each once",
     "label or none": "a team label (below the run's largest), or -1: none",
@@ -561,7 +561,9 @@ class Spec:
                 return "index out of range"
             if not ((step[some] >= 0) & (step[some] <= k)).all():
                 return "stamp out of range"
-            return None if _distinct(label) else "labels not distinct"
+            if not _distinct(label):
+                return "labels not distinct"
+            return _buried(label[some], step[some], arrays)
         if domain == "slot bids":
             confirmed = arrays["status"] == 2 if "status" in arrays else arrays["label"] >= 0
             if (np.isnan(value) != ~confirmed).any():
@@ -749,6 +751,21 @@ TRACK_DOMAINS = frozenset(
     + ("tombstones", "slot bids", "track estimate", "measurement covariance", "counts")
     + ("ground positions",)
 )
+
+
+def _buried(label: np.ndarray, step: np.ndarray, arrays: dict) -> str | None:
+    """Why tombstones (label, step) contradict the tracks they travel with: a sender holds
+    a track under a label it says was deleted after the track's stamp. An honest UAV
+    buries such a track before it sends (`tracks.team.bury`), so this is a lie about the
+    deletion or about the track."""
+    if "status" not in arrays or not label.size:
+        return None
+    live = arrays["status"] != 0
+    held, stamp = arrays["label"][live], arrays["stamp"][live]
+    order = np.argsort(label)
+    at = np.minimum(np.searchsorted(label[order], held), label.size - 1)
+    named = label[order][at] == held
+    return "tombstone of a track it holds" if (named & (stamp < step[order][at])).any() else None
 
 
 def _distinct(label: np.ndarray) -> bool:
