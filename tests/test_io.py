@@ -216,6 +216,22 @@ def test_a_results_folder_becomes_one_row_per_trial(tmp_path, capsys):
     code, _, err = run_cli(capsys, "export", folder, "--out", tmp_path / "again.parquet")
     assert code == 0 and "left out 1 job file(s) that fail their checksum" in err
     assert len(pd.read_parquet(tmp_path / "again.parquet")) == 2 * 2 * 3 - 3
+    # an intact job file copied over another job's name: refused, naming it
+    victim.write_text(json.dumps(json.loads(victim.read_text()) | {"sha256": "x"}))
+    other = sorted((folder / "raw").glob("*distributed*.json"))[0]
+    kept = other.read_bytes()
+    other.write_bytes(sorted((folder / "raw").glob("*distributed*.json"))[1].read_bytes())
+    code, _, err = run_cli(capsys, "export", folder, "--out", tmp_path / "copied.csv")
+    assert code == 2 and f"{other}: holds the result of job" in err, err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "copied.csv").exists()
+    other.write_bytes(kept)
+    # a manifest that cannot be read: refused, not exported with the swept field blank
+    manifest = folder / "manifest.json"
+    for broken in ("{not json", "[]", '{"scenario": {"steps": -1}}'):
+        manifest.write_text(broken)
+        code, _, err = run_cli(capsys, "export", folder, "--out", tmp_path / "broken.csv")
+        assert code == 2 and f"{manifest}: cannot be read" in err, err
+        assert len(err.strip().splitlines()) == 1 and not (tmp_path / "broken.csv").exists()
 
 
 def test_export_refuses_bad_input_and_leaves_nothing(tmp_path, saved, capsys):

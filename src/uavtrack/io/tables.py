@@ -49,7 +49,7 @@ except ImportError as exc:  # an optional extra
         f"uavtrack.io.tables needs xarray and pandas: {install_hint('io')} ({exc})"
     ) from None
 
-from ..config import Scenario, ScenarioError
+from ..config import Scenario
 from ..errors import UsageError
 from ..metrics import METRICS, team_best
 from ..simulation import TRACKED, Cycle, Trace
@@ -377,7 +377,7 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
     frame = pd.DataFrame(rows)
     set_fields = [c for c in frame.columns if "." in c or c in Scenario.model_fields]
     for name in set_fields:  # the value the base scenario gives where a label leaves it
-        default = _plain(base.value(name)) if base is not None else None
+        default = _plain(base.value(name))
         frame[name] = [default if v is None or v != v else v for v in frame[name]]
     frame = frame.sort_values(["kind", "label", "method", "trial"], ignore_index=True)
     frame.attrs["left_out"] = left_out
@@ -385,12 +385,10 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
     return frame
 
 
-def _base_scenario(folder: Path) -> Scenario | None:
-    try:
-        manifest = json.loads((folder / "manifest.json").read_text(encoding="utf-8"))
-        return Scenario.from_dict(manifest["scenario"])
-    except (OSError, ValueError, KeyError, TypeError, ScenarioError):
-        return None
+def _base_scenario(folder: Path) -> Scenario:
+    from .results import manifest
+
+    return Scenario.from_dict(manifest(folder)["scenario"])
 
 
 def _plain(value: Any) -> Any:
