@@ -489,3 +489,33 @@ def test_a_world_stopped_for_15_s_mid_run_loses_no_program(tmp_path):
     )
     scenario = uavtrack.Scenario(steps=30)
     equal_until_counted(swarm, uavtrack.simulate(scenario, "distributed", seed=1).trace)
+
+
+def test_a_world_silent_past_the_programs_wait_ends_the_run_saying_why():
+    """The world stops answering (its cycle held, as a stopped process) for longer than
+    a program waits for its next cycle: every program ends, saying the world went
+    silent. The world, going on, loses them all, names what they said (not a guess from
+    their Zenoh tokens), and the command ends with exit code 1 and one line."""
+    pytest.importorskip("zenoh")
+    from uavtrack.cli.swarm import check_not_all_lost
+    from uavtrack.errors import RunError
+
+    wait = 10.0  # each program waits this long for its next cycle (swarm's startup)
+
+    def hold(k: int) -> None:
+        if k == 3:
+            time.sleep(2.5 * wait)  # the scenario's silence, not a limit
+
+    scenario = uavtrack.Scenario(steps=12)
+    swarm = run_swarm(scenario, transport="zenoh", seed=1, patience=wait, progress=hold)
+    traffic = swarm.traffic
+    assert set(traffic.lost) == set(range(5)), traffic.lost
+    for program in range(5):
+        why = traffic.why[program]
+        assert why.startswith("its process ended (exit code 1): "), why
+        assert "the world ended or went silent for 10 s at step 3" in why, why
+    with pytest.raises(RunError) as caught:
+        check_not_all_lost(traffic, 5)
+    text = str(caught.value)
+    assert text.startswith("every program was lost, the first at step ") and "\n" not in text
+    assert "went silent" in text and "wrote nothing" in text

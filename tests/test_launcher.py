@@ -150,3 +150,29 @@ def test_a_swarm_whose_launcher_is_killed_ends_at_once_with_one_line():
     assert "\n" not in text and 3 <= int(text.split("at step ")[1].split(",")[0]) < 20
     assert len(seen["programs"]) == 5
     assert wait_until(lambda: not any(alive(p) for p in seen["programs"]), limit=30)
+
+
+def test_garbage_on_the_launchers_socket_ends_it_and_says_so(waiting, monkeypatch):
+    """A report that is not one: the reader does not die with the launcher still
+    believed; the launcher is killed, by its pid, with its programs, and a start or the
+    swarm's next cycle ends with one line naming it."""
+    made_reader = Launcher._receive
+    reports = []
+
+    def receive(self):
+        if reports:  # after the first report (a start), garbage
+            return b"\xff not a report"
+        reports.append(made_reader(self))
+        return reports[0]
+
+    monkeypatch.setattr(Launcher, "_receive", receive)
+    made = Launcher()
+    try:
+        with tempfile.TemporaryFile() as log:
+            program = made.start(4, spec(4, [waiting]), log)  # its report, then the garbage
+            assert program.wait(timeout=60) == -signal.SIGKILL  # gone with its launcher
+            assert made.gone and made.process.wait(timeout=30) == -signal.SIGKILL
+            with pytest.raises(RunError, match=r"launcher sent a report that is not one"):
+                made.start(5, spec(5, [waiting]), log)
+    finally:
+        made.close()

@@ -84,6 +84,7 @@ class Launcher:
         self.forked: dict[int, Forked] = {}  # pid -> its handle
         self.answered = threading.Condition(self.lock)
         self.gone = False
+        self.fault = ""  # why the launcher was ended here, if it was
         self.reader = threading.Thread(target=self._read, daemon=True, name="uavtrack-launcher")
         self.reader.start()
 
@@ -140,6 +141,8 @@ class Launcher:
     def ended(self, wait: float = 2.0) -> str:
         """How the launcher process ended, as words ("ended (killed by SIGKILL)"); waits
         up to `wait` seconds for it, as its socket closes a moment before it exits."""
+        if self.fault:
+            return self.fault
         try:
             code = self.process.wait(timeout=wait)
         except subprocess.TimeoutExpired:
@@ -151,29 +154,42 @@ class Launcher:
                 return f"ended (killed by signal {-code})"
         return f"ended (exit code {code})"
 
+    def _receive(self) -> bytes:
+        """The launcher's next report (b"": its socket closed)."""
+        try:
+            return self.socket.recv(MESSAGE)
+        except OSError:
+            return b""
+
     def _read(self) -> None:
-        """Take the launcher's reports until its socket closes."""
-        while True:
+        """Take the launcher's reports until its socket closes. A report that is not one
+        (garbage on the socket) ends the launcher, which no longer can be believed: it
+        is killed, by its pid, and its programs with it, and `ended` says why."""
+        while data := self._receive():
             try:
-                data = self.socket.recv(MESSAGE)
-            except OSError:
-                data = b""
-            if not data:
+                self._take(json.loads(data))
+            except (ValueError, TypeError, KeyError, AttributeError):
+                self.fault = f"sent a report that is not one ({data[:40]!r})"
+                self.process.kill()
                 break
-            report = json.loads(data)
-            with self.answered:
-                if "started" in report:
-                    self.started[int(report["started"])] = (int(report["pid"]), "")
-                elif "refused" in report:
-                    self.started[int(report["refused"])] = (-1, str(report["why"]))
-                elif "ended" in report:
-                    pid = int(report["ended"])
-                    self.forked.setdefault(pid, Forked(pid, self)).ended(int(report["code"]))
-                self.answered.notify_all()
         with self.answered:  # its children died with it (their parent-death signal)
             self.gone = True
             for handle in self.forked.values():
                 handle.ended(-signal.SIGKILL)
+            self.answered.notify_all()
+
+    def _take(self, report: dict) -> None:
+        """One report: a program started or refused, a program ended."""
+        with self.answered:
+            if "started" in report:
+                self.started[int(report["started"])] = (int(report["pid"]), "")
+            elif "refused" in report:
+                self.started[int(report["refused"])] = (-1, str(report["why"]))
+            elif "ended" in report:
+                pid = int(report["ended"])
+                self.forked.setdefault(pid, Forked(pid, self)).ended(int(report["code"]))
+            else:
+                raise KeyError("no report")
             self.answered.notify_all()
 
     def close(self, grace: float = 5.0) -> None:
@@ -235,7 +251,7 @@ def run_program(spec: dict, parent: int) -> int:
     from .._process import die_with
 
     die_with(parent)
-    from .program import serve
+    from .program import STARTUP, serve
     from .security import Credential
     from .transport import ZenohOptions, ZenohTransport, zenoh_reason
 
@@ -256,6 +272,7 @@ def run_program(spec: dict, parent: int) -> int:
             transport,
             spec["run"],
             int(spec["program"]),
+            wait=spec.get("wait") or STARTUP,
             credential=credential,
             ros2=spec.get("ros2"),
         )
@@ -267,7 +284,9 @@ def run_program(spec: dict, parent: int) -> int:
         return 0
     at = f" at step {served.at}" if served.at >= 0 else ""
     why = f": {served.why}" if served.why else ""
-    print(f"program {spec['program']}: {served.end}{at}{why}", file=sys.stderr)
+    wait = spec.get("wait") or STARTUP
+    end = {"world gone": f"the world ended or went silent for {wait:g} s"}.get(served.end)
+    print(f"program {spec['program']}: {end or served.end}{at}{why}", file=sys.stderr)
     return 1
 
 

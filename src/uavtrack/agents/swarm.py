@@ -91,6 +91,7 @@ class Options:
     trace: bool = True
     progress: Callable[[int], None] | None = None
     startup: float = 60.0
+    patience: float | None = None
     announce: Callable[[str, str, list[Path]], None] | None = None
     sign: bool = True
     keys: Path | None = None
@@ -116,6 +117,7 @@ def run_swarm(
     keys: Path | None = None,
     zenoh: ZenohOptions | None = None,
     ros2: int | None = None,
+    patience: float | None = None,
 ) -> SwarmResult:
     """Run one trial as a swarm of programs; its result equals `simulate`'s for the same
     scenario, method and seed (the same faults included).
@@ -125,7 +127,9 @@ def run_swarm(
     (programs on other machines); spawn: start the programs here (else wait for them,
     started with `uavtrack agent`; `announce` is told the run id, the endpoint and the
     key files written in `keys`); realtime: pace cycles at dt; startup: seconds to wait
-    for the programs; sign: authenticate every message (`security`); zenoh: a Zenoh
+    for the programs; patience: seconds a spawned program waits for each message of the
+    world before it ends, saying the world went silent (default: `startup` in memory,
+    `program.STARTUP` over Zenoh); sign: authenticate every message (`security`); zenoh: a Zenoh
     configuration file and TLS files; ros2: a ROS 2 domain id (0-232): every UAV program
     also publishes its pose, transform and estimates as ROS 2 topics, the world the
     simulated clock on /clock (`io.ros2`, zenoh only).
@@ -159,6 +163,7 @@ def run_swarm(
         trace=trace,
         progress=progress,
         startup=startup if startup is not None else 30.0 + 4.0 * len(programs),
+        patience=patience,
         announce=announce,
         sign=sign,
         keys=keys,
@@ -181,7 +186,7 @@ def _in_memory(scenario, method, seed, run, programs, o: Options, keyring) -> Sw
         link = MemoryTransport(bus)
         credential = keyring.credential(me) if keyring is not None else None
         try:
-            serve(link, run, me, wait=o.startup, credential=credential)
+            serve(link, run, me, wait=o.patience or o.startup, credential=credential)
         except BaseException as exc:  # reported by the world's thread
             errors.append(exc)
         finally:
@@ -251,6 +256,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
                     "credential": keyring.credential(me).to_json() if keyring else None,
                     "parent": os.getpid(),
                     "ros2": o.ros2,
+                    "wait": o.patience,
                 }
                 children.append(Child.start(me, spec, launcher))
 
@@ -279,6 +285,9 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         except TimeoutError as exc:
             raise RunError(str(exc)) from None
         finished = True
+        for child in children:  # a lost program that ended says why, better than a token
+            if child.me in world.traffic.lost and child.process.poll() is not None:
+                world.traffic.why[child.me] = ended_why(child)
     finally:
         if clock is not None:
             clock.close()
@@ -360,6 +369,14 @@ def said_by(children: list[Child]) -> str:
             f"{name} {who} (exit code {codes}) " + (f"said: {text}" if text else "printed nothing")
         )
     return "; ".join(parts)
+
+
+def ended_why(child: Child) -> str:
+    """Why a lost program ended, in its own words: its exit code and last line."""
+    code = child.process.returncode
+    said = child.printed()
+    words = f": {said[-1][:300]}" if said else ", printing nothing"
+    return f"its process ended (exit code {code}){words}"
 
 
 def wait_for(processes: list[Forked], seconds: float) -> None:

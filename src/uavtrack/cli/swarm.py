@@ -274,6 +274,7 @@ def swarm(
     import numpy as np  # not at import: `uavtrack bench` pins BLAS threads first
 
     traffic = out.traffic
+    check_not_all_lost(traffic, n + central)
     cycles = max(len(traffic.cycle_seconds), 1)
     uavs = scenario.n_uavs
     seconds = np.array(traffic.cycle_seconds or [0.0])
@@ -347,6 +348,23 @@ def swarm(
     )
     for line in swarm_notes(traffic, lost):
         typer.echo(f"uavtrack: note: {line}", err=True)
+
+
+def check_not_all_lost(traffic, programs: int) -> None:
+    """A run whose every program was lost (but those the fault model failed) measured
+    nothing of the method: it ends with exit code 1 and why, and writes nothing."""
+    left = set(range(programs)) - set(traffic.failed)
+    if not left or not left <= set(traffic.lost):
+        return
+    whys: dict[str, list[int]] = {}
+    for program in sorted(left):
+        whys.setdefault(traffic.why.get(program, "no reason recorded"), []).append(program)
+    why, who = max(whys.items(), key=lambda item: len(item[1]))
+    others = f" (and {len(left) - len(who)} for other reasons)" if len(who) < len(left) else ""
+    raise RunError(
+        f"every program was lost, the first at step {min(traffic.lost.values())}, so the run "
+        f"measured nothing and wrote nothing: programs {', '.join(map(str, who))}: {why}{others}"
+    )
 
 
 def swarm_notes(traffic, names: dict[str, int]) -> list[str]:
