@@ -173,3 +173,52 @@ def test_a_download_its_measurement_contradicts_is_not_taken():
     measured = gate.Measured.of(observed, z, np.broadcast_to(np.eye(2), (2, 2, 2)), recent)
     mean, _ = take_download(own_mean, own_cov, got, arrived, setting, 20, measured)
     assert mean[0, 0, 2, 0] == 0.0  # 50 m from its own estimate of 1 m std: kept its own
+
+
+@pytest.mark.parametrize("association", ["known", "jpda"])
+def test_a_plugin_of_its_own_assignment_rule_runs_with_tracks(association):
+    """`examples/nearest_track.py`: each UAV follows its nearest estimate. With tracks its
+    bids come by label column and its estimates by track slot; `Inputs.columns` maps one
+    to the other, and every UAV follows the label of its nearest confirmed track."""
+    import runpy
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    method = runpy.run_path(str(root / "examples" / "nearest_track.py"))["NearestTrack"]()
+    scenario = uavtrack.Scenario(steps=40)
+    if association != "known":
+        scenario = scenario.with_overrides(
+            {"tracker.association": association, "sensor.detection_probability": 0.9,
+             "sensor.clutter_rate": 2.0}
+        )  # fmt: skip
+    trace = uavtrack.simulate(scenario, method, seed=2).trace
+    checked = 0
+    for k, i in np.ndindex(trace.assignment.shape):
+        held = trace.status[k, i] == 2 if association != "known" else np.ones(4, dtype=bool)
+        if not held.any():
+            continue
+        distance = np.hypot(*(trace.mean[k, i, :, :2] - trace.uavs[k, i, :2]).T)
+        nearest = np.argmin(np.where(held, distance, np.inf))
+        want = trace.label[k, i, nearest] if association != "known" else nearest
+        assert trace.assignment[k, i] == want, (k, i)
+        checked += 1
+    assert checked >= 150
+
+
+def test_the_agent_form_refuses_a_method_whose_assign_it_would_not_run():
+    """Each UAV program runs a method's neighbourhood rule (`solve`); a method with an
+    `assign` of its own would silently run as the paper's auction there: refused."""
+    import runpy
+    from pathlib import Path
+
+    from uavtrack.agents import run_swarm
+    from uavtrack.agents.agent import check_method
+    from uavtrack.errors import UsageError
+
+    root = Path(__file__).resolve().parents[1] / "examples"
+    nearest = runpy.run_path(str(root / "nearest_track.py"))["NearestTrack"]()
+    sequential = runpy.run_path(str(root / "custom_method.py"))["SequentialAuction"]()
+    for method in ("distributed", "greedy", "centralized", sequential):
+        check_method(uavtrack.methods.get(method))  # built on the paper's: runs
+    with pytest.raises(UsageError, match="replaces assign, which the agent form does not run"):
+        run_swarm(uavtrack.Scenario(steps=2), nearest)

@@ -648,6 +648,7 @@ def _decide_tracked(
         previous=columns.label_column(state.target, cols.labels),
         held=held,
         holds=columns.holds(cols),
+        columns=cols,
     )
     belief = (tracks.mean, tracks.cov, None)
     if not plan:

@@ -209,6 +209,24 @@ def plausible(spec: Spec, mailbox: Mailbox, content: dict) -> dict:
     return content
 
 
+def check_method(method: Method) -> None:
+    """Refuse (ValueError) a method the agent form cannot run as it is: one not built on
+    Distributed, Greedy or Centralized, or one that replaces their `assign` (each UAV
+    program runs the method's neighbourhood rule, `solve`, not a batch `assign`)."""
+    bases = [c for c in type(method).__mro__ if c in (Distributed, Greedy, Centralized)]
+    if not bases:
+        raise ValueError(
+            f"method {method.name!r}: the agent form runs methods built on "
+            "Distributed, Greedy or Centralized"
+        )
+    if type(method).assign is not bases[0].assign:
+        raise ValueError(
+            f"method {method.name!r} replaces assign, which the agent form does not run "
+            "(each UAV program runs a method's neighbourhood rule, solve): run it with "
+            "uavtrack run or compare"
+        )
+
+
 def closed(ids: list[int], me: int) -> tuple[int, network.Links]:
     """A receiver's closed neighbourhood as one batch of the stage functions: the row of
     `me` among `ids` (itself and the senders heard, in index order) and links on which
@@ -295,11 +313,7 @@ class UavAgent:
         self.held = None
         if scenario.faults.loss > 0:
             self.held = Held(np.zeros((self.n, self.m)), np.full(self.n, -1, dtype=np.int64))
-        if not isinstance(self.method, Distributed | Greedy | Centralized):
-            raise ValueError(
-                f"method {self.method.name!r}: the agent form runs methods built on "
-                "Distributed, Greedy or Centralized"
-            )
+        check_method(self.method)
         self.central = isinstance(self.method, Centralized)
         self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
         self.limits = beacons.Limits.of(scenario)  # what an honest beacon can do

@@ -35,6 +35,7 @@ from ..errors import RunError, UsageError, install_hint
 from ..methods import get
 from ..radio import RUN_CHARS
 from ..simulation import Result, result_of
+from .agent import check_method
 from .launcher import Forked, Launcher
 from .program import serve
 from .security import Keyring
@@ -136,7 +137,10 @@ def run_swarm(
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
-    get(method)  # refuses an unknown method now
+    try:  # refuses an unknown method, or one the programs cannot run, now
+        check_method(get(method))
+    except ValueError as exc:
+        raise UsageError(str(exc)) from None
     if sign and not spawn and keys is None:
         raise UsageError(
             "--no-spawn with signed messages needs --keys DIR, a folder for the programs' "

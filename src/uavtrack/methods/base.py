@@ -18,6 +18,7 @@ from ..numerics.buffers import Buffers, take
 from ..radio import Radio, content_bytes, counted, layout, layout_bytes, wire_cov, wire_mean
 from ..robust import gate
 from ..tracks import association, manage, team
+from ..tracks.columns import Columns
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -75,10 +76,17 @@ class Inputs:
     the UAV states as the UAVs believe them (B, N, 5), who is alive (B, N), each UAV's
     previous target (B, N) (-1: none), the bids held (`Held`, when messages get lost),
     and with the measurement gate (``robust.gate``) what each UAV measured
-    (`gate.Measured`). With tracks (unknown association) the targets are the columns
-    of team labels (`tracks.columns`) and holds (B, N, M) says which each UAV holds
-    confirmed: a UAV knows a label only from its own tracks and the bids that reached it,
-    so the bids it holds of a sender count only for such labels."""
+    (`gate.Measured`).
+
+    With tracks (unknown association) the bids' targets (B, N, L) are the columns of team
+    labels, while mean, cov and gamma stay per track slot (B, N, K, ...): `columns`
+    (`tracks.columns.Columns`) says which label each column is (``columns.labels`` (B,
+    L)) and which column each slot holds (``columns.column`` (B, N, K), -1: not
+    confirmed), and ``columns.per_label(inputs.mean)`` gives each UAV's estimate of each
+    column's target (B, N, L, 4), NaN where it holds none. holds (B, N, L) says which
+    labels each UAV holds confirmed: a UAV knows a label only from its own tracks and the
+    bids that reached it, so the bids it holds of a sender count only for such labels.
+    docs: Your own method, with tracks."""
 
     k: int
     radio: Radio
@@ -98,6 +106,9 @@ class Inputs:
     told: np.ndarray | None = None
     """With ``fusion.trigger``: the confidence each UAV last sent of each target (B, N,
     M) (NaN: never)."""
+    columns: Columns | None = None
+    """With tracks: the team labels of the bids' columns and the column of each track
+    slot (`tracks.columns.Columns`); None with known association (column j: target j)."""
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -34,6 +34,16 @@ class Columns:
     def width(self) -> int:
         return self.labels.shape[1]
 
+    def per_label(self, values: np.ndarray, fill: float = np.nan) -> np.ndarray:
+        """Per-slot values (B, N, K, ...) laid out by column (B, N, L, ...): each UAV's
+        value for the slot holding each label, `fill` where it holds none confirmed.
+        With a track's mean (B, N, K, 4): each UAV's estimate of each label's target."""
+        B, N, _ = self.column.shape
+        out = np.full((B, N, self.width, *values.shape[3:]), fill, dtype=float)
+        b, i, s = np.nonzero(self.column >= 0)
+        out[b, i, self.column[b, i, s]] = values[b, i, s]
+        return out
+
 
 def of(label: np.ndarray, confirmed: np.ndarray) -> Columns:
     """The columns of the confirmed slots: label (B, N, K) int64, confirmed (B, N, K)."""
