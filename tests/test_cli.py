@@ -349,6 +349,63 @@ def test_compare_gives_paired_differences_of_the_first_method(capsys):
     assert list(json.loads(out)["paired"]) == ["distributed - centralized", "distributed - greedy"]
 
 
+TRACKED_SETS = (
+    "--set", 'tracker.association="jpda"', "--set", "sensor.detection_probability=0.9",
+    "--set", "sensor.clutter_rate=2",
+)  # fmt: skip
+
+
+def test_compare_with_tracks_shows_and_pairs_the_track_metrics(capsys):
+    """With tracks the per-target estimate rows are n/a: the table shows GOSPA and its
+    parts, false tracks, switches and SIAP, and --json pairs them, trial by trial."""
+    from uavtrack.experiments.statistics import TRACK_METRICS
+
+    args = ("compare", "--trials", "3", "--steps", "30", *TRACKED_SETS)
+    code, out, err = run_cli(capsys, *args, "--method", "distributed", "--method", "greedy")
+    assert code == 0, err
+    text = " ".join(out.split())
+    for label in ("GOSPA, each UAV's confirmed tracks", "its false part", "SIAP completeness",
+                  "false confirmed tracks per target and step", "track switches"):  # fmt: skip
+        assert text.count(label) == 2, label  # the means and the paired differences
+    assert "RMSE" not in text and "n/a │" not in out  # no per-target estimate rows
+    code, out, _ = run_cli(capsys, *args, "--method", "distributed", "--method", "greedy", "--json")
+    data = json.loads(out, parse_constant=refuse_constant)
+    pair = data["paired"]["distributed - greedy"]
+    assert set(TRACK_METRICS) <= set(pair) and "rmse_best" not in pair
+    scenario = uavtrack.Scenario(steps=30).with_overrides(
+        {"tracker.association": "jpda", "sensor.detection_probability": 0.9,
+         "sensor.clutter_rate": 2.0}
+    )  # fmt: skip
+    seeds = [uavtrack.trial_seed(0, t) for t in range(3)]
+    runs = {m: uavtrack.run(scenario, m, seeds).metrics for m in ("distributed", "greedy")}
+    for key in TRACK_METRICS:
+        diff = runs["distributed"][key] - runs["greedy"][key]
+        assert pair[key]["mean"] == pytest.approx(np.nanmean(diff), rel=1e-9, abs=1e-12), key
+        assert data["methods"]["greedy"][key]["mean"] == pytest.approx(
+            np.nanmean(runs["greedy"][key]), rel=1e-9, abs=1e-12
+        )
+
+
+def test_a_sweep_with_tracks_reports_and_pairs_the_track_metrics(capsys, tmp_path):
+    from uavtrack.experiments.statistics import TRACK_METRICS
+
+    out = tmp_path / "sweep"
+    code, _, err = run_cli(
+        capsys, "sweep", "sensor.clutter_rate", "0", "2", "--trials", "2", "--set", "steps=20",
+        "--set", 'tracker.association="gnn"', "--method", "distributed", "--method", "greedy",
+        "--out", str(out), "--no-progress", "--workers", "1",
+    )  # fmt: skip
+    assert code == 0, err
+    summary = json.loads((out / "summary.json").read_text())
+    assert list(summary["paired_metrics"]) == list(TRACK_METRICS)
+    for name in TRACK_METRICS:
+        cells = summary["paired_metrics"][name]["distributed - greedy"]
+        assert len(cells) == 2 and all(c["trials"] >= 1 for c in cells)
+    report = (out / "report.md").read_text()
+    assert "## Tracks" in report and "### SIAP spuriousness" in report
+    assert "### GOSPA, each UAV's confirmed tracks [m]" in report
+
+
 def test_paired_differences_leave_out_undefined_trials():
     from uavtrack.experiments.jobs import paired
 

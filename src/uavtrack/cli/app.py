@@ -539,14 +539,15 @@ def compare(
     """Run the methods on the same trials, in this process: mean and std of each metric,
     and the paired differences of the first method minus each other, with 95% intervals."""
     from ..experiments.jobs import compare as run_compare
-    from ..experiments.statistics import against_first, summarize
+    from ..experiments.statistics import against_first, paired_metrics, summarize
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     names = chosen_methods(methods)
+    tracked = scenario.tracker.association != "known"
     with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
         raw = run_compare(scenario, names, trials, seed, progress=advance)
     results: dict[str, dict[str, Any]] = {m: summarize(v) for m, v in raw.items()}
-    pairs = against_first(raw)
+    pairs = against_first(raw, paired_metrics(tracked))
     if as_json:
         typer.echo(
             dumps(
@@ -565,11 +566,15 @@ def compare(
 
     from ..experiments.statistics import pm
 
+    caption = (
+        TRACK_CAPTION
+        if tracked
+        else "Best estimate: per target, the most confident UAV's. OSPA is a mean over "
+        "the targets, GOSPA a sum." + not_computed(scenario.n_targets, per_uav=False)
+    )
     table = Table(
         title=f"{trials} trials of {scenario.steps} steps, seed {seed}: mean over trials",
-        caption="Best estimate: per target, the most confident UAV's. OSPA is a mean over "
-        "the targets, GOSPA a sum. Decision time: trial 0, run alone."
-        + not_computed(scenario.n_targets, per_uav=False),
+        caption=caption + " Decision time: trial 0, run alone.",
         caption_justify="left",
     )
     table.add_column("metric", no_wrap=True)
@@ -584,16 +589,27 @@ def compare(
     )
     for label, values in target_rows([r["per_target"]["mean"] for r in results.values()]):
         table.add_row(label, *values)
-    for key, label, fmt in COMPARE_ROWS:
+    for key, label, fmt in TRACK_COMPARE_ROWS if tracked else COMPARE_ROWS:
         table.add_row(escape(label), *(number(fmt, r[key]["mean"]) for r in results.values()))
     console().print(table)
     if pairs:
         console().print(paired_table(pairs, names[0], trials))
 
 
+TRACK_COMPARE_ROWS = tuple(r for r in TRACK_ROWS if r[0] in ("gospa",) or "gospa_" in r[0]) + (
+    ("false_tracks_per_target", "false confirmed tracks per target and step", "{:.3f}"),
+    ("switches", "track switches per target and 100 steps", "{:.2f}"),
+    ("siap_completeness", "SIAP completeness", "{:.3f}"),
+    ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),
+    ("siap_spuriousness", "SIAP spuriousness", "{:.3f}"),
+    *(r for r in COMPARE_ROWS if r[0] in ("rounds", "messages", "bytes", "decision_time_ms")),
+)
+"""The rows of `uavtrack compare` with tracks, in place of the per-target estimate rows."""
+
 PAIRED_ROWS = {
     "observation_rate": ("observation rate", 4),
     **{key: (label, int(fmt[3])) for key, label, fmt in COMPARE_ROWS},  # "{:.2f}" -> 2
+    **{key: (label.strip(), int(fmt[3])) for key, label, fmt in TRACK_COMPARE_ROWS},
 }
 """Labels and digits of the rows of the paired-differences table (those of the means)."""
 

@@ -394,13 +394,15 @@ def sweep(
     }
     from ..experiments import figures, report
     from ..experiments.jobs import summarize_sweep
+    from ..experiments.statistics import TRACK_METRICS
 
     with run_jobs(plan, out, manifest, engine, workers, address, progress, ["sweep.png"]) as (
         results,
         info,
     ):
         info["seed"] = seed
-        summary = summarize_sweep(plan, results, axes, names)
+        tracked = scenario.tracker.association != "known"
+        summary = summarize_sweep(plan, results, axes, names, TRACK_METRICS if tracked else ())
         summary["units"] = {name: scenario.unit(name) for name in axes}
         if one:
             summary["unit"] = summary["units"][field]

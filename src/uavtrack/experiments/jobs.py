@@ -261,28 +261,34 @@ def summarize_sweep(
     results: dict[str, dict],
     axes: Mapping[str, Sequence[Any]],
     methods: Sequence[str],
+    more: Sequence[str] = (),
 ) -> dict[str, Any]:
     """summary.json of a sweep: per cell (a combination of the swept values, in
-    `sweep_cells` order) and method, and the paired differences of every two methods.
+    `sweep_cells` order) and method, and the paired differences of every two methods in
+    observation rate (``paired``) and in each metric of `more` (``paired_metrics``:
+    metric -> pair -> per cell; with tracks, `statistics.TRACK_METRICS`).
 
     ``fields`` and ``axes`` name the swept fields and their values, ``cells`` each cell's
     values in field order; a sweep of one field also keeps ``field`` and ``values``."""
     data = collect(plan["sweep"], results)
     labels = list(dict.fromkeys(job.label for job in plan["sweep"]))  # one per cell
     per_method = {m: [describe(data[(lab, m)]) for lab in labels] for m in methods}
-    pairs = {}
+    by_metric: dict[str, dict[str, list]] = {name: {} for name in ("observation_rate", *more)}
     for k, a in enumerate(methods):
         for b in methods[k + 1 :]:
-            pairs[f"{a} - {b}"] = [
-                paired(data[(lab, a)]["observation_rate"], data[(lab, b)]["observation_rate"])
-                for lab in labels
-            ]
+            for name, pairs_of in by_metric.items():
+                pairs_of[f"{a} - {b}"] = [
+                    paired(data[(lab, a)][name], data[(lab, b)][name]) for lab in labels
+                ]
+    pairs = by_metric.pop("observation_rate")
     cells = sweep_cells(axes)
     out: dict[str, Any] = {"fields": list(axes), "axes": {f: list(v) for f, v in axes.items()}}
     if len(axes) == 1:
         ((field, values),) = axes.items()
         out.update(field=field, values=list(values))
     out.update(cells=[list(c.values()) for c in cells], methods=per_method, paired=pairs)
+    if more:
+        out["paired_metrics"] = by_metric
     return out
 
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 from typing import Any
 
 from ..config import Scenario
-from ..metrics import rank_names
+from ..metrics import METRICS, rank_names
 from .statistics import ci, level_text, number, pm, signed
 
 PAPER_NOTE = (
@@ -343,8 +343,45 @@ def sweep(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> 
         pairs = summary["paired"]
         out += ["", "Paired differences (same trials), mean [95% CI]:", ""]
         out += _by_cell(header, summary["cells"], list(pairs), lambda k, n: ci(pairs[n][k]))
+    if "paired_metrics" in summary:
+        out += ["", "## Tracks", "", TRACKS_NOTE]
+        for name, pairs in summary["paired_metrics"].items():
+            unit = METRICS[name][0]
+            title = TRACK_TITLES[name] + (f" [{unit}]" if unit else "")
+            out += ["", f"### {title}", "", "Mean ± std over trials:", ""]
+            out += _by_cell(
+                header, summary["cells"], methods,
+                lambda k, m, name=name: pm(rows[m][k][name]["mean"], rows[m][k][name]["std"]),
+            )  # fmt: skip
+            if pairs:
+                out += ["", "Paired differences (same trials), mean [95% CI]:", ""]
+                out += _by_cell(
+                    header, summary["cells"], list(pairs),
+                    lambda k, n, pairs=pairs: ci(pairs[n][k]),
+                )  # fmt: skip
     out += ["", "![sweep](sweep.png)", "", "## Base scenario", ""] + parameter_table(scenario)
     return "\n".join(out) + "\n"
+
+
+TRACK_TITLES = {
+    "gospa": "GOSPA, each UAV's confirmed tracks",
+    "gospa_localisation": "GOSPA's localisation part",
+    "gospa_missed": "GOSPA's missed part",
+    "gospa_false": "GOSPA's false part",
+    "false_tracks_per_target": "False confirmed tracks per target and step",
+    "switches": "Track switches per target and 100 steps",
+    "siap_completeness": "SIAP completeness",
+    "siap_ambiguity": "SIAP ambiguity",
+    "siap_spuriousness": "SIAP spuriousness",
+}
+"""The headings of the track metrics in a sweep's report (`statistics.TRACK_METRICS`)."""
+
+TRACKS_NOTE = (
+    "Each UAV's confirmed tracks against the true targets, one-to-one by the GOSPA "
+    "assignment (cut-off `evaluation.ospa_cutoff`, order `evaluation.ospa_order`); a track "
+    "matched to no target is false; a switch is a target's matched label changing; SIAP "
+    "associates each track with its nearest target within the cut-off."
+)
 
 
 def _by_cell(fields: list[str], cells: list[list], columns: list[str], cell) -> list[str]:

@@ -71,6 +71,23 @@ PAIRED_METRICS = (
 """The metrics whose paired differences `compare` reports (decision times are measured on
 one trial only, so they have no interval)."""
 
+TRACK_METRICS = (
+    "gospa", "gospa_localisation", "gospa_missed", "gospa_false", "false_tracks_per_target",
+    "switches", "siap_completeness", "siap_ambiguity", "siap_spuriousness",
+)  # fmt: skip
+"""The track metrics of a run with tracks (``tracker.association`` gnn or jpda), which a
+comparison and a sweep report beside the observation rate."""
+
+TRACK_PAIRED_METRICS = ("observation_rate", *TRACK_METRICS, "rounds", "messages")
+"""The metrics whose paired differences `compare` reports with tracks, in place of the
+per-target estimate metrics, which a track set does not have."""
+
+
+def paired_metrics(tracked: bool) -> tuple[str, ...]:
+    """The metrics a comparison pairs: `TRACK_PAIRED_METRICS` with tracks, else
+    `PAIRED_METRICS`."""
+    return TRACK_PAIRED_METRICS if tracked else PAIRED_METRICS
+
 
 def against_first(
     raw: dict[str, dict[str, np.ndarray]], metrics: Sequence[str] = PAIRED_METRICS
