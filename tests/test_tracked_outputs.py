@@ -221,10 +221,18 @@ def test_the_bag_of_a_tracked_run_holds_tracks_by_label_and_the_scans(tmp_path, 
 
         for i in (1, 3):
             tracks = read(f"/uav_{i}/tracks")
-            assert len(tracks) == int(trace.alive[:, i].sum())  # UAV 1 fails at step 12
+            failed = int(not trace.alive[-1, i])
+            assert len(tracks) == int(trace.alive[:, i].sum()) + failed  # UAV 1 fails at 12
+            if failed:  # at its failure, a DELETEALL alone: its tracks leave the view
+                t, msg = tracks.pop()
+                assert t == 12 * 500_000_000 and [x.action for x in msg.markers] == [3]
+                t, msg = read(f"/uav_{i}/scan")[-1]
+                assert t == 12 * 500_000_000 and [x.action for x in msg.markers] == [3]
             for t, msg in tracks:
                 k = t // 500_000_000
                 assert msg.markers[0].action == 3  # DELETEALL: the last step's tracks go
+                lifetimes = {(x.lifetime.sec, x.lifetime.nanosec) for x in msg.markers[1:]}
+                assert lifetimes <= {(1, 0)}  # two steps of 0.5 s: they go by themselves
                 ellipses = [x for x in msg.markers if x.ns in ("tentative", "confirmed")]
                 held = np.flatnonzero(trace.status[k, i] > 0)
                 assert [x.id for x in ellipses] == trace.label[k, i, held].tolist()
@@ -239,7 +247,8 @@ def test_the_bag_of_a_tracked_run_holds_tracks_by_label_and_the_scans(tmp_path, 
                 texts = [x for x in msg.markers if x.ns == "label"]
                 assert [x.text for x in texts] == [f"L{x.id}" for x in ellipses]
             scans = read(f"/uav_{i}/scan")
-            assert len(scans) == len(tracks)
+            assert len(scans) == len(tracks) + failed
+            scans = scans[: len(tracks)]
             for t, msg in scans:
                 k = t // 500_000_000
                 spots = {x.ns: [(p.x, p.y) for p in x.points] for x in msg.markers}

@@ -210,6 +210,8 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
             node.publish(k, program.believed, bank, report.mean.array(), report.cov.array(), *slots)
         ran += 1
     if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
+        if end != "done":  # its tracks go from the view before its run's end
+            node.clear()
         node.close()  # now, not when the lingering ends
     if end == "done" and last is not None:  # stay until the world is done: closing at
         # once could lose the last report in flight, or leave the world asking for it

@@ -32,6 +32,9 @@ A run of tracks (``tracker.association`` gnn or jpda) has no estimate per target
   ground positions: two sphere lists, ns ``detections`` (red) and ``clutter`` (grey),
   split by the origin the simulator knows (for evaluation: a UAV does not);
 
+each of their markers with a lifetime of two steps, and at the step a UAV fails a
+DELETEALL alone on both topics: a failed UAV's tracks leave the view;
+
 and ``/team/assignments`` draws a line from each UAV to its own estimate of the track it
 follows.
 """
@@ -58,8 +61,10 @@ from ..tracks.manage import CONFIRMED
 from .mavlink import LocalFrame
 from .ros2 import (
     Markers,
+    delete_all,
     ellipse_marker,
     estimate_of,
+    lifetime_of,
     track_markers,
     transform_of,
     uav_pose,
@@ -145,7 +150,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 write("/team/estimates", T_["visualization_msgs/msg/MarkerArray"](
                     markers=ellipses), ns)  # fmt: skip
             else:
-                lines = _tracks(m, ns, write, trace, k)
+                lines = _tracks(m, ns, write, trace, k, scenario.dt)
             write("/team/assignments", T_["visualization_msgs/msg/MarkerArray"](markers=[
                 m.marker(ns, "assignment", 0, 5, m.pose(0, 0, 0, 0), (0.5, 0, 0),
                          (0.2, 0.9, 0.2, 0.8), lines)]), ns)  # fmt: skip
@@ -177,14 +182,19 @@ def _estimates(m: Markers, ns: int, write, trace, k: int, best, best_mean, best_
     return ellipses, lines
 
 
-def _tracks(m: Markers, ns: int, write, trace, k: int) -> list:
+def _tracks(m: Markers, ns: int, write, trace, k: int, dt: float) -> list:
     """Each living UAV's tracks and scan at step k (their topics); the assignment lines,
     from each UAV to its own estimate of the track it follows."""
     MarkerArray = m.T["visualization_msgs/msg/MarkerArray"]
+    lifetime = lifetime_of(dt)
     lines = []
+    if k > 0:  # a UAV failed at this step: its tracks and scan go from the view
+        for i in np.flatnonzero(trace.alive[k - 1] & ~trace.alive[k]):
+            write(f"/uav_{i}/tracks", MarkerArray(markers=delete_all(m, ns)), ns)
+            write(f"/uav_{i}/scan", MarkerArray(markers=delete_all(m, ns)), ns)
     for i in np.flatnonzero(trace.alive[k]):
         label, status = trace.label[k, i], trace.status[k, i]
-        markers = track_markers(m, ns, label, status, trace.mean[k, i], trace.cov[k, i])
+        markers = track_markers(m, ns, label, status, trace.mean[k, i], trace.cov[k, i], lifetime)
         followed = np.flatnonzero((status == CONFIRMED) & (label == trace.assignment[k, i]))
         for s in followed:
             lines += [trace.uavs[k, i, :3], (*trace.mean[k, i, s, :2], 0.0)]
@@ -193,7 +203,8 @@ def _tracks(m: Markers, ns: int, write, trace, k: int) -> list:
         clutter = trace.scan_origin[k, i] == -1
         where = np.concatenate([trace.scan_z[k, i], np.zeros((len(valid), 1))], axis=1)
         scan: list[Any] = [
-            m.marker(ns, name, n, 7, m.pose(0, 0, 0, 0), (2.0, 2.0, 2.0), rgba, where[chosen])
+            m.marker(ns, name, n, 7, m.pose(0, 0, 0, 0), (2.0, 2.0, 2.0), rgba, where[chosen],
+                     lifetime=lifetime)  # fmt: skip
             for n, (name, chosen, rgba) in enumerate(
                 (("detections", valid & ~clutter, (1.0, 0.2, 0.2, 1.0)),
                  ("clutter", valid & clutter, (0.6, 0.6, 0.6, 1.0)))

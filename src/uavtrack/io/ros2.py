@@ -239,6 +239,14 @@ class UavNode(Node):
         super().__init__(session, domain, uav, "/uavtrack", f"uav_{uav}", topics)
         self.uav, self.dt = uav, dt
         self.markers = Markers() if tracks else None
+        self.last = -1  # the last step published
+
+    def clear(self) -> None:
+        """With tracks: take this UAV's tracks from the view (a DELETEALL at the step
+        after its last), as its program ends before the run does (failed, lost)."""
+        if self.markers is not None and self.last >= 0:
+            markers = delete_all(self.markers, sim_ns(self.last + 1, self.dt))
+            self.put(f"/uav_{self.uav}/tracks", store().types[MARKERS](markers=markers))
 
     def publish(
         self, k: int, uav: np.ndarray, bank: float, mean, cov, label=None, status=None
@@ -253,8 +261,10 @@ class UavNode(Node):
         self.put(f"/uav_{self.uav}/pose", T[POSE](header=header, pose=pose))
         self.put("/tf", T[TF](transforms=[transform_of(header, f"uav_{self.uav}", pose)]))
         if self.markers is not None:
-            markers = track_markers(self.markers, ns, label, status, mean, cov)
+            lifetime = lifetime_of(self.dt)
+            markers = track_markers(self.markers, ns, label, status, mean, cov, lifetime)
             self.put(f"/uav_{self.uav}/tracks", T[MARKERS](markers=markers))
+            self.last = k
             return
         for j in range(len(mean)):
             self.put(f"/uav_{self.uav}/target_{j}/estimate", estimate_of(header, mean[j], cov[j]))
@@ -358,8 +368,9 @@ class Markers:
 
     def marker(
         self, ns_time: int, ns: str, ident: int, kind: int, pose, scale, rgba, points=(),
-        text: str = "", action: int = 0,
+        text: str = "", action: int = 0, lifetime: int = 0,
     ):  # fmt: skip
+        """A visualization_msgs/Marker stamped `ns_time`; lifetime [ns] (0: until replaced)."""
         T = self.T
         return T["visualization_msgs/msg/Marker"](
             header=self.header(ns_time),
@@ -370,7 +381,7 @@ class Markers:
             pose=pose,
             scale=self.Vector3(x=scale[0], y=scale[1], z=scale[2]),
             color=self.Color(r=rgba[0], g=rgba[1], b=rgba[2], a=rgba[3]),
-            lifetime=self.Duration(sec=0, nanosec=0),
+            lifetime=self.Duration(sec=lifetime // 10**9, nanosec=lifetime % 10**9),
             frame_locked=False,
             points=[self.Point(x=float(p[0]), y=float(p[1]), z=float(p[2])) for p in points],
             colors=[],
@@ -393,28 +404,41 @@ TRACK_COLOURS = {TENTATIVE: (0.6, 0.6, 0.6, 0.4), CONFIRMED: (0.2, 0.6, 1.0, 0.6
 """A track's ellipse colour by status: tentative grey, confirmed blue."""
 
 
-def track_markers(m: Markers, ns: int, label, status, mean, cov) -> list[Any]:
+def lifetime_of(dt: float) -> int:
+    """How long a UAV's track and scan markers stay [ns]: two steps, so that those of a
+    UAV that failed, or whose program ended, go from the view by themselves."""
+    return sim_ns(2, dt)
+
+
+def delete_all(m: Markers, ns: int) -> list[Any]:
+    """The markers of a MarkerArray that clears its topic: one DELETEALL."""
+    return [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0), action=3)]
+
+
+def track_markers(m: Markers, ns: int, label, status, mean, cov, lifetime: int = 0) -> list[Any]:
     """A UAV's track slots (label, status (K,), mean (K, 4), cov (K, 4, 4)) as the
     markers of one MarkerArray: a DELETEALL (the last step's go), then per track its
     2-sigma ellipse (namespace its status, id its team label, `TRACK_COLOURS`) and a text
-    ``L<label>`` above it (namespace "label")."""
-    markers: list[Any] = [m.marker(ns, "", 0, 0, m.pose(0, 0, 0, 0), (0, 0, 0), (0, 0, 0, 0),
-                          action=3)]  # fmt: skip
+    ``L<label>`` above it (namespace "label"), each for `lifetime` ns (`lifetime_of`)."""
+    markers = delete_all(m, ns)
     for s in np.flatnonzero(status > 0):
         ident, state = int(label[s]), int(status[s])
         markers.append(ellipse_marker(m, ns, STATUS_NAMES[state], ident, mean[s], cov[s],
-                                      TRACK_COLOURS[state]))  # fmt: skip
+                                      TRACK_COLOURS[state], lifetime))  # fmt: skip
         above = m.pose(float(mean[s, 0]), float(mean[s, 1]), 3.0, 0.0)
         markers.append(m.marker(ns, "label", ident, 9, above, (0, 0, 3.0),
-                                (1.0, 1.0, 1.0, 1.0), text=f"L{ident}"))  # fmt: skip
+                                (1.0, 1.0, 1.0, 1.0), text=f"L{ident}",
+                                lifetime=lifetime))  # fmt: skip
     return markers
 
 
-def ellipse_marker(m: Markers, ns: int, space: str, ident: int, mean, P, rgba):
+def ellipse_marker(m: Markers, ns: int, space: str, ident: int, mean, P, rgba, lifetime=0):
     """A flat cylinder of the 2-sigma ellipse of an estimate's position."""
     major, minor, angle = _ellipse(P[:2, :2])
     place = m.pose(float(mean[0]), float(mean[1]), 0.0, angle)
-    return m.marker(ns, space, ident, 3, place, (4 * major, 4 * minor, 0.1), rgba)
+    return m.marker(
+        ns, space, ident, 3, place, (4 * major, 4 * minor, 0.1), rgba, lifetime=lifetime
+    )
 
 
 def _ellipse(P: np.ndarray) -> tuple[float, float, float]:
