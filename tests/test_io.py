@@ -453,3 +453,62 @@ def test_which_versions_a_trace_is_read_from(tmp_path, saved, capsys):
     code, out, err = run_cli(capsys, "export", odd, "--out", tmp_path / "d.nc")
     assert code == 2 and "unknown trace format two" in err
     assert sorted(p.name for p in tmp_path.glob("*.nc")) == ["o.nc", "u.nc"]
+
+
+CF_TABLES = {
+    # the entries of the CF standard name table for the names uavtrack writes, with their
+    # canonical units; the file uses no area type and no region name
+    "names.xml": "<standard_name_table><version_number>the names uavtrack writes"
+    "</version_number><last_modified>2026-12-04</last_modified>"
+    '<entry id="time"><canonical_units>s</canonical_units></entry>'
+    '<entry id="height"><canonical_units>m</canonical_units></entry></standard_name_table>',
+    "areas.xml": "<area_type_table><version_number>none used</version_number>"
+    "<date>2026-12-04</date></area_type_table>",
+    "regions.xml": "<standard_region_list><version_number>none used</version_number>"
+    "<date>2026-12-04</date></standard_region_list>",
+}
+
+
+def cf_checker(tmp_path):
+    """The CF checker (the cfchecker package) with offline tables; skipped, saying why,
+    where it cannot run (it needs the UDUNITS-2 library, Debian's libudunits2-0)."""
+    pytest.importorskip("netCDF4")
+    try:
+        from cfchecker.cfchecks import CFChecker
+    except (ImportError, FileNotFoundError) as exc:  # cfunits raises the latter
+        pytest.skip(f"the CF checker cannot run here: {exc}")
+    for name, text in CF_TABLES.items():
+        (tmp_path / name).write_text(f'<?xml version="1.0"?>\n{text}\n')
+    return CFChecker(
+        cfStandardNamesXML=str(tmp_path / "names.xml"),
+        cfAreaTypesXML=str(tmp_path / "areas.xml"),
+        cfRegionNamesXML=str(tmp_path / "regions.xml"),
+        version="CF-1.8", silent=True,
+    )  # fmt: skip
+
+
+@pytest.mark.integration  # the CF checker finds UDUNITS-2 by running ldconfig
+@pytest.mark.parametrize("association", ["known", "jpda"])
+def test_the_cf_checker_finds_no_error_in_an_exported_netcdf(tmp_path, capsys, association):
+    trace, nc = tmp_path / "t.npz", tmp_path / "t.nc"
+    more = [] if association == "known" else [
+        "--set", f'tracker.association="{association}"', "--set", "sensor.clutter_rate=2",
+    ]  # fmt: skip
+    code, _, err = run_cli(
+        capsys, "run", "--steps", 20, "--trace", trace, "--set", "faults.failures=[[1, 8]]", *more
+    )
+    assert code == 0, err
+    assert run_cli(capsys, "export", trace, "--out", nc)[0] == 0
+    checker = cf_checker(tmp_path)
+    results = checker.checker(str(nc))
+    capsys.readouterr()
+    found = [
+        m for part in [results["global"], *results["variables"].values()]
+        for kind in ("FATAL", "ERROR") for m in part[kind]
+    ]  # fmt: skip
+    assert found == []
+    warned = {v for v, part in results["variables"].items() if part["WARN"]}
+    assert warned <= {"state", "state_"}  # text coordinates: CF prefers auxiliary ones
+    with xr.open_dataset(nc) as back:  # and xarray reads the names back as text
+        assert back.state.values.tolist() == ["x", "y", "vx", "vy"]
+        assert back.attrs["Conventions"] == "CF-1.8"  # what the checker checked it against

@@ -112,8 +112,9 @@ METRICS: dict[str, tuple[str, str]] = {
     "false_tracks": ("", "confirmed tracks matched to no target, per UAV and step"),
     "false_tracks_per_target": ("", "the same per target and step"),
     "time_to_confirm": (
-        "steps",
-        "steps from a target's first sight without a track to its first matched track",
+        "1",
+        "steps from a target's first sight without a track to its first matched track (a "
+        "count of steps)",
     ),
     "never_confirmed": ("", "fraction of those targets never matched by the end"),
     "siap_completeness": ("", "SIAP completeness: fraction of targets with a track"),
@@ -130,7 +131,7 @@ METRICS: dict[str, tuple[str, str]] = {
     ),
     "delivered": ("", "radio messages per step that arrive (messages minus those lost)"),
     "bytes": (
-        "B",
+        "byte",
         "radio bytes per UAV and step: every frame the UAVs (and the central node) sent in "
         "the cycle, as the agent form puts it on the wire (MessagePack in an envelope with "
         "a 16-byte tag, one frame per receiver and round), over the team's UAVs; the "

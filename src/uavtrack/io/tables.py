@@ -103,12 +103,14 @@ def to_xarray(
     a `TraceFile`, or a bare `Trace` with its `scenario` (method and seed optional).
 
     Dimensions step, uav, target (and state, state_ for the estimates and covariances);
-    coordinates step, time, uav, target. ``time`` is the CF time axis (standard_name
+    coordinates step, time, uav, target (indices: units "1"), and the state's names (as
+    characters on disk). ``time`` is the CF time axis (standard_name
     time): on disk seconds since `trace.EPOCH` (2000-01-01), so xarray decodes it to
     datetimes, step k at EPOCH + k dt. Every variable has a long_name and, where it has
     one, its units (UDUNITS; the estimates' and covariances' units, which differ by
-    state, are in their comment). Attributes: dt [s], method, seed, scenario (JSON) and
-    uavtrack, the version that ran the trial.
+    state, are in their comment). Attributes: Conventions (CF-1.8: the CF checker,
+    cfchecks, finds no error in an exported file), dt [s], method, seed, scenario (JSON)
+    and uavtrack, the version that ran the trial.
 
     With unknown association (``tracker.association`` gnn or jpda) the estimates,
     covariances and bids are per track slot (dimension ``slot``, not ``target``), with
@@ -164,6 +166,7 @@ def to_xarray(
     if tracked:
         _track_variables(variables, trace, sut)
     attrs = {
+        "Conventions": "CF-1.8",
         "title": "a uavtrack trial, step by step",
         "source": f"uavtrack {saved.version}",
         "dt": scenario.dt,
@@ -176,21 +179,25 @@ def to_xarray(
         attrs["seed"] = int(saved.seed)
     elapsed = np.round(np.arange(T) * scenario.dt * 1e9).astype("timedelta64[ns]")
     time = {"standard_name": "time", "long_name": "simulated time of the step"}
+    index = {"units": "1"}  # an index is a count: dimensionless (CF 3.1)
     coords = {
-        "step": ("step", np.arange(T), {"long_name": "decision cycle"}),
+        "step": ("step", np.arange(T), {"long_name": "decision cycle", **index}),
         "time": ("step", np.datetime64(trace_file.EPOCH, "ns") + elapsed, time),
-        "uav": ("uav", np.arange(Nu), {"long_name": "UAV index"}),
-        "target": ("target", np.arange(Nt), {"long_name": "target index"}),
+        "uav": ("uav", np.arange(Nu), {"long_name": "UAV index", **index}),
+        "target": ("target", np.arange(Nt), {"long_name": "target index", **index}),
         "state": ("state", list(TARGET_STATE), {"long_name": "component of a target's state"}),
         "state_": ("state_", list(TARGET_STATE), {"long_name": "the same, second axis"}),
     }
     if tracked:
         K, Z = trace.label.shape[2], trace.scan_valid.shape[2]
-        coords["slot"] = ("slot", np.arange(K), {"long_name": "track slot of a UAV"})
+        coords["slot"] = ("slot", np.arange(K), {"long_name": "track slot of a UAV", **index})
         coords["measurement"] = (
-            "measurement", np.arange(Z), {"long_name": "place of a measurement in a UAV's scan"}
+            "measurement", np.arange(Z),
+            {"long_name": "place of a measurement in a UAV's scan", **index},
         )  # fmt: skip
     dataset = xr.Dataset(variables, coords=coords, attrs=attrs)
+    for name in ("state", "state_"):  # text on disk as characters: netCDF-3 types, as CF asks
+        dataset[name].encoding["dtype"] = "S1"
     dataset["time"].encoding.update(
         units=f"seconds since {trace_file.EPOCH:%Y-%m-%d}",  # midnight
         calendar="proleptic_gregorian",
@@ -381,7 +388,9 @@ def results_frame(folder: str | Path) -> pd.DataFrame:
         frame[name] = [default if v is None or v != v else v for v in frame[name]]
     frame = frame.sort_values(["kind", "label", "method", "trial"], ignore_index=True)
     frame.attrs["left_out"] = left_out
-    frame.attrs["units"] = {c: METRICS[c][0] for c in frame.columns if METRICS.get(c, ("",))[0]}
+    frame.attrs["units"] = {
+        c: unit for c in frame.columns if (unit := METRICS.get(c, ("",))[0]) not in ("", "m^p")
+    }  # m^p (p the scenario's evaluation.ospa_order) is no UDUNITS unit: its description says
     return frame
 
 
