@@ -2,6 +2,8 @@
 back by an independent library: the tables by pandas, pyarrow and xarray, the tracks by
 Stone Soup, the bag by rosbags, the recording by Rerun's reader."""
 
+import datetime
+
 import numpy as np
 import pytest
 
@@ -325,3 +327,83 @@ def test_a_recording_of_a_tracked_run_draws_tracks_by_label_and_the_scans(tmp_pa
     for i in np.flatnonzero(trace.alive[k] & (trace.assignment[k] >= 0)):
         s = np.flatnonzero(trace.label[k, i] == trace.assignment[k, i])[0]
         np.testing.assert_allclose(centers[k][i][:2], trace.mean[k, i, s, :2], rtol=1e-6)
+
+
+class PerStep:
+    """A track-to-truth associator for Stone Soup's metrics: at each step, each track to
+    its nearest truth closer than `threshold` (`TrackToTruth`'s rule at one step, with
+    nothing carried between steps). Stone Soup's own `TrackToTruth` at
+    consec_pairs_confirm = consec_misses_end = 1 makes the same associations but cannot
+    hold one of a single step (its TimeRange asks start < end, a ValueError), so a run of
+    steps with one truth is a TimeRangeAssociation from its first step to its last plus
+    1 us: it holds those steps and no other (the next is dT later)."""
+
+    def __init__(self, threshold: float) -> None:
+        self.threshold = threshold
+
+    def associate_tracks(self, tracks, truths):
+        from stonesoup.types.association import AssociationSet, TimeRangeAssociation
+        from stonesoup.types.time import TimeRange
+
+        from uavtrack.io.stonesoup import POSITION
+
+        truths = list(truths)
+        at = [{s.timestamp: s.state_vector.ravel()[list(POSITION)] for s in t} for t in truths]
+        out = set()
+        for track in tracks:
+            runs: list[list] = []  # [truth, first, last] of each run of steps
+            for state in sorted(track, key=lambda s: s.timestamp):
+                where = state.state_vector.ravel()[list(POSITION)]
+                best, nearest = self.threshold, None
+                for truth, states in zip(truths, at, strict=True):
+                    there = states.get(state.timestamp)
+                    if there is not None and float(np.hypot(*(where - there))) < best:
+                        best, nearest = float(np.hypot(*(where - there))), truth
+                if nearest is None:
+                    runs.append([None, None, None])
+                elif runs and runs[-1][0] is nearest:
+                    runs[-1][2] = state.timestamp
+                else:
+                    runs.append([nearest, state.timestamp, state.timestamp])
+            for truth, first, last in runs:
+                if truth is not None:
+                    end = last + datetime.timedelta(microseconds=1)
+                    out.add(TimeRangeAssociation((track, truth), TimeRange(first, end)))
+        return AssociationSet(out)
+
+
+def test_stone_soups_siap_on_the_exported_tracks_is_uavtracks(saved):
+    """Stone Soup's SIAPMetrics on each UAV's exported tracks and the truth of the steps
+    it lived, with the per-step association (`PerStep`), gives each UAV's completeness,
+    ambiguity and spuriousness; their means over the UAVs are uavtrack's siap_* of the
+    run to 1e-12."""
+    pytest.importorskip("stonesoup")
+    from stonesoup.measures import Euclidean
+    from stonesoup.metricgenerator.manager import MultiManager
+    from stonesoup.metricgenerator.tracktotruthmetrics import SIAPMetrics
+    from stonesoup.types.groundtruth import GroundTruthPath
+
+    from uavtrack.io.stonesoup import EPOCH, POSITION
+
+    path, result = saved
+    trace = result.trace
+    truths, per_uav = uavtrack.io.to_stonesoup(path, tracks="uavs")
+    names = ("Completeness", "Ambiguity", "Spuriousness")
+    theirs = {name: [] for name in names}
+    for i in range(TRACKED.n_uavs):
+        lived = {EPOCH + datetime.timedelta(seconds=0.5 * int(k)) for k in np.flatnonzero(
+            trace.alive[:, i])}  # fmt: skip
+        seen = {GroundTruthPath([s for s in t if s.timestamp in lived], id=t.id) for t in truths}
+        mine = {t for t in per_uav if t.metadata["uav"] == i}
+        siap = SIAPMetrics(
+            position_measure=Euclidean(POSITION), velocity_measure=Euclidean(POSITION)
+        )
+        manager = MultiManager([siap], PerStep(TRACKED.evaluation.ospa_cutoff))
+        manager.add_data({"groundtruth_paths": seen, "tracks": mine})
+        values = {m.title: m.value for m in manager.generate_metrics()["siap_generator"].values()}
+        for name in names:
+            theirs[name].append(values[f"SIAP {name}"])
+    ours = result.summary()
+    assert 0 < ours["siap_completeness"] < 1 and ours["siap_spuriousness"] > 0
+    for name in names:
+        assert ours[f"siap_{name.lower()}"] == pytest.approx(np.mean(theirs[name]), rel=1e-12)
