@@ -93,6 +93,7 @@ class FakeVehicle(threading.Thread):
         self.arrivals, self.stream_start = [], None  # setpoints' receive times
         self.flown, self.acks, self.exits = [], [], []  # (in the mode, roll) per tick
         self.left, self.stop = threading.Event(), threading.Event()
+        self.heartbeats = []  # (receive time, system, component, type) of each HEARTBEAT
 
     def run(self):
         while not self.stop.is_set():
@@ -110,6 +111,7 @@ class FakeVehicle(threading.Thread):
     def handle(self, msg, now):
         kind = msg.get_type()
         if kind == "HEARTBEAT":
+            self.heartbeats.append((now, msg.get_srcSystem(), msg.get_srcComponent(), msg.type))
             autopilot = 12 if self.flavour == "px4" else 3  # MAV_AUTOPILOT_PX4, ARDUPILOTMEGA
             self.link.mav.heartbeat_send(1, autopilot, 1, self.mode, 4)  # fixed wing, active
         elif kind == "SET_MODE" and self.flavour == "ardupilot":
@@ -234,6 +236,14 @@ def test_px4_takes_offboard_and_keeps_it_through_the_run(dt):
         arrivals = np.array(vehicle_side.arrivals)
         # 20 Hz sent; a loaded machine may stretch it, so only half of that is asserted
         assert (len(arrivals) - 1) / (arrivals[-1] - arrivals[0]) > 10.0
+        # a companion computer of vehicle 1 (component 191, MAV_TYPE_ONBOARD_CONTROLLER),
+        # never the broadcast id 0, with a heartbeat at 1 Hz beside the setpoints
+        beats = vehicle_side.heartbeats
+        assert {(system, component, kind) for _, system, component, kind in beats} == {(1, 191, 18)}
+        streamed = [t for t, *_ in beats if t >= arrivals[0]]
+        assert len(streamed) >= 2
+        rate = (len(streamed) - 1) / (streamed[-1] - streamed[0])
+        assert 0.5 < rate < 1.5  # 1 Hz sent: a loaded machine may stretch it
         vehicle.close()  # the stream stops, and the vehicle falls back in half a second
         assert vehicle_side.left.wait(timeout=30.0)
         assert vehicle_side.mode == HOLD and not vehicle.stream.is_alive()

@@ -14,7 +14,9 @@ that has received setpoints more often than 2 Hz for about a second, and leaves 
 offboard-loss failsafe) when they stop for COM_OF_LOSS_T, while a cycle is 0.5 s or 1 s.
 So each `Vehicle` has a sender of its own, `SetpointStream`, a thread that resends the
 current setpoint at `STREAM_HZ` (as MAVSDK's offboard plugin does) from before the switch
-of mode until the vehicle is closed; a decision only replaces the setpoint it resends.
+of mode until the vehicle is closed, and a HEARTBEAT at 1 Hz beside them; a decision only
+replaces the setpoint it resends. The bridge is a companion computer of its vehicle: the
+vehicle's system id, component 191 (MAV_COMP_ID_ONBOARD_COMPUTER).
 
 The exchange waits on the vehicle's clock, not the world's: after a setpoint decided on
 the vehicle's report of time t, `fly` returns with the first position report stamped
@@ -50,6 +52,15 @@ DO_SET_MODE = 176
 STREAM_HZ = 20.0
 """How often a vehicle's current setpoint is resent [Hz]: PX4 needs more than 2 Hz to
 enter and stay in OFFBOARD; 20 Hz is MAVSDK's rate, ten times that."""
+HEARTBEAT_HZ = 1.0
+"""How often the bridge says it is there [Hz]: MAVLink's heartbeat rate, by which a
+flight controller and a ground station see a component alive."""
+COMPANION = 191
+"""The bridge's component id: MAV_COMP_ID_ONBOARD_COMPUTER, a companion computer on the
+vehicle (never 0, MAVLink's broadcast id); its system id is the vehicle's."""
+ONBOARD_CONTROLLER, AUTOPILOT_INVALID = 18, 8
+"""Its HEARTBEAT's type (MAV_TYPE_ONBOARD_CONTROLLER) and autopilot (MAV_AUTOPILOT_INVALID:
+it flies nothing itself)."""
 LEAD_S = 1.5
 """How long setpoints stream before PX4 is asked for OFFBOARD [s]: PX4 enables offboard
 control after about a second of them; half a second more so that the vehicle has seen a
@@ -125,9 +136,17 @@ class SetpointStream(threading.Thread):
     ends the thread and is kept in `error`.
     """
 
-    def __init__(self, send: Callable[[tuple], None], rate: float, lead: float) -> None:
+    def __init__(
+        self,
+        send: Callable[[tuple], None],
+        rate: float,
+        lead: float,
+        beat: Callable[[], None] | None = None,
+    ) -> None:
         super().__init__(daemon=True, name="uavtrack-setpoints")
         self.send, self.period, self.lead = send, 1.0 / rate, lead
+        self.beat = beat  # a HEARTBEAT, sent at HEARTBEAT_HZ beside the setpoints
+        self.beats = 0
         self.setpoint: tuple | None = None
         self.sent = 0
         self.error: BaseException | None = None
@@ -145,7 +164,7 @@ class SetpointStream(threading.Thread):
             self.join(timeout)
 
     def run(self) -> None:
-        first = due = time.monotonic()
+        first = due = beat_due = time.monotonic()
         while True:
             woken = self._wake.wait(max(0.0, due - time.monotonic()))
             self._wake.clear()
@@ -155,6 +174,10 @@ class SetpointStream(threading.Thread):
                 if self.setpoint is None:
                     raise RuntimeError("the setpoint stream started without a setpoint")
                 self.send(self.setpoint)
+                if self.beat is not None and time.monotonic() >= beat_due:
+                    self.beat()
+                    self.beats += 1
+                    beat_due = max(beat_due + 1.0 / HEARTBEAT_HZ, time.monotonic())
             except Exception as exc:  # noqa: BLE001 (a closed link, a dead interface)
                 self.error = exc
                 return
@@ -171,14 +194,24 @@ class SetpointStream(threading.Thread):
 
 class Vehicle:
     """One flight controller over a MAVLink connection (`url` as pymavlink takes it,
-    e.g. ``udpout:127.0.0.1:14551``); `target` its system id."""
+    e.g. ``udpout:127.0.0.1:14551``); `target` its system id. The bridge speaks as a
+    companion computer of that vehicle: system id `source` (default: the vehicle's),
+    component `COMPANION`, a HEARTBEAT at `HEARTBEAT_HZ` from the connection on."""
 
-    def __init__(self, url: str, target: int = 1, source: int = 245) -> None:
-        self.link = _mavutil().mavlink_connection(url, source_system=source)
+    def __init__(self, url: str, target: int = 1, source: int | None = None) -> None:
+        self.link = _mavutil().mavlink_connection(
+            url, source_system=target if source is None else source, source_component=COMPANION
+        )
         self.target = target
         self.clock_ms = 0  # the vehicle's time_boot_ms, from its reports
         self._sending = threading.Lock()  # the stream and this thread share one link
-        self.stream = SetpointStream(self._send_setpoint, STREAM_HZ, LEAD_S)
+        self.stream = self._stream()
+
+    def _stream(self) -> SetpointStream:
+        return SetpointStream(self._send_setpoint, STREAM_HZ, LEAD_S, self._heartbeat)
+
+    def _heartbeat(self) -> None:
+        self._send("heartbeat_send", ONBOARD_CONTROLLER, AUTOPILOT_INVALID, 0, 0, 0)
 
     def connect(
         self, flavour: str, deadline: float, pitch: float = 0.0, thrust: float = 0.5
@@ -196,12 +229,12 @@ class Vehicle:
             raise ValueError(f"flavour must be 'ardupilot' or 'px4', not {flavour!r}")
         end = time.monotonic() + deadline
         while True:
-            self._send("heartbeat_send", 6, 8, 0, 0, 0)  # GCS, autopilot invalid
+            self._heartbeat()
             if self.link.recv_match(type="HEARTBEAT", blocking=True, timeout=0.2):
                 break
             if time.monotonic() > end:
                 raise RunError(f"no heartbeat from the vehicle within {deadline:g} s")
-        self.stream = SetpointStream(self._send_setpoint, STREAM_HZ, LEAD_S)
+        self.stream = self._stream()
         self.command(0.0, pitch, 0.0, thrust)
         self.stream.start()
         try:
