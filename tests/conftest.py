@@ -1,3 +1,4 @@
+import platform
 import signal
 
 import numpy as np
@@ -6,6 +7,11 @@ import pytest
 import uavtrack
 
 from . import isolation
+
+# platform learns the processor by running `uname -p`, once per process: asked here,
+# outside the wall of `isolation`, so that a library asking on import (h5py) starts no
+# process inside whichever test imports it first
+platform.processor()
 
 
 @pytest.fixture

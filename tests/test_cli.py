@@ -217,8 +217,8 @@ def cli_command(*args):
 @pytest.mark.parametrize("name", ["run.trace", "t", "T.NPZ"])
 def test_trace_is_written_at_exactly_the_path_given(capsys, tmp_path, name):
     path = tmp_path / name
-    path.write_text("earlier")
-    code, out, err = run_cli(capsys, "run", "--set", "steps=6", "--trace", str(path))
+    path.write_text("earlier")  # replaced only when asked to
+    code, out, err = run_cli(capsys, "run", "--set", "steps=6", "--trace", str(path), "--force")
     assert code == 0, err
     assert [p.name for p in tmp_path.iterdir()] == [name]
     with np.load(path) as npz:
@@ -603,3 +603,44 @@ def test_a_world_on_every_interface_prints_endpoints_others_can_reach():
     assert found and all(e.startswith("tcp/") and e.endswith(":7447") for e in found)
     assert "tcp/0.0.0.0:7447" not in found and "tcp/127.0.0.1:7447" in found
     assert reachable("tls/10.1.2.3:7447") == ["tls/10.1.2.3:7447"]
+
+
+def test_every_command_that_writes_a_file_refuses_one_that_exists_unless_forced(capsys, tmp_path):
+    trace, nc = tmp_path / "t.npz", tmp_path / "t.nc"
+    assert run_cli(capsys, "run", "--steps", "5", "--trace", str(trace))[0] == 0
+    first = trace.read_bytes()
+    assert run_cli(capsys, "export", str(trace), "--out", str(nc))[0] == 0
+    taken = [
+        (["run", "--steps", "5", "--seed", "1", "--trace", str(trace)], "--trace"),
+        (["swarm", "--steps", "2", "--trace", str(trace)], "--trace"),
+        (["export", str(trace), "--out", str(nc)], "--out"),
+        (["animate", "--steps", "4", "--out", str(tmp_path / "a.gif")], "--out"),
+        (["bench", "--quick", "--json", str(nc)], "--json"),
+    ]
+    (tmp_path / "a.gif").write_bytes(b"GIF89a")
+    for args, option in taken:
+        code, out, err = run_cli(capsys, *args)
+        assert code == 2 and err.count("\n") == 1, (args, err)
+        assert f"{option}: " in err and "exists" in err and "--force to replace it" in err
+    assert trace.read_bytes() == first  # nothing replaced
+    code, _, err = run_cli(capsys, *taken[0][0], "--force")
+    assert code == 0, err
+    assert trace.read_bytes() != first  # seed 1's trace replaced seed 0's
+    assert run_cli(capsys, "export", str(trace), "--out", str(nc), "--force")[0] == 0
+
+
+def test_an_interrupted_command_says_what_it_left_on_disk(capsys, tmp_path, monkeypatch):
+    """Ctrl-C while `run --trace --bag` writes the bag: the trace is complete on disk,
+    the bag is not there, and the message says both."""
+    from uavtrack.io import bag as bag_module
+
+    def interrupted(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(bag_module, "write_bag", interrupted)
+    trace, bag = tmp_path / "t.npz", tmp_path / "bag"
+    code, _, err = run_cli(capsys, "run", "--steps", "5", "--trace", str(trace), "--bag", str(bag))
+    assert code == 130
+    assert "no partial file was left; written whole before it: " + str(trace) in err, err
+    assert trace.is_file() and not bag.exists()
+    uavtrack.io.trace.read(trace)  # whole: it reads back

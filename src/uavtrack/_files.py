@@ -25,18 +25,21 @@ _UMASK = os.umask(0)
 os.umask(_UMASK)
 
 
-def check_output(path: str | Path, option: str) -> Path:
+def check_output(path: str | Path, option: str, force: bool | None = None) -> Path:
     """Refuse early an output file that cannot be written, before any long computation.
 
-    The target must be a regular file or not exist, and its folder must exist and take
-    a file (tried, not read off the permission bits). `option` names the argument in the
-    message (``--trace``).
+    The target must not exist (with `force`, it may be a regular file, then replaced;
+    None: a file the command always writes anew, as a results folder's report), and its
+    folder must exist and take a file (tried, not read off the permission bits). `option`
+    names the argument in the message (``--trace``).
     """
     path = Path(path).expanduser()
     if path.is_dir():
         raise UsageError(f"{option}: {path} is a directory; give a file name")
     if path.exists() and not path.is_file():
         raise UsageError(f"{option}: {path} exists and is not a regular file")
+    if force is False and os.path.lexists(path):
+        raise UsageError(f"{option}: {path} exists; give a new name, or --force to replace it")
     parent = path.resolve().parent
     if not parent.is_dir():
         raise UsageError(f"{option}: directory {parent} does not exist")
@@ -102,12 +105,18 @@ def check_new_folder(path: str | Path, option: str, what: str) -> Path:
     return path
 
 
-def check_new_file(path: str | Path, option: str, what: str) -> Path:
+def check_new_file(path: str | Path, option: str, what: str, force: bool = False) -> Path:
     """Refuse early an output file that exists (or is a link, even to nothing) or cannot
     be written: one line naming `option` (``--out``) and `what` goes in it (``the
-    netCDF``). For outputs that are never replaced, as a new folder is not."""
+    netCDF``). With `force` a regular file that exists is replaced (a link is not)."""
     path = Path(path).expanduser()
-    _taken(path, option, what)
+    if path.is_file() and not path.is_symlink():
+        if not force:
+            raise UsageError(
+                f"{option}: {path} exists; give a new name for {what}, or --force to replace it"
+            )
+    else:
+        _taken(path, option, what)
     return check_output(path, option)
 
 
@@ -121,6 +130,7 @@ def new_folder(path: str | Path) -> Iterator[Path]:
     try:
         yield work / path.name
         os.rename(work / path.name, path)
+        WRITTEN.append(path)
     finally:
         shutil.rmtree(work, ignore_errors=True)
 
@@ -142,6 +152,7 @@ def replacing(path: str | Path) -> Iterator[Path]:
         yield Path(tmp)
         os.chmod(tmp, 0o666 & ~_UMASK)
         os.replace(tmp, path)
+        WRITTEN.append(path)
     except OSError as exc:
         Path(tmp).unlink(missing_ok=True)
         if exc.filename is None or exc.filename == tmp:  # name the file the user asked for
@@ -150,6 +161,11 @@ def replacing(path: str | Path) -> Iterator[Path]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+WRITTEN: list[Path] = []
+"""Every file and folder written whole by this process, in order: what an interrupted
+command says it leaves on disk."""
 
 
 def plain(data: Any) -> Any:

@@ -114,6 +114,12 @@ MethodOpt = Annotated[
     typer.Option(metavar="METHOD", help=", ".join(registry.names())),
 ]
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
+ForceOpt = Annotated[
+    bool,
+    typer.Option(
+        "--force", help="replace the output files that exist (a folder is never replaced)"
+    ),
+]
 BagOpt = Annotated[
     Path | None,
     typer.Option(
@@ -372,6 +378,7 @@ def run(
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
     bag: BagOpt = None,
+    force: ForceOpt = False,
     rerun: Annotated[
         str | None,
         typer.Option(
@@ -390,14 +397,14 @@ def run(
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     check_distinct({"--trace": trace, "--rerun": rerun or None, "--bag": bag})
     if trace is not None:
-        check_output(trace, "--trace")
+        check_output(trace, "--trace", force)
     check_bag(bag)
     viewer = None
     if rerun is not None:
         if rerun and Path(rerun).suffix != ".rrd":
             raise UsageError(f"--rerun: {rerun} should end in .rrd")
         if rerun:
-            check_output(rerun, "--rerun")
+            check_output(rerun, "--rerun", force)
         elif not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
             raise UsageError(
                 "--rerun without a file opens the Rerun viewer, which needs a display; "
@@ -685,7 +692,10 @@ def console(width: int = 120):
 
 def main(argv: list[str] | None = None) -> int:
     """Console entry point; returns the exit code (see the module docstring)."""
+    from .._files import WRITTEN
+
     argv = _optional_values(sys.argv[1:] if argv is None else list(argv))
+    WRITTEN.clear()  # what this command writes (`no_partial`)
     _terminate_as_interrupt()
     try:
         _process.check()
@@ -693,7 +703,7 @@ def main(argv: list[str] | None = None) -> int:
         code = app(args=argv or ["--help"], prog_name="uavtrack", standalone_mode=False)
         code = code if isinstance(code, int) else 0
         if code == 130:
-            return interrupted(NO_PARTIAL)
+            return interrupted(no_partial())
         flush_stdout()  # a full or closed stdout shows here, not at interpreter exit
         return code
     except TyperException as exc:  # usage errors: unknown option, bad value, ...
@@ -703,7 +713,7 @@ def main(argv: list[str] | None = None) -> int:
     except Interrupted as exc:
         return interrupted(str(exc))
     except KeyboardInterrupt:
-        return interrupted(NO_PARTIAL)
+        return interrupted(no_partial())
     except RunError as exc:
         return fail(str(exc), code=1)
     except typer.Exit as exc:
@@ -765,6 +775,18 @@ def _optional_values(argv: list[str]) -> list[str]:
 
 
 NO_PARTIAL = "no partial file was left"
+
+
+def no_partial() -> str:
+    """What an interrupted command leaves: no partial file, and the files it had written
+    whole before the interruption (`_files.WRITTEN`), named."""
+    from .._files import WRITTEN
+
+    if not WRITTEN:
+        return NO_PARTIAL
+    shown = ", ".join(str(p) for p in WRITTEN[:3]) + (" and more" if len(WRITTEN) > 3 else "")
+    return f"{NO_PARTIAL}; written whole before it: {shown}"
+
 
 _signal = {"terminated": False}
 

@@ -9,7 +9,7 @@ from typing import Annotated
 import typer
 
 from .._files import check_output, write_json
-from .app import app, console
+from .app import ForceOpt, app, console
 
 
 @app.command()
@@ -26,12 +26,13 @@ def bench(
             help="draw time per cycle against team size (.png, .pdf or .svg, by its suffix)",
         ),
     ] = None,
+    force: ForceOpt = False,
 ) -> None:
     """Speed of the building blocks and whole runs, each beside its reference."""
     if json_out is not None:
-        check_output(json_out, "--json")
+        check_output(json_out, "--json", force)
     if figure is not None:
-        check_output(figure, "--figure")
+        check_output(figure, "--figure", force)
     from ..experiments.bench import bench as run_bench
 
     results = run_bench(quick, progress=lambda what: print(f"bench: {what}", file=sys.stderr))

@@ -16,6 +16,7 @@ from ..config import MAX_TRIALS
 from ..errors import Interrupted, ScenarioError, UsageError
 from .app import (
     ConfigOpt,
+    ForceOpt,
     MethodName,
     MethodOpt,
     SetOpt,
@@ -485,6 +486,7 @@ def animate(
     fps: Annotated[
         int, typer.Option(min=1, max=60, metavar="F", help="frames per second, 1 to 60")
     ] = 10,
+    force: ForceOpt = False,
 ) -> None:
     """Animate one trial like the paper's Figure 4, as a GIF."""
     from .._progress import bar
@@ -493,7 +495,7 @@ def animate(
 
     if out.suffix.lower() != ".gif":
         raise UsageError(f"--out must name a .gif file, got {out}")
-    check_output(out, "--out")
+    check_output(out, "--out", force)
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     with steps_bar(scenario) as advance:
         result = simulate(scenario, method.value, seed=seed, progress=lambda _: advance(1))

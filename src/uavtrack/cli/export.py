@@ -11,7 +11,7 @@ import typer
 
 from .._files import check_new_file, check_new_folder, new_folder, replacing, write_bytes
 from ..errors import RunError, UsageError
-from .app import app
+from .app import ForceOpt, app
 from .experiments import note
 
 
@@ -48,6 +48,7 @@ def export(
             "(.parquet, .csv, .nc), else parquet]",
         ),
     ] = None,
+    force: ForceOpt = False,
 ) -> None:
     """Write a trace or a results folder as tidy tables for pandas, xarray or a spreadsheet."""
     source = source.expanduser()
@@ -62,7 +63,7 @@ def export(
     if source.is_dir():
         if format_ is Format.netcdf:
             raise UsageError("--format netcdf: a results folder exports as parquet or csv")
-        check_new_file(out, "--out", "the table")
+        check_new_file(out, "--out", "the table", force)
         frame = tables.results_frame(source)
         left_out = frame.attrs.get("left_out", [])
         if left_out:
@@ -84,7 +85,7 @@ def export(
             f"{out.suffix}"
         )
     if format_ is Format.netcdf:
-        check_new_file(out, "--out", "the netCDF file")
+        check_new_file(out, "--out", "the netCDF file", force)
     else:
         check_new_folder(out, "--out", "the tables")
     saved = _read(source)

@@ -17,6 +17,7 @@ from ..errors import Interrupted, RunError, UsageError, install_hint
 from .app import (
     BagOpt,
     ConfigOpt,
+    ForceOpt,
     MethodName,
     MethodOpt,
     Ros2Opt,
@@ -161,6 +162,7 @@ def swarm(
         typer.Option("--trace", metavar="FILE", help="write the per-step trace to FILE (.npz)"),
     ] = None,
     bag: BagOpt = None,
+    force: ForceOpt = False,
     ros2: Ros2Opt = None,
     listen: Annotated[
         str | None,
@@ -210,7 +212,7 @@ def swarm(
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     if trace is not None:
-        check_output(trace, "--trace")
+        check_output(trace, "--trace", force)
     check_distinct({"--trace": trace, "--bag": bag})
     check_bag(bag)
     zenoh_given = [zenoh_config, tls_ca, tls_cert, tls_key, keys]
