@@ -264,3 +264,68 @@ def test_no_command_runs_past_its_block_and_no_field_name_breaks(site, page):
     if screenshot.chromium() is None:
         pytest.skip("no Chromium here (python docs/screenshot.py documents the check)")
     assert screenshot.hidden(site, page) == {"cut": [], "broken": []}
+
+
+def printed_blocks() -> list[tuple[str, str, str]]:
+    """(page, code, output) of every python block a page follows with what it prints (a
+    short paragraph, then a text block)."""
+    found = []
+    for page in sorted(DOCS.rglob("*.md")):
+        text = page.read_text()
+        pattern = r"```python\n(.*?)```\n\n([^`]{0,200}?)```text\n(.*?)```"
+        for m in re.finditer(pattern, text, flags=re.S):
+            if "prints" in m.group(2):
+                found.append((str(page.relative_to(DOCS)), m.group(1), m.group(3)))
+    return found
+
+
+def test_what_a_page_says_its_code_prints_is_what_it_prints(tmp_path, monkeypatch):
+    import contextlib
+    import io
+
+    blocks = printed_blocks()
+    assert blocks  # docs/concepts.md's cycle and trace fields at least
+    monkeypatch.chdir(tmp_path)
+    for page, code, output in blocks:
+        out = io.StringIO()
+        with contextlib.redirect_stdout(out):
+            exec(compile(code, page, "exec"), {"__name__": "__page__"})
+        assert out.getvalue() == output, f"{page}: its printed output is not what it prints"
+
+
+def collected(marks: str) -> int:
+    """How many tests `pytest -m MARKS` collects (in a process of its own)."""
+    import subprocess
+
+    done = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
+         "-m", marks, str(ROOT / "tests")],
+        capture_output=True, text=True, cwd=ROOT, timeout=600,
+    )  # fmt: skip
+    last = done.stdout.strip().splitlines()[-1]
+    match = re.match(r"(\d+)(?:/\d+)? tests? collected", last)
+    assert match, last
+    return int(match[1])
+
+
+@pytest.mark.integration  # collects the suite in a process of its own
+def test_the_test_counts_the_pages_give_are_the_suites():
+    """The README's and docs/tests.md's counts are what pytest collects: a test added
+    without them fails here, so they cannot drift."""
+    counts = {
+        "fast": collected("not integration and not slow"),
+        "default": collected("not slow"),
+        "slow": collected("slow"),
+        "integration": collected("integration and not slow"),
+    }
+    readme, page = (ROOT / "README.md").read_text(), (DOCS / "tests.md").read_text()
+    expected = {
+        "README default": (readme, f"({counts['default']:,} tests,"),
+        "README fast": (readme, f"({counts['fast']:,} tests,"),
+        "tests.md fast": (page, f"in one process: {counts['fast']:,} tests"),
+        "tests.md default": (page, f"everything but the slow tests: {counts['default']:,} tests"),
+        "tests.md slow": (page, f"namespaces: {counts['slow']} tests"),
+        "tests.md integration": (page, f"the {counts['integration']:,} tests that start"),
+    }
+    wrong = [where for where, (text, phrase) in expected.items() if phrase not in text]
+    assert not wrong, (wrong, counts)

@@ -277,3 +277,25 @@ def test_a_jsbsim_scenario_is_built_and_read_without_jsbsim(monkeypatch, tmp_pat
     with pytest.raises(uavtrack.ScenarioError, match="needs JSBSim"):
         flight.check(scenario)
     flight.check(uavtrack.Scenario())  # the unicycle needs nothing
+
+
+def test_every_subpackage_names_each_of_its_modules_and_the_cli_each_command():
+    """A package's docstring is its map: it names every module in it (so a new module
+    cannot go unmentioned), and the command line's names every command it has."""
+    import ast
+    import re
+    from pathlib import Path
+
+    from uavtrack import cli
+
+    root = Path(uavtrack.__file__).parent
+    for init in sorted(root.glob("*/__init__.py")):
+        doc = ast.get_docstring(ast.parse(init.read_text())) or ""
+        modules = [p.stem for p in init.parent.glob("*.py") if not p.stem.startswith("_")]
+        missing = [m for m in modules if not re.search(rf"\b{m}\b", doc)]
+        assert not missing, (init.parent.name, missing)
+    commands = {
+        c.name or c.callback.__name__.replace("_", "-") for c in cli.app.registered_commands
+    }
+    listed = set(re.findall(r"\w+", cli.__doc__.split("``")[1])) - {"uavtrack"}
+    assert listed == commands, listed ^ commands

@@ -14,7 +14,11 @@
 * `transport`: the in-process bus and Zenoh (peer mode, optionally TLS), the `Mailbox`;
 * `swarm`: `run_swarm`, which starts and stops everything;
 * `program`: the main loop of one program (``python -m uavtrack.agents``);
-* `launcher`: the process that forks a swarm's programs from modules loaded once.
+* `launcher`: the process that forks a swarm's programs from modules loaded once;
+* `tracked`: a UAV's program and the central node with tracks of unknown association;
+* `schema`: the messages' fields as the documentation lists them (agents-messages);
+* `tls`: the checks of TLS files before Zenoh reads them;
+* `stops`: how a program notices that its own process was stopped (SIGSTOP).
 
 With the same seed, scenario and faults, a swarm's trace equals `uavtrack.simulate`'s.
 """

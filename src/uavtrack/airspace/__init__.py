@@ -1,3 +1,11 @@
-"""The airspace the team shares: separation between UAVs that fly in one altitude band
-(`separation`), measured in every run; beyond the paper, whose Sec. 8 leaves horizontal
-collision avoidance out."""
+"""The airspace the team shares, beyond the paper, whose Sec. 8 leaves horizontal
+collision avoidance out:
+
+* `separation`: the separation between UAVs that fly in one altitude band, measured in
+  every run;
+* `avoidance`: the filter on each UAV's action that keeps that separation from the
+  neighbours it heard (``planner.avoidance``);
+* `beacons`: a receiver's check of those neighbours' beacons against what it already
+  knows (the sender's earlier beacon, the radio's range, the start)."""
+
+__all__ = ["avoidance", "beacons", "separation"]

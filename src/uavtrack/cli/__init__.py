@@ -1,5 +1,7 @@
-"""Command line: ``uavtrack run | compare | reproduce | sweep | robustness | flight | swarm |
-agent | animate | bench | params``.
+"""Command line: ``uavtrack run | compare | params | reproduce | sweep | animate | bandwidth |
+bench | export | flight | robustness | sensing | separation | swarm | agent | trackers``,
+each in a module of its name (`app`: run, compare, params and the shared options;
+`experiments`: reproduce, sweep, animate; `benchmark`: bench; `swarm`: swarm, agent).
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
 ``uavtrack: error: ...`` on stderr, nothing computed, nothing written); 130

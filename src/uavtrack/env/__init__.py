@@ -10,6 +10,10 @@ assignment are exactly those of `simulate`; only the flown actions come from the
 * `vector_env(num_envs)`: that many trials as one batch, arrays (trials, agents, ...);
   `uavtrack.env.learn` makes it a Stable-Baselines3 VecEnv or a TorchRL EnvBase.
 
+Modules: `parallel` (the ParallelEnv and the AEC env), `vector` (the batch), `episodes`
+(the loop), `spaces` (observations, state, rewards), `learn` (Stable-Baselines3 and
+TorchRL), `benchmarl` (a BenchMARL task).
+
 Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
 
 * **Observation** (``observation="box"``, the default): a flat float32 Box in

@@ -1,5 +1,6 @@
 """Outside formats: the trace file (`trace`), tidy tables and xarray (`tables`, the io
-extra), Stone Soup's types (`stonesoup`), ROS 2 bags and topics (`bag`, `ros2`).
+extra), a results folder's job files (`results`), Stone Soup's types (`stonesoup`), ROS 2
+bags and topics (`bag`, `ros2`), and the decision as MAVLink setpoints (`mavlink`).
 
 Each conversion takes a trial in one call, as ``xarray.open_dataset`` takes a file: the
 path of a trace file (``uavtrack run --trace run.npz``), a `Result` with a trace

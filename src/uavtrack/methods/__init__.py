@@ -24,6 +24,10 @@ in nothing.
 A new auction rule plugs in by subclassing `Distributed` and replacing `solve` (see
 examples/custom_method.py); `register` adds a method to the `registry` the command line
 and the experiments read, and other packages can add theirs by entry point.
+
+Modules: `base` (the interface, `Method`, and what it sees, `Inputs`), `distributed`,
+`centralized`, `greedy`, `builtin` (the three by name) and `registry` (every method by
+name, the entry points' included).
 """
 
 import importlib
