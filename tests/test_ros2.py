@@ -264,25 +264,18 @@ def test_ros2_needs_zenoh_and_a_domain():
         run_swarm(uavtrack.Scenario(steps=2), transport="zenoh", ros2=500)
 
 
-@pytest.mark.integration
-def test_a_swarm_of_tracks_publishes_them_by_label():
-    """With tracker.association jpda each UAV's estimates are its track slots: one
-    MarkerArray a step on /uav_i/tracks, a DELETEALL then per track its ellipse (id the
-    team label, namespace the status) at the trace's estimate, and its label's text."""
+def swarm_heard_on_domain_8(scenario):
+    """Run `scenario` as a Zenoh swarm publishing on ROS 2 domain 8 beside a listener:
+    the swarm, and every sample the listener heard as (key, payload)."""
     port = free_port()
     listener = ZenohTransport([f"tcp/127.0.0.1:{port}"], [], mode="peer")
     events, lock = [], threading.Lock()
 
     def on_sample(sample):
         with lock:
-            events.append(("data", str(sample.key_expr), sample.payload.to_bytes(), None))
+            events.append((str(sample.key_expr), sample.payload.to_bytes()))
 
     subscriber = listener.session.declare_subscriber("8/**", on_sample)
-    steps = 6
-    scenario = uavtrack.Scenario(steps=steps).with_overrides(
-        {"tracker.association": "jpda", "sensor.detection_probability": 0.9,
-         "sensor.clutter_rate": 2.0}
-    )  # fmt: skip
     try:
         swarm = run_swarm(
             scenario, "distributed", seed=3, transport="zenoh", ros2=8,
@@ -291,15 +284,29 @@ def test_a_swarm_of_tracks_publishes_them_by_label():
     finally:
         subscriber.undeclare()
         listener.close()
-    trace = swarm.result.trace
     with lock:
-        seen = [e for e in events if e[1].startswith("8/")]
+        return swarm, list(events)
+
+
+@pytest.mark.integration
+def test_a_swarm_of_tracks_publishes_them_by_label():
+    """With tracker.association jpda each UAV's estimates are its track slots: one
+    MarkerArray a step on /uav_i/tracks, a DELETEALL then per track its ellipse (id the
+    team label, namespace the status) at the trace's estimate, and its label's text."""
+    steps = 6
+    scenario = uavtrack.Scenario(steps=steps).with_overrides(
+        {"tracker.association": "jpda", "sensor.detection_probability": 0.9,
+         "sensor.clutter_rate": 2.0}
+    )  # fmt: skip
+    swarm, events = swarm_heard_on_domain_8(scenario)
+    trace = swarm.result.trace
+    seen = [(key, payload) for key, payload in events if key.startswith("8/")]
     key = f"8/uav_0/tracks/visualization_msgs::msg::dds_::MarkerArray_/{STORE.hash_rihs01(MARKERS)}"
-    samples = [e[2] for e in seen if e[1] == key]
+    samples = [payload for k, payload in seen if k == key]
     # one a step; the first may go before the listener's subscription has reached the
     # program (Zenoh routes a subscription as it spreads, with no guarantee of when)
     assert steps - 1 <= len(samples) <= steps
-    assert not any("/target_" in e[1] for e in seen)  # no per-target topic with tracks
+    assert not any("/target_" in k for k, _ in seen)  # no per-target topic with tracks
     for payload in samples:
         markers = STORE.deserialize_cdr(payload, MARKERS).markers
         k = stamp_of(markers[0]) // DT_NS
@@ -319,29 +326,12 @@ def test_a_swarm_of_tracks_publishes_them_by_label():
 def test_a_failed_uavs_tracks_leave_the_view_live():
     """A UAV program whose UAV fails publishes a DELETEALL on /uav_i/tracks as it ends,
     and every track marker lives two steps: the view shows each living UAV's tracks."""
-    port = free_port()
-    listener = ZenohTransport([f"tcp/127.0.0.1:{port}"], [], mode="peer")
-    events, lock = [], threading.Lock()
-
-    def on_sample(sample):
-        with lock:
-            events.append((str(sample.key_expr), sample.payload.to_bytes()))
-
-    subscriber = listener.session.declare_subscriber("8/**", on_sample)
     scenario = uavtrack.Scenario(steps=8).with_overrides(
         {"tracker.association": "gnn", "faults.failures": [[0, 4]]}
     )
-    try:
-        run_swarm(
-            scenario, "distributed", seed=3, transport="zenoh", ros2=8,
-            connect=(f"tcp/127.0.0.1:{port}",),
-        )  # fmt: skip
-    finally:
-        subscriber.undeclare()
-        listener.close()
+    _, events = swarm_heard_on_domain_8(scenario)
     key = f"8/uav_0/tracks/visualization_msgs::msg::dds_::MarkerArray_/{STORE.hash_rihs01(MARKERS)}"
-    with lock:
-        samples = [STORE.deserialize_cdr(p, MARKERS).markers for k, p in events if k == key]
+    samples = [STORE.deserialize_cdr(p, MARKERS).markers for k, p in events if k == key]
     assert 4 <= len(samples) <= 4 + 1  # steps (0 to) 3, then the clearing at its end
     *published, last = samples
     assert [m.action for m in last] == [3] and stamp_of(last[0]) == 4 * DT_NS
