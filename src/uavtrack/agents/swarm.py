@@ -380,7 +380,13 @@ def ended_why(child: Child) -> str:
     code = child.process.returncode
     said = child.printed()
     words = f": {said[-1][:300]}" if said else ", printing nothing"
-    return f"its process ended (exit code {code}){words}"
+    how = f"exit code {code}"
+    if code is not None and code < 0:
+        try:
+            how = f"killed by {signal.Signals(-code).name}"
+        except ValueError:
+            how = f"killed by signal {-code}"
+    return f"its process ended ({how}){words}"
 
 
 def wait_for(processes: list[Forked], seconds: float) -> None:
