@@ -113,8 +113,8 @@ def test_resized_team_keeps_the_altitude_spread():
 
 
 def test_an_experiment_of_more_trials_than_it_can_hold_is_refused_before_planning():
-    from uavtrack.config import MAX_TRIALS
     from uavtrack.experiments.jobs import trial_jobs
+    from uavtrack.limits import MAX_TRIALS
 
     scenario = uavtrack.Scenario(steps=5)
     assert len(trial_jobs(scenario, {}, "greedy", MAX_TRIALS, 10, 0)) == MAX_TRIALS // 10

@@ -24,7 +24,7 @@ import uavtrack
 PACKAGE = Path(uavtrack.__file__).parent
 
 LAYERS = {
-    "base": {"errors", "_files", "_progress", "_process", "numerics"},
+    "base": {"errors", "_files", "_progress", "_process", "numerics", "limits"},
     "config": {"config"},
     "model": {
         "world", "network", "faults", "radio", "sensing", "estimation", "fusion", "planning",

@@ -1231,12 +1231,15 @@ def memory_estimate(scenario: Scenario, batch: int = 1, trace: bool = False) -> 
         radio += batch * Nu * (1 + _neighbours(scenario)) * Nt * f * 6
     if scenario.faults.loss > 0 or scenario.faults.delay > 0:  # each UAV's view of the bids
         radio += batch * Nu * Nu * Nt * f * 3
-    # the targets' states and their draws: a block of steps (`world.Targets`), or every
-    # step when kept for a trace or drawn whole (manoeuvring targets)
-    whole = trace or scenario.target.motion == "manoeuvring"
-    drawn = T if whole else min(T, Targets.BLOCK + 1)
+    # the targets' states: a block of steps (`world.Targets`), or every step when kept for
+    # a trace or drawn whole (manoeuvring targets); their draws' temporaries: a block of
+    # every trial at once, or a manoeuvring trial's whole run
+    turning = scenario.target.motion == "manoeuvring"
+    block = min(T, Targets.BLOCK + 1)
+    kept = T if trace or turning else block
+    temporaries = T if turning else batch * block
     parts = {
-        "steps": batch * drawn * Nt * 4 * f * 2 + drawn * Nt * 2 * f * 8,
+        "steps": batch * kept * Nt * 4 * f * 2 + temporaries * Nt * 2 * f * 8,
         "planner.horizon": planning.memory(batch * Nu, Nt, 3, scenario.planner.horizon),
         "n_uavs": radio,
         "n_targets": pairs * f * 20 * 6 * history + 2 * noise,

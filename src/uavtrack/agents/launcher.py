@@ -116,6 +116,8 @@ class Launcher:
             if pid < 0:
                 raise RunError(f"the program launcher could not start program {me}: {why}")
             handle = self.forked.setdefault(pid, Forked(pid, self))
+            if self.gone:  # the launcher went before this handle was made: so did its child
+                handle.ended(-signal.SIGKILL)
         return handle
 
     def signal(self, pid: int, number: int) -> None:

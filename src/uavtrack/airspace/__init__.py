@@ -7,5 +7,3 @@ collision avoidance out:
   neighbours it heard (``planner.avoidance``);
 * `beacons`: a receiver's check of those neighbours' beacons against what it already
   knows (the sender's earlier beacon, the radio's range, the start)."""
-
-__all__ = ["avoidance", "beacons", "separation"]

@@ -19,8 +19,8 @@ from typer.exceptions import TyperException
 from .. import __version__, _process
 from .._files import check_distinct, check_new_folder, check_output, dumps
 from .._progress import bar
-from ..config import MAX_TRIALS
 from ..errors import Interrupted, RunError, ScenarioError, UsageError
+from ..limits import MAX_TRIALS
 from ..methods import registry
 
 if TYPE_CHECKING:

@@ -8,7 +8,7 @@ from typing import Annotated
 
 import typer
 
-from ..config import MAX_TRIALS
+from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, app, console, load_scenario, parse_overrides
 from .experiments import (
     AddressOpt,

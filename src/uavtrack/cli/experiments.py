@@ -12,8 +12,8 @@ from typing import Annotated, Any
 import typer
 
 from .._files import check_output, check_outputs, write_json, write_text
-from ..config import MAX_TRIALS
 from ..errors import Interrupted, ScenarioError, UsageError
+from ..limits import MAX_TRIALS
 from .app import (
     ConfigOpt,
     ForceOpt,

@@ -7,8 +7,8 @@ from typing import Annotated
 
 import typer
 
-from ..config import MAX_TRIALS
 from ..errors import UsageError
+from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,

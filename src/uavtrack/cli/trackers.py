@@ -7,7 +7,7 @@ from typing import Annotated
 
 import typer
 
-from ..config import MAX_TRIALS
+from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,

@@ -11,7 +11,6 @@ its errors: a scenario is built and read without numpy, JSBSim or any engine.
 from ..errors import ScenarioError
 from .parts import (
     MAX_ALTITUDE,
-    MAX_TRIALS,
     Bool,
     EstimationModel,
     EvaluationModel,
@@ -51,7 +50,6 @@ __all__ = [  # noqa: RUF022
     "G",
     "Int",
     "MAX_ALTITUDE",
-    "MAX_TRIALS",
     "ManoeuvreModel",
     "PlannerModel",
     "RadioModel",

@@ -129,11 +129,6 @@ class SensorModel(Part):
 MAX_ALTITUDE = 20_000.0
 """Highest flight altitude accepted [m] (above any fixed-wing UAV's ceiling)."""
 
-MAX_TRIALS = 100_000
-"""The most trials an experiment runs per configuration and method: 10,000 result files
-of 10 trials, and about 12 hours of one core at 500 steps. A larger count is refused
-before any job is planned."""
-
 
 class UAVModel(Part):
     """Fixed-wing UAVs at constant speed and altitude, bank-angle actions (eq. 1)."""

@@ -8,7 +8,7 @@ import sys
 import tomllib
 from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, TypeGuard
+from typing import Any, TypeGuard, cast
 
 from pydantic import (
     ValidationError,
@@ -68,10 +68,11 @@ def _depth(value: object) -> int:
     deepest, stack = 0, [(value, 0)]
     while stack:
         node, depth = stack.pop()
-        children = (
-            node.values() if isinstance(node, dict) else node if isinstance(node, list) else None
-        )
-        if children is None:
+        if _is_table(node):
+            children: list[object] = list(node.values())
+        elif isinstance(node, list):
+            children = cast(list[object], node)
+        else:
             continue
         deepest = max(deepest, depth + 1)
         if deepest > MAX_DEPTH:

@@ -23,7 +23,8 @@ from typing import Any
 
 import numpy as np
 
-from ..config import MAX_TRIALS, Scenario, ScenarioError, flatten
+from ..config import Scenario, ScenarioError, flatten
+from ..limits import MAX_TRIALS
 from ..simulation import run, trial_seed
 from .statistics import describe, paired
 
@@ -126,7 +127,7 @@ def trial_jobs(
     origin: str = "override",
 ) -> list[Job]:
     """Jobs covering trials 0 .. trials-1 of base+overrides with one method; more than
-    `config.MAX_TRIALS` trials are refused before a job is made."""
+    `limits.MAX_TRIALS` trials are refused before a job is made."""
     if not 1 <= trials <= MAX_TRIALS:
         raise ScenarioError(f"trials {trials}: give 1 to {MAX_TRIALS:,} per configuration")
     scenario = base.with_overrides(overrides, origin=origin)

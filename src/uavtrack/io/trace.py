@@ -195,7 +195,7 @@ def _check_headers(
             f"{path}: its arrays disagree: targets has {steps} steps, its scenario {scenario.steps}"
         )
     sizes = _sizes(scenario)
-    expected = {"targets": (steps, scenario.n_targets, 4)}
+    expected: dict[str, tuple[int, ...]] = {"targets": (steps, scenario.n_targets, 4)}
     expected.update({f.name: _shape(f, sizes, steps) for f in RECORDED})
     scans = scenario.n_targets + 50 + 10 * int(np.ceil(scenario.sensor.clutter_rate))
     for name, (dtype, shape) in headers.items():
