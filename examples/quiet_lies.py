@@ -150,10 +150,17 @@ def honest_rates(scenario, n_trials: int) -> np.ndarray:
 LIES = ("tombstones", "tombstones-hidden", "beacons")
 
 
+def positive(text: str) -> int:
+    """A count of at least 1, for argparse."""
+    if not text.isdigit() or int(text) < 1:
+        raise argparse.ArgumentTypeError(f"a positive integer, got {text!r}")
+    return int(text)
+
+
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    parser.add_argument("--trials", type=int, default=20)
-    parser.add_argument("--steps", type=int, default=500)
+    parser.add_argument("--trials", type=positive, default=20)
+    parser.add_argument("--steps", type=positive, default=500)
     parser.add_argument("--lie", choices=LIES, action="append", help="which (repeatable)")
     args = parser.parse_args()
     out: dict = {"trials": args.trials, "steps": args.steps}

@@ -104,6 +104,7 @@ BAD = [
     (["sweep", "n_uavs", "10", "30", "--team", "20x20"], "do not sweep n_uavs too"),
     (["run", "--set", "n_uavs=300", "--set", "n_targets=300"], "--team 300x300"),
     (["sweep", "comm_range", "50", "--trials", "100000000"], "less than or equal to 100000"),
+    (["run", "--team", "9" * 5000 + "x3"], "--team expects NxM"),
     (["sensing", "--trials", "100001"], "less than or equal to 100000"),
     (["compare", "--trials", "100001"], "less than or equal to 100000"),
 ]

@@ -227,11 +227,21 @@ def test_a_results_folder_becomes_one_row_per_trial(tmp_path, capsys):
     other.write_bytes(kept)
     # a manifest that cannot be read: refused, not exported with the swept field blank
     manifest = folder / "manifest.json"
-    for broken in ("{not json", "[]", '{"scenario": {"steps": -1}}'):
-        manifest.write_text(broken)
+    deep = "[" * 200_000 + "]" * 200_000  # deeper than json parses: a RecursionError
+    for broken in ("{not json", "[]", '{"scenario": {"steps": -1}}', deep, "/dev/zero"):
+        manifest.unlink()
+        if broken == "/dev/zero":  # read whole, 24 GB went before the kernel's OOM killer
+            manifest.symlink_to(broken)
+        else:
+            manifest.write_text(broken)
         code, _, err = run_cli(capsys, "export", folder, "--out", tmp_path / "broken.csv")
         assert code == 2 and f"{manifest}: cannot be read" in err, err
         assert len(err.strip().splitlines()) == 1 and not (tmp_path / "broken.csv").exists()
+        code, _, err = run_cli(
+            capsys, "sweep", "planner.horizon", 2, 3, "--trials", 3, "--set", "steps=15",
+            "--method", "distributed", "--method", "greedy", "--out", folder, "--no-progress",
+        )  # fmt: skip
+        assert code == 2 and err.count("\n") == 1 and str(folder) in err, err  # named
 
 
 def test_export_refuses_bad_input_and_leaves_nothing(tmp_path, saved, capsys):
@@ -245,6 +255,8 @@ def test_export_refuses_bad_input_and_leaves_nothing(tmp_path, saved, capsys):
         ((saved, "--format", "csv", "--out", tmp_path / "e.csv"), "go in a folder"),
         ((saved, "--format", "csv", "--out", tmp_path / "f.parquet"), "names parquet"),
         ((tmp_path / "taken", "--out", tmp_path / "g.csv"), "no manifest.json"),
+        ((saved, "--out", saved, "--format", "netcdf", "--force"), "is SOURCE itself"),
+        ((tmp_path / "taken", "--out", tmp_path / "taken", "--force"), "is SOURCE itself"),
     ]
     before = sorted(p.name for p in tmp_path.iterdir())
     for args, message in cases:
@@ -409,6 +421,19 @@ def test_a_trace_is_checked_from_its_headers_before_any_array_is_read(tmp_path, 
         assert message in err, err
         assert peak < 20 * 2**20, peak  # far below a read of the arrays' declared sizes
     assert not (tmp_path / "t.nc").exists()
+    # a scenario nested deeper than json parses, and an archive of other arrays
+    with np.load(saved) as data:
+        arrays = {name: data[name] for name in data.files}
+    np.savez_compressed(tmp_path / "deep.npz", **{**arrays, "scenario": np.array("[" * 10**5)})
+    np.savez(tmp_path / "plain.npz", a=np.zeros(3))
+    refusals = {
+        "deep.npz": "its scenario cannot be read (nested too deeply)",
+        "plain.npz": "not a uavtrack trace file (unknown array 'a')",
+    }
+    for name, message in refusals.items():
+        code, _, err = run_cli(capsys, "export", tmp_path / name, "--out", tmp_path / "t.nc")
+        assert code == 2 and err.count("\n") == 1 and message in err, err
+        assert err.count("not a uavtrack trace file") <= 1  # said once
     # a header that agrees with its bytes, but not with the scenario's steps
     long = rewrite(tmp_path / "long.npz", saved, targets=np.zeros((10**4, 4, 4)))
     code, _, err = run_cli(capsys, "export", long, "--out", tmp_path / "t.nc")

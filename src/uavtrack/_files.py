@@ -91,12 +91,14 @@ def _taken(path: Path, option: str, what: str) -> None:
         raise UsageError(f"{option}: {path} exists; give a new name for {what}")
 
 
-def check_new_folder(path: str | Path, option: str, what: str) -> Path:
+def check_new_folder(path: str | Path, option: str, what: str, force: bool = False) -> Path:
     """Refuse early an output folder that exists (or is a link) or cannot be made: one
-    line naming `option` (``--bag``) and `what` goes in it (``the bag``)."""
+    line naming `option` (``--bag``) and `what` goes in it (``the bag``); with `force`,
+    the line says that a folder is never replaced."""
     path = Path(path).expanduser()
     if path.exists():
-        raise UsageError(f"{option}: {path} exists; give a new folder for {what}")
+        never = " (--force replaces files, never a folder)" if force else ""
+        raise UsageError(f"{option}: {path} exists; give a new folder for {what}{never}")
     _taken(path, option, what)
     if not path.parent.is_dir():
         raise UsageError(f"{option}: directory {path.parent} does not exist")
@@ -161,6 +163,27 @@ def replacing(path: str | Path) -> Iterator[Path]:
     except BaseException:
         Path(tmp).unlink(missing_ok=True)
         raise
+
+
+JSON_BYTES = 16 << 20
+"""The largest JSON file uavtrack reads back (a manifest, a job file) [bytes]: a job of
+ten trials takes a few KiB."""
+
+
+def read_json(path: str | Path) -> Any:
+    """A JSON file uavtrack wrote, read back: ValueError (one line) for one that is not a
+    regular file, larger than `JSON_BYTES`, not JSON, or nested too deeply to parse."""
+    path = Path(path)
+    if not path.is_file() or path.is_symlink() and not path.resolve().is_file():
+        raise ValueError("not a regular file")
+    with open(path, "rb") as file:
+        raw = file.read(JSON_BYTES + 1)
+    if len(raw) > JSON_BYTES:
+        raise ValueError(f"larger than {JSON_BYTES >> 20} MiB")
+    try:
+        return json.loads(raw.decode("utf-8"))
+    except RecursionError:
+        raise ValueError("nested too deeply") from None
 
 
 WRITTEN: list[Path] = []

@@ -143,11 +143,11 @@ Ros2Opt = Annotated[
 ]
 
 
-def check_bag(bag: Path | None) -> None:
+def check_bag(bag: Path | None, force: bool = False) -> None:
     """Refuse early a bag folder that cannot be made, and a missing io extra."""
     if bag is None:
         return
-    check_new_folder(bag, "--bag", "the bag")
+    check_new_folder(bag, "--bag", "the bag", force)
     try:
         from ..io import bag as _  # noqa: F401
     except ImportError as exc:
@@ -196,10 +196,11 @@ def source_of(config: Path | None, overrides: list[str] | None, team: str | None
 
 def parse_team(text: str) -> tuple[int, int]:
     """``"300x300"`` -> (300, 300): UAVs and targets, each a positive integer."""
-    match = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", text)
+    match = re.fullmatch(r"\s*(\d{1,9})\s*[xX]\s*(\d{1,9})\s*", text)
     if not match or min(int(match[1]), int(match[2])) < 1:
         raise ScenarioError(
-            f"--team expects NxM, N UAVs and M targets, positive integers (300x300), got {text!r}"
+            "--team expects NxM, N UAVs and M targets, positive integers (300x300), got "
+            + (repr(text) if len(text) <= 40 else f"{text[:28]!r}... ({len(text)} chars)")
         )
     return int(match[1]), int(match[2])
 
@@ -398,7 +399,7 @@ def run(
     check_distinct({"--trace": trace, "--rerun": rerun or None, "--bag": bag})
     if trace is not None:
         check_output(trace, "--trace", force)
-    check_bag(bag)
+    check_bag(bag, force)
     viewer = None
     if rerun is not None:
         if rerun and Path(rerun).suffix != ".rrd":

@@ -55,6 +55,8 @@ def export(
     out = out.expanduser()
     if not source.exists():
         raise UsageError(f"SOURCE: {source} does not exist")
+    if out.resolve() == source.resolve():
+        raise UsageError(f"--out: {out} is SOURCE itself; give another name")
     format_ = _format(out, format_)
     try:
         from ..io import tables
@@ -87,7 +89,7 @@ def export(
     if format_ is Format.netcdf:
         check_new_file(out, "--out", "the netCDF file", force)
     else:
-        check_new_folder(out, "--out", "the tables")
+        check_new_folder(out, "--out", "the tables", force)
     saved = _read(source)
     if format_ is Format.netcdf:
         # built in memory: HDF5 cannot recover from a failed write (a full disk crashes

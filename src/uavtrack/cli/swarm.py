@@ -214,7 +214,7 @@ def swarm(
     if trace is not None:
         check_output(trace, "--trace", force)
     check_distinct({"--trace": trace, "--bag": bag})
-    check_bag(bag)
+    check_bag(bag, force)
     zenoh_given = [zenoh_config, tls_ca, tls_cert, tls_key, keys]
     if transport == TransportName.memory and (
         listen is not None or connect or not spawn or any(x is not None for x in zenoh_given)

@@ -39,7 +39,7 @@ from pathlib import Path
 from typing import Any
 
 from .. import __version__
-from .._files import dumps, write_json
+from .._files import dumps, read_json, write_json
 from .._progress import bar
 from ..config import flatten
 from ..errors import RunError, UsageError, install_hint
@@ -130,7 +130,9 @@ class Store:
 
     def _check_manifest(self, path: Path) -> None:
         try:
-            old = json.loads(path.read_text(encoding="utf-8"))
+            old = read_json(path)
+            if not isinstance(old, dict):
+                raise ValueError("not a manifest")
         except (OSError, ValueError) as exc:
             raise UsageError(f"{path} is unreadable ({_reason(exc)}); use another --out") from None
         problem = mismatch(old, self.manifest)
@@ -192,7 +194,7 @@ class Store:
     def _read(self, job: Job, path: Path) -> tuple[str, dict[str, Any]]:
         """(problem, record): problem is '' when the file is `job`'s intact result."""
         try:
-            record = json.loads(path.read_text(encoding="utf-8"))
+            record = read_json(path)
         except (OSError, ValueError) as exc:
             return f"unreadable ({_reason(exc)})", {}
         if not isinstance(record, dict) or set(record) != {"job", "seconds", "metrics", "sha256"}:

@@ -8,10 +8,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
+from .._files import read_json
 from ..errors import UsageError
 
 
@@ -34,7 +36,7 @@ def read_jobs(
     for path in sorted((root / "raw").glob("*.json")):
         body: dict[str, Any] = {}
         try:
-            record = json.loads(path.read_text(encoding="utf-8"))
+            record = read_json(path)
             body = {k: record[k] for k in ("job", "seconds", "metrics")}
             intact = checksum(body) == record["sha256"]
         except (OSError, ValueError, KeyError, TypeError):
@@ -58,10 +60,10 @@ def manifest(root: str | Path) -> dict[str, Any]:
     from ..config import Scenario, ScenarioError
 
     path = Path(root).expanduser() / "manifest.json"
-    if not path.is_file():
+    if not os.path.lexists(path):
         raise UsageError(f"{path.parent}: not a uavtrack results folder (no manifest.json)")
     try:
-        data = json.loads(path.read_text(encoding="utf-8"))
+        data = read_json(path)
         if not isinstance(data, dict) or not isinstance(data.get("scenario"), dict):
             raise ValueError("no scenario in it")
         Scenario.from_dict(data["scenario"], origin="its scenario")

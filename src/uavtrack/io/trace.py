@@ -100,6 +100,8 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
             arrays = {name: data[name] for name in headers if name in META}
             _check_headers(path, headers, arrays)
             arrays.update({name: data[name] for name in headers if name not in META})
+    except UsageError:
+        raise
     except (OSError, ValueError, zipfile.BadZipFile, EOFError) as exc:
         raise UsageError(f"{path}: not a uavtrack trace file ({exc})") from None
     version = str(arrays["uavtrack"]) if "uavtrack" in arrays else "unknown"
@@ -114,6 +116,8 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
         raise UsageError(f"{path}: not a uavtrack trace file, missing {', '.join(missing)}{hint}")
     try:
         scenario = Scenario.from_dict(json.loads(str(arrays["scenario"])), origin=str(path))
+    except RecursionError:
+        raise UsageError(f"{path}: its scenario cannot be read (nested too deeply)") from None
     except (json.JSONDecodeError, ScenarioError) as exc:
         raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
     if later:  # arrays of a later format, not counted when the file was written
@@ -187,6 +191,8 @@ def _check_headers(
         return  # `read` names what is missing
     try:
         scenario = Scenario.from_dict(json.loads(str(meta["scenario"])), origin=str(path))
+    except RecursionError:
+        raise UsageError(f"{path}: its scenario cannot be read (nested too deeply)") from None
     except (json.JSONDecodeError, ScenarioError) as exc:
         raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
     steps = headers["targets"][1][0] if headers["targets"][1] else 0
