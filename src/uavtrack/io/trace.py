@@ -98,7 +98,7 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
         with np.load(path, allow_pickle=False) as data:
             headers = _headers(path, data.zip)
             arrays = {name: data[name] for name in headers if name in META}
-            _check_headers(path, headers, arrays)
+            scenario = _check_headers(path, headers, arrays)
             arrays.update({name: data[name] for name in headers if name not in META})
     except UsageError:
         raise
@@ -114,12 +114,7 @@ def read(path: str | os.PathLike[str]) -> TraceFile:
         older = " (written before traces carried their scenario: run it again)"
         hint = older if "scenario" in missing and len(missing) <= 2 else ""
         raise UsageError(f"{path}: not a uavtrack trace file, missing {', '.join(missing)}{hint}")
-    try:
-        scenario = Scenario.from_dict(json.loads(str(arrays["scenario"])), origin=str(path))
-    except RecursionError:
-        raise UsageError(f"{path}: its scenario cannot be read (nested too deeply)") from None
-    except (json.JSONDecodeError, ScenarioError) as exc:
-        raise UsageError(f"{path}: its scenario cannot be read ({exc})") from None
+    assert scenario is not None  # read from the headers' metadata: nothing is missing
     if later:  # arrays of a later format, not counted when the file was written
         sizes = _sizes(scenario)
         steps = arrays["targets"].shape[0] if arrays["targets"].ndim else 0
@@ -178,9 +173,10 @@ def _headers(path: Path, archive: zipfile.ZipFile) -> dict[str, tuple[np.dtype, 
 
 def _check_headers(
     path: Path, headers: dict[str, tuple[np.dtype, tuple[int, ...]]], meta: dict[str, np.ndarray]
-) -> None:
+) -> Scenario | None:
     """Refuse, before any array's data is read, metadata that is not short text or one
-    number, and arrays larger than the scenario's team and steps allow."""
+    number, and arrays larger than the scenario's team and steps allow. Returns the
+    scenario (None when the scenario or the targets are missing: `read` names them)."""
     for name in META:
         if name in headers:
             dtype, shape = headers[name]
@@ -188,7 +184,7 @@ def _check_headers(
             if shape != () or not (text or dtype.kind in "iuf"):
                 raise UsageError(f"{path}: not a uavtrack trace file ({name} is not metadata)")
     if "scenario" not in meta or "targets" not in headers:
-        return  # `read` names what is missing
+        return None  # `read` names what is missing
     try:
         scenario = Scenario.from_dict(json.loads(str(meta["scenario"])), origin=str(path))
     except RecursionError:
@@ -223,6 +219,7 @@ def _check_headers(
                 f"({scenario.n_uavs} UAVs, {scenario.n_targets} targets) and the {steps} "
                 f"steps of targets give {expected[name]}"
             )
+    return scenario
 
 
 def _check_format(path: Path, entry: np.ndarray | None, version: str) -> int:
