@@ -206,7 +206,18 @@ def test_targets_drawn_a_block_at_a_time_are_the_whole_run_bit_for_bit(
     monkeypatch.setattr(world.Targets, "BLOCK", block)
     scenario = uavtrack.Scenario(steps=100).with_overrides(overrides)
     seeds = [np.random.SeedSequence(3), np.random.SeedSequence(4)]
-    whole = np.stack([world.initial_conditions(scenario, world.streams(s)[0])[1] for s in seeds])
+
+    def at_once(seed):  # every acceleration drawn at once, then the whole closed form
+        rng = world.streams(seed)[0]
+        start = world.draw_start(scenario, rng)[0]
+        nt, dt, L = scenario.n_targets, scenario.dt, scenario.field_size
+        accel = rng.standard_normal((scenario.steps - 1, nt, 2)) * scenario.acceleration_std()
+        if scenario.target.motion == "manoeuvring":
+            m = scenario.target.manoeuvre
+            return world.manoeuvring_trajectories(start, accel, dt, L, m, rng)
+        return world.target_trajectories(start, accel, dt, L)
+
+    whole = np.stack([at_once(s) for s in seeds])
     rngs = [world.streams(s)[0] for s in seeds]
     starts = [world.draw_start(scenario, rng)[0] for rng in rngs]
     streamed = world.Targets(np.stack(starts), rngs, scenario)  # keeps one block

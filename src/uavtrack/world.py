@@ -106,13 +106,52 @@ def target_trajectories(
     Returns (..., T, Nt, 4), element k the targets at step k.
     """
     p0, v0 = initial[..., None, :, :2], initial[..., None, :, 2:]
-    vel = np.concatenate([v0, v0 + dt * np.cumsum(accel, axis=-3)], axis=-3)
-    moves = vel[..., :-1, :, :] * dt + 0.5 * dt**2 * accel
-    free = np.concatenate([p0, p0 + np.cumsum(moves, axis=-3)], axis=-3)
-    folded = np.mod(free, 2.0 * field_size)
-    pos = np.where(folded > field_size, 2.0 * field_size - folded, folded)
-    mirrored = np.mod(np.floor_divide(free, field_size), 2) == 1
+    later, _ = free_path(p0, v0, accel, dt, field_size)
+    return np.concatenate([fold(p0, v0, field_size), later], axis=-3)
+
+
+Sums = tuple[np.ndarray, np.ndarray, np.ndarray]
+"""What the closed form carries from one block of steps to the next (`free_path`): the
+accelerations summed, the free moves summed, the free velocity at the block's start."""
+
+
+def free_path(
+    p0: np.ndarray,
+    v0: np.ndarray,
+    accel: np.ndarray,
+    dt: float,
+    field_size: float,
+    sums: Sums | None = None,
+) -> tuple[np.ndarray, Sums]:
+    """The states after the accelerations accel (..., n, Nt, 2) of the path that starts
+    at p0, v0 (..., 1, Nt, 2), folded into the field (`fold`), and the sums to continue
+    it: given `sums` of the steps before, the cumulative sums go on from them, so that
+    blocks of steps give the states of the whole run bit for bit (an accumulation adds
+    in order)."""
+    if sums is None:
+        speed, velocity = np.cumsum(accel, axis=-3), v0
+    else:
+        speed, velocity = _continued(sums[0], accel), sums[2]
+    vel = v0 + dt * speed  # the velocity after each acceleration
+    before = np.concatenate([velocity, vel[..., :-1, :, :]], axis=-3)
+    moves = before * dt + 0.5 * dt**2 * accel
+    moved = np.cumsum(moves, axis=-3) if sums is None else _continued(sums[1], moves)
+    carried = (speed[..., -1:, :, :], moved[..., -1:, :, :], vel[..., -1:, :, :])
+    return fold(p0 + moved, vel, field_size), carried
+
+
+def fold(free: np.ndarray, vel: np.ndarray, field_size: float) -> np.ndarray:
+    """Free positions and velocities (..., 2) folded into [0, L]: the walls are mirrors."""
+    L = field_size
+    folded = np.mod(free, 2.0 * L)
+    pos = np.where(folded > L, 2.0 * L - folded, folded)
+    mirrored = np.mod(np.floor_divide(free, L), 2) == 1
     return np.concatenate([pos, np.where(mirrored, -vel, vel)], axis=-1)
+
+
+def _continued(carried: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """np.cumsum(values, axis=-3) continued from `carried` (..., 1, Nt, 2)."""
+    return np.cumsum(np.concatenate([carried, values], axis=-3), axis=-3)[..., 1:, :, :]
 
 
 # ---------------------------------------------------------------- each trial's draws
@@ -237,10 +276,8 @@ class Targets:
         self.steps = scenario.steps
         self.std = np.asarray(scenario.acceleration_std())
         self.p0, self.v0 = initial[..., :2], initial[..., 2:]
-        self.speed_sum = np.zeros(self.v0.shape)  # the accelerations summed so far
-        self.move_sum = np.zeros(self.p0.shape)  # the free moves summed so far
-        self.velocity = self.v0  # the free velocity at the next step's start
-        self.blocks = [self._fold(self.p0[:, None], self.v0[:, None])]  # (B, n, Nt, 4) each
+        self.sums: Sums | None = None  # what the closed form carries (`free_path`)
+        self.blocks = [fold(self.p0[:, None], self.v0[:, None], scenario.field_size)]
         self.made = 1  # steps drawn
         self.start = 0  # the step of blocks[-1][:, 0]
 
@@ -274,32 +311,20 @@ class Targets:
         else:
             n, nt = min(self.BLOCK, self.steps - self.made), self.p0.shape[-2]
             accel = np.stack([rng.standard_normal((n, nt, 2)) for rng in self.rngs]) * self.std
-            block = self._free(accel, first=self.made == 1)
+            block = self._free(accel)
         if self.keep:
             self.blocks.append(block)
         else:
             self.blocks = [block]
         self.start, self.made = self.made, self.made + block.shape[1]
 
-    def _free(self, accel: np.ndarray, first: bool) -> np.ndarray:
-        """The states after the accelerations (B, n, Nt, 2): `target_trajectories`'
-        closed form, its cumulative sums continued from those carried."""
-        dt = self.scenario.dt
-        speed = np.cumsum(accel, axis=1) if first else _continued(self.speed_sum, accel)
-        vel = self.v0[:, None] + dt * speed  # the velocity after each acceleration
-        before = np.concatenate([self.velocity[:, None], vel[:, :-1]], axis=1)
-        moves = before * dt + 0.5 * dt**2 * accel
-        moved = np.cumsum(moves, axis=1) if first else _continued(self.move_sum, moves)
-        self.speed_sum, self.move_sum, self.velocity = speed[:, -1], moved[:, -1], vel[:, -1]
-        return self._fold(self.p0[:, None] + moved, vel)
-
-    def _fold(self, free: np.ndarray, vel: np.ndarray) -> np.ndarray:
-        """Free positions and velocities folded into the field (the walls are mirrors)."""
-        L = self.scenario.field_size
-        folded = np.mod(free, 2.0 * L)
-        pos = np.where(folded > L, 2.0 * L - folded, folded)
-        mirrored = np.mod(np.floor_divide(free, L), 2) == 1
-        return np.concatenate([pos, np.where(mirrored, -vel, vel)], axis=-1)
+    def _free(self, accel: np.ndarray) -> np.ndarray:
+        """The states after the accelerations (B, n, Nt, 2), continuing the run."""
+        s = self.scenario
+        block, self.sums = free_path(
+            self.p0[:, None], self.v0[:, None], accel, s.dt, s.field_size, self.sums
+        )
+        return block
 
     def _manoeuvring(self) -> np.ndarray:
         """Steps 1 .. T-1 of every trial's manoeuvring run, drawn whole."""
@@ -317,13 +342,6 @@ class Targets:
             for b, rng in enumerate(self.rngs)
         ]
         return np.stack(runs)[:, 1:]
-
-
-def _continued(carried: np.ndarray, values: np.ndarray) -> np.ndarray:
-    """np.cumsum(values, axis=-3) continued from `carried` (B, Nt, 2): the sums a whole
-    cumsum gives there, bit for bit (an accumulation adds in order)."""
-    both = np.concatenate([carried[:, None], values], axis=1)
-    return np.cumsum(both, axis=1)[:, 1:]
 
 
 def start_grid(n: int, spacing: float, field_size: float) -> np.ndarray:
