@@ -9,7 +9,9 @@ from uavtrack.tracks.manage import CONFIRMED, EMPTY, TENTATIVE
 
 
 def _scenario(**tracker):
-    return uavtrack.Scenario(n_uavs=1, n_targets=1, tracker={"association": "gnn", **tracker})
+    return uavtrack.Scenario(
+        n_uavs=1, n_targets=1, tracker={"association": "gnn", "confirmation": "m_of_n", **tracker}
+    )
 
 
 def _one(status, hits=0, scans=0, misses=0, label=7):

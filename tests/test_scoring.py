@@ -18,6 +18,7 @@ from uavtrack.tracks.scoring import (
     label_changes,
     matched_nees,
     nearest_truth,
+    unassigned_kinds,
 )
 
 stonesoup = pytest.importorskip("stonesoup")
@@ -277,8 +278,13 @@ def test_the_accumulator_per_row_and_per_trial():
         "gospa_missed": [np.mean([half, half, half, 2 * half]), 0.0, 2 * half, half],
         "switches": [100 * 1 / 8, 0.0, 0.0, 0.0],
         "fragmentations": [100 * 1 / 8, 0.0, 0.0, 0.0],
-        "false_tracks": [1 / 4, 1.0, 0.0, 0.0],
-        "false_tracks_per_target": [1 / 8, 1 / 2, 0.0, 0.0],
+        "unassigned_tracks": [1 / 4, 1.0, 0.0, 0.0],
+        "unassigned_tracks_per_target": [1 / 8, 1 / 2, 0.0, 0.0],
+        # row 0's label 9 never followed a target; row 1's second track of target 1
+        "duplicate_tracks": [0.0, 1 / 2, 0.0, 0.0],
+        "stale_tracks": [0.0, 0.0, 0.0, 0.0],
+        "never_tracks": [1 / 8, 0.0, 0.0, 0.0],
+        "never_tracks_new": [100 / 4, 0.0, 0.0, 0.0],
         "siap_completeness": [3 / 8, 1.0, 0.0, 1 / 2],
         "siap_ambiguity": [1.0, 3 / 2, np.nan, 1.0],
         "siap_spuriousness": [1 / 4, 0.0, np.nan, 0.0],
@@ -356,3 +362,17 @@ def test_inputs_of_the_wrong_shape_are_refused():
         score.add(**(good | {"labels": np.zeros((2, 5), int)}))
     score.add(**good)
     assert score.steps == 1
+
+
+def test_unassigned_tracks_split_into_duplicates_stale_and_never_followed():
+    """Three unassigned tracks of one row: a second track on a followed target, a track
+    that followed a target before and is now off it, and one that never followed any."""
+    assigned = np.array([[0, -1]])  # target 0 held by slot 0; target 1 by none
+    nearest = np.array([[0, 0, -1, -1, 1]])  # slot 1 sits on target 0 too; slot 4 near 1
+    confirmed = np.array([[True, True, True, True, True]])
+    before = np.array([[True, False, True, False, False]])
+    duplicate, stale, never = unassigned_kinds(assigned, nearest, confirmed, before)
+    assert duplicate.tolist() == [[False, True, False, False, False]]
+    assert stale.tolist() == [[False, False, True, False, False]]
+    # slot 4 is near target 1, which nothing holds: not a duplicate, never followed
+    assert never.tolist() == [[False, False, False, True, True]]

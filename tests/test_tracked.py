@@ -85,7 +85,7 @@ def test_a_batch_gives_what_each_trial_gives_alone():
     together = uavtrack.run(scenario, "distributed", seeds).metrics
     for t, seed in enumerate(seeds):
         alone = uavtrack.run(scenario, "distributed", [seed]).metrics
-        for name in ("observation_rate", "gospa", "false_tracks", "switches", "messages"):
+        for name in ("observation_rate", "gospa", "unassigned_tracks", "switches", "messages"):
             assert together[name][t] == pytest.approx(alone[name][0], rel=1e-9, nan_ok=True)
 
 
@@ -130,7 +130,7 @@ def test_every_method_runs_with_tracks(method, extra):
     r = uavtrack.simulate(scenario, method, seed=5)
     t = r.trace
     assert 0.0 <= r.observation_rate <= 1.0
-    for name in ("gospa", "false_tracks", "siap_completeness", "nees_median"):
+    for name in ("gospa", "unassigned_tracks", "siap_completeness", "nees_median"):
         assert np.isfinite(getattr(r, name)), name
     assert np.isnan(r.rmse)  # a track set has no estimate per target index
     confirmed = t.status == 2

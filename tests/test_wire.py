@@ -13,6 +13,7 @@ from uavtrack import radio
 from uavtrack.agents.messages import VERSION, Part, Radio, Spec, encode, packed
 from uavtrack.agents.security import Gate
 from uavtrack.faults import PROTOCOLS
+from uavtrack.tracks import manage
 
 PARTS = ("flood", "consensus", "beacon", "bids", "upload", "download")
 
@@ -31,6 +32,7 @@ def frames(draw):
     m = draw(st.integers(1, 40))
     slots = draw(st.sampled_from([0, draw(st.integers(1, 20))]))
     avoid = draw(st.booleans())
+    book = draw(st.sampled_from([(), ("existence",), ("close",), ("existence", "close")]))
     count = draw(st.integers(1, 3))
     parts = []
     for _ in range(count):
@@ -43,7 +45,7 @@ def frames(draw):
     k = draw(st.sampled_from([0, 1, 127, 128, 255, 256, 65535, 65536, 2**32]))
     sender = draw(st.integers(0, n - 1))
     receiver = draw(st.integers(0, n))
-    return n, m, slots, avoid, parts, k, sender, receiver
+    return n, m, slots, avoid, book, parts, k, sender, receiver
 
 
 @settings(max_examples=150, deadline=None)
@@ -51,11 +53,11 @@ def frames(draw):
 def test_the_counted_bytes_of_a_frame_are_those_the_agents_put_on_the_wire(frame):
     # every MessagePack size class is crossed: ints of 1-9 bytes, strings, binaries of
     # 8- and 16-bit lengths, variable rows (a scan), parts without content
-    n, m, slots, avoid, parts, k, sender, receiver = frame
+    n, m, slots, avoid, book, parts, k, sender, receiver = frame
     rng = np.random.default_rng(0)
     wire, counted, count = [], 0, len(parts)
     for protocol, round_, final, rows in parts:
-        layout = radio.layout(protocol, n, m, slots, avoid)
+        layout = radio.layout(protocol, n, m, slots, avoid, book=book)
         if rows is None:
             wire.append(Part(protocol, round_, final, None))
             counted += int(radio.part_bytes(protocol, round_, final, None))
@@ -88,13 +90,15 @@ def test_the_int_sizes_are_messagepacks_at_every_boundary():
 @pytest.mark.parametrize("avoid", [False, True])
 def test_the_batch_layouts_are_what_the_agents_admit(tracked, avoid):
     overrides = {"planner.avoidance": "loiter" if avoid else "none"}
-    if tracked:
-        overrides["tracker.association"] = "gnn"
+    if tracked:  # existence (the default) and merging: the download carries both
+        overrides |= {"tracker.association": "gnn", "tracker.merge": 2}
     scenario = uavtrack.Scenario().with_overrides(overrides)
     spec = Spec.of(scenario, central=True)
     K = scenario.track_slots if tracked else 0
+    book = manage.sent_fields(scenario.tracker) if tracked else ()
+    assert book == (("existence", "close") if tracked else ())
     for protocol in PARTS:
-        layout = radio.layout(protocol, scenario.n_uavs, scenario.n_targets, K, avoid)
+        layout = radio.layout(protocol, scenario.n_uavs, scenario.n_targets, K, avoid, book=book)
         admitted = spec.contents(protocol)
         assert admitted is not None
         assert {name: kind[:2] for name, kind in admitted.items()} == layout, protocol

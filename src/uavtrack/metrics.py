@@ -109,8 +109,28 @@ METRICS: dict[str, tuple[str, str]] = {
         "(CLEAR MOT mismatches), each UAV's tracks",
     ),
     "fragmentations": ("", "per target and 100 steps, a target in view that loses its track"),
-    "false_tracks": ("", "confirmed tracks matched to no target, per UAV and step"),
-    "false_tracks_per_target": ("", "the same per target and step"),
+    "unassigned_tracks": (
+        "",
+        "confirmed tracks GOSPA assigns to no target (within the cut-off), per UAV and step: "
+        "duplicates, stale and never-followed tracks together",
+    ),
+    "unassigned_tracks_per_target": ("", "the same per target and step"),
+    "duplicate_tracks": (
+        "",
+        "unassigned confirmed tracks whose nearest target within the cut-off another track "
+        "follows (a target followed twice), per target and step",
+    ),
+    "stale_tracks": (
+        "",
+        "the other unassigned confirmed tracks whose label followed a target before (a "
+        "track left behind), per target and step",
+    ),
+    "never_tracks": (
+        "",
+        "unassigned confirmed tracks that have not followed any target so far (clutter-born), "
+        "per target and step",
+    ),
+    "never_tracks_new": ("", "such tracks new to a UAV, per UAV and 100 steps"),
     "time_to_confirm": (
         "1",
         "steps from a target's first sight without a track to its first matched track (a "

@@ -471,7 +471,13 @@ F8, I8, B1 = "<f8", "<i8", "|b1"
 
 
 def layout(
-    protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False, tuples: str = "full"
+    protocol: str,
+    n: int,
+    m: int,
+    slots: int = 0,
+    avoid: bool = False,
+    tuples: str = "full",
+    book: tuple[str, ...] = (),
 ) -> Layout:
     """The arrays of a protocol's content in the agent form, `n` UAVs, `m` targets, K =
     `slots` track slots per UAV with unknown association (0: known), and with
@@ -482,7 +488,10 @@ def layout(
     tuples: how the consensus carries its tuples: "full", every target's in float64;
     "listed" (``fusion.trigger``), the same for the targets it lists; "compact"
     (``radio.encoding``), the targets it lists in float32, the covariance's upper
-    triangle (`wire_cov`), without the confidence (its receiver computes it)."""
+    triangle (`wire_cov`), without the confidence (its receiver computes it).
+
+    book: the track book's fields beyond M-of-N's that the download carries
+    (`tracks.manage.sent_fields`)."""
     if protocol == "consensus" and tuples != "full" and not slots:
         if tuples == "compact":
             return {
@@ -497,6 +506,7 @@ def layout(
         tracks = {"mean": (F8, (K, 4)), "cov": (F8, (K, 4, 4)), "label": (I8, (K,))}
         tracks |= {"status": (I8, (K,)), "stamp": (I8, (K,))}
         counts = {"hits": (I8, (K,)), "scans": (I8, (K,)), "misses": (I8, (K,))}
+        counts |= {name: (F8 if name == "existence" else I8, (K,)) for name in book}
         return {
             "flood": {"known": (B1, (n,))},
             "consensus": {**tracks, "tombs": (I8, (K, 2))},
@@ -606,9 +616,11 @@ the parts."""
 
 
 @functools.cache
-def layout_bytes(protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False) -> int:
+def layout_bytes(
+    protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False, book: tuple[str, ...] = ()
+) -> int:
     """`content_bytes` of a fixed `layout` (no scan in it)."""
-    return int(content_bytes(layout(protocol, n, m, slots, avoid)))
+    return int(content_bytes(layout(protocol, n, m, slots, avoid, book=book)))
 
 
 def wire_mean(mean: np.ndarray) -> np.ndarray:

@@ -707,7 +707,9 @@ def _finish_tracked(
     if tracks.central is not None:
         c = tracks.central
         m, P, node_modes = tracker.close(c.mean, c.cov, c.modes, c.mean, c.cov)
-        central = manage.Slots(book=c.book, mean=m, cov=P, modes=node_modes)
+        central = manage.Slots(
+            book=manage.survive(c.book, ctx.scenario), mean=m, cov=P, modes=node_modes
+        )
     target = pending.assigned.target
     new = State(
         k=pending.k + 1,
@@ -720,7 +722,7 @@ def _finish_tracked(
         held=pending.assigned.held,
         flight=state.flight,
         modes=modes,
-        book=tracks.book,
+        book=manage.survive(tracks.book, ctx.scenario),
         central=central,
         labels=pending.labels,
         tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
@@ -1329,8 +1331,12 @@ class Result:
     gospa_false: float
     switches: float
     fragmentations: float
-    false_tracks: float
-    false_tracks_per_target: float
+    unassigned_tracks: float
+    unassigned_tracks_per_target: float
+    duplicate_tracks: float
+    stale_tracks: float
+    never_tracks: float
+    never_tracks_new: float
     time_to_confirm: float
     never_confirmed: float
     siap_completeness: float

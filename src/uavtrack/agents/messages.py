@@ -39,6 +39,7 @@ from .. import estimation
 from ..faults import PROTOCOLS
 from ..radio import WIRE_VERSION, mirrored
 from ..robust.plausibility import CONSISTENT, Bounds
+from ..tracks import manage
 
 VERSION = WIRE_VERSION
 """Schema version; a message of another version is dropped."""
@@ -257,6 +258,7 @@ DOMAINS = {
     "measurement covariance": "as covariance, of a measurement (2 x 2)",
     "ground positions": "x and y within the field plus the run's margin",
     "counts": "a count in [0, the run's largest label]",
+    "existence": "a track's existence probability, in [0, 1]",
     "targets": "the targets a consensus message lists, each once, 0 to M - 1 (up to M of "
     "them); the other fields' rows are theirs",
     "covariance triangle": "each row the upper triangle (row by row) of a covariance, "
@@ -307,6 +309,8 @@ class Spec:
     (``fusion.trigger``: the targets it lists) or "compact" (``radio.encoding``)."""
     limited: bool = False
     """With ``radio.bandwidth_bps``: Sense and Tick carry what the shares afford."""
+    book: tuple[str, ...] = ()
+    """The track book's fields beyond M-of-N's a download carries (`manage.sent_fields`)."""
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
@@ -335,6 +339,7 @@ class Spec:
             if scenario.fusion.trigger is not None
             else "full",
             limited=scenario.radio.bandwidth_bps is not None,
+            book=manage.sent_fields(scenario.tracker) if tracked else (),
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -426,6 +431,10 @@ class Spec:
                 "hits": (I, (K,), "counts"),
                 "scans": (I, (K,), "counts"),
                 "misses": (I, (K,), "counts"),
+                **{
+                    name: (F, (K,), "existence") if name == "existence" else (I, (K,), "counts")
+                    for name in self.book
+                },
                 "serial": (I, (), "counts"),
                 "target": (I, (), "label or none"),
             },
@@ -552,6 +561,8 @@ class Spec:
             return None if self.bounds is None else _position(value, self.bounds)
         if domain == "counts":
             return None if ((value >= 0) & (value < self.labels)).all() else "count out of range"
+        if domain == "existence":
+            return None if ((value >= 0) & (value <= 1)).all() else "probability out of range"
         if domain == "track stamp":
             return None if ((value[live] >= 0) & (value[live] <= k)).all() else "stamp out of range"
         if domain == "tombstones":

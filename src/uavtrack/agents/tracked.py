@@ -135,10 +135,12 @@ class TrackedUav(UavAgent):
         if content is not None:
             K = self.scenario.track_slots
             book = manage.Book(
-                **{f: content[f].reshape(1, 1, K) for f in ("label", "hits", "scans", "misses")},
+                **{
+                    f: content[f].reshape(1, 1, K)
+                    for f in ("label", "hits", "scans", "misses", "stamp", *self.spec.book)
+                },
                 status=content["status"].astype(np.int8).reshape(1, 1, K),
                 serial=content["serial"].reshape(1, 1),
-                stamp=content["stamp"].reshape(1, 1, K),
             )
             mean, cov = content["mean"][None, None], content["cov"][None, None]
             target = int(content["target"])
@@ -151,7 +153,8 @@ class TrackedUav(UavAgent):
             k, slot, best, book, mean, cov, slot_bids, one, (sent, delivered), plan_seconds
         )
         tracker = self.ctx.const.tracker
-        self.book, self.modes = book, None  # the node keeps the modes of an IMM
+        self.book = manage.survive(book, self.scenario)
+        self.modes = None  # the node keeps the modes of an IMM
         self.mean, self.cov = estimation.predict(mean, cov, tracker.A, tracker.Q)
         return report
 
@@ -188,7 +191,7 @@ class TrackedUav(UavAgent):
             )
         else:
             self.mean, self.cov = estimation.predict(agreed.mean, agreed.cov, tracker.A, tracker.Q)
-        self.book = book
+        self.book = manage.survive(book, self.scenario)
         if agreed.tombs is not None:
             self.tombs = agreed.tombs
 
@@ -398,6 +401,7 @@ class TrackedCentral(CentralAgent):
             "mean": node.mean[0, 0], "cov": node.cov[0, 0], "label": book.label[0, 0],
             "status": book.status[0, 0].astype(np.int64), "stamp": book.stamp[0, 0],
             "hits": book.hits[0, 0], "scans": book.scans[0, 0], "misses": book.misses[0, 0],
+            **{name: getattr(book, name)[0, 0] for name in self.spec.book},
             "serial": np.array(book.serial[0, 0], dtype=np.int64),
         }  # fmt: skip
         contents = {
@@ -405,5 +409,7 @@ class TrackedCentral(CentralAgent):
             for i in np.flatnonzero(alive)
         }
         mean, cov, modes = tracker.close(node.mean, node.cov, node.modes, node.mean, node.cov)
-        self.node = manage.Slots(book=book, mean=mean, cov=cov, modes=modes)
+        self.node = manage.Slots(
+            book=manage.survive(book, self.scenario), mean=mean, cov=cov, modes=modes
+        )
         return self.downloads(k, alive, contents, offered, start)

@@ -252,7 +252,11 @@ TRACK_ROWS = (
     ("gospa_localisation", "  its localisation part [m^p]", "{:.2f}"),
     ("gospa_missed", "  its missed part [m^p]", "{:.2f}"),
     ("gospa_false", "  its false part [m^p]", "{:.2f}"),
-    ("false_tracks_per_target", "false confirmed tracks per target and step", "{:.3f}"),
+    ("unassigned_tracks_per_target", "unassigned confirmed tracks per target and step", "{:.3f}"),
+    ("duplicate_tracks", "  duplicates (a target followed twice)", "{:.3f}"),
+    ("stale_tracks", "  stale (once on a target, now off)", "{:.3f}"),
+    ("never_tracks", "  never on a target (clutter-born)", "{:.3f}"),
+    ("never_tracks_new", "  new ones per UAV and 100 steps", "{:.2f}"),
     ("switches", "track switches per target and 100 steps", "{:.2f}"),
     ("fragmentations", "fragmentations per target and 100 steps", "{:.2f}"),
     ("time_to_confirm", "steps to confirm a target found anew", "{:.1f}"),
@@ -605,7 +609,11 @@ def compare(
 
 
 TRACK_COMPARE_ROWS = tuple(r for r in TRACK_ROWS if r[0] in ("gospa",) or "gospa_" in r[0]) + (
-    ("false_tracks_per_target", "false confirmed tracks per target and step", "{:.3f}"),
+    ("unassigned_tracks_per_target", "unassigned confirmed tracks per target and step", "{:.3f}"),
+    ("duplicate_tracks", "  duplicates (a target followed twice)", "{:.3f}"),
+    ("stale_tracks", "  stale (once on a target, now off)", "{:.3f}"),
+    ("never_tracks", "  never on a target (clutter-born)", "{:.3f}"),
+    ("never_tracks_new", "  new ones per UAV and 100 steps", "{:.2f}"),
     ("switches", "track switches per target and 100 steps", "{:.2f}"),
     ("siap_completeness", "SIAP completeness", "{:.3f}"),
     ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),

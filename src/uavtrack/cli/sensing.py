@@ -78,12 +78,12 @@ def _print(summary: dict, out: Path, info: dict) -> None:
     from rich.table import Table
 
     table = Table(title="sensing (mean over trials)")
-    for col in ("method", "P_D", "clutter", "assoc.", "rate", "− known", "GOSPA", "false/tgt"):
+    for col in ("method", "P_D", "clutter", "assoc.", "rate", "− known", "GOSPA", "dup/tgt"):
         table.add_column(col, justify="left" if col in ("method", "assoc.") else "right")
     for method, rows in summary["methods"].items():
         for k, e in enumerate(rows.values()):
             against = e.get("against_known")
-            false = e["false_tracks_per_target"]["mean"]
+            false = e["duplicate_tracks"]["mean"]
             table.add_row(
                 method if k == 0 else "",
                 f"{e['pd']:g}",

@@ -212,7 +212,9 @@ class Scenario(Part):
     def _models(self) -> Scenario:
         """A setting of a model that is not on would do nothing: refuse it."""
         tracks = ("max_tracks", "gate_probability", "confirm", "delete_misses", "delete_std")
-        tracks += ("birth_velocity_std",)
+        tracks += ("birth_velocity_std", "confirmation", "merge", "existence", "birth_existence")
+        tracks += ("survival",)
+        counted = ("confirm", "delete_misses")
         for group, value, wanted, on, names in (
             (
                 self.target.manoeuvre,
@@ -234,6 +236,20 @@ class Scenario(Part):
                 "tracker.association = gnn or jpda",
                 "tracks",
                 tracks,
+            ),
+            (
+                self.tracker,
+                self.tracker.confirmation,
+                "tracker.confirmation = existence",
+                "existence",
+                ("existence", "birth_existence", "survival"),
+            ),
+            (
+                self.tracker,
+                self.tracker.confirmation,
+                "tracker.confirmation = m_of_n",
+                "m_of_n",
+                counted,
             ),
         ):
             if value == on:

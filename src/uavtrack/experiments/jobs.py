@@ -78,8 +78,9 @@ UNDEFINED_ALLOWED = (
     "rmse", "rmse_best", "nees", "nees_best", "rounds", "decision_time_ms", "decision_wall_ms",
     "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best", "nees_median",
     "nees_inside", "nees_best_median", "nees_best_inside", "gospa_localisation",
-    "gospa_missed", "gospa_false", "switches", "fragmentations", "false_tracks",
-    "false_tracks_per_target", "time_to_confirm", "never_confirmed", "siap_completeness",
+    "gospa_missed", "gospa_false", "switches", "fragmentations", "unassigned_tracks",
+    "unassigned_tracks_per_target", "duplicate_tracks", "stale_tracks", "never_tracks",
+    "never_tracks_new", "time_to_confirm", "never_confirmed", "siap_completeness",
     "siap_ambiguity", "siap_spuriousness", "separation_min",
 )  # fmt: skip
 """Metrics that may be NaN: nothing to average (every UAV failed), not measured, or not

@@ -72,7 +72,8 @@ PAIRED_METRICS = (
 one trial only, so they have no interval)."""
 
 TRACK_METRICS = (
-    "gospa", "gospa_localisation", "gospa_missed", "gospa_false", "false_tracks_per_target",
+    "gospa", "gospa_localisation", "gospa_missed", "gospa_false",
+    "unassigned_tracks_per_target", "duplicate_tracks", "stale_tracks", "never_tracks",
     "switches", "siap_completeness", "siap_ambiguity", "siap_spuriousness",
 )  # fmt: skip
 """The track metrics of a run with tracks (``tracker.association`` gnn or jpda), which a

@@ -240,10 +240,11 @@ def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.nd
     known = scenario is None or scenario.tracker.association == "known"
     slots = 0 if known or scenario is None else scenario.track_slots
     avoid = scenario is not None and scenario.planner.avoidance != "none"
+    book = () if known or scenario is None else manage.sent_fields(scenario.tracker)
     m = inputs.gamma.shape[-1]
     if rows is not None:
-        return content_bytes(layout(protocol, n, m, slots, avoid), rows)
-    return layout_bytes(protocol, n, m, slots, avoid)
+        return content_bytes(layout(protocol, n, m, slots, avoid, book=book), rows)
+    return layout_bytes(protocol, n, m, slots, avoid, book)
 
 
 def rounds_on_air(

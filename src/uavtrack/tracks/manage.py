@@ -84,8 +84,12 @@ class Book:
     int8 (`EMPTY`, `TENTATIVE`, `CONFIRMED`), hits int64 (of a tentative track, the scans
     in view that met a measurement), scans int64 (its scans in view), misses int64
     (consecutive scans in view without a measurement), serial (B, N) int64, the births
-    of each UAV so far, and stamp (B, N, K) int64, the last step a measurement met the
-    track anywhere in the team as far as the UAV knows (`team.TrackSet`)."""
+    of each UAV so far, stamp (B, N, K) int64, the last step a measurement met the
+    track anywhere in the team as far as the UAV knows (`team.TrackSet`), existence
+    (B, N, K) float64, the track's probability of existence (``tracker.confirmation =
+    "existence"``; carried but unread under m_of_n), and close (B, N, K) int64, the scans
+    in view in a row the track lay inside another's position gate (``tracker.merge``);
+    both are zeros when not given."""
 
     label: np.ndarray
     status: np.ndarray
@@ -94,6 +98,14 @@ class Book:
     misses: np.ndarray
     serial: np.ndarray
     stamp: np.ndarray
+    existence: np.ndarray = None  # type: ignore[assignment]  (filled in below)
+    close: np.ndarray = None  # type: ignore[assignment]
+
+    def __post_init__(self) -> None:  # a book made without them: no existence, no count
+        if self.existence is None:
+            object.__setattr__(self, "existence", np.zeros(self.label.shape))
+        if self.close is None:
+            object.__setattr__(self, "close", np.zeros(self.label.shape, dtype=np.int64))
 
     @property
     def present(self) -> np.ndarray:
@@ -102,6 +114,32 @@ class Book:
     @property
     def confirmed(self) -> np.ndarray:
         return self.status == CONFIRMED
+
+
+SLOT_FIELDS = ("label", "status", "hits", "scans", "misses", "stamp", "existence", "close")
+"""The fields of a `Book` with one value per slot (serial has one per UAV)."""
+
+BRIEFED_EXISTENCE = 0.99
+"""The existence probability of a briefed target's track (``tracker.confirmation =
+"existence"``): the briefing says the target is there, but not 1, from which no miss
+could ever lower it."""
+
+
+EXISTENCE_CAP = 0.999
+"""The largest existence probability a track takes. Uncapped, a track met for a while
+reaches 1 to rounding, and the misses of a target gone (each multiplies the odds
+r / (1 - r) by 1 - P_D P_G) would take tens of scans to delete it; from 0.999, five
+misses in view in a row at P_D 0.9 fall below a deletion threshold of 0.05, as
+likely for a target that is there (1e-5) as three misses of the M-of-N rule at P_D 0.7."""
+
+
+def sent_fields(settings: TrackerModel) -> tuple[str, ...]:
+    """The `Book` fields beyond M-of-N's a central node's download carries: existence
+    with ``tracker.confirmation = "existence"``, close with ``tracker.merge``; a run
+    without them sends the bytes it always sent."""
+    return ("existence",) * (settings.confirmation == "existence") + ("close",) * bool(
+        settings.merge
+    )
 
 
 def briefed(mean: np.ndarray, cov: np.ndarray, slots: int) -> tuple[Book, np.ndarray, np.ndarray]:
@@ -127,6 +165,8 @@ def briefed(mean: np.ndarray, cov: np.ndarray, slots: int) -> tuple[Book, np.nda
         misses=zeros.copy(),
         serial=np.zeros((B, N), dtype=np.int64),
         stamp=zeros.copy(),
+        existence=np.where(status == CONFIRMED, BRIEFED_EXISTENCE, 0.0),
+        close=zeros.copy(),
     )
     return book, out_mean, out_cov
 
@@ -216,9 +256,13 @@ def scan(
     # (which is in view) lies in its gate: a target entering the disk is met at once
     pd = sensor.detection_probability * (in_view.reshape(P, K) | gated.any(axis=-1))
     dens = np.maximum(density.reshape(P), np.finfo(float).tiny)
+    exists = settings.confirmation == "existence"
+    r = book.existence.reshape(P, K)
+    weigh = pd * r if exists else pd  # JIPDA: a track detected only if it exists
     new_mean, new_cov = m, P_  # updated below: by the filter, or as the modes combine
+    beta = None
     if settings.association == "gnn":
-        take = association.gnn(inn, gated, pd, dens, settings.gate_probability)
+        take = association.gnn(inn, gated, weigh, dens, settings.gate_probability)
         unused = association.unused_gnn(take, ok)
         if modes is None:
             new_mean, new_cov = association.assigned_update(m, P_, zz, RR, take)
@@ -230,8 +274,12 @@ def scan(
             )
             modes = _unrows(flat, mean.shape[:3])
     else:
-        beta = association.jpda(inn, gated, pd, dens, settings.gate_probability)
+        beta = association.jpda(inn, gated, weigh, dens, settings.gate_probability)
         unused = association.unused_jpda(gated, ok)
+    if exists:
+        r = existence_update(r, inn, gated, pd, dens, settings.gate_probability, beta)
+        book = replace(book, existence=np.where(present, r.reshape(B, N, K), book.existence))
+    if beta is not None:
         beta = _firm(beta, (book.status == TENTATIVE).reshape(P, K))
         if modes is None:
             new_mean, new_cov = association.pda_update(m, P_, zz, RR, beta)
@@ -249,15 +297,16 @@ def scan(
     before = book
     book = _count(book, met, in_view, new_cov, scenario, new_mean)
     book = replace(book, stamp=np.where(met, k, book.stamp))
-    lost = (
-        (before.status == CONFIRMED)
-        & (book.status == EMPTY)
-        & (before.misses + 1 >= settings.delete_misses)
-        & in_view
-    )
+    if exists:  # a confirmed track whose existence fell below the threshold where it was looked for
+        missing = before.existence < settings.existence[1]
+    else:
+        missing = before.misses + 1 >= settings.delete_misses
+    lost = (before.status == CONFIRMED) & (book.status == EMPTY) & missing & in_view
     dead = np.where(lost, before.label, -1)
     new_mean = np.where(present[..., None], new_mean, mean)
     new_cov = np.where(present[..., None, None], new_cov, cov)
+    if settings.merge:
+        book = merge(book, new_mean, new_cov, in_view, settings)
     coast = in_view & book.confirmed & ~gated.any(axis=-1).reshape(B, N, K)
     jump = estimation.process_noise(scenario.dt, MANOEUVRE_STD, MANOEUVRE_STD)
     new_cov = np.where(coast[..., None, None], new_cov + jump, new_cov)
@@ -265,6 +314,11 @@ def scan(
         book, new_mean, new_cov, zz, RR, unused, scenario.n_targets,
         settings.birth_velocity_std, team or (0, N),
     )  # fmt: skip
+    book = replace(
+        book,
+        existence=np.where(born, settings.birth_existence, book.existence),
+        close=np.where(born, 0, book.close),
+    )
     book = replace(book, stamp=np.where(born, k, book.stamp))
     if modes is not None:
         if tracker is None:
@@ -383,9 +437,15 @@ def _count(
     scans = book.scans + (tentative & in_view)
     misses = np.where(met, 0, book.misses + in_view)
     status = book.status.copy()
-    status[tentative & (hits >= M)] = CONFIRMED
-    hopeless = tentative & (hits + (Nc - scans) < M)
-    lost = (book.status == CONFIRMED) & (misses >= tracker.delete_misses)
+    if tracker.confirmation == "existence":  # thresholds on the existence probability
+        confirm, delete = tracker.existence
+        status[tentative & (book.existence >= confirm)] = CONFIRMED
+        hopeless = tentative & (book.existence < delete)
+        lost = (book.status == CONFIRMED) & (book.existence < delete)
+    else:
+        status[tentative & (hits >= M)] = CONFIRMED
+        hopeless = tentative & (hits + (Nc - scans) < M)
+        lost = (book.status == CONFIRMED) & (misses >= tracker.delete_misses)
     spread = np.sqrt(cov[..., 0, 0] + cov[..., 1, 1]) > tracker.delete_std
     gone = (hopeless | lost | spread | outside) & book.present
     status[gone] = EMPTY
@@ -396,6 +456,8 @@ def _count(
         hits=np.where(gone, 0, hits),
         scans=np.where(gone, 0, scans),
         misses=np.where(gone, 0, misses),
+        existence=np.where(gone, 0.0, book.existence),
+        close=np.where(gone, 0, book.close),
     )
 
 
@@ -455,6 +517,8 @@ def _births(
         **{name: value.reshape(B, N, K) for name, value in out.items()},
         serial=(serial + n_born).reshape(B, N),
         stamp=book.stamp,
+        existence=book.existence,
+        close=book.close,
     )
     return new_book, mean.reshape(B, N, K, 4), cov.reshape(B, N, K, 4, 4), born.reshape(B, N, K)
 
@@ -481,6 +545,11 @@ def after_fusion(
     agreed; a track new to the UAV (changed 2) starts its counters afresh (confirmed, no
     misses), an emptied slot (3) clears them; a fused one (1) keeps its own."""
     fresh = (changed == 2) | (changed == 3)
+    # a track confirmed by the team (adopted, or a tentative one fused with a confirmed
+    # offer) exists at least as surely as a confirmation says
+    confirmed = (status == CONFIRMED) & ((changed == 2) | (book.status != CONFIRMED))
+    floor = scenario.tracker.existence[0]
+    existence = np.where(confirmed, np.maximum(book.existence, floor), book.existence)
     return replace(
         book,
         label=label,
@@ -489,16 +558,15 @@ def after_fusion(
         scans=np.where(fresh, 0, book.scans),
         misses=np.where(fresh, 0, book.misses),
         stamp=book.stamp if stamp is None else stamp,
+        existence=np.where(changed == 3, 0.0, np.where(changed == 2, floor, existence)),
+        close=np.where(fresh, 0, book.close),
     )
 
 
 def broadcast(book: Book, n: int) -> Book:
     """A central node's book (B, 1, K) as every one of n UAVs' (B, n, K)."""
     return Book(
-        **{
-            name: np.repeat(getattr(book, name), n, axis=1)
-            for name in ("label", "status", "hits", "scans", "misses", "stamp")
-        },
+        **{name: np.repeat(getattr(book, name), n, axis=1) for name in SLOT_FIELDS},
         serial=np.repeat(book.serial, n, axis=1),
     )
 
@@ -507,9 +575,123 @@ def where(take: np.ndarray, a: Book, b: Book) -> Book:
     """Per UAV (take (B, N) bool) the slots of book a, else those of b."""
     pick = take[..., None]
     return Book(
-        **{
-            name: np.where(pick, getattr(a, name), getattr(b, name))
-            for name in ("label", "status", "hits", "scans", "misses", "stamp")
-        },
+        **{name: np.where(pick, getattr(a, name), getattr(b, name)) for name in SLOT_FIELDS},
         serial=np.where(take, a.serial, b.serial),
     )
+
+
+def existence_update(
+    r: np.ndarray,
+    inn: association.Innovations,
+    gated: np.ndarray,
+    pd: np.ndarray,
+    density: np.ndarray,
+    gate_probability: float,
+    beta: np.ndarray | None = None,
+) -> np.ndarray:
+    """Each track's existence probability after a scan, r (P, K) before it.
+
+    Without `beta` (gnn), the integrated PDA's (Musicki, Evans and Stankovic, IEEE TAC
+    1994): r' = L r / (1 - r + L r), L = 1 - P_D P_G + P_D / lambda sum_z N(z; H x, S)
+    over the gated measurements. With the JIPDA weights `beta` (P, K, Z + 1) of the
+    association, whose detection probability was P_D r: r' = (1 - beta_0) + beta_0 r
+    (1 - P_D P_G) / (1 - P_D P_G r), the track detected or, missed, existing unseen;
+    for a track alone in its cluster the two are the same. pd (P, K) is P_D where the
+    track can be detected (0 elsewhere: r is unchanged), density (P,) lambda."""
+    miss = 1.0 - pd * gate_probability
+    if beta is None:
+        lik = np.where(gated, np.exp(inn.log_lik), 0.0).sum(axis=-1)
+        L = miss + pd / density[:, None] * lik  # > 0: P_G < 1
+        with np.errstate(over="ignore"):  # L = inf (no clutter): r' = 1
+            after = r / (r + (1.0 - r) / L)
+    else:
+        unseen = miss * r / np.maximum(1.0 - pd * gate_probability * r, np.finfo(float).tiny)
+        after = (1.0 - beta[..., 0]) + beta[..., 0] * unseen
+    return np.where(r > 0, np.minimum(after, EXISTENCE_CAP), r)
+
+
+def survive(book: Book, scenario: Scenario) -> Book:
+    """Each track's existence predicted one step (``tracker.survival``); the book as it
+    is under ``tracker.confirmation = "m_of_n"``. Called where the tracks are
+    predicted: the simulator's and the agents' cycles, the central node's."""
+    settings = scenario.tracker
+    if settings.confirmation != "existence":
+        return book
+    return replace(book, existence=book.existence * settings.survival)
+
+
+def merge(
+    book: Book, mean: np.ndarray, cov: np.ndarray, in_view: np.ndarray, settings: TrackerModel
+) -> Book:
+    """Tracks of one row that hold one target, merged (``tracker.merge`` = W scans).
+
+    Two present tracks in view are close when their position difference lies inside the
+    gate of the sum of their position covariances (d2 <= chi2.ppf(P_G, 2)); a track's
+    `close` counts the scans in view in a row it was close to another (a scan out of view
+    leaves it). Close tracks whose counts both reached W are one target's: each group of
+    them (connected by closeness) keeps its most confident track (1/trace P; ties: the
+    smaller label), which takes the group's smallest label, its newest stamp, its
+    largest existence, and is confirmed if any was; the others are emptied. A target
+    followed twice is then followed once, under the label the team knew first; two
+    targets crossing stay apart, since two sure tracks a few metres apart are far
+    outside each other's gate, and one that a UAV lost coasts with a wide gate for
+    fewer than W scans in view before it is deleted."""
+    B, N, K = book.label.shape
+    P = B * N
+    look = (book.present & in_view).reshape(P, K)
+    V = int(look.sum(axis=1).max()) if P else 0
+    if V < 2:
+        return replace(book, close=np.where(in_view, 0, book.close))
+    order = np.argsort(~look, axis=1, kind="stable")[:, :V]  # the slots in view first
+    ok = np.take_along_axis(look, order, axis=1)
+    xy = np.take_along_axis(mean.reshape(P, K, 4)[..., :2], order[..., None], axis=1)
+    pp = cov.reshape(P, K, 4, 4)[..., :2, :2]
+    pp = np.take_along_axis(pp, order[..., None, None], axis=1)
+    d = xy[:, :, None] - xy[:, None, :]  # (P, V, V, 2)
+    S = pp[:, :, None] + pp[:, None, :]
+    det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
+    d2 = (S[..., 1, 1] * d[..., 0] ** 2 - 2 * S[..., 0, 1] * d[..., 0] * d[..., 1]
+          + S[..., 0, 0] * d[..., 1] ** 2) / np.maximum(det, np.finfo(float).tiny)  # fmt: skip
+    near = (d2 <= association.threshold(settings.gate_probability)) & ok[:, :, None] & ok[:, None]
+    near &= ~np.eye(V, dtype=bool)
+    row = np.arange(P)[:, None]
+    close = book.close.reshape(P, K).copy()
+    counted = np.where(near.any(axis=-1), close[row, order] + 1, 0)
+    close[row, order] = np.where(ok, counted, close[row, order])
+    ripe = ok & (counted >= settings.merge)
+    pair = near & ripe[:, :, None] & ripe[:, None, :]
+    out = {name: getattr(book, name).reshape(P, K).copy() for name in SLOT_FIELDS}
+    out["close"] = close
+    if pair.any():
+        p, a, b = np.nonzero(pair)
+        n_groups, group = association.components(p * V + a, p * V + b, P * V)
+        members = np.unique(np.concatenate([p * V + a, p * V + b]))
+        g = group[members]
+        mp, mv = members // V, members % V
+        slot = order[mp, mv]
+        lab = out["label"][mp, slot]
+        trace = cov.reshape(P, K, 4, 4)[mp, slot].trace(axis1=-2, axis2=-1)
+        keep = np.zeros(n_groups, dtype=np.int64)  # the most confident member of each group
+        first = np.lexsort((lab, trace, g))
+        starts = np.r_[True, g[first][1:] != g[first][:-1]]
+        keep[g[first][starts]] = first[starts]
+        smallest = np.full(n_groups, np.iinfo(np.int64).max)
+        np.minimum.at(smallest, g, lab)
+        newest = np.full(n_groups, np.iinfo(np.int64).min)
+        np.maximum.at(newest, g, out["stamp"][mp, slot])
+        surest = np.zeros(n_groups)
+        np.maximum.at(surest, g, out["existence"][mp, slot])
+        sure = np.zeros(n_groups, dtype=bool)
+        np.logical_or.at(sure, g, out["status"][mp, slot] == CONFIRMED)
+        gone = np.ones(members.size, dtype=bool)
+        gone[keep[g[first][starts]]] = False
+        for name in ("label", "status", "hits", "scans", "misses", "stamp", "existence", "close"):
+            out[name][mp[gone], slot[gone]] = -1 if name == "label" else 0
+        w = keep[g[first][starts]]
+        gw = g[w]
+        out["label"][mp[w], slot[w]] = smallest[gw]
+        out["stamp"][mp[w], slot[w]] = newest[gw]
+        out["existence"][mp[w], slot[w]] = surest[gw]
+        out["status"][mp[w], slot[w]] = np.where(sure[gw], CONFIRMED, out["status"][mp[w], slot[w]])
+        out["close"][mp[w], slot[w]] = 0
+    return replace(book, **{name: value.reshape(B, N, K) for name, value in out.items()})

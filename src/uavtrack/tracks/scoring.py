@@ -63,8 +63,12 @@ TRACK_METRICS: dict[str, tuple[str, str]] = {
             "gospa_false",
             "switches",
             "fragmentations",
-            "false_tracks",
-            "false_tracks_per_target",
+            "unassigned_tracks",
+            "unassigned_tracks_per_target",
+            "duplicate_tracks",
+            "stale_tracks",
+            "never_tracks",
+            "never_tracks_new",
             "time_to_confirm",
             "never_confirmed",
             "siap_completeness",
@@ -161,6 +165,29 @@ def siap_counts(
     )
 
 
+def unassigned_kinds(
+    assigned: np.ndarray,
+    nearest: np.ndarray,
+    confirmed: np.ndarray,
+    followed_before: np.ndarray,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """GOSPA's unassigned confirmed tracks split as a tracking engineer reads them, each
+    (..., K) bool: *duplicates*, whose nearest target within the cut-off (`nearest`,
+    `nearest_truth`) is assigned to another track (a target followed twice); *stale*,
+    the others whose label followed a target at an earlier step (`followed_before`,
+    (..., K)); *never*, the rest, tracks that never followed a target (clutter-born, so
+    far). assigned (..., Nt): the slot assigned to each target (-1: none), as
+    `gospa_assignment` gives it."""
+    K = confirmed.shape[-1]
+    slot = np.arange(K)
+    held = (assigned[..., None, :] == slot[:, None]).any(axis=-1)  # (..., K)
+    unassigned = confirmed & ~held
+    taken = np.take_along_axis(assigned, np.maximum(nearest, 0), axis=-1) >= 0
+    duplicate = unassigned & (nearest >= 0) & taken
+    stale = unassigned & ~duplicate & followed_before
+    return duplicate, stale, unassigned & ~duplicate & ~followed_before
+
+
 def label_changes(
     label: np.ndarray,
     last: np.ndarray,
@@ -233,8 +260,12 @@ def matched_nees(
 
 _SUMS = (
     "steps", "targets", "gospa", "localisation", "missed", "false", "switches",
-    "fragmentations", "false_tracks", "J", "JT", "N", "NA", "confirm_time", "confirmed",
+    "fragmentations", "unassigned_tracks", "J", "JT", "N", "NA", "confirm_time", "confirmed",
+    "duplicate_tracks", "stale_tracks", "never_tracks", "never_new",
 )  # fmt: skip
+
+LABEL_BITS = 40
+"""A (row, label) pair is kept as row << LABEL_BITS | label: labels stay below 2^40."""
 
 
 @dataclass(kw_only=True)
@@ -287,6 +318,8 @@ class TrackScore:
             "last": np.full((P, Nt), -1, np.int64),  # label last matched
             "was": np.zeros((P, Nt), bool),  # matched at the previous step
             "start": np.full((P, Nt), -1, np.int64),  # confirm clock
+            "followed": np.zeros(0, np.int64),  # (row, label) keys once matched, sorted
+            "never": np.zeros(0, np.int64),  # keys counted as never-followed, sorted
         }
 
     def add(
@@ -332,14 +365,22 @@ class TrackScore:
         switch, fragment = label_changes(label, st["last"], st["was"], present, in_view)
         start, time = confirm_clock(self.steps, st["start"], matched, present, in_view)
         threshold = self.cutoff if self.threshold is None else self.threshold
-        J, JT, N, NA = siap_counts(
-            nearest_truth(truth, present, tracks, confirmed, threshold), present, confirmed
-        )
+        nearest = nearest_truth(truth, present, tracks, confirmed, threshold)
+        J, JT, N, NA = siap_counts(nearest, present, confirmed)
+        labels = np.asarray(labels, dtype=np.int64)
+        key = (np.arange(P, dtype=np.int64)[:, None] << LABEL_BITS) | np.maximum(labels, 0)
+        duplicate, stale, never = unassigned_kinds(
+            assigned, nearest_truth(truth, present, tracks, confirmed, self.cutoff), confirmed,
+            _member(key, st["followed"]),
+        )  # fmt: skip
+        first = never & ~_member(key, st["never"]) & alive[:, None]
         step = {
             "steps": 1, "targets": present.sum(axis=1), "gospa": g.distance,
             "localisation": g.localisation, "missed": g.missed, "false": g.false,
             "switches": switch.sum(axis=1), "fragmentations": fragment.sum(axis=1),
-            "false_tracks": confirmed.sum(axis=1) - matched.sum(axis=1),
+            "unassigned_tracks": confirmed.sum(axis=1) - matched.sum(axis=1),
+            "duplicate_tracks": duplicate.sum(axis=1), "stale_tracks": stale.sum(axis=1),
+            "never_tracks": never.sum(axis=1), "never_new": first.sum(axis=1),
             "J": J, "JT": JT, "N": N, "NA": NA,
             "confirm_time": np.where(time >= 0, time, 0).sum(axis=1),
             "confirmed": (time >= 0).sum(axis=1),
@@ -351,6 +392,9 @@ class TrackScore:
         st["last"] = np.where(keep & matched, label, st["last"])
         st["was"] = np.where(keep, matched, st["was"])
         st["start"] = np.where(keep, start, st["start"])
+        matched_key = np.take_along_axis(key, np.maximum(assigned, 0), axis=1)[matched & keep]
+        st["followed"] = np.union1d(st["followed"], matched_key)
+        st["never"] = np.union1d(st["never"], key[first])
         if mean is not None and cov is not None and states is not None:
             q = matched_nees(assigned, mean, cov, states)
             counted = matched & keep
@@ -374,8 +418,12 @@ class TrackScore:
             "gospa_false": ratio(s["false"], s["steps"]),
             "switches": 100 * ratio(s["switches"], s["targets"]),
             "fragmentations": 100 * ratio(s["fragmentations"], s["targets"]),
-            "false_tracks": ratio(s["false_tracks"], s["steps"]),
-            "false_tracks_per_target": ratio(s["false_tracks"], s["targets"]),
+            "unassigned_tracks": ratio(s["unassigned_tracks"], s["steps"]),
+            "unassigned_tracks_per_target": ratio(s["unassigned_tracks"], s["targets"]),
+            "duplicate_tracks": ratio(s["duplicate_tracks"], s["targets"]),
+            "stale_tracks": ratio(s["stale_tracks"], s["targets"]),
+            "never_tracks": ratio(s["never_tracks"], s["targets"]),
+            "never_tracks_new": 100 * ratio(s["never_new"], s["steps"]),
             "time_to_confirm": ratio(s["confirm_time"], s["confirmed"]),
             "never_confirmed": ratio(running, s["confirmed"] + running),
             "siap_completeness": ratio(s["JT"], s["J"]),
@@ -457,3 +505,11 @@ class Scores:
         if self.tracks is None:
             return out | {name: nothing for name in TRACKS_ONLY}
         return out | {name: nothing for name in REPLACED} | self.tracks.summary()
+
+
+def _member(key: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
+    """Whether each key is in `sorted_keys` (a sorted 1-D array)."""
+    if sorted_keys.size == 0:
+        return np.zeros(key.shape, dtype=bool)
+    at = np.minimum(np.searchsorted(sorted_keys, key), sorted_keys.size - 1)
+    return sorted_keys[at] == key
