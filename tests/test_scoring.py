@@ -16,8 +16,10 @@ from uavtrack.tracks.scoring import (
     confirm_clock,
     gospa_assignment,
     label_changes,
+    label_purity,
     matched_nees,
     nearest_truth,
+    team_picture,
     unassigned_kinds,
 )
 
@@ -376,3 +378,21 @@ def test_unassigned_tracks_split_into_duplicates_stale_and_never_followed():
     assert stale.tolist() == [[False, False, True, False, False]]
     # slot 4 is near target 1, which nothing holds: not a duplicate, never followed
     assert never.tolist() == [[False, False, False, True, True]]
+
+
+def test_the_team_picture_takes_each_labels_most_confident_confirmed_track():
+    labels = np.array([[[4, 7, -1], [7, 4, 9]]])  # one trial, two UAVs, three slots
+    confirmed = np.array([[[True, True, False], [True, True, False]]])
+    tracks = np.arange(12.0).reshape(1, 2, 3, 2)
+    gamma = np.array([[[1.0, 5.0, 9.0], [2.0, 1.0, 9.0]]])  # 4: a tie, UAV 0 first
+    label, where, held = team_picture(labels, confirmed, tracks, gamma)
+    assert label[0, held[0]].tolist() == [4, 7] and held.sum() == 2  # 9 is not confirmed
+    np.testing.assert_array_equal(where[0, :2], [tracks[0, 0, 0], tracks[0, 0, 1]])
+
+
+def test_label_purity_counts_the_uavs_that_carry_the_majority_label():
+    # one trial, four UAVs, two targets: target 0 held as 5, 5, 8 and unmatched (3 of 3
+    # pairs matched, 2 agree); target 1 as 6 by two UAVs, 2 unmatched (2 of 2 agree)
+    label = np.array([[[5, 6], [5, -1], [8, 6], [-1, -1]]])
+    agreeing, matched = label_purity(label)
+    assert agreeing.tolist() == [4] and matched.tolist() == [5]

@@ -181,6 +181,16 @@ def test_stone_soup_scores_the_tracks_by_label_as_uavtrack_does(saved):
     for state, k in zip(track.states, held, strict=True):
         i, s = np.unravel_index(np.argmin(spread[k]), spread[k].shape)
         np.testing.assert_allclose(state.covar[0, 0], trace.cov[k, i, s, 0, 0], rtol=1e-12)
+    # Stone Soup's GOSPA of the team's tracks per step, averaged: uavtrack's gospa_team
+    stamps = [{s.timestamp: s for s in t} for t in team]
+    values = [
+        gospa.compute_gospa_metric([s[t] for s in stamps if t in s], [p[t] for p in truths])[
+            0
+        ].value["distance"]
+        for t in times
+    ]
+    assert np.mean(values) == pytest.approx(result.gospa_team, rel=1e-9)
+    assert result.gospa_team < result.gospa  # the team's picture beats a UAV's own
 
     # the scans as a detector yields them: true detections of the truths, and clutter
     scans = uavtrack.io.to_detections(path, truths=truths)

@@ -131,6 +131,17 @@ METRICS: dict[str, tuple[str, str]] = {
         "per target and step",
     ),
     "never_tracks_new": ("", "such tracks new to a UAV, per UAV and 100 steps"),
+    "gospa_team": (
+        "m",
+        "GOSPA (alpha = 2) of the team picture: per team label the confirmed track of the "
+        "most confident living UAV that holds it (1/trace of its position covariance), "
+        "mean per step",
+    ),
+    "label_purity": (
+        "",
+        "share of the (UAV, target, step) whose track matched to the target carries the "
+        "team's majority label for it among the UAVs that hold a matched track",
+    ),
     "time_to_confirm": (
         "1",
         "steps from a target's first sight without a track to its first matched track (a "

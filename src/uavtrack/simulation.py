@@ -1337,6 +1337,8 @@ class Result:
     stale_tracks: float
     never_tracks: float
     never_tracks_new: float
+    gospa_team: float
+    label_purity: float
     time_to_confirm: float
     never_confirmed: float
     siap_completeness: float

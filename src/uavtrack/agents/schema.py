@@ -88,7 +88,9 @@ def _admits() -> list[str]:
     check at the radio and the code that uses the message."""
     n, m, p, K = -2, -3, -4, -5  # stand-ins for the run's sizes, named in the table
     spec = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1)
-    tracked = messages.Spec(n=n, m=m, programs=p, actions=3, rounds=0, behind=1, slots=K)
+    tracked = messages.Spec(
+        n=n, m=m, programs=p, actions=3, rounds=0, behind=1, slots=K, book=("existence", "close")
+    )
     lines = [
         "## What a message may hold",
         "",
@@ -121,6 +123,12 @@ def _admits() -> list[str]:
         "|---|---|---|---|---|",
     ]
     lines += _rows(tracked, ("consensus", "bids", "upload", "download"), size)
+    lines += [
+        "",
+        "The download's `existence` comes with ``tracker.confirmation`` existence (the "
+        "default) and its `close` with ``tracker.merge``: without them the download has "
+        "neither (`uavtrack.tracks.manage.sent_fields`).",
+    ]
     lines += ["", "Domains:", ""]
     lines += [f"- **{name}**: {text}" for name, text in messages.DOMAINS.items()]
     lines += [""]

@@ -257,6 +257,8 @@ TRACK_ROWS = (
     ("stale_tracks", "  stale (once on a target, now off)", "{:.3f}"),
     ("never_tracks", "  never on a target (clutter-born)", "{:.3f}"),
     ("never_tracks_new", "  new ones per UAV and 100 steps", "{:.2f}"),
+    ("gospa_team", "GOSPA, the team picture (a track per label) [m]", "{:.2f}"),
+    ("label_purity", "label purity (the team's label for a target)", "{:.3f}"),
     ("switches", "track switches per target and 100 steps", "{:.2f}"),
     ("fragmentations", "fragmentations per target and 100 steps", "{:.2f}"),
     ("time_to_confirm", "steps to confirm a target found anew", "{:.1f}"),
@@ -618,6 +620,7 @@ TRACK_COMPARE_ROWS = tuple(r for r in TRACK_ROWS if r[0] in ("gospa",) or "gospa
     ("siap_completeness", "SIAP completeness", "{:.3f}"),
     ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),
     ("siap_spuriousness", "SIAP spuriousness", "{:.3f}"),
+    ("label_purity", "label purity (the team's label for a target)", "{:.3f}"),
     *(r for r in COMPARE_ROWS if r[0] in ("rounds", "messages", "bytes", "decision_time_ms")),
 )
 """The rows of `uavtrack compare` with tracks, in place of the per-target estimate rows."""

@@ -372,6 +372,8 @@ TRACK_TITLES = {
     "duplicate_tracks": "Duplicate confirmed tracks per target and step",
     "stale_tracks": "Stale confirmed tracks per target and step",
     "never_tracks": "Never-followed (clutter-born) confirmed tracks per target and step",
+    "gospa_team": "GOSPA of the team picture (one track per label)",
+    "label_purity": "Label purity",
     "switches": "Track switches per target and 100 steps",
     "siap_completeness": "SIAP completeness",
     "siap_ambiguity": "SIAP ambiguity",

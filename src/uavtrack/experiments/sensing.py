@@ -35,7 +35,8 @@ GOAL_CELL = (0.9, 2.0, "jpda")
 SCORED = (
     "observation_rate", "gospa", "gospa_localisation", "gospa_missed", "gospa_false",
     "switches", "fragmentations", "unassigned_tracks", "unassigned_tracks_per_target",
-    "duplicate_tracks", "stale_tracks", "never_tracks", "never_tracks_new",
+    "duplicate_tracks", "stale_tracks", "never_tracks", "never_tracks_new", "gospa_team",
+    "label_purity",
     "time_to_confirm", "never_confirmed", "siap_completeness", "siap_ambiguity",
     "siap_spuriousness", "nees", "nees_median", "nees_inside", "messages",
 )  # fmt: skip
@@ -162,6 +163,9 @@ def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
         ("never-followed tracks per target and step", dist["never_tracks"]["mean"], "<=", 0.02),
         ("the same, centralized", cent["never_tracks"]["mean"], "<=", 0.02),
         ("track switches per target and 100 steps", dist["switches"]["mean"], "<=", 1.0),
+        ("team picture GOSPA / a UAV's (distributed)",
+         dist["gospa_team"]["mean"] / dist["gospa"]["mean"], "<=", 0.8),
+        ("label purity (distributed)", dist["label_purity"]["mean"], ">=", 0.95),
         ("centralized minus distributed rate", cent["observation_rate"]["mean"] - rate, "<=", 0.03),
         ("distributed minus greedy rate", rate - greedy["observation_rate"]["mean"], ">", 0.0),
         ("NEES inside its 95 % interval", dist["nees_inside"]["mean"], ">=", 0.85),

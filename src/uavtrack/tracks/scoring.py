@@ -44,7 +44,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..estimation import nees
+from ..estimation import confidence, nees
 
 if TYPE_CHECKING:
     from ..simulation import Cycle
@@ -69,6 +69,8 @@ TRACK_METRICS: dict[str, tuple[str, str]] = {
             "stale_tracks",
             "never_tracks",
             "never_tracks_new",
+            "gospa_team",
+            "label_purity",
             "time_to_confirm",
             "never_confirmed",
             "siap_completeness",
@@ -188,6 +190,49 @@ def unassigned_kinds(
     return duplicate, stale, unassigned & ~duplicate & ~followed_before
 
 
+def team_picture(
+    labels: np.ndarray, confirmed: np.ndarray, tracks: np.ndarray, gamma: np.ndarray
+) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The team's picture: one track per team label, the confirmed track of that label
+    held with the most confidence (1/trace P) by any UAV of the trial (the lowest UAV and
+    slot on ties), as ``to_stonesoup(tracks="best")`` exports it. labels, confirmed, confidence
+    (B, N, K) (a failed UAV's tracks not confirmed), tracks (B, N, K, 2). Returns (label
+    (B, N K), position (B, N K, 2), held (B, N K)): each trial's labels first, padded."""
+    B, N, K = labels.shape
+    flat = labels.reshape(B, N * K)
+    ok = confirmed.reshape(B, N * K)
+    gamma = np.where(ok, gamma.reshape(B, N * K), -np.inf)
+    key = np.where(ok, flat, np.iinfo(np.int64).max)
+    order = np.lexsort((-gamma, key), axis=-1)  # by label, the most confident first
+    key = np.take_along_axis(key, order, axis=-1)
+    first = np.ones(key.shape, dtype=bool)
+    first[:, 1:] = key[:, 1:] != key[:, :-1]
+    first &= np.take_along_axis(ok, order, axis=-1)
+    rank = np.argsort(~first, axis=-1, kind="stable")  # the picked ones first
+    pick = np.take_along_axis(order, rank, axis=-1)
+    held = np.take_along_axis(first, rank, axis=-1)
+    position = np.take_along_axis(tracks.reshape(B, N * K, 2), pick[..., None], axis=1)
+    return np.where(held, np.take_along_axis(flat, pick, axis=-1), -1), position, held
+
+
+def label_purity(label: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """For each trial, the (UAV, target) pairs whose matched track carries the team's
+    majority label for that target, and the pairs matched at all: label (B, N, Nt) the
+    label of the track GOSPA matched to each target (-1: none). Ties between majority
+    labels count once. Returns (agreeing (B,), matched (B,))."""
+    B, N, Nt = label.shape
+    lab = np.moveaxis(label, 1, -1).reshape(B * Nt, N)  # each (trial, target): its UAVs
+    srt = np.sort(lab, axis=-1)
+    # the longest run of one label >= 0 in each sorted row
+    start = np.ones(srt.shape, dtype=bool)
+    start[:, 1:] = srt[:, 1:] != srt[:, :-1]
+    run_id = np.cumsum(start, axis=-1) - 1
+    counts = np.zeros(srt.shape, dtype=np.int64)
+    np.add.at(counts, (np.arange(srt.shape[0])[:, None], run_id), srt >= 0)
+    agreeing = counts.max(axis=-1).reshape(B, Nt).sum(axis=-1)
+    return agreeing, (label >= 0).sum(axis=(1, 2))
+
+
 def label_changes(
     label: np.ndarray,
     last: np.ndarray,
@@ -263,6 +308,8 @@ _SUMS = (
     "fragmentations", "unassigned_tracks", "J", "JT", "N", "NA", "confirm_time", "confirmed",
     "duplicate_tracks", "stale_tracks", "never_tracks", "never_new",
 )  # fmt: skip
+_TEAM_SUMS = ("steps", "gospa", "agreeing", "matched")
+"""What `TrackScore` sums per trial: the team picture's GOSPA and the label purity."""
 
 LABEL_BITS = 40
 """A (row, label) pair is kept as row << LABEL_BITS | label: labels stay below 2^40."""
@@ -278,9 +325,13 @@ class TrackScore:
     into the row's values, then averages each over the trial's rows where it is defined
     (NaN when none is):
 
-    * gospa and its parts: means per step; false_tracks: confirmed tracks matched to no
-      truth per step (gospa_false / (c^p / 2)), false_tracks_per_target: per present
-      target and step;
+    * gospa and its parts: means per step; unassigned_tracks: confirmed tracks matched
+      to no truth per step (gospa_false / (c^p / 2)), unassigned_tracks_per_target: per
+      present target and step; duplicate_tracks, stale_tracks and never_tracks their
+      kinds per target and step (`unassigned_kinds`), never_tracks_new the never-followed
+      (row, label) pairs new to a row per 100 steps;
+    * gospa_team, the team picture's GOSPA (`team_picture`) per step, and label_purity
+      (`label_purity`), per trial over its rows at once;
     * switches and fragmentations (`label_changes`): 100 x count / target-steps (present
       targets summed over the steps), per target and 100 steps;
     * time_to_confirm (`confirm_clock`): the mean of the row's times [steps];
@@ -312,6 +363,7 @@ class TrackScore:
     def __post_init__(self) -> None:
         P, Nt = self.batch * self.rows, self.n_targets
         self.sums = {name: np.zeros(P) for name in _SUMS}
+        self.team = {name: np.zeros(self.batch) for name in _TEAM_SUMS}
         self.spread = NeesSpread(self.batch)
         self._nees = np.zeros((2, self.batch))
         self._state = {
@@ -395,6 +447,23 @@ class TrackScore:
         matched_key = np.take_along_axis(key, np.maximum(assigned, 0), axis=1)[matched & keep]
         st["followed"] = np.union1d(st["followed"], matched_key)
         st["never"] = np.union1d(st["never"], key[first])
+        B, rows = self.batch, self.rows
+        agreeing, pairs = label_purity(np.where(alive[:, None], label, -1).reshape(B, rows, Nt))
+        self.team["agreeing"] += agreeing
+        self.team["matched"] += pairs
+        if cov is not None:  # the team picture needs each track's confidence
+            gamma = confidence(np.asarray(cov))
+            _, where, held = team_picture(
+                np.asarray(labels).reshape(B, rows, K), confirmed.reshape(B, rows, K),
+                np.asarray(tracks).reshape(B, rows, K, 2), gamma.reshape(B, rows, K),
+            )  # fmt: skip
+            whole = alive.reshape(B, rows).any(axis=1)
+            _, team = gospa_assignment(
+                truth.reshape(B, rows, Nt, 2)[:, 0], present.reshape(B, rows, Nt)[:, 0],
+                where, held, self.cutoff, self.order,
+            )  # fmt: skip
+            self.team["gospa"] += np.where(whole, team.distance, 0.0)
+            self.team["steps"] += whole
         if mean is not None and cov is not None and states is not None:
             q = matched_nees(assigned, mean, cov, states)
             counted = matched & keep
@@ -434,6 +503,8 @@ class TrackScore:
             name: mean_std(value.reshape(self.batch, self.rows), axis=1)[0]
             for name, value in per_row.items()
         }
+        out["gospa_team"] = ratio(self.team["gospa"], self.team["steps"])
+        out["label_purity"] = ratio(self.team["agreeing"], self.team["matched"])
         out["nees"] = ratio(self._nees[0], self._nees[1])
         out["nees_median"] = self.spread.median()
         out["nees_inside"] = self.spread.inside_fraction()
