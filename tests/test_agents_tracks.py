@@ -58,9 +58,10 @@ def test_memory_swarm_with_tracks_equals_the_simulator(method, faults):
         ("gnn", {"tracker.model": "imm"}),
         ("jpda", {"fusion.rule": "covariance_intersection"}),
         ("jpda", {"tracker.confirmation": "existence", "tracker.merge": 2}),
-        ("gnn", {"tracker.confirmation": "existence"}),
+        ("gnn", {"tracker.confirmation": "m_of_n"}),
+        ("jpda", {"tracker.briefing": False}),
     ],
-    ids=["gnn-imm", "jpda-ci", "jpda-existence-merge", "gnn-existence"],
+    ids=["gnn-imm", "jpda-ci", "jpda-existence-merge", "gnn-m-of-n", "jpda-unbriefed"],
 )
 @pytest.mark.parametrize("method", ["distributed", "centralized"])
 def test_memory_swarm_with_tracks_equals_the_simulator_in_every_setting(method, association, more):

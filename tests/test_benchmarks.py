@@ -95,3 +95,24 @@ def test_the_cycle_profile_finds_every_stage_of_each_method(method, tmp_path):
     }  # fmt: skip
     assert all(shown[stage] > 0 for stage in stages), shown
     assert files_in(tmp_path) == ["benchmarks/profile_cycle.py"]
+
+
+def test_the_trackers_head_to_head_replays_the_run_and_scores_both(tmp_path):
+    """uavtrack's central tracker replayed on a run's scans must give the run's tracks
+    (the script stops otherwise); Stone Soup's tracker runs on the same scans; both
+    are scored and the table printed, and a file written only where asked."""
+    pytest.importorskip("stonesoup")
+    args = ("--trials", "1", "--steps", "15")
+    done = run("trackers.py", tmp_path, *args)
+    assert done.returncode == 0, done.stderr
+    rows = [line for line in done.stdout.splitlines() if line.startswith("| ")]
+    assert [row.split(" | ")[0] for row in rows[1:]] == ["| uavtrack", "| stonesoup"]
+    assert files_in(tmp_path) == ["benchmarks/trackers.py"]
+    done = run("trackers.py", tmp_path / "b", *args, "--association", "gnn", "--out", "t.json")
+    assert done.returncode == 0, done.stderr
+    means = json.loads((tmp_path / "b" / "t.json").read_text())["means"]
+    for who in ("uavtrack", "stonesoup"):  # GOSPA is its three parts (p = 1)
+        m = means[who]
+        assert m["gospa"] == pytest.approx(m["localisation"] + m["missed"] + m["false"])
+    bad = run("trackers.py", tmp_path / "c", "--detection", "1.5")
+    assert bad.returncode == 2 and "Traceback" not in bad.stderr

@@ -44,6 +44,20 @@ def test_the_briefing_is_every_target_confirmed_under_its_index():
         manage.briefed(mean, cov, 3)
 
 
+def test_without_a_briefing_the_mission_starts_with_no_track_and_finds_the_targets():
+    mean = np.random.default_rng(0).normal(size=(2, 3, 4, 4))
+    cov = np.broadcast_to(np.eye(4), (2, 3, 4, 4, 4)).copy()
+    book, m, c = manage.briefed(mean, cov, 6, briefing=False)
+    assert not book.present.any() and m.shape == (2, 3, 6, 4)
+    scenario = uavtrack.Scenario(steps=80).with_overrides(
+        {"tracker.association": "jpda", "tracker.briefing": False}
+    )
+    r = uavtrack.simulate(scenario, seed=1, trace=True)
+    label, status = r.trace.label, r.trace.status
+    assert not ((label >= 0) & (label < scenario.n_targets)).any()  # no briefed label
+    assert (status[-1] == CONFIRMED).any() and r.siap_completeness > 0.25  # found some
+
+
 @pytest.mark.parametrize(
     ("history", "outcome"),
     [

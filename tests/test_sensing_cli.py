@@ -22,7 +22,8 @@ def test_run_with_tracks_shows_the_track_scores(capsys):
     assert summary["rmse"] is None or np.isnan(summary["rmse"])  # no estimate per target
     code = cli.main(["run", "--set", "tracker.association=jpda", "--set", "steps=10"])
     out, _ = capsys.readouterr()
-    assert code == 0 and "false confirmed tracks per target and step" in out
+    assert code == 0 and "unassigned confirmed tracks per target and step" in out
+    assert "duplicates (a target followed twice)" in out and "label purity" in out
 
 
 @pytest.mark.parametrize(
@@ -68,7 +69,9 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
             for e in cells.values()
         ]
     )
-    assert len(rows) == 3 * (3 + 3 * 3 * 2)  # known per P_D, and every tracked cell
+    # known per P_D, every tracked cell and the unbriefed one
+    assert len(rows) == 3 * (3 + 3 * 3 * 2 + 1)
+    assert (rows["association"] == "jpda-unbriefed").sum() == 3
     for method, cells in summary["methods"].items():
         for key, e in cells.items():
             if e["association"] == "known":
@@ -78,7 +81,24 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
             rate, base = e["observation_rate"]["mean"], known["observation_rate"]["mean"]
             assert diff == pytest.approx(rate - base, abs=1e-12), (method, key)
     goals = summary["goals"]
-    assert len(goals) == 10 and all(isinstance(g["met"], bool) for g in goals)
+    assert len(goals) == 19 and all(isinstance(g["met"], bool) for g in goals)
+    value = {g["goal"]: g["value"] for g in goals}
+    for method in ("distributed", "centralized"):  # the worst cell, recomputed
+        cells = summary["methods"][method]
+        worst = min(
+            cells[f"pd={p:g} clutter={c:g} jpda"]["observation_rate"]["mean"]
+            - cells[f"pd={p:g} clutter={c:g} gnn"]["observation_rate"]["mean"]
+            for p in sensing.DETECTION
+            for c in sensing.CLUTTER
+        )  # fmt: skip
+        assert value[f"{method}: jpda minus gnn rate, worst cell"] == pytest.approx(worst)
+    goal = summary["methods"]["distributed"]["pd=0.9 clutter=2 jpda"]
+    assert value["label purity (distributed)"] == goal["label_purity"]["mean"]
+    cold = summary["methods"]["distributed"]["pd=0.9 clutter=2 jpda-unbriefed"]
+    assert (
+        value["unbriefed (distributed): steps to confirm a target found anew"]
+        == (cold["time_to_confirm"]["mean"])
+    )
     parity = [g for g in goals if g["goal"].startswith("P_D 1, no clutter")]
     cells = summary["methods"]["distributed"]
     for g, association in zip(parity, sensing.ASSOCIATIONS, strict=True):

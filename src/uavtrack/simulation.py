@@ -1024,12 +1024,14 @@ def initial_stream(
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
     book = central = labels = tombs = None
     if scenario.tracker.association != "known":  # the briefed targets as confirmed tracks
-        node = manage.briefed(mean[:, :1], cov[:, :1], scenario.track_slots)
+        briefing = scenario.tracker.briefing
+        node = manage.briefed(mean[:, :1], cov[:, :1], scenario.track_slots, briefing)
         central = manage.Slots(
             book=node[0], mean=node[1], cov=node[2], modes=tracker.start(node[1], node[2])[2]
         )
-        book, mean, cov = manage.briefed(mean, cov, scenario.track_slots)
-        labels = np.broadcast_to(np.arange(Nt), (B, Nt)).copy()
+        book, mean, cov = manage.briefed(mean, cov, scenario.track_slots, briefing)
+        labels = np.broadcast_to(np.arange(Nt if briefing else 0), (B, Nt if briefing else 0))
+        labels = labels.copy()
         tombs = np.full((B, Nu, scenario.track_slots, 2), -1, dtype=np.int64)
     mean, cov, modes = tracker.start(mean, cov)
     state = State(

@@ -38,7 +38,9 @@ class TrackedUav(UavAgent):
         super().__init__(me, scenario, method, faults, link, mailbox, deadline, prior)
         K = scenario.track_slots
         mean, cov = prior  # (M, 4), (M, 4, 4): the briefed targets
-        book, mean, cov = manage.briefed(mean[None, None], cov[None, None], K)
+        book, mean, cov = manage.briefed(
+            mean[None, None], cov[None, None], K, scenario.tracker.briefing
+        )
         self.book = book
         self.mean, self.cov, self.modes = self.ctx.const.tracker.start(mean, cov)
         self.tombs = np.full((1, 1, K, 2), -1, dtype=np.int64)
@@ -362,7 +364,9 @@ class TrackedCentral(CentralAgent):
     def __init__(self, scenario, faults, link, mailbox, deadline, prior) -> None:
         super().__init__(scenario, faults, link, mailbox, deadline)
         mean, cov = prior  # (M, 4), (M, 4, 4): the briefed targets
-        book, mean, cov = manage.briefed(mean[None, None], cov[None, None], scenario.track_slots)
+        book, mean, cov = manage.briefed(
+            mean[None, None], cov[None, None], scenario.track_slots, scenario.tracker.briefing
+        )
         modes = self.ctx.const.tracker.start(mean, cov)[2]
         self.node = manage.Slots(book=book, mean=mean, cov=cov, modes=modes)
 

@@ -568,6 +568,15 @@ class TrackerModel(Part):
             "existence)"
         ),
     )
+    briefing: bool = Field(
+        default=True,
+        description=(
+            "whether the mission starts with every target a confirmed track of every UAV "
+            "(the initial belief the paper's filters start from) [-]; false: beyond the "
+            "paper, no track at the start, and the team must find the targets; assumed: "
+            "true, the paper's start"
+        ),
+    )
     birth_velocity_std: Float = Field(
         default=2.0,
         gt=0,

@@ -213,7 +213,7 @@ class Scenario(Part):
         """A setting of a model that is not on would do nothing: refuse it."""
         tracks = ("max_tracks", "gate_probability", "confirm", "delete_misses", "delete_std")
         tracks += ("birth_velocity_std", "confirmation", "merge", "existence", "birth_existence")
-        tracks += ("survival",)
+        tracks += ("survival", "briefing")
         counted = ("confirm", "delete_misses")
         for group, value, wanted, on, names in (
             (

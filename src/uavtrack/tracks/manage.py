@@ -142,10 +142,15 @@ def sent_fields(settings: TrackerModel) -> tuple[str, ...]:
     )
 
 
-def briefed(mean: np.ndarray, cov: np.ndarray, slots: int) -> tuple[Book, np.ndarray, np.ndarray]:
+def briefed(
+    mean: np.ndarray, cov: np.ndarray, slots: int, briefing: bool = True
+) -> tuple[Book, np.ndarray, np.ndarray]:
     """The mission's start: each UAV's prior of each target (mean (B, N, M, 4), cov
-    (B, N, M, 4, 4)) as its confirmed tracks 0 .. M - 1 in the first M of `slots` slots.
-    Returns (book, mean (B, N, K, 4), cov (B, N, K, 4, 4)); empty slots hold 0 and I."""
+    (B, N, M, 4, 4)) as its confirmed tracks 0 .. M - 1 in the first M of `slots` slots;
+    without `briefing` (``tracker.briefing``) no track at all. Returns (book, mean
+    (B, N, K, 4), cov (B, N, K, 4, 4)); empty slots hold 0 and I."""
+    if not briefing:
+        mean, cov = mean[:, :, :0], cov[:, :, :0]
     B, N, M = mean.shape[:3]
     if slots < M:
         raise ValueError(f"{slots} track slots cannot hold the {M} briefed targets")
