@@ -12,15 +12,16 @@ trace; its scans (each UAV's, in UAV order, as the central node takes them) are 
   alone), and
 * to a Stone Soup tracker built from Stone Soup's own parts: ``MultiTargetMixtureTracker``
   with ``JPDA`` and ``PDAHypothesiser`` (or ``MultiTargetTracker`` with
-  ``GNNWith2DAssignment`` and ``DistanceHypothesiser`` for gnn), Kalman predictor and
-  updater, a ``MultiMeasurementInitiator`` (4 updates to confirm).
+  ``GNNWith2DAssignment`` and ``DistanceHypothesiser`` for gnn: Mahalanobis distance,
+  which reads neither P_D nor the clutter), Kalman predictor and updater, a
+  ``MultiMeasurementInitiator`` (M updates to confirm, M of ``tracker.confirm``).
 
 Both use the same models: the targets' constant-velocity motion with the run's process
 noise Q (eq. 15), each measurement's converted position with its covariance R (eqs.
 5-12, from the UAV's pose), the clutter density (clutter per scan over the observation
 disk), P_D where a track is predicted in the scanning UAV's disk (widened by 3 std of the
 track's position) and 0 elsewhere, P_G and its gate. Both start from the briefing (every
-target a confirmed track). Deletion is the project's rule in both: a confirmed track
+target a confirmed track), or with no track under ``tracker.briefing = false``. Deletion is the project's rule in both: a confirmed track
 after ``tracker.delete_misses`` scans in view in a row without an update, or when its
 position std exceeds ``tracker.delete_std``; a tentative one when it can no longer meet
 M of N (``tracker.confirm``).
@@ -40,13 +41,16 @@ import datetime as dt
 import json
 import platform
 import statistics
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
 import uavtrack
-from uavtrack import estimation, sensing, simulation
+from uavtrack import _files, estimation, sensing, simulation
+from uavtrack.cli.app import parse_overrides
+from uavtrack.errors import ScenarioError, UsageError
 from uavtrack.tracks import manage
 from uavtrack.tracks.scoring import gospa_assignment
 
@@ -56,14 +60,29 @@ EPOCH = dt.datetime(2000, 1, 1)
 TICK = dt.timedelta(microseconds=1)  # UAV i's scan of step k comes at t_k + i ticks
 
 
+OWN = {
+    "steps": "--steps",
+    "sensor.detection_probability": "--detection",
+    "sensor.clutter_rate": "--clutter",
+    "tracker.association": "--association",
+}
+"""The settings the script's own options give: --set may not give them too."""
+
+
 def scenario(args: argparse.Namespace) -> uavtrack.Scenario:
-    more = dict(item.split("=", 1) for item in args.set)
-    return uavtrack.Scenario(steps=args.steps).with_overrides(
+    """The run's scenario: the script's options, then --set (values as `uavtrack run
+    --set` reads them, TOML). Raises ScenarioError on a bad setting."""
+    more = parse_overrides(args.set)
+    for key, option in OWN.items():
+        if key in more:
+            raise ScenarioError(f"--set {key}: give it with {option}")
+    return uavtrack.Scenario().with_overrides(
         {
+            "steps": args.steps,
             "sensor.detection_probability": args.detection,
             "sensor.clutter_rate": args.clutter,
             "tracker.association": args.association,
-            **{key: json.loads(value) for key, value in more.items()},
+            **more,
         }
     )
 
@@ -269,7 +288,7 @@ def stonesoup_tracker(sc: uavtrack.Scenario, seed: int, trace, scanned, associat
             data_associator=GNNWith2DAssignment(distance), updater=updater,
         )  # fmt: skip
     state = simulation.initial_state(sc, [seed])[0]
-    for j in range(sc.n_targets):  # the briefing: every target a confirmed track
+    for j in range(sc.n_targets if sc.tracker.briefing else 0):  # the briefing, if any
         m, P = state.mean[0, 0, j], state.cov[0, 0, j]
         tracker._tracks.add(
             Track([GaussianState(m[ORDER_SS].reshape(4, 1), P[np.ix_(ORDER_SS, ORDER_SS)], EPOCH)])
@@ -319,28 +338,43 @@ def score(per_step: list, truth: np.ndarray) -> dict[str, float]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--trials", type=int, default=4)
-    parser.add_argument("--steps", type=int, default=500)
-    parser.add_argument("--association", choices=("gnn", "jpda"), default="jpda")
-    parser.add_argument("--clutter", type=float, default=2.0)
-    parser.add_argument("--detection", type=float, default=0.9)
-    parser.add_argument(
-        "--set",
-        action="append",
-        default=[],
-        metavar="KEY=VALUE",
-        help="a scenario setting for the run, VALUE as JSON (repeatable)",
+    parser = argparse.ArgumentParser(
+        description="uavtrack's central tracker against Stone Soup's on a centralized run's "
+        "scans, scored alike (see the script's docstring).",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter,
     )
-    parser.add_argument("--out", type=Path, default=None)
+    parser.add_argument("--trials", type=int, default=4, help="trials (seeds 0, 1, ...)")
+    parser.add_argument("--steps", type=int, default=500, help="steps of each trial")
+    parser.add_argument(
+        "--association", choices=("gnn", "jpda"), default="jpda", help="both trackers'"
+    )
+    parser.add_argument("--clutter", type=float, default=2.0, help="false measurements per scan")
+    parser.add_argument("--detection", type=float, default=0.9, help="detection probability")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE",
+        help="another scenario setting, as uavtrack run --set takes it (repeatable)",
+    )  # fmt: skip
+    parser.add_argument("--out", type=Path, default=None, help="also write the figures as JSON")
     args = parser.parse_args(argv)
-    if any("=" not in item for item in args.set):
-        parser.error("--set takes KEY=VALUE")
     if min(args.trials, args.steps) < 1:
         parser.error("--trials and --steps must be at least 1")
     if not 0 < args.detection <= 1 or args.clutter < 0:
         parser.error("--detection must be in (0, 1] and --clutter at least 0")
-    sc = scenario(args)
+    try:
+        sc = scenario(args)
+        if args.out is not None:
+            _files.check_output(args.out, "--out", force=True)
+    except (ScenarioError, UsageError) as exc:
+        parser.error(str(exc))
+    try:
+        run(args, sc)
+    except KeyboardInterrupt:
+        print("interrupted: nothing written", file=sys.stderr)
+        raise SystemExit(130) from None
+
+
+def run(args: argparse.Namespace, sc: uavtrack.Scenario) -> None:
+    """The trials, the table and (with --out) the JSON."""
     rows: dict[str, list[dict]] = {"uavtrack": [], "stonesoup": []}
     for t in range(args.trials):
         seed = uavtrack.trial_seed(0, t)
@@ -361,7 +395,7 @@ def main(argv: list[str] | None = None) -> None:
     names = ("gospa", "localisation", "missed", "false", "duplicates", "never_on_target", "cpu_ms")
     print(
         f"\n{args.association}, P_D {args.detection}, clutter {args.clutter}, "
-        f"{args.trials} trials x {args.steps} steps (centralized scans)"
+        f"{args.trials} trial(s) x {args.steps} steps (centralized scans)"
     )
     print("| tracker | " + " | ".join(names) + " |")
     print("|---" * (len(names) + 1) + "|")
@@ -377,7 +411,7 @@ def main(argv: list[str] | None = None) -> None:
             "trials": rows,
             "means": means,
         }
-        args.out.write_text(json.dumps(out, indent=2) + "\n")
+        _files.write_text(args.out, json.dumps(out, indent=2) + "\n")
 
 
 if __name__ == "__main__":

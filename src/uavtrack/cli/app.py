@@ -275,7 +275,10 @@ per-target estimate rows, which a track set does not have."""
 TRACK_CAPTION = (
     "Tracks: each UAV's confirmed tracks against the true targets, one-to-one by the GOSPA "
     "assignment (cut-off evaluation.ospa_cutoff, order evaluation.ospa_order); a track "
-    "matched to no target is false; a switch is a target's matched label changing; SIAP "
+    "matched to no target is unassigned: a duplicate (its nearest target within the cut-off "
+    "is matched to another track), stale (it followed a target before) or never on a "
+    "target; a switch is a target's matched label changing; the team picture keeps per "
+    "label the most confident holder's track; SIAP "
     "associates each track with its nearest target within the cut-off."
 )
 

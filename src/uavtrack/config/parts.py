@@ -537,7 +537,8 @@ class TrackerModel(Part):
         gt=0,
         lt=1,
         description=(
-            "existence probability of a track born from one measurement [-], (0, 1); "
+            "existence probability of a track born from one measurement [-], (0, 1), "
+            "between the two of tracker.existence; "
             "assumed: 0.1, so that two more detections near the track's centre confirm it "
             "(0.81, then 0.99 at 2 clutter per scan) and a scan without one deletes it "
             "(docs: Track existence)"
