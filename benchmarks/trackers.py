@@ -21,7 +21,9 @@ noise Q (eq. 15), each measurement's converted position with its covariance R (e
 5-12, from the UAV's pose), the clutter density (clutter per scan over the observation
 disk), P_D where a track is predicted in the scanning UAV's disk (widened by 3 std of the
 track's position) and 0 elsewhere, P_G and its gate. Both start from the briefing (every
-target a confirmed track), or with no track under ``tracker.briefing = false``. Deletion is the project's rule in both: a confirmed track
+target a confirmed track), or with no track under ``tracker.briefing = false``. Stone
+Soup's tracker has no existence probability: it confirms and deletes by the project's
+M-of-N rules (uavtrack's under ``tracker.confirmation = "m_of_n"``): a confirmed track
 after ``tracker.delete_misses`` scans in view in a row without an update, or when its
 position std exceeds ``tracker.delete_std``; a tentative one when it can no longer meet
 M of N (``tracker.confirm``).
