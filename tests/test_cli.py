@@ -358,7 +358,8 @@ TRACKED_SETS = (
 
 def test_compare_with_tracks_shows_and_pairs_the_track_metrics(capsys):
     """With tracks the per-target estimate rows are n/a: the table shows GOSPA and its
-    parts, false tracks, switches and SIAP, and --json pairs them, trial by trial."""
+    parts, the unassigned tracks and their kinds, the team picture, label purity, switches
+    and SIAP, and --json pairs them, trial by trial."""
     from uavtrack.experiments.statistics import TRACK_METRICS
 
     args = ("compare", "--trials", "3", "--steps", "30", *TRACKED_SETS)
@@ -366,7 +367,9 @@ def test_compare_with_tracks_shows_and_pairs_the_track_metrics(capsys):
     assert code == 0, err
     text = " ".join(out.split())
     for label in ("GOSPA, each UAV's confirmed tracks", "its false part", "SIAP completeness",
-                  "false confirmed tracks per target and step", "track switches"):  # fmt: skip
+                  "unassigned confirmed tracks per target and step", "duplicates (a target",
+                  "never on a target (clutter-born)", "GOSPA, the team picture", "label purity",
+                  "track switches"):  # fmt: skip
         assert text.count(label) == 2, label  # the means and the paired differences
     assert "RMSE" not in text and "n/a │" not in out  # no per-target estimate rows
     code, out, _ = run_cli(capsys, *args, "--method", "distributed", "--method", "greedy", "--json")
