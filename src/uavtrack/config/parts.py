@@ -572,8 +572,8 @@ class TrackerModel(Part):
     briefing: bool = Field(
         default=True,
         description=(
-            "whether the mission starts with every target a confirmed track of every UAV "
-            "(the initial belief the paper's filters start from) [-]; false: beyond the "
+            "true or false [-]: whether the mission starts with every target a confirmed "
+            "track of every UAV (the initial belief the paper's filters start from); false: beyond the "
             "paper, no track at the start, and the team must find the targets; assumed: "
             "true, the paper's start"
         ),

@@ -40,7 +40,7 @@ outside its gate is where the runs part.
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -98,14 +98,16 @@ class Book:
     misses: np.ndarray
     serial: np.ndarray
     stamp: np.ndarray
-    existence: np.ndarray = None  # type: ignore[assignment]  (filled in below)
-    close: np.ndarray = None  # type: ignore[assignment]
+    existence: np.ndarray = field(default_factory=lambda: np.zeros(0))
+    close: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
 
     def __post_init__(self) -> None:  # a book made without them: no existence, no count
-        if self.existence is None:
-            object.__setattr__(self, "existence", np.zeros(self.label.shape))
-        if self.close is None:
-            object.__setattr__(self, "close", np.zeros(self.label.shape, dtype=np.int64))
+        for name in ("existence", "close"):
+            value = getattr(self, name)
+            if value.shape != self.label.shape:
+                if value.size:
+                    raise ValueError(f"book {name} {value.shape} is not label's {self.label.shape}")
+                object.__setattr__(self, name, np.zeros(self.label.shape, dtype=value.dtype))
 
     @property
     def present(self) -> np.ndarray:

@@ -457,6 +457,8 @@ class TrackScore:
                 np.asarray(labels).reshape(B, rows, K), confirmed.reshape(B, rows, K),
                 np.asarray(tracks).reshape(B, rows, K, 2), gamma.reshape(B, rows, K),
             )  # fmt: skip
+            L = max(int(held.sum(axis=1).max()), 1)  # the labels held, not every slot
+            where, held = where[:, :L], held[:, :L]
             whole = alive.reshape(B, rows).any(axis=1)
             _, team = gospa_assignment(
                 truth.reshape(B, rows, Nt, 2)[:, 0], present.reshape(B, rows, Nt)[:, 0],
