@@ -43,6 +43,28 @@ def test_ipda_and_jipda_agree_on_a_track_alone():
         np.testing.assert_allclose(jipda, ipda, rtol=1e-9)
 
 
+def test_given_existence_a_lone_tracks_weights_are_pdas_with_p_d():
+    """JIPDA's weights (with P_D r) conditioned on existence are, for a track alone in
+    its cluster, PDA's weights with P_D: whether it exists does not change which
+    measurement it would have made."""
+    rng = np.random.default_rng(3)
+    for _ in range(50):
+        mean, cov = _track(std=rng.uniform(0.5, 5))
+        Z = int(rng.integers(0, 4))
+        z = rng.normal(0, 4, (1, Z, 2))
+        R = np.broadcast_to(np.eye(2) * rng.uniform(0.5, 3), (1, Z, 2, 2)).copy()
+        inn = association.innovations(mean[0], cov[0], z, R)
+        gated = association.gate(inn.d2, np.ones((1, 1), bool), np.ones((1, Z), bool), 0.99)
+        r, pd = np.array([[rng.uniform(0.01, 0.99)]]), np.array([[0.9]])
+        density = np.array([rng.uniform(1e-4, 1e-2)])
+        jipda = association.jpda(inn, gated, pd * r, density, 0.99)
+        given = manage.given_existence(jipda, r, pd, 0.99)
+        np.testing.assert_allclose(
+            given, association.jpda(inn, gated, pd, density, 0.99), rtol=1e-9
+        )
+        np.testing.assert_allclose(given.sum(axis=-1), 1.0)
+
+
 def test_a_miss_multiplies_the_odds_by_one_minus_pd_pg_and_unseen_tracks_keep_theirs():
     mean, cov = _track()
     z, R = np.zeros((1, 0, 2)), np.zeros((1, 0, 2, 2))

@@ -134,7 +134,7 @@ METRICS: dict[str, tuple[str, str]] = {
     "gospa_team": (
         "m",
         "GOSPA (alpha = 2) of the team picture: per team label the confirmed track of the "
-        "most confident living UAV that holds it (1/trace of its position covariance), "
+        "most confident living UAV that holds it (1/trace P, P its 4 x 4 covariance), "
         "mean per step",
     ),
     "label_purity": (

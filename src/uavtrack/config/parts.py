@@ -573,9 +573,9 @@ class TrackerModel(Part):
         default=True,
         description=(
             "true or false [-]: whether the mission starts with every target a confirmed "
-            "track of every UAV (the initial belief the paper's filters start from); false: beyond the "
-            "paper, no track at the start, and the team must find the targets; assumed: "
-            "true, the paper's start"
+            "track of every UAV (the initial belief the paper's filters start from); "
+            "false: beyond the paper, no track at the start, and the team must find the "
+            "targets; assumed: true, the paper's start"
         ),
     )
     birth_velocity_std: Float = Field(

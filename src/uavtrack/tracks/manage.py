@@ -268,8 +268,8 @@ def scan(
     weigh = pd * r if exists else pd  # JIPDA: a track detected only if it exists
     new_mean, new_cov = m, P_  # updated below: by the filter, or as the modes combine
     beta = None
-    if settings.association == "gnn":
-        take = association.gnn(inn, gated, weigh, dens, settings.gate_probability)
+    if settings.association == "gnn":  # which measurement, given that the track exists
+        take = association.gnn(inn, gated, pd, dens, settings.gate_probability)
         unused = association.unused_gnn(take, ok)
         if modes is None:
             new_mean, new_cov = association.assigned_update(m, P_, zz, RR, take)
@@ -284,8 +284,10 @@ def scan(
         beta = association.jpda(inn, gated, weigh, dens, settings.gate_probability)
         unused = association.unused_jpda(gated, ok)
     if exists:
-        r = existence_update(r, inn, gated, pd, dens, settings.gate_probability, beta)
-        book = replace(book, existence=np.where(present, r.reshape(B, N, K), book.existence))
+        after = existence_update(r, inn, gated, pd, dens, settings.gate_probability, beta)
+        book = replace(book, existence=np.where(present, after.reshape(B, N, K), book.existence))
+        if beta is not None:  # the state is updated given that the track exists
+            beta = given_existence(beta, r, pd, settings.gate_probability)
     if beta is not None:
         beta = _firm(beta, (book.status == TENTATIVE).reshape(P, K))
         if modes is None:
@@ -615,6 +617,23 @@ def existence_update(
         unseen = miss * r / np.maximum(1.0 - pd * gate_probability * r, np.finfo(float).tiny)
         after = (1.0 - beta[..., 0]) + beta[..., 0] * unseen
     return np.where(r > 0, np.minimum(after, EXISTENCE_CAP), r)
+
+
+def given_existence(
+    beta: np.ndarray, r: np.ndarray, pd: np.ndarray, gate_probability: float
+) -> np.ndarray:
+    """JIPDA's weights beta (P, K, Z + 1), computed with P_D r, conditioned on the track's
+    existence (Musicki and Evans 2004): beta_j / r' for a measurement and beta_0 r (1 -
+    P_D P_G) / (1 - P_D P_G r) / r' for the miss, r' = (1 - beta_0) + beta_0 r (1 - P_D
+    P_G) / (1 - P_D P_G r) the existence after the scan (uncapped). The state's update
+    reads these: a track that may not exist still takes the measurement it would take
+    if it did. Rows with r' = 0 (no track) keep their weights."""
+    tiny = np.finfo(float).tiny
+    unseen = (1.0 - pd * gate_probability) * r / np.maximum(1.0 - pd * gate_probability * r, tiny)
+    out = beta.copy()
+    out[..., 0] = beta[..., 0] * unseen
+    total = out.sum(axis=-1, keepdims=True)
+    return np.where(total > 0, out / np.where(total > 0, total, 1.0), beta)
 
 
 def survive(book: Book, scenario: Scenario) -> Book:
