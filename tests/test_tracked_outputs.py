@@ -348,8 +348,9 @@ class PerStep:
     nothing carried between steps). Stone Soup's own `TrackToTruth` at
     consec_pairs_confirm = consec_misses_end = 1 makes the same associations but cannot
     hold one of a single step (its TimeRange asks start < end, a ValueError), so a run of
-    steps with one truth is a TimeRangeAssociation from its first step to its last plus
-    1 us: it holds those steps and no other (the next is dT later)."""
+    steps in a row with one truth is a TimeRangeAssociation from its first step to its
+    last plus 1 us: it holds those steps and no other (the next is dT later; a track
+    absent at a step, a label deleted and adopted back, ends a run)."""
 
     def __init__(self, threshold: float) -> None:
         self.threshold = threshold
@@ -372,10 +373,11 @@ class PerStep:
                     there = states.get(state.timestamp)
                     if there is not None and float(np.hypot(*(where - there))) < best:
                         best, nearest = float(np.hypot(*(where - there))), truth
+                step = datetime.timedelta(seconds=TRACKED.dt)
                 if nearest is None:
                     runs.append([None, None, None])
-                elif runs and runs[-1][0] is nearest:
-                    runs[-1][2] = state.timestamp
+                elif runs and runs[-1][0] is nearest and state.timestamp - runs[-1][2] == step:
+                    runs[-1][2] = state.timestamp  # a run is steps in a row: a gap ends it
                 else:
                     runs.append([nearest, state.timestamp, state.timestamp])
             for truth, first, last in runs:
