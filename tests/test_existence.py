@@ -24,11 +24,10 @@ def _track(x=0.0, y=0.0, std=1.0):
     return mean, np.broadcast_to(np.eye(4) * std**2, (1, 1, 1, 4, 4)).copy()
 
 
-def test_ipda_and_jipda_agree_on_a_track_alone():
-    """A track alone in its cluster: the JIPDA form over the association's weights (with
-    P_D r in them) is the integrated PDA's closed form, for any scan."""
-    rng = np.random.default_rng(1)
-    for _ in range(50):
+def _lone_scans(seed: int, count: int = 50):
+    """Random scans of a track alone in its cluster: (innovations, gated, r, P_D, lambda)."""
+    rng = np.random.default_rng(seed)
+    for _ in range(count):
         mean, cov = _track(std=rng.uniform(0.5, 5))
         Z = int(rng.integers(0, 4))
         z = rng.normal(0, 4, (1, Z, 2))
@@ -36,7 +35,13 @@ def test_ipda_and_jipda_agree_on_a_track_alone():
         inn = association.innovations(mean[0], cov[0], z, R)
         gated = association.gate(inn.d2, np.ones((1, 1), bool), np.ones((1, Z), bool), 0.99)
         r = np.array([[rng.uniform(0.01, 0.99)]])
-        pd, density = np.array([[0.9]]), np.array([rng.uniform(1e-4, 1e-2)])
+        yield inn, gated, r, np.array([[0.9]]), np.array([rng.uniform(1e-4, 1e-2)])
+
+
+def test_ipda_and_jipda_agree_on_a_track_alone():
+    """A track alone in its cluster: the JIPDA form over the association's weights (with
+    P_D r in them) is the integrated PDA's closed form, for any scan."""
+    for inn, gated, r, pd, density in _lone_scans(1):
         beta = association.jpda(inn, gated, pd * r, density, 0.99)
         ipda = manage.existence_update(r, inn, gated, pd, density, 0.99)
         jipda = manage.existence_update(r, inn, gated, pd, density, 0.99, beta)
@@ -47,21 +52,11 @@ def test_given_existence_a_lone_tracks_weights_are_pdas_with_p_d():
     """JIPDA's weights (with P_D r) conditioned on existence are, for a track alone in
     its cluster, PDA's weights with P_D: whether it exists does not change which
     measurement it would have made."""
-    rng = np.random.default_rng(3)
-    for _ in range(50):
-        mean, cov = _track(std=rng.uniform(0.5, 5))
-        Z = int(rng.integers(0, 4))
-        z = rng.normal(0, 4, (1, Z, 2))
-        R = np.broadcast_to(np.eye(2) * rng.uniform(0.5, 3), (1, Z, 2, 2)).copy()
-        inn = association.innovations(mean[0], cov[0], z, R)
-        gated = association.gate(inn.d2, np.ones((1, 1), bool), np.ones((1, Z), bool), 0.99)
-        r, pd = np.array([[rng.uniform(0.01, 0.99)]]), np.array([[0.9]])
-        density = np.array([rng.uniform(1e-4, 1e-2)])
+    for inn, gated, r, pd, density in _lone_scans(3):
         jipda = association.jpda(inn, gated, pd * r, density, 0.99)
         given = manage.given_existence(jipda, r, pd, 0.99)
-        np.testing.assert_allclose(
-            given, association.jpda(inn, gated, pd, density, 0.99), rtol=1e-9
-        )
+        pda = association.jpda(inn, gated, pd, density, 0.99)
+        np.testing.assert_allclose(given, pda, rtol=1e-9)
         np.testing.assert_allclose(given.sum(axis=-1), 1.0)
 
 
