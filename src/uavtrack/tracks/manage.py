@@ -607,15 +607,13 @@ def existence_update(
     (1 - P_D P_G) / (1 - P_D P_G r), the track detected or, missed, existing unseen;
     for a track alone in its cluster the two are the same. pd (P, K) is P_D where the
     track can be detected (0 elsewhere: r is unchanged), density (P,) lambda."""
-    miss = 1.0 - pd * gate_probability
     if beta is None:
         lik = np.where(gated, np.exp(inn.log_lik), 0.0).sum(axis=-1)
-        L = miss + pd / density[:, None] * lik  # > 0: P_G < 1
+        L = 1.0 - pd * gate_probability + pd / density[:, None] * lik  # > 0: P_G < 1
         with np.errstate(over="ignore"):  # L = inf (no clutter): r' = 1
             after = r / (r + (1.0 - r) / L)
     else:
-        unseen = miss * r / np.maximum(1.0 - pd * gate_probability * r, np.finfo(float).tiny)
-        after = (1.0 - beta[..., 0]) + beta[..., 0] * unseen
+        after = (1.0 - beta[..., 0]) + beta[..., 0] * _unseen(r, pd, gate_probability)
     return np.where(r > 0, np.minimum(after, EXISTENCE_CAP), r)
 
 
@@ -628,12 +626,16 @@ def given_existence(
     P_G) / (1 - P_D P_G r) the existence after the scan (uncapped). The state's update
     reads these: a track that may not exist still takes the measurement it would take
     if it did. Rows with r' = 0 (no track) keep their weights."""
-    tiny = np.finfo(float).tiny
-    unseen = (1.0 - pd * gate_probability) * r / np.maximum(1.0 - pd * gate_probability * r, tiny)
     out = beta.copy()
-    out[..., 0] = beta[..., 0] * unseen
+    out[..., 0] = beta[..., 0] * _unseen(r, pd, gate_probability)
     total = out.sum(axis=-1, keepdims=True)
     return np.where(total > 0, out / np.where(total > 0, total, 1.0), beta)
+
+
+def _unseen(r: np.ndarray, pd: np.ndarray, gate_probability: float) -> np.ndarray:
+    """P(the track exists | it was missed) = r (1 - P_D P_G) / (1 - P_D P_G r)."""
+    detect = pd * gate_probability
+    return (1.0 - detect) * r / np.maximum(1.0 - detect * r, np.finfo(float).tiny)
 
 
 def survive(book: Book, scenario: Scenario) -> Book:

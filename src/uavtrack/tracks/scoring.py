@@ -418,11 +418,16 @@ class TrackScore:
         start, time = confirm_clock(self.steps, st["start"], matched, present, in_view)
         threshold = self.cutoff if self.threshold is None else self.threshold
         nearest = nearest_truth(truth, present, tracks, confirmed, threshold)
+        within_c = (
+            nearest
+            if threshold == self.cutoff  # SIAP's threshold is the cut-off unless given
+            else nearest_truth(truth, present, tracks, confirmed, self.cutoff)
+        )
         J, JT, N, NA = siap_counts(nearest, present, confirmed)
         labels = np.asarray(labels, dtype=np.int64)
         key = (np.arange(P, dtype=np.int64)[:, None] << LABEL_BITS) | np.maximum(labels, 0)
         duplicate, stale, never = unassigned_kinds(
-            assigned, nearest_truth(truth, present, tracks, confirmed, self.cutoff), confirmed,
+            assigned, within_c, confirmed,
             _member(key, st["followed"]),
         )  # fmt: skip
         first = never & ~_member(key, st["never"]) & alive[:, None]
