@@ -60,8 +60,16 @@ def test_memory_swarm_with_tracks_equals_the_simulator(method, faults):
         ("jpda", {"tracker.confirmation": "existence", "tracker.merge": 2}),
         ("gnn", {"tracker.confirmation": "m_of_n"}),
         ("jpda", {"tracker.briefing": False}),
+        ("jpda", {"target.stay": 8, "target.away": 5, "planner.existence": True}),
     ],
-    ids=["gnn-imm", "jpda-ci", "jpda-existence-merge", "gnn-m-of-n", "jpda-unbriefed"],
+    ids=[
+        "gnn-imm",
+        "jpda-ci",
+        "jpda-existence-merge",
+        "gnn-m-of-n",
+        "jpda-unbriefed",
+        "jpda-births-weighed",
+    ],  # fmt: skip
 )
 @pytest.mark.parametrize("method", ["distributed", "centralized"])
 def test_memory_swarm_with_tracks_equals_the_simulator_in_every_setting(method, association, more):

@@ -9,7 +9,7 @@ import pytest
 from scipy import stats
 
 from uavtrack import estimation
-from uavtrack.metrics import NEES_BINS_PER_DECADE, gospa
+from uavtrack.metrics import NEES_BINS_PER_DECADE, gospa, ospa
 from uavtrack.tracks.scoring import (
     TRACK_METRICS,
     TrackScore,
@@ -19,8 +19,10 @@ from uavtrack.tracks.scoring import (
     label_purity,
     matched_nees,
     nearest_truth,
+    ospa2,
     team_picture,
     unassigned_kinds,
+    window_tracks,
 )
 
 stonesoup = pytest.importorskip("stonesoup")
@@ -396,3 +398,102 @@ def test_label_purity_counts_the_uavs_that_carry_the_majority_label():
     label = np.array([[[5, 6], [5, -1], [8, 6], [-1, -1]]])
     agreeing, matched = label_purity(label)
     assert agreeing.tolist() == [4] and matched.tolist() == [5]
+
+
+def brute_ospa2(X, xe, Y, ye, c, p):
+    """OSPA(2) of one row by its definition (Beard, Vo and Vo 2020), every matching tried."""
+    import itertools
+
+    xs = [a for a in range(X.shape[1]) if xe[:, a].any()]
+    ys = [b for b in range(Y.shape[1]) if ye[:, b].any()]
+
+    def base(a, b):
+        steps = [t for t in range(X.shape[0]) if xe[t, a] or ye[t, b]]
+        total = sum(
+            min(c, float(np.linalg.norm(X[t, a] - Y[t, b]))) if xe[t, a] and ye[t, b] else c
+            for t in steps
+        )
+        return total / len(steps)
+
+    if not xs and not ys:
+        return 0.0
+    small, large, d = (xs, ys, base) if len(xs) <= len(ys) else (ys, xs, lambda a, b: base(b, a))
+    best = min(
+        sum(d(a, b) ** p for a, b in zip(small, chosen, strict=True))
+        for chosen in itertools.permutations(large, len(small))
+    )
+    return ((best + c**p * (len(large) - len(small))) / len(large)) ** (1 / p)
+
+
+@pytest.mark.parametrize("p", [1.0, 2.0])
+def test_ospa2_equals_its_definition(rng, p):
+    """Random windows of tracks that come and go: the vectorised OSPA(2) equals the
+    definition with every matching tried."""
+    c, w = 10.0, 5
+    for _ in range(30):
+        m, n = rng.integers(0, 4, 2)
+        X = rng.uniform(0, 25, (w, 1, m, 2))
+        Y = rng.uniform(0, 25, (w, 1, n, 2))
+        xe, ye = rng.random((w, 1, m)) < 0.7, rng.random((w, 1, n)) < 0.7
+        got = ospa2(X, xe, Y, ye, c, p)[0]
+        assert got == pytest.approx(brute_ospa2(X[:, 0], xe[:, 0], Y[:, 0], ye[:, 0], c, p))
+
+
+def test_ospa2_of_one_step_is_ospa(rng):
+    """A window of one step: each track is a point, and OSPA(2) is OSPA."""
+    for _ in range(20):
+        m, n = rng.integers(0, 5, 2)
+        X, Y = rng.uniform(0, 30, (m, 2)), rng.uniform(0, 30, (n, 2))
+        got = ospa2(
+            X[None, None], np.ones((1, 1, m), bool), Y[None, None], np.ones((1, 1, n), bool),
+            10.0, 2.0,
+        )[0]  # fmt: skip
+        assert got == pytest.approx(ospa(X, Y, 10.0, 2.0), abs=1e-12)
+
+
+def test_window_tracks_gives_each_key_of_a_row_a_column():
+    keys = np.array([[[5, 7], [1, 0]], [[7, 9], [1, 0]]])  # (w 2, P 2, M 2)
+    exists = np.array([[[True, True], [True, False]], [[True, True], [True, False]]])
+    positions = np.arange(16.0).reshape(2, 2, 2, 2)
+    where, held = window_tracks(keys, exists, positions)
+    # row 0: keys 5, 7, 9 -> columns 0, 1, 2; row 1: key 1 -> column 0
+    assert held[:, 0].tolist() == [[True, True, False], [False, True, True]]
+    assert held[:, 1].tolist() == [[True, False, False], [True, False, False]]
+    assert where[1, 0, 1].tolist() == positions[1, 0, 0].tolist()  # key 7 moved slot
+
+
+def test_a_label_switch_costs_in_ospa2_and_not_in_gospa():
+    """One target followed exactly, by label 1 for 5 steps and label 2 for 5: over a
+    window of 10 steps the truth matches one label half the time (c/2) and the other is
+    left over (c), so OSPA(2) = (c/2 + c) / 2; windows of 5 see one label each: 0."""
+    c = 10.0
+    for window, expected in ((10, 0.75 * c), (5, 0.0)):
+        score = TrackScore(batch=1, rows=1, n_targets=1, cutoff=c, window=window)
+        for k in range(10):
+            score.add(
+                truth=np.zeros((1, 1, 2)), tracks=np.zeros((1, 1, 2)),
+                labels=np.array([[1 if k < 5 else 2]]), confirmed=np.ones((1, 1), bool),
+                in_view=np.ones((1, 1), bool),
+            )  # fmt: skip
+        s = score.summary()
+        assert s["gospa"][0] == 0.0
+        assert s["ospa2"][0] == pytest.approx(expected, abs=1e-12)
+
+
+def test_the_team_clock_stops_at_any_uavs_confirmed_track():
+    """One target and two UAVs: found by UAV 0 at step 0, confirmed by UAV 1 at step 2
+    (2 steps); found again at 3, confirmed by UAV 0 at 4 (1 step); found at 6 and gone
+    at 7 before anyone confirms it (no time). The team's median: 1.5."""
+    held = {2: 1, 4: 0, 5: 0}  # step -> the UAV whose confirmed track is on the target
+    score = TrackScore(batch=1, rows=2, n_targets=1, cutoff=10.0)
+    for k in range(9):
+        labels = np.full((2, 1), -1)
+        if k in held:
+            labels[held[k], 0] = 3
+        in_view = np.array([[k in (0, 1, 3, 6)], [False]])
+        score.add(
+            truth=np.zeros((2, 1, 2)), present=np.full((2, 1), k != 7),
+            tracks=np.zeros((2, 1, 2)), labels=labels, confirmed=labels >= 0,
+            in_view=in_view,
+        )  # fmt: skip
+    assert score.summary()["time_to_confirm_team"][0] == pytest.approx(1.5)

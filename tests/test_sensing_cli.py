@@ -69,19 +69,23 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
             for e in cells.values()
         ]
     )
-    # known per P_D, every tracked cell and the unbriefed one
-    assert len(rows) == 3 * (3 + 3 * 3 * 2 + 1)
+    # known per P_D, every tracked cell, the unbriefed one and the births one
+    assert len(rows) == 3 * (3 + 3 * 3 * 2 + 2)
     assert (rows["association"] == "jpda-unbriefed").sum() == 3
+    assert (rows["association"] == "jpda-births").sum() == 3
     for method, cells in summary["methods"].items():
         for key, e in cells.items():
             if e["association"] == "known":
+                continue
+            if e["association"] == "jpda-births":  # another truth: no known to pair with
+                assert "against_known" not in e
                 continue
             known = cells[f"pd={e['pd']:g} clutter=0 known"]
             diff = e["against_known"]["observation_rate"]["mean"]  # paired on the trials
             rate, base = e["observation_rate"]["mean"], known["observation_rate"]["mean"]
             assert diff == pytest.approx(rate - base, abs=1e-12), (method, key)
     goals = summary["goals"]
-    assert len(goals) == 19 and all(isinstance(g["met"], bool) for g in goals)
+    assert len(goals) == 20 and all(isinstance(g["met"], bool) for g in goals)
     value = {g["goal"]: g["value"] for g in goals}
     for method in ("distributed", "centralized"):  # the worst cell, recomputed
         cells = summary["methods"][method]
@@ -94,11 +98,10 @@ def test_uavtrack_sensing_writes_its_tables_and_figure_and_resumes(tmp_path, cap
         assert value[f"{method}: jpda minus gnn rate, worst cell"] == pytest.approx(worst)
     goal = summary["methods"]["distributed"]["pd=0.9 clutter=2 jpda"]
     assert value["label purity (distributed)"] == goal["label_purity"]["mean"]
-    cold = summary["methods"]["distributed"]["pd=0.9 clutter=2 jpda-unbriefed"]
-    assert (
-        value["unbriefed (distributed): steps to confirm a target found anew"]
-        == (cold["time_to_confirm"]["mean"])
-    )
+    for end, what in (("unbriefed", "unbriefed"), ("births", "unbriefed, births")):
+        cold = summary["methods"]["distributed"][f"pd=0.9 clutter=2 jpda-{end}"]
+        name = f"{what} (distributed): steps for the team to confirm a target in view, median"
+        assert value[name] == cold["time_to_confirm_team"]["mean"]
     parity = [g for g in goals if g["goal"].startswith("P_D 1, no clutter")]
     cells = summary["methods"]["distributed"]
     for g, association in zip(parity, sensing.ASSOCIATIONS, strict=True):

@@ -142,10 +142,21 @@ METRICS: dict[str, tuple[str, str]] = {
         "share of the (UAV, target, step) whose track matched to the target carries the "
         "team's majority label for it among the UAVs that hold a matched track",
     ),
+    "ospa2": (
+        "m",
+        "OSPA(2) (Beard, Vo and Vo 2020, order p, cut-off c) of a UAV's confirmed tracks "
+        "against the targets as tracks over windows of 10 steps: a label switch costs",
+    ),
+    "ospa2_team": ("m", "the same of the team picture (gospa_team's tracks)"),
     "time_to_confirm": (
         "1",
         "steps from a target's first sight without a track to its first matched track (a "
         "count of steps)",
+    ),
+    "time_to_confirm_team": (
+        "1",
+        "median steps from a target's entering some UAV's view while no UAV holds a "
+        "confirmed track of it to the first confirmed track of it held by any UAV",
     ),
     "never_confirmed": ("", "fraction of those targets never matched by the end"),
     "siap_completeness": ("", "SIAP completeness: fraction of targets with a track"),
@@ -337,6 +348,9 @@ class Tally:
     cutoff: float = 20.0
     order: float = 1.0
     steps: int = 0
+    log: list[dict[str, np.ndarray]] | None = None
+    """With a list: each step's own values of the metrics that are means over the steps
+    (`STEP_METRICS`), appended as the steps are added (`series`)."""
     observed: np.ndarray = field(init=False)
     sums: dict[str, np.ndarray] = field(init=False)
     spread: dict[str, NeesSpread] = field(init=False)  # nees, nees_best
@@ -348,6 +362,7 @@ class Tally:
 
     def __post_init__(self) -> None:
         self.observed = np.zeros((self.batch, self.n_targets))
+        self.present = np.zeros((self.batch, self.n_targets))  # steps each target was there
         names = (
             "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
             "delivered", "bytes", "conflicts", "decision", "wall", "decided", "pairs", "best",
@@ -367,7 +382,24 @@ class Tally:
         everyone = bool(alive.all())
         in_view = cycle.observed.any(axis=1)
         self.observed += in_view
-        s["in_view_sq"] += np.square(in_view.mean(axis=1))
+        here = ~np.isnan(truth[..., 0])  # targets that come and go are NaN while away
+        self.present += here
+        if here.all():
+            share = in_view.mean(axis=1)
+        else:  # the share of the targets there
+            share = in_view.sum(axis=1) / np.maximum(here.sum(axis=1), 1)
+        s["in_view_sq"] += np.square(share)
+        if self.log is not None:
+            living, anyone = np.maximum(alive.sum(axis=1), 1), alive.any(axis=1)
+            self.log.append({
+                "observation_rate": share,
+                "rounds": np.where(
+                    anyone, np.where(alive, cycle.rounds, 0).sum(axis=1) / living, np.nan
+                ),
+                "messages": cycle.messages * 1.0, "delivered": cycle.delivered * 1.0,
+                "bytes": (cycle.bytes.sum(axis=1) + cycle.node_bytes) / self.n_uavs,
+                "conflicts": cycle.conflicts * 1.0,
+            })  # fmt: skip
         anyone = alive.any(axis=1)
         if getattr(cycle, "label", None) is None:  # tracks are scored by their labels
             self._estimates(cycle, truth, everyone)
@@ -416,6 +448,12 @@ class Tally:
         err = best_mean[..., :2] - truth[..., :2]
         s["squared_error_best"] += np.where(anyone, (err * err).sum(axis=(1, 2)), 0.0)
         s["best"] += anyone * self.n_targets
+        if self.log is not None:
+            pairs = np.where(alive.any(axis=1), alive.sum(axis=1) * self.n_targets, np.nan)
+            self.log[-1]["rmse"] = np.sqrt(squared.sum(axis=(1, 2, 3)) / pairs)
+            self.log[-1]["rmse_best"] = np.where(
+                anyone, np.sqrt((err * err).sum(axis=(1, 2)) / self.n_targets), np.nan
+            )
         if self._block > 1:  # held past this call: copies, as the caller may reuse its arrays
             mean, cov = mean.copy(), cov.copy()
         self._pending.append((mean, cov, best_mean, best_cov, truth, None if everyone else alive))
@@ -434,12 +472,17 @@ class Tally:
         if not alive.all():  # a failed UAV's estimates are NaN; its scores are masked out
             mean = np.where(alive[..., None, None], mean, 0.0)
             best_mean = np.where(anyone[..., None, None], best_mean, 0.0)
+        logged = self.log[len(self.log) - X.shape[0] :] if self.log is not None else []
         if self.n_targets <= PER_UAV_SETS:
             d, g = ospa_and_gospa(X[:, :, None], mean[..., :2], c, p)  # (S, B, Nu)
             d, gd = np.where(alive, d, 0.0), np.where(alive, g.distance, 0.0)
             for step in range(d.shape[0]):
                 s["ospa"] += d[step].sum(axis=1)
                 s["gospa"] += gd[step].sum(axis=1)
+            living = np.where(anyone, alive.sum(axis=2), np.nan)  # (S, B)
+            for step, entry in enumerate(logged):
+                entry["ospa"] = d[step].sum(axis=1) / living[step]
+                entry["gospa"] = gd[step].sum(axis=1) / living[step]
         if self.n_targets <= BEST_SETS:
             d, g = ospa_and_gospa(X, best_mean[..., :2], c, p)  # (S, B)
             d, gd = np.where(anyone, d, 0.0), np.where(anyone, g.distance, 0.0)
@@ -448,6 +491,9 @@ class Tally:
                 s["ospa_best"] += d[step]
                 s["gospa_best"] += gd[step]
                 s["gospa_missed_best"] += missed[step]
+            for step, entry in enumerate(logged):
+                entry["ospa_best"] = np.where(anyone[step], d[step], np.nan)
+                entry["gospa_best"] = np.where(anyone[step], gd[step], np.nan)
 
     def _flush(self) -> None:
         if self._pending:
@@ -472,6 +518,18 @@ class Tally:
                 self.spread["nees_best"].add(trials_first[1])
             self.sums["nees"] += q.sum(axis=(0, 2, 3))
             self.sums["nees_best"] += best.sum(axis=(0, 2))
+            if self.log is not None:
+                pairs = alive.sum(axis=2) * self.n_targets  # (S, B)
+                anyone = np.any(alive, axis=2)
+                logged = self.log[len(self.log) - q.shape[0] :]
+                for step, entry in enumerate(logged):
+                    entry["nees"] = np.where(
+                        pairs[step] > 0, q[step].sum(axis=(1, 2)) / np.maximum(pairs[step], 1),
+                        np.nan,
+                    )  # fmt: skip
+                    entry["nees_best"] = np.where(
+                        anyone[step], best[step].sum(axis=1) / self.n_targets, np.nan
+                    )
             self._pending = []
 
     def _set_summary(self) -> dict[str, np.ndarray]:
@@ -491,9 +549,24 @@ class Tally:
             "gospa_missed_best": s["gospa_missed_best"] / steps,
         }
 
+    @property
+    def fixed(self) -> bool:
+        """Whether every target was present at every step so far (the paper's fixed set)."""
+        return bool((self.present == self.steps).all())
+
     def per_target(self) -> np.ndarray:
-        """Observation rate of each target, (B, Nt)."""
-        return self.observed / self.steps
+        """Observation rate of each target, (B, Nt): the share of the steps it was
+        present at which some UAV held it in view (NaN for a target never present)."""
+        if self.fixed:
+            return self.observed / self.steps
+        return np.where(self.present > 0, self.observed / np.maximum(self.present, 1), np.nan)
+
+    def observation_rate(self) -> np.ndarray:
+        """The observation rate of each trial (B,): the mean of `per_target`, or, with
+        targets that come and go, the share of present target-steps in view."""
+        if self.fixed:
+            return self.per_target().mean(axis=1)
+        return self.observed.sum(axis=1) / np.maximum(self.present.sum(axis=1), 1)
 
     def summary(self) -> dict[str, np.ndarray]:
         """Per-trial metrics of `METRICS`, each an array over the batch (per_target (B, Nt))."""
@@ -507,12 +580,11 @@ class Tally:
         untimed = np.full(self.batch, np.nan)
         decision = s["decision"] / decided if self.timed else untimed
         wall = s["wall"] / decided if self.timed else untimed
+        rate = self.observation_rate()
         return {
-            "observation_rate": per_target.mean(axis=1),
+            "observation_rate": rate,
             "per_target": per_target,
-            "in_view_std": np.sqrt(
-                np.maximum(s["in_view_sq"] / self.steps - per_target.mean(axis=1) ** 2, 0.0)
-            ),
+            "in_view_std": np.sqrt(np.maximum(s["in_view_sq"] / self.steps - rate**2, 0.0)),
             "rmse": np.sqrt(s["squared_error"] / pairs),
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,

@@ -656,6 +656,7 @@ def _decide_tracked(
         return replace(pending, tracks=tracks, scan=scan, labels=cols.labels)
     start = timing.start()
     slot_bids, best = ctx.setting.plan(believed, tracks.mean)
+    slot_bids = manage.weighed(slot_bids, tracks.book, scenario)
     plan_seconds = timing.since(start)
     slot_bids = np.where(confirmed, slot_bids, np.nan)
     assigned = method.assign(inputs, fused, columns.bids(np.nan_to_num(slot_bids), cols))
@@ -1013,7 +1014,9 @@ def initial_stream(
     B, Nu, Nt = len(seeds), scenario.n_uavs, scenario.n_targets
     truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
     drawn = [draw_start(scenario, rng) for rng in truth_rngs]
-    targets = Targets(np.stack([d[0] for d in drawn]), list(truth_rngs), scenario, keep)
+    targets = Targets(
+        np.stack([d[0] for d in drawn]), list(truth_rngs), scenario, keep, seeds=list(seeds)
+    )
     uavs = np.stack([d[1] for d in drawn])
     mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
     cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
@@ -1341,7 +1344,10 @@ class Result:
     never_tracks_new: float
     gospa_team: float
     label_purity: float
+    ospa2: float
+    ospa2_team: float
     time_to_confirm: float
+    time_to_confirm_team: float
     never_confirmed: float
     siap_completeness: float
     siap_ambiguity: float
@@ -1366,6 +1372,15 @@ class Result:
             value = getattr(self, name)
             out[name] = [float(x) for x in value] if name == "per_target" else float(value)
         return out
+
+    def series(self) -> dict[str, np.ndarray]:
+        """Each step's own value (T,) of the metrics that are means over the steps, for
+        plots (`tracks.scoring.series`); needs the trace (``simulate(..., trace=True)``)."""
+        if self.trace is None:
+            raise ValueError("this result holds no trace: simulate(..., trace=True)")
+        from .tracks.scoring import series
+
+        return series(self.trace, self.scenario)
 
 
 def simulate(

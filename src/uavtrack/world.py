@@ -189,6 +189,31 @@ def detection_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequen
     )
 
 
+def presence_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
+    """The presence stream of one trial (targets leaving and entering, ``target.stay``):
+    a sixth child of its seed, so the others are the same with or without it."""
+    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
+    return np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, 5), pool_size=seq.pool_size
+    )
+
+
+def presence(here: np.ndarray, draws: np.ndarray, stay: float, away: float) -> np.ndarray:
+    """Which targets are in the field over the next steps, (B, n, Nt) bool.
+
+    Each target alternates between present and away: a present one leaves at a step
+    with probability 1/stay (a death), an away one's place is taken by a new target with
+    probability 1/away (a birth), so stays and absences are geometric with means `stay`
+    and `away` steps. here (B, Nt): who is present at the step before; draws (B, n, Nt)
+    uniforms on [0, 1), one per target and step whatever its state."""
+    out = np.empty(draws.shape, dtype=bool)
+    for k in range(draws.shape[1]):
+        u = draws[:, k]
+        here = np.where(here, u >= 1.0 / stay, u < 1.0 / away)
+        out[:, k] = here
+    return out
+
+
 def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:
     """(truth, sensor) generators of one trial (see `children`)."""
     truth, sensor, _ = children(seed)
@@ -260,7 +285,13 @@ class Targets:
     acceleration, so their run is drawn whole at the first step.
 
     initial (B, Nt, 4) the states at step 0; rngs each trial's truth stream, after the
-    draws of its start; keep: whether the steps passed stay (for `whole`)."""
+    draws of its start; keep: whether the steps passed stay (for `whole`).
+
+    With ``target.stay`` > 0 targets come and go (`presence`, drawn from each trial's
+    `presence_stream` of `seeds`): every target is present at step 0, and a target away
+    at a step has the state NaN there. Its motion goes on unseen, so a new target enters
+    wherever that motion has taken it, and the present steps are those of the fixed set.
+    """
 
     BLOCK = 1024
     """Steps drawn at once [steps]."""
@@ -271,6 +302,7 @@ class Targets:
         rngs: list[np.random.Generator],
         scenario: Scenario,
         keep: bool = False,
+        seeds: list[np.random.SeedSequence] | None = None,
     ) -> None:
         self.scenario, self.rngs, self.keep = scenario, rngs, keep
         self.steps = scenario.steps
@@ -278,6 +310,12 @@ class Targets:
         self.p0, self.v0 = initial[..., :2], initial[..., 2:]
         self.sums: Sums | None = None  # what the closed form carries (`free_path`)
         self.blocks = [fold(self.p0[:, None], self.v0[:, None], scenario.field_size)]
+        self.present: list[np.random.Generator] | None = None  # presence streams
+        if scenario.target.stay > 0:
+            if seeds is None or len(seeds) != len(rngs):
+                raise ValueError("target.stay > 0 needs each trial's seed (seeds=)")
+            self.present = [np.random.default_rng(presence_stream(s)) for s in seeds]
+            self.here = np.ones(self.p0.shape[:-1], dtype=bool)  # (B, Nt) at the last step
         self.made = 1  # steps drawn
         self.start = 0  # the step of blocks[-1][:, 0]
 
@@ -312,6 +350,11 @@ class Targets:
             n, nt = min(self.BLOCK, self.steps - self.made), self.p0.shape[-2]
             accel = np.stack([rng.standard_normal((n, nt, 2)) for rng in self.rngs]) * self.std
             block = self._free(accel)
+        if self.present is not None:
+            draws = np.stack([rng.random(block.shape[1:3]) for rng in self.present])
+            here = presence(self.here, draws, self.scenario.target.stay, self.scenario.target.away)
+            self.here = here[:, -1]
+            block = np.where(here[..., None], block, np.nan)
         if self.keep:
             self.blocks.append(block)
         else:

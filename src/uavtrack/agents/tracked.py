@@ -95,6 +95,7 @@ class TrackedUav(UavAgent):
         each slot, and the seconds (CPU, wall) it took."""
         start = timing.start()
         slot_bids, best = self.setting.plan(self.believed[None, None], mean)
+        slot_bids = manage.weighed(slot_bids, book, self.scenario)
         slot_bids = np.where(book.confirmed[0, 0], slot_bids[0, 0], np.nan)
         return slot_bids, best[0, 0], timing.since(start)
 
@@ -395,6 +396,7 @@ class TrackedCentral(CentralAgent):
             believed = np.stack([uploads[i]["uav"] for i in heard])[None]
             slot_bids = np.full((1, n, self.scenario.track_slots), np.nan)
             slot_bids[0, heard] = s.plan(believed, np.repeat(node.mean, heard.size, axis=1))[0]
+            slot_bids = manage.weighed(slot_bids, node.book, scenario)  # (1, 1, K) broadcast
             confirmed = np.repeat(node.book.confirmed, n, axis=1) & alive[None, :, None]
             slot_bids = np.where(confirmed, slot_bids, np.nan)
             cols = columns.of(np.repeat(node.book.label, n, axis=1), confirmed)

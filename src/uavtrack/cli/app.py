@@ -259,9 +259,12 @@ TRACK_ROWS = (
     ("never_tracks_new", "  new ones per UAV and 100 steps", "{:.2f}"),
     ("gospa_team", "GOSPA, the team picture (a track per label) [m]", "{:.2f}"),
     ("label_purity", "label purity (the team's label for a target)", "{:.3f}"),
+    ("ospa2", "OSPA(2), each UAV's tracks over 10 steps [m]", "{:.2f}"),
+    ("ospa2_team", "OSPA(2), the team picture [m]", "{:.2f}"),
     ("switches", "track switches per target and 100 steps", "{:.2f}"),
     ("fragmentations", "fragmentations per target and 100 steps", "{:.2f}"),
     ("time_to_confirm", "steps to confirm a target found anew", "{:.1f}"),
+    ("time_to_confirm_team", "  by the team, median", "{:.1f}"),
     ("siap_completeness", "SIAP completeness", "{:.3f}"),
     ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),
     ("siap_spuriousness", "SIAP spuriousness", "{:.3f}"),
@@ -624,6 +627,8 @@ TRACK_COMPARE_ROWS = tuple(r for r in TRACK_ROWS if r[0] in ("gospa",) or "gospa
     ("siap_ambiguity", "SIAP ambiguity", "{:.3f}"),
     ("siap_spuriousness", "SIAP spuriousness", "{:.3f}"),
     ("label_purity", "label purity (the team's label for a target)", "{:.3f}"),
+    ("ospa2", "OSPA(2), each UAV's tracks over 10 steps [m]", "{:.2f}"),
+    ("ospa2_team", "OSPA(2), the team picture [m]", "{:.2f}"),
     *(r for r in COMPARE_ROWS if r[0] in ("rounds", "messages", "bytes", "decision_time_ms")),
 )
 """The rows of `uavtrack compare` with tracks, in place of the per-target estimate rows."""

@@ -386,6 +386,27 @@ class TargetModel(Part):
     manoeuvre: ManoeuvreModel = Field(
         default_factory=ManoeuvreModel, description="manoeuvres (target.motion = manoeuvring)"
     )
+    stay: Float = Field(
+        default=0.0,
+        ge=0,
+        le=1e6,
+        description=(
+            "mean steps a target stays in the field [steps], 0 or [1, 1e6]; 0: every target "
+            "stays the whole run, the paper's fixed set; beyond the paper: each leaves with "
+            "probability 1/stay per step (a death) and a new one enters after a mean of "
+            "target.away steps (a birth), where the hidden motion has taken it"
+        ),
+    )
+    away: Float = Field(
+        default=100.0,
+        ge=1,
+        le=1e6,
+        description=(
+            "mean steps a target's place stays empty before a new target enters [steps], "
+            "[1, 1e6] (target.stay > 0); assumed 100: with stay 200 a third of the run's "
+            "targets are away at a time, so the team keeps finding new ones"
+        ),
+    )
     noise_form: Literal["acceleration", "printed"] = Field(
         default="acceleration",
         description=(
@@ -774,6 +795,17 @@ class PlannerModel(Part):
             "skipping targets whose upper bound of det G cannot reach them; false: score "
             "every bid, so that the "
             "trace holds them all (as it always does when messages can be lost or late)"
+        ),
+    )
+    existence: Bool = Field(
+        default=False,
+        description=(
+            "true or false; beyond the paper, with tracker.confirmation = existence: each "
+            "bid times its track's existence probability, the information expected of a "
+            "track that may not be there; assumed false: measured at P_D 0.9, 2 clutter, "
+            "jpda, 36 paired trials, it lowers the distributed observation rate by 0.028 "
+            "(0.018 with target.stay 200), as the team stops visiting targets it has not "
+            "seen for a while (docs: Track existence)"
         ),
     )
     wind: Bool = Field(

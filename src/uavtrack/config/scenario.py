@@ -176,6 +176,36 @@ class Scenario(Part):
         return self
 
     @model_validator(mode="after")
+    def _births(self) -> Scenario:
+        """Targets that come and go (target.stay) need tracks to find the new ones, and
+        bids weighed by existence (planner.existence) tracks that have one."""
+        t = self.target
+        if 0 < t.stay < 1:
+            raise ValueError(
+                f"target.stay {t.stay:g} must be 0 (every target stays) or at least 1 step "
+                "(a target leaves with probability 1/stay per step)"
+            )
+        if t.stay == 0 and t.away != TargetModel.model_fields["away"].default:
+            raise ValueError(
+                "target.away needs target.stay > 0 (it does nothing otherwise); set "
+                "target.stay or leave target.away unset"
+            )
+        if self.planner.existence and (
+            self.tracker.association == "known" or self.tracker.confirmation != "existence"
+        ):
+            raise ValueError(
+                "planner.existence needs tracks with an existence probability: set "
+                "tracker.association=jpda (or gnn) with tracker.confirmation=existence, or "
+                "leave planner.existence unset"
+            )
+        if t.stay > 0 and self.tracker.association == "known":
+            raise ValueError(
+                "target.stay > 0 (targets that come and go) needs tracker.association = gnn "
+                "or jpda: known association holds one filter per target for the whole run"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _tracks(self) -> Scenario:
         """What tracks of unknown association cannot do yet, said before a run starts."""
         if self.tracker.association == "known":

@@ -80,7 +80,8 @@ UNDEFINED_ALLOWED = (
     "nees_inside", "nees_best_median", "nees_best_inside", "gospa_localisation",
     "gospa_missed", "gospa_false", "switches", "fragmentations", "unassigned_tracks",
     "unassigned_tracks_per_target", "duplicate_tracks", "stale_tracks", "never_tracks",
-    "never_tracks_new", "gospa_team", "label_purity", "time_to_confirm", "never_confirmed",
+    "never_tracks_new", "gospa_team", "label_purity", "ospa2", "ospa2_team", "time_to_confirm",
+    "time_to_confirm_team", "never_confirmed",
     "siap_completeness", "siap_ambiguity", "siap_spuriousness", "separation_min",
 )  # fmt: skip
 """Metrics that may be NaN: nothing to average (every UAV failed), not measured, or not

@@ -374,6 +374,8 @@ TRACK_TITLES = {
     "never_tracks": "Never-followed (clutter-born) confirmed tracks per target and step",
     "gospa_team": "GOSPA of the team picture (one track per label)",
     "label_purity": "Label purity",
+    "ospa2": "OSPA(2) of each UAV's confirmed tracks (10-step windows)",
+    "ospa2_team": "OSPA(2) of the team picture",
     "switches": "Track switches per target and 100 steps",
     "siap_completeness": "SIAP completeness",
     "siap_ambiguity": "SIAP ambiguity",

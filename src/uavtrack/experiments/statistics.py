@@ -75,7 +75,7 @@ TRACK_METRICS = (
     "gospa", "gospa_localisation", "gospa_missed", "gospa_false",
     "unassigned_tracks_per_target", "duplicate_tracks", "stale_tracks", "never_tracks",
     "switches", "siap_completeness", "siap_ambiguity", "siap_spuriousness", "gospa_team",
-    "label_purity",
+    "label_purity", "ospa2", "ospa2_team",
 )  # fmt: skip
 """The track metrics of a run with tracks (``tracker.association`` gnn or jpda), which a
 comparison and a sweep report beside the observation rate."""

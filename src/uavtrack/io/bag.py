@@ -90,7 +90,6 @@ def write_bag(
 def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
     m = Markers()
     T, Nu = trace.uavs.shape[:2]
-    Nt = trace.targets.shape[1]
     dt_ns = int(round(scenario.dt * 1e9))
     frame = LocalFrame(*origin)
     east, north = frame.radii
@@ -136,7 +135,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 write(f"/uav_{i}/fix", fix, ns)
                 transforms.append(transform_of(m.header(ns), f"uav_{i}", pose))
             truth = []
-            for j in range(Nt):
+            for j in map(int, np.flatnonzero(~np.isnan(targets[:, 0]))):  # away: no pose
                 x, y, vx, vy = (float(v) for v in targets[j])
                 course = math.atan2(vy, vx)
                 place = m.pose(x, y, 0.0, course)

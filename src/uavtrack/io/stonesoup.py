@@ -112,16 +112,21 @@ def to_stonesoup(
 
 
 def _truths(trace: Trace, times: list[_dt.datetime]) -> set:
-    """The true targets as `GroundTruthPath`s, id ``target-j``."""
+    """The true targets as `GroundTruthPath`s, id ``target-j``. With targets that come
+    and go (``target.stay``, NaN while away), each stay in place j is its own path, the
+    first ``target-j``, the n-th after it ``target-j-n``."""
     from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
 
     truths = set()
+    here = ~np.isnan(trace.targets[: len(times), :, 0])  # (T, Nt)
     for j in range(trace.targets.shape[1]):
-        states = [
-            GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k])
-            for k in range(len(times))
-        ]
-        truths.add(GroundTruthPath(states, id=f"target-{j}"))
+        steps = np.flatnonzero(here[:, j])
+        for n, stay in enumerate(np.split(steps, np.flatnonzero(np.diff(steps) > 1) + 1)):
+            states = [
+                GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k]) for k in stay
+            ]
+            if states:
+                truths.add(GroundTruthPath(states, id=f"target-{j}" + (f"-{n}" if n else "")))
     return truths
 
 

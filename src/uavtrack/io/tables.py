@@ -4,7 +4,12 @@ results folder as one row per trial. Needs the io extra (xarray, pandas, pyarrow
 Tables (one row per ...):
 
 * ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of targets in
-  some UAV's disk), alive_uavs (how many);
+  some UAV's disk), alive_uavs (how many), and from a trace file or a `Result` (which
+  carry the scenario) each metric's own value at the step, for plots
+  (`tracks.scoring.series`): observation_rate, rounds, bytes, with known association
+  rmse, ospa, gospa, nees and their _best twins, with tracks gospa and its parts, the
+  kinds of unassigned tracks, switches, SIAP, gospa_team, label_purity, and ospa2 and
+  ospa2_team at the last step of each window (NaN elsewhere);
 * ``uavs``: step and UAV: its true state (x, y, altitude [m], speed [m/s], heading
   [rad]), alive, assignment (-1: failed), bank_angle [rad], rounds, decision times [ms];
 * ``targets``: step and target: its true state (x, y [m], vx, vy [m/s]), in_view (of
@@ -54,6 +59,7 @@ from ..errors import UsageError
 from ..metrics import METRICS, team_best
 from ..simulation import TRACKED, Cycle, Trace
 from ..tracks.manage import STATUS_NAMES
+from ..tracks.scoring import series
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -78,7 +84,10 @@ def unit(column: str) -> str | None:
     for prefix in ("est_", "best_"):
         if column.startswith(prefix) and column[len(prefix) :] in TARGET_STATE:
             return UNITS[column[len(prefix) :]]
-    return UNITS.get(column)
+    if column in UNITS:
+        return UNITS[column]
+    metric = METRICS.get(column, ("",))[0]  # a metric's series (``steps``)
+    return metric if metric not in ("", "1") else None
 
 
 def _estimates(mean: np.ndarray, cov: np.ndarray) -> dict[str, np.ndarray]:
@@ -235,13 +244,14 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     [s]: `TABLES`, or with tracks of unknown association `TRACK_TABLES`. Each frame's
     ``attrs["units"]`` maps its columns to their units (Parquet keeps them, see
     `write_table`)."""
+    scenario = None
     if isinstance(source, Trace):
         if dt is None:
             raise UsageError("a bare Trace needs its step dt: to_frames(trace, dt)")
         trace = source
     else:
         saved = trace_file.load(source)
-        trace, dt = saved.trace, saved.dt
+        trace, dt, scenario = saved.trace, saved.dt, saved.scenario
     tracked = trace.label is not None
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
@@ -258,6 +268,10 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
             "alive_uavs": trace.alive.sum(axis=1),
         }
     )
+    if scenario is not None:  # each metric's own value per step
+        for name, values in series(trace, scenario).items():
+            if name not in steps:
+                steps[name] = values
     k, i = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nu), indexing="ij"))
     uavs = {"step": k, "time": time[k], "uav": i}
     for c, name in enumerate(UAV_STATE):
@@ -276,6 +290,8 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     for c, name in enumerate(TARGET_STATE):
         targets[name] = trace.targets[..., c].ravel()
     targets["in_view"] = trace.observed.any(axis=1).ravel()
+    if np.isnan(trace.targets[..., 0]).any():  # targets that come and go: NaN while away
+        targets["present"] = ~np.isnan(trace.targets[..., 0]).ravel()
     frames = {"steps": steps, "uavs": pd.DataFrame(uavs)}
     if tracked:
         frames["targets"] = pd.DataFrame(targets)

@@ -723,3 +723,13 @@ def merge(
         out["status"][mp[w], slot[w]] = np.where(sure[gw], CONFIRMED, out["status"][mp[w], slot[w]])
         out["close"][mp[w], slot[w]] = 0
     return replace(book, **{name: value.reshape(B, N, K) for name, value in out.items()})
+
+
+def weighed(bids: np.ndarray, book: Book, scenario: Scenario) -> np.ndarray:
+    """Each slot's bid (B, N, K) times its track's existence probability with
+    ``planner.existence``: the information a UAV expects from a track that may not be
+    there (all of it if it is, none if not). Unchanged otherwise. Called by the
+    simulator's, the agents' and the central node's planning."""
+    if not scenario.planner.existence:
+        return bids
+    return bids * book.existence

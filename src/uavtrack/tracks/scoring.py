@@ -40,14 +40,15 @@ second decimal.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ..estimation import confidence, nees
 
 if TYPE_CHECKING:
-    from ..simulation import Cycle
+    from ..config import Scenario
+    from ..simulation import Cycle, Trace
 
 from ..airspace.separation import NAMES as SEPARATION
 from ..airspace.separation import Separation
@@ -71,7 +72,10 @@ TRACK_METRICS: dict[str, tuple[str, str]] = {
             "never_tracks_new",
             "gospa_team",
             "label_purity",
+            "ospa2",
+            "ospa2_team",
             "time_to_confirm",
+            "time_to_confirm_team",
             "never_confirmed",
             "siap_completeness",
             "siap_ambiguity",
@@ -287,6 +291,61 @@ def confirm_clock(
     return np.where(stop, -1, np.where(begin, k, start)), time
 
 
+def window_tracks(
+    keys: np.ndarray, exists: np.ndarray, positions: np.ndarray
+) -> tuple[np.ndarray, np.ndarray]:
+    """The tracks of each row over a window of w steps, one column per distinct key.
+
+    keys (w, P, M) int in [0, 2^40) name each slot's track at each step (a label, or a
+    target and its life), exists (w, P, M) whether it is there, positions (w, P, M, 2).
+    Returns positions (w, P, L, 2) and exists (w, P, L), L the most keys of a row; a
+    row's columns past its own keys never exist."""
+    w, P, _ = keys.shape
+    row = np.broadcast_to(np.arange(P, dtype=np.int64)[None, :, None], keys.shape)
+    full = (row << LABEL_BITS) | np.asarray(keys, dtype=np.int64)
+    t, r, m = np.nonzero(exists)
+    there = full[t, r, m]
+    distinct = np.unique(there)
+    owner = distinct >> LABEL_BITS
+    L = max(int(np.bincount(owner, minlength=P).max(initial=0)), 1)
+    column = np.arange(distinct.size) - np.searchsorted(owner, owner)  # rank in its row
+    col = column[np.searchsorted(distinct, there)]
+    out = np.zeros((w, P, L, 2))
+    held = np.zeros((w, P, L), dtype=bool)
+    out[t, r, col], held[t, r, col] = positions[t, r, m], True
+    return out, held
+
+
+def ospa2(
+    X: np.ndarray, x_exists: np.ndarray, Y: np.ndarray, y_exists: np.ndarray, c: float, p: float
+) -> np.ndarray:
+    """OSPA(2) (Beard, Vo and Vo 2020) of the track sets of each row over a window.
+
+    X (w, P, m, 2) and Y (w, P, n, 2) are the tracks' positions over the window's w
+    steps, x_exists (w, P, m) and y_exists (w, P, n) the steps each track exists (a
+    column that never exists is no track). The distance between two tracks is the mean
+    over the steps either exists of min(d, c) where both do and c where one does; OSPA
+    of order p and cut-off c over that distance gives the row's value (P,), 0 for two
+    empty sets. A label switch inside the window costs, where per-step OSPA sees none."""
+    diff = X[:, :, :, None, :] - Y[:, :, None, :, :]
+    d = np.minimum(np.sqrt(np.einsum("...k,...k->...", diff, diff)), c)  # (w, P, m, n)
+    xe, ye = x_exists[:, :, :, None], y_exists[:, :, None, :]
+    step = np.where(xe & ye, d, np.where(xe | ye, c, 0.0))
+    either = (xe | ye).sum(axis=0)
+    base = np.where(either > 0, step.sum(axis=0) / np.maximum(either, 1), 0.0)  # (P, m, n)
+    P, m, n = base.shape
+    N = max(m, n)
+    cost = np.zeros((P, N, N))  # a missing track against a real one costs c^p (it never exists)
+    cost[:, :m, :n] = base**p
+    real_x, real_y = np.any(x_exists, axis=0), np.any(y_exists, axis=0)  # (P, m), (P, n)
+    cost[:, m:, :n] = np.where(real_y[:, None, :], c**p, 0.0)
+    cost[:, :m, n:] = np.where(real_x[:, :, None], c**p, 0.0)
+    match = matching(cost)
+    total = np.take_along_axis(cost, match[..., None], axis=-1)[..., 0].sum(axis=-1)
+    size = np.maximum(real_x.sum(axis=-1), real_y.sum(axis=-1))
+    return np.where(size > 0, (total / np.maximum(size, 1)) ** (1.0 / p), 0.0)
+
+
 def matched_nees(
     assigned: np.ndarray, mean: np.ndarray, cov: np.ndarray, states: np.ndarray
 ) -> np.ndarray:
@@ -306,9 +365,9 @@ def matched_nees(
 _SUMS = (
     "steps", "targets", "gospa", "localisation", "missed", "false", "switches",
     "fragmentations", "unassigned_tracks", "J", "JT", "N", "NA", "confirm_time", "confirmed",
-    "duplicate_tracks", "stale_tracks", "never_tracks", "never_new",
+    "duplicate_tracks", "stale_tracks", "never_tracks", "never_new", "ospa2", "windows",
 )  # fmt: skip
-_TEAM_SUMS = ("steps", "gospa", "agreeing", "matched")
+_TEAM_SUMS = ("steps", "gospa", "agreeing", "matched", "ospa2", "windows")
 """What `TrackScore` sums per trial: the team picture's GOSPA and the label purity."""
 
 LABEL_BITS = 40
@@ -354,7 +413,11 @@ class TrackScore:
     cutoff: float = 20.0
     order: float = 1.0
     threshold: float | None = None
+    window: int = 10
     steps: int = 0
+    log: list[dict[str, np.ndarray]] | None = None
+    """With a list: each step's own values (B,) of the metrics that are means over the
+    steps, appended as the steps are added (`series`)."""
     sums: dict[str, np.ndarray] = field(init=False)
     spread: NeesSpread = field(init=False)
     _nees: np.ndarray = field(init=False, repr=False)  # (2, B): sum, count
@@ -372,7 +435,13 @@ class TrackScore:
             "start": np.full((P, Nt), -1, np.int64),  # confirm clock
             "followed": np.zeros(0, np.int64),  # (row, label) keys once matched, sorted
             "never": np.zeros(0, np.int64),  # keys counted as never-followed, sorted
+            "life": np.zeros((P, Nt), np.int64),  # the targets that held each place so far
+            "here": np.ones((P, Nt), bool),  # present at the previous step
+            "team_start": np.full((self.batch, Nt), -1, np.int64),  # the team's clock
         }
+        self._window: dict[str, list[tuple[np.ndarray, ...]]] = {"rows": [], "team": []}
+        self._logged: dict[str, np.ndarray] = {}  # the step's values beyond the rows' own
+        self._team_times: list[np.ndarray] = [np.zeros(0, np.int64)] * self.batch
 
     def add(
         self,
@@ -442,13 +511,17 @@ class TrackScore:
             "confirm_time": np.where(time >= 0, time, 0).sum(axis=1),
             "confirmed": (time >= 0).sum(axis=1),
         }  # fmt: skip
+        step = {name: np.where(alive, value, 0) for name, value in step.items()}
         for name, value in step.items():
-            s[name] += np.where(alive, value, 0)
+            s[name] += value
         # a failed UAV's row keeps what it had
         keep = alive[:, None]
         st["last"] = np.where(keep & matched, label, st["last"])
         st["was"] = np.where(keep, matched, st["was"])
         st["start"] = np.where(keep, start, st["start"])
+        if not present.all():  # a target that left: the next one there is another
+            st["last"] = np.where(present, st["last"], -1)
+            st["start"] = np.where(present, st["start"], -1)
         matched_key = np.take_along_axis(key, np.maximum(assigned, 0), axis=1)[matched & keep]
         st["followed"] = np.union1d(st["followed"], matched_key)
         st["never"] = np.union1d(st["never"], key[first])
@@ -456,21 +529,43 @@ class TrackScore:
         agreeing, pairs = label_purity(np.where(alive[:, None], label, -1).reshape(B, rows, Nt))
         self.team["agreeing"] += agreeing
         self.team["matched"] += pairs
+        if self.log is not None:
+            self._logged = {
+                name: mean_std(value.reshape(B, rows), axis=1)[0]
+                for name, value in _row_values(step).items()
+            }
+            purity = np.where(pairs > 0, agreeing / np.maximum(pairs, 1), np.nan)
+            self._logged["label_purity"] = purity
+        self._team_clock(matched & keep, present, in_view & keep)
+        born = present & ~st["here"]
+        st["life"] += born
+        st["here"] = present
+        target = (st["life"] << 20) | np.arange(Nt)  # a place and the target that holds it
+        self._window["rows"].append(
+            (target, present, np.array(truth), labels, confirmed, np.array(tracks), alive)
+        )
         if cov is not None:  # the team picture needs each track's confidence
             gamma = confidence(np.asarray(cov))
-            _, where, held = team_picture(
+            label_, where, held = team_picture(
                 np.asarray(labels).reshape(B, rows, K), confirmed.reshape(B, rows, K),
                 np.asarray(tracks).reshape(B, rows, K, 2), gamma.reshape(B, rows, K),
             )  # fmt: skip
             L = max(int(held.sum(axis=1).max()), 1)  # the labels held, not every slot
-            where, held = where[:, :L], held[:, :L]
-            whole = alive.reshape(B, rows).any(axis=1)
+            label_, where, held = label_[:, :L], where[:, :L], held[:, :L]
+            whole = np.any(alive.reshape(B, rows), axis=1)
             _, team = gospa_assignment(
                 truth.reshape(B, rows, Nt, 2)[:, 0], present.reshape(B, rows, Nt)[:, 0],
                 where, held, self.cutoff, self.order,
             )  # fmt: skip
             self.team["gospa"] += np.where(whole, team.distance, 0.0)
             self.team["steps"] += whole
+            if self.log is not None:
+                self._logged["gospa_team"] = np.where(whole, team.distance, np.nan)
+            B_ = slice(None, None, rows)  # each trial's first row: its truth
+            self._window["team"].append(
+                (target[B_], present[B_], np.asarray(truth)[B_], np.maximum(label_, 0), held,
+                 where, whole)
+            )  # fmt: skip
         if mean is not None and cov is not None and states is not None:
             q = matched_nees(assigned, mean, cov, states)
             counted = matched & keep
@@ -478,33 +573,60 @@ class TrackScore:
             self._nees[0] += np.where(counted, q, 0.0).reshape(self.batch, -1).sum(axis=1)
             self._nees[1] += counted.reshape(self.batch, -1).sum(axis=1)
         self.steps += 1
+        if self.steps % self.window == 0:
+            self._close_windows()
+        if self.log is not None:
+            self.log.append(self._logged)
+
+    def _team_clock(self, matched: np.ndarray, present: np.ndarray, in_view: np.ndarray) -> None:
+        """The team's time to confirm (`confirm_clock` over the whole team): a target is
+        found anew when present, in some living UAV's view and matched by none of their
+        confirmed tracks; its clock stops when any UAV's confirmed track is matched."""
+        B, rows, Nt = self.batch, self.rows, self.n_targets
+        anyone = np.any(matched.reshape(B, rows, Nt), axis=1)
+        seen = np.any(in_view.reshape(B, rows, Nt), axis=1)
+        here = present.reshape(B, rows, Nt)[:, 0]
+        st = self._state
+        start, time = confirm_clock(self.steps, st["team_start"], anyone, here, seen)
+        st["team_start"] = np.where(here, start, -1)  # a target that left is no one's
+        for b in np.flatnonzero((time >= 0).any(axis=1)):
+            self._team_times[b] = np.concatenate([self._team_times[b], time[b][time[b] >= 0]])
+
+    def _close_windows(self) -> None:
+        """Add the OSPA(2) of the steps held (a window) per row and for the team."""
+        for kind, sums in (("rows", self.sums), ("team", self.team)):
+            held = self._window[kind]
+            if not held:
+                continue
+            target, present, truth, labels, exists, tracks, alive = (
+                _stacked(part) for part in zip(*held, strict=True)
+            )
+            X, x_exists = window_tracks(target, present, truth)
+            Y, y_exists = window_tracks(labels, exists, tracks)
+            value = ospa2(X, x_exists, Y, y_exists, self.cutoff, self.order)
+            counted = alive[-1]  # a row that failed inside the window is left out
+            sums["ospa2"] += np.where(counted, value, 0.0)
+            sums["windows"] += counted
+            if self.log is not None:  # at the window's last step
+                name = "ospa2" if kind == "rows" else "ospa2_team"
+                per = np.where(counted, value, np.nan)
+                self._logged[name] = (
+                    per
+                    if kind == "team"
+                    else mean_std(per.reshape(self.batch, self.rows), axis=1)[0]
+                )
+            self._window[kind] = []
 
     def summary(self) -> dict[str, np.ndarray]:
         """The metrics of `TRACK_METRICS`, each an array over the B trials."""
+        self._close_windows()  # the last steps, a window shorter than the others
         s = self.sums
 
-        def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-            return np.where(b > 0, a / np.where(b > 0, b, 1.0), np.nan)
-
         running = (self._state["start"] >= 0).sum(axis=1)
-        per_row = {
-            "gospa": ratio(s["gospa"], s["steps"]),
-            "gospa_localisation": ratio(s["localisation"], s["steps"]),
-            "gospa_missed": ratio(s["missed"], s["steps"]),
-            "gospa_false": ratio(s["false"], s["steps"]),
-            "switches": 100 * ratio(s["switches"], s["targets"]),
-            "fragmentations": 100 * ratio(s["fragmentations"], s["targets"]),
-            "unassigned_tracks": ratio(s["unassigned_tracks"], s["steps"]),
-            "unassigned_tracks_per_target": ratio(s["unassigned_tracks"], s["targets"]),
-            "duplicate_tracks": ratio(s["duplicate_tracks"], s["targets"]),
-            "stale_tracks": ratio(s["stale_tracks"], s["targets"]),
-            "never_tracks": ratio(s["never_tracks"], s["targets"]),
-            "never_tracks_new": 100 * ratio(s["never_new"], s["steps"]),
+        per_row = _row_values(s) | {
             "time_to_confirm": ratio(s["confirm_time"], s["confirmed"]),
             "never_confirmed": ratio(running, s["confirmed"] + running),
-            "siap_completeness": ratio(s["JT"], s["J"]),
-            "siap_ambiguity": ratio(s["NA"], s["JT"]),
-            "siap_spuriousness": ratio(s["N"] - s["NA"], s["N"]),
+            "ospa2": ratio(s["ospa2"], s["windows"]),
         }
         out = {
             name: mean_std(value.reshape(self.batch, self.rows), axis=1)[0]
@@ -512,6 +634,10 @@ class TrackScore:
         }
         out["gospa_team"] = ratio(self.team["gospa"], self.team["steps"])
         out["label_purity"] = ratio(self.team["agreeing"], self.team["matched"])
+        out["ospa2_team"] = ratio(self.team["ospa2"], self.team["windows"])
+        out["time_to_confirm_team"] = np.array(
+            [np.median(t) if t.size else np.nan for t in self._team_times]
+        )
         out["nees"] = ratio(self._nees[0], self._nees[1])
         out["nees_median"] = self.spread.median()
         out["nees_inside"] = self.spread.inside_fraction()
@@ -552,8 +678,9 @@ class Scores:
             return
         if self.tracks is None:
             self.tracks = TrackScore(
-                batch=B, rows=Nu, n_targets=t.n_targets, cutoff=t.cutoff, order=t.order
-            )
+                batch=B, rows=Nu, n_targets=t.n_targets, cutoff=t.cutoff, order=t.order,
+                log=None if t.log is None else [],
+            )  # fmt: skip
         P = B * Nu
         states = np.repeat(truth, Nu, axis=0)  # (P, Nt, 4): each row its trial's targets
         alive = cycle.alive.reshape(P)
@@ -561,6 +688,7 @@ class Scores:
         cov = np.where(alive[:, None, None, None], cycle.cov.reshape(P, K, 4, 4), np.eye(4))
         self.tracks.add(
             truth=states[..., :2],
+            present=None if t.fixed else ~np.isnan(states[..., 0]),
             tracks=mean[..., :2],
             labels=cycle.label.reshape(P, K),
             confirmed=cycle.status.reshape(P, K) == 2,
@@ -583,6 +711,78 @@ class Scores:
         if self.tracks is None:
             return out | {name: nothing for name in TRACKS_ONLY}
         return out | {name: nothing for name in REPLACED} | self.tracks.summary()
+
+    def series(self) -> dict[str, np.ndarray]:
+        """Each step's own value of the metrics that are means over the steps, (T, B)
+        per name (NaN where a step has none); the tally must keep a log (``log=[]``)."""
+        if self.tally.log is None:
+            raise ValueError("these scores keep no log: make their Tally with log=[]")
+        self.tally.summary()  # scores the steps still pending
+        T = len(self.tally.log)
+        rows = self.tally.log
+        if self.tracks is not None and self.tracks.log is not None:
+            self.tracks.summary()  # closes the last window
+            rows = [a | b for a, b in zip(rows, self.tracks.log, strict=True)]
+        if not T:
+            return {}
+        names = list(dict.fromkeys(name for row in rows for name in row))
+        nothing = np.full(self.tally.batch, np.nan)
+        return {name: np.stack([row.get(name, nothing) for row in rows]) for name in names}
+
+
+def series(trace: Trace, scenario: Scenario) -> dict[str, np.ndarray]:
+    """Each step's own value (T,) of every metric of a trial that is a mean over its steps
+    (the observation rate, GOSPA and its parts, the kinds of unassigned tracks, the team
+    picture's GOSPA, label purity, messages, bytes ...; OSPA(2) at the last step of each
+    window), from its trace and scenario: the run's metrics replayed step by step. The
+    mean of a series over the steps is the run's value wherever every UAV lives."""
+    from ..simulation import RECORDED, Cycle, scores
+
+    score = scores(scenario, 1, timed=True)
+    score.tally.log = []
+    arrays: dict[str, np.ndarray] = trace.arrays()  # the recorded fields, not None
+    names = [f.name for f in RECORDED] + [n for n in ("label", "status") if n in arrays]
+    for k in range(trace.targets.shape[0]):
+        fields: dict[str, Any] = {name: arrays[name][k][None] for name in names}
+        score.add(Cycle(**fields), trace.targets[k][None])
+    return {name: values[:, 0] for name, values in score.series().items()}
+
+
+def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """a / b, NaN where b is 0 (nothing to average)."""
+    return np.where(b > 0, a / np.where(b > 0, b, 1.0), np.nan)
+
+
+def _row_values(s: dict[str, np.ndarray]) -> dict[str, np.ndarray]:
+    """The per-row metrics that are ratios of `TrackScore`'s sums: over a run from its
+    sums, over one step from that step's counts (`series`)."""
+    return {
+        "gospa": ratio(s["gospa"], s["steps"]),
+        "gospa_localisation": ratio(s["localisation"], s["steps"]),
+        "gospa_missed": ratio(s["missed"], s["steps"]),
+        "gospa_false": ratio(s["false"], s["steps"]),
+        "switches": 100 * ratio(s["switches"], s["targets"]),
+        "fragmentations": 100 * ratio(s["fragmentations"], s["targets"]),
+        "unassigned_tracks": ratio(s["unassigned_tracks"], s["steps"]),
+        "unassigned_tracks_per_target": ratio(s["unassigned_tracks"], s["targets"]),
+        "duplicate_tracks": ratio(s["duplicate_tracks"], s["targets"]),
+        "stale_tracks": ratio(s["stale_tracks"], s["targets"]),
+        "never_tracks": ratio(s["never_tracks"], s["targets"]),
+        "never_tracks_new": 100 * ratio(s["never_new"], s["steps"]),
+        "siap_completeness": ratio(s["JT"], s["J"]),
+        "siap_ambiguity": ratio(s["NA"], s["JT"]),
+        "siap_spuriousness": ratio(s["N"] - s["NA"], s["N"]),
+    }
+
+
+def _stacked(arrays: tuple[np.ndarray, ...]) -> np.ndarray:
+    """The arrays stacked on a new first axis, each padded with zeros (False) to the
+    largest (the team picture holds a number of labels that varies by step)."""
+    shape = np.max([a.shape for a in arrays], axis=0)
+    out = np.zeros((len(arrays), *shape), dtype=arrays[0].dtype)
+    for k, a in enumerate(arrays):
+        out[(k, *(slice(0, n) for n in a.shape))] = a
+    return out
 
 
 def _member(key: np.ndarray, sorted_keys: np.ndarray) -> np.ndarray:
