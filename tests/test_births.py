@@ -154,6 +154,51 @@ def test_a_bag_shows_only_the_targets_present(tmp_path):
         chosen = [c for c in reader.connections if c.topic == "/targets/truth"]
         for k, (c, _, raw) in enumerate(reader.messages(chosen)):
             markers = reader.deserialize(raw, c.msgtype).markers
+            assert markers[0].action == 3  # DELETEALL: a target that left leaves the view
+            markers = markers[1:]
             assert [m.id for m in markers] == np.flatnonzero(here[k]).tolist()
             for m in markers:
                 assert m.pose.position.x == trace.targets[k, m.id, 0]
+
+
+def test_stone_soup_detections_point_at_the_stay_they_measured():
+    """Each true detection's ground-truth path has a state at the detection's time."""
+    pytest.importorskip("stonesoup")
+    from uavtrack.io.stonesoup import to_detections
+
+    scenario = uavtrack.Scenario().with_overrides(
+        {**BIRTHS, "sensor.detection_probability": 0.9, "sensor.clutter_rate": 1.0}
+    )
+    trace = uavtrack.simulate(scenario, "distributed", seed=4).trace
+    here = ~np.isnan(trace.targets[..., 0])
+    assert (here[1:] & ~here[:-1]).any()  # some target entered after step 0
+    true = 0
+    for time, detections in to_detections(trace, scenario.dt):
+        for d in detections:
+            path = getattr(d, "groundtruth_path", None)
+            if path is not None:
+                true += 1
+                assert time in {state.timestamp for state in path}, path.id
+    assert true > 0
+
+
+def test_the_environment_counts_the_targets_present():
+    """The environment's observation rate and its team reward read the targets present,
+    as the run's metrics do."""
+    from uavtrack.env import parallel_env
+
+    settings = {**BIRTHS, "steps": 60, "target.stay": 10, "target.away": 5}
+    scenario = uavtrack.Scenario().with_overrides(settings)
+    env = parallel_env(scenario=scenario, reward="team")
+    env.reset(seed=3)
+    earned = []
+    while env.agents:
+        _, reward, *_ = env.step({a: 0 for a in env.agents})
+        earned.append(np.mean(list(reward.values())))
+    result = env.result()
+    here = ~np.isnan(result.trace.targets[..., 0])
+    assert not here.all()
+    in_view = result.trace.observed.any(axis=1)
+    share = (in_view & here).sum(axis=1) / np.maximum(here.sum(axis=1), 1)  # none: 0
+    assert env.unwrapped._run.observation_rate()[0] == pytest.approx(result.observation_rate)
+    assert np.allclose(earned[:-1], share[1:], atol=1e-12)  # a step earns the next's share

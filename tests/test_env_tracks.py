@@ -25,6 +25,7 @@ JPDA = {
     "sensor": {"detection_probability": 0.9, "clutter_rate": 2},
 }
 GNN = {"tracker": {"association": "gnn"}, "sensor": {"clutter_rate": 1}}
+BIRTHS = {**JPDA, "target": {"stay": 8, "away": 5}, "planner": {"existence": True}}
 RHO = 425 * math.tan(math.radians(5))  # the observation radius of the paper's scenario
 GATE = chi2.ppf(0.99, 2)  # tracker.gate_probability's default
 
@@ -62,8 +63,8 @@ def own_gate(pending):
 
 @pytest.mark.parametrize(
     "method,settings",
-    [("distributed", JPDA), ("centralized", GNN), ("greedy", JPDA)],
-    ids=["distributed-jpda", "centralized-gnn", "greedy-jpda"],
+    [("distributed", JPDA), ("centralized", GNN), ("greedy", JPDA), ("distributed", BIRTHS)],
+    ids=["distributed-jpda", "centralized-gnn", "greedy-jpda", "distributed-births"],
 )
 def test_paper_actions_through_the_env_are_simulate_with_tracks(method, settings):
     env = parallel_env(method_for_others=method, steps=30, **settings)

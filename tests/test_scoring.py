@@ -497,3 +497,32 @@ def test_the_team_clock_stops_at_any_uavs_confirmed_track():
             in_view=in_view,
         )  # fmt: skip
     assert score.summary()["time_to_confirm_team"][0] == pytest.approx(1.5)
+
+
+def test_reading_the_scores_mid_run_changes_nothing(rng):
+    """summary() part way (as an environment's render does) leaves the windows of OSPA(2)
+    whole, and arrays the caller reuses after a step do not reach the windows held."""
+    P, Nt, K, steps = 4, 3, 5, 23
+    frames = [random_rows(rng, P, Nt, K) for _ in range(steps)]
+    labels = rng.integers(0, 6, (steps, P, K))
+
+    def scored(peek, reuse):
+        score = TrackScore(batch=2, rows=2, n_targets=Nt, cutoff=10.0)
+        buffers = [np.empty_like(a) for a in (frames[0][0], frames[0][2], labels[0])]
+        for k, (X, present, Y, confirmed) in enumerate(frames):
+            X, Y, lab = np.nan_to_num(X), np.where(confirmed[..., None], Y, 0.0), labels[k]
+            if reuse:  # the same arrays, overwritten each step
+                for buffer, value in zip(buffers, (X, Y, lab), strict=True):
+                    buffer[...] = value
+                X, Y, lab = buffers
+            score.add(
+                truth=X, present=present, tracks=Y, labels=lab, confirmed=confirmed,
+                in_view=np.ones((P, Nt), bool),
+            )  # fmt: skip
+            if peek and k in (4, 13):
+                score.summary()
+        return score.summary()["ospa2"]
+
+    plain = scored(False, False)
+    assert np.array_equal(scored(True, False), plain)
+    assert np.array_equal(scored(False, True), plain)

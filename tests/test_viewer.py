@@ -225,3 +225,26 @@ def test_a_recording_of_a_team_that_all_failed_warns_of_nothing(tmp_path):
         warnings.simplefilter("error")
         rerun.save(trace, scenario, tmp_path / "x.rrd")
     assert (tmp_path / "x.rrd").stat().st_size > 0
+
+
+def test_targets_that_come_and_go_are_drawn_while_present(tmp_path):
+    """With target.stay a target away is not drawn (NaN) and each stay has its own path
+    and name: T0, then T0.1 for the next target in place 0."""
+    scenario = uavtrack.Scenario(steps=40).with_overrides(
+        {"tracker.association": "jpda", "target.stay": 8, "target.away": 4}
+    )
+    result = uavtrack.simulate(scenario, seed=4)
+    path = tmp_path / "run.rrd"
+    rerun.save(result.trace, scenario, path)
+    here = ~np.isnan(result.trace.targets[..., 0])
+    points = column(path, "world/targets", "positions")
+    labels = column(path, "world/targets", "labels")
+    for k in range(40):
+        drawn = np.isfinite(np.array(points[k], dtype=float)).all(axis=1)
+        assert drawn.tolist() == here[k].tolist()
+    entered = (here[1:] & ~here[:-1]).sum(axis=0)  # new targets per place
+    names = {
+        name for k in range(40) for name, shown in zip(labels[k], here[k], strict=True) if shown
+    }
+    assert len(names) == 4 + entered.sum()
+    assert "T0" in names and (entered[0] == 0 or "T0.1" in names)

@@ -38,14 +38,19 @@ METRICS: dict[str, tuple[str, str]] = {
     "observation_rate": (
         "",
         "mean over targets of the fraction of steps at which the target's true position "
-        "lies inside at least one UAV's observation disk (Sec. 7)",
+        "lies inside at least one UAV's observation disk (Sec. 7); with targets that come "
+        "and go (target.stay), the share of the present target-steps so held",
     ),
-    "per_target": ("", "observation rate of each target, numbered from 0"),
+    "per_target": (
+        "",
+        "observation rate of each target (of each place, over the steps a target held it), "
+        "numbered from 0",
+    ),
     "in_view_std": (
         "",
-        "standard deviation over the steps of the fraction of targets in view, whose mean "
-        "over the steps is the observation rate (one reading of the paper's σ, see the docs, "
-        "Spread)",
+        "standard deviation over the steps of the fraction of targets in view (of those "
+        "present), whose mean over the steps is the observation rate with the paper's fixed "
+        "set (one reading of the paper's σ, see the docs, Spread)",
     ),
     "rmse": (
         "m",
@@ -155,8 +160,9 @@ METRICS: dict[str, tuple[str, str]] = {
     ),
     "time_to_confirm_team": (
         "1",
-        "median steps from a target's entering some UAV's view while no UAV holds a "
-        "confirmed track of it to the first confirmed track of it held by any UAV",
+        "median steps from a step a target is in some living UAV's view while no UAV holds "
+        "a confirmed track of it (met anew, or lost by all) to the first confirmed track "
+        "of it held by any UAV; a clock still running when its target leaves is dropped",
     ),
     "never_confirmed": ("", "fraction of those targets never matched by the end"),
     "siap_completeness": ("", "SIAP completeness: fraction of targets with a track"),
@@ -350,7 +356,7 @@ class Tally:
     steps: int = 0
     log: list[dict[str, np.ndarray]] | None = None
     """With a list: each step's own values of the metrics that are means over the steps
-    (`STEP_METRICS`), appended as the steps are added (`series`)."""
+    (`simulation.series`), appended as the steps are added."""
     observed: np.ndarray = field(init=False)
     sums: dict[str, np.ndarray] = field(init=False)
     spread: dict[str, NeesSpread] = field(init=False)  # nees, nees_best
@@ -366,7 +372,8 @@ class Tally:
         names = (
             "squared_error", "squared_error_best", "nees", "nees_best", "rounds", "messages",
             "delivered", "bytes", "conflicts", "decision", "wall", "decided", "pairs", "best",
-            "alive", "in_view_sq", "ospa", "ospa_best", "gospa", "gospa_best", "gospa_missed_best",
+            "alive", "in_view_sq", "in_view", "shared", "ospa", "ospa_best", "gospa",
+            "gospa_best", "gospa_missed_best",
         )  # fmt: skip
         self.sums = {name: np.zeros(self.batch) for name in names}
         self.spread = {name: NeesSpread(self.batch) for name in ("nees", "nees_best")}
@@ -386,9 +393,12 @@ class Tally:
         self.present += here
         if here.all():
             share = in_view.mean(axis=1)
-        else:  # the share of the targets there
-            share = in_view.sum(axis=1) / np.maximum(here.sum(axis=1), 1)
-        s["in_view_sq"] += np.square(share)
+        else:  # the share of the targets there, of steps with any there
+            there = here.any(axis=1)
+            share = np.where(there, in_view.sum(axis=1) / np.maximum(here.sum(axis=1), 1), np.nan)
+        s["in_view_sq"] += np.nan_to_num(np.square(share))
+        s["in_view"] += np.nan_to_num(share)
+        s["shared"] += ~np.isnan(share)
         if self.log is not None:
             living, anyone = np.maximum(alive.sum(axis=1), 1), alive.any(axis=1)
             self.log.append({
@@ -549,6 +559,15 @@ class Tally:
             "gospa_missed_best": s["gospa_missed_best"] / steps,
         }
 
+    def _in_view_std(self, rate: np.ndarray) -> np.ndarray:
+        """The standard deviation over the steps of the share of targets in view (of
+        those present, over the steps with any present)."""
+        s = self.sums
+        if self.fixed:  # the mean of the shares is the rate
+            return np.sqrt(np.maximum(s["in_view_sq"] / self.steps - rate**2, 0.0))
+        n = np.maximum(s["shared"], 1)
+        return np.sqrt(np.maximum(s["in_view_sq"] / n - (s["in_view"] / n) ** 2, 0.0))
+
     @property
     def fixed(self) -> bool:
         """Whether every target was present at every step so far (the paper's fixed set)."""
@@ -584,7 +603,7 @@ class Tally:
         return {
             "observation_rate": rate,
             "per_target": per_target,
-            "in_view_std": np.sqrt(np.maximum(s["in_view_sq"] / self.steps - rate**2, 0.0)),
+            "in_view_std": self._in_view_std(rate),
             "rmse": np.sqrt(s["squared_error"] / pairs),
             "rmse_best": np.sqrt(s["squared_error_best"] / targets),
             "nees": s["nees"] / pairs,

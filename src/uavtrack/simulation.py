@@ -1375,11 +1375,9 @@ class Result:
 
     def series(self) -> dict[str, np.ndarray]:
         """Each step's own value (T,) of the metrics that are means over the steps, for
-        plots (`tracks.scoring.series`); needs the trace (``simulate(..., trace=True)``)."""
+        plots (`series`); needs the trace (``simulate(..., trace=True)``)."""
         if self.trace is None:
             raise ValueError("this result holds no trace: simulate(..., trace=True)")
-        from .tracks.scoring import series
-
         return series(self.trace, self.scenario)
 
 
@@ -1405,6 +1403,28 @@ def simulate(
         raise TypeError(f"seed must be an integer or a SeedSequence, not {type(seed).__name__}")
     batch = run(scenario, method, [seed], trace=trace, progress=progress)
     return result_of(batch, seed if isinstance(seed, int) else None)
+
+
+def series(trace: Trace, scenario: Scenario) -> dict[str, np.ndarray]:
+    """Each step's own value (T,) of every metric of a trial that is a mean over its steps
+    (the observation rate, GOSPA and its parts, the kinds of unassigned tracks, the team
+    picture's GOSPA, label purity, messages, bytes ...; OSPA(2) at the last step of each
+    window), from its trace and scenario: the run's metrics replayed step by step.
+
+    With the paper's fixed set of targets and every UAV alive, a series' mean over the
+    steps is the run's value for the metrics that are means over the steps; it is not for
+    those that are ratios of sums (rmse and rmse_best, the square root of a mean;
+    label_purity and SIAP, sums over the run divided), nor with targets that come and go,
+    where the run weighs each step by the targets present (a step's value by its count
+    of present targets, summed and divided by their total, gives the run's)."""
+    score = scores(scenario, 1, timed=True)
+    score.tally.log = []
+    arrays: dict[str, np.ndarray] = trace.arrays()  # the recorded fields, not None
+    names = [f.name for f in RECORDED] + [n for n in ("label", "status") if n in arrays]
+    for k in range(trace.targets.shape[0]):
+        fields: dict[str, Any] = {name: arrays[name][k][None] for name in names}
+        score.add(Cycle(**fields), trace.targets[k][None])
+    return {name: values[:, 0] for name, values in score.series().items()}
 
 
 def result_of(batch: BatchResult, seed: int | None) -> Result:

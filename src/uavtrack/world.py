@@ -232,7 +232,13 @@ def initial_conditions(
     scenario: Scenario, rng: np.random.Generator
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """One trial's start (`draw_start`) and its whole target trajectories: uavs (Nu, 5),
-    trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4)."""
+    trajectories (T, Nt, 4), prior mean (Nt, 4), P0 (4, 4). The paper's fixed set only:
+    targets that come and go draw from the trial's seed (`simulation.initial_stream`)."""
+    if scenario.target.stay > 0:
+        raise ValueError(
+            "initial_conditions draws the fixed set of targets; with target.stay > 0 use "
+            "simulation.initial_stream(scenario, seeds), which reads each trial's seed"
+        )
     targets, uavs, prior, P0 = draw_start(scenario, rng)
     trajectory = Targets(targets[None], [rng], scenario, keep=True).whole()[0]
     return uavs, trajectory, prior, P0

@@ -403,8 +403,8 @@ class TargetModel(Part):
         le=1e6,
         description=(
             "mean steps a target's place stays empty before a new target enters [steps], "
-            "[1, 1e6] (target.stay > 0); assumed 100: with stay 200 a third of the run's "
-            "targets are away at a time, so the team keeps finding new ones"
+            "[1, 1e6] (target.stay > 0); assumed 100: with stay 200 a third of the places "
+            "are empty in the long run, so the team keeps finding new targets"
         ),
     )
     noise_form: Literal["acceleration", "printed"] = Field(

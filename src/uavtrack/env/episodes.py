@@ -54,6 +54,7 @@ class Episodes:
         self.noises = sensor_noise(rngs, s.n_uavs, s.n_targets, s.steps)
         B = len(self.seeds)
         self.seen = np.zeros((B, s.n_targets))  # steps each target was in some UAV's view
+        self.present = np.zeros((B, s.n_targets))  # steps each target was there
         self.tally = self.recorder = None
         if record:
             self.tally = scores(s, B, timed=B == 1)
@@ -91,6 +92,7 @@ class Episodes:
         k, pending = self.state.k, self.pending
         self.state, cycle = finish(self.state, pending, self.ctx, actions)
         self.seen += pending.observed.any(axis=1)
+        self.present += ~np.isnan(self.trajectory.at(k)[..., 0])  # NaN: away (target.stay)
         if self.tally is not None and self.recorder is not None:  # record=True: both
             self.tally.add(cycle, self.trajectory.at(k))
             self.recorder.record(k, cycle)
@@ -98,7 +100,8 @@ class Episodes:
         if self.pending is None:
             return np.zeros(pending.alive.shape)
         p = self.pending
-        earned = rewards(self.reward, p.observed, self.state.cov, p.belief[1])
+        present = ~np.isnan(self.trajectory.at(p.k)[..., 0])
+        earned = rewards(self.reward, p.observed, self.state.cov, p.belief[1], present)
         return np.where(pending.alive, earned, 0.0)  # a UAV already down did not act
 
     def view(self) -> View:
@@ -151,7 +154,9 @@ class Episodes:
         """(B,) the observation rate of each trial over the steps flown."""
         if self.k == 0:
             raise RuntimeError("no step flown yet")
-        return (self.seen / self.k).mean(axis=-1)  # as metrics.Tally computes it
+        if (self.present == self.k).all():  # every target there throughout
+            return (self.seen / self.k).mean(axis=-1)  # as metrics.Tally computes it
+        return self.seen.sum(axis=-1) / np.maximum(self.present.sum(axis=-1), 1)
 
     def batch_result(self) -> BatchResult:
         """The steps flown as `simulation.run` reports them (record=True only)."""

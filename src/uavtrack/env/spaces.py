@@ -284,17 +284,24 @@ class Spaces:
 
 
 def rewards(
-    kind: str, observed: np.ndarray, prior: np.ndarray, posterior: np.ndarray
+    kind: str,
+    observed: np.ndarray,
+    prior: np.ndarray,
+    posterior: np.ndarray,
+    present: np.ndarray | None = None,
 ) -> np.ndarray:
     """What the actions at cycle k earn, (B, Nu), from the next cycle: observed (B, Nu,
     Nt) the targets in each UAV's disk; prior and posterior (B, Nu, Nt, 4, 4) each UAV's
-    covariances before and after its own measurements (only "information" reads them).
-    See `REWARDS`."""
+    covariances before and after its own measurements (only "information" reads them);
+    present (B, Nt) the targets there (``target.stay``; default every one), whose number
+    the shares of "team" and "difference" divide by. See `REWARDS`."""
     check_reward(kind)
     nt = observed.shape[-1]
+    if present is not None and not present.all():
+        nt = np.maximum(present.sum(axis=-1), 1)[:, None]  # (B, 1)
     if kind == "team":
-        team = observed.any(axis=1).sum(axis=-1) / nt
-        return np.broadcast_to(team[:, None], observed.shape[:2]).astype(np.float64)
+        team = observed.any(axis=1).sum(axis=-1, keepdims=True) / nt
+        return np.broadcast_to(team, observed.shape[:2]).astype(np.float64)
     if kind == "difference":
         alone = observed & (observed.sum(axis=1, keepdims=True) == 1)
         return alone.sum(axis=-1) / nt

@@ -70,7 +70,8 @@ go (`BIRTH_SETTINGS`): the team must find each new one."""
 
 BIRTH_SETTINGS = {"target.stay": 200.0, "target.away": 100.0}
 """The births cell's targets: a stay of 200 steps on average, a place empty for 100
-(a third of the places empty at a time, about 10 new targets in a run of 500 steps)."""
+(in a run of 500 steps from the full set, about 0.3 of the places empty at a time and
+1.4 new targets per place)."""
 
 
 def overrides(pd: float, clutter: float, association: str) -> dict[str, Any]:

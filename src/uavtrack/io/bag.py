@@ -13,7 +13,9 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
 * ``/uav_i/pose`` geometry_msgs/msg/PoseStamped and ``/uav_i/fix``
   sensor_msgs/msg/NavSatFix, each UAV's true state, while it is alive: heading as yaw,
   the flown bank angle as REP-103's roll (positive: right wing down; `ros2.uav_pose`);
-* ``/targets/truth`` visualization_msgs/msg/MarkerArray: a sphere per target;
+* ``/targets/truth`` visualization_msgs/msg/MarkerArray: a sphere per target (with
+  targets that come and go, ``target.stay``, a DELETEALL first, then the targets
+  present: one that left leaves the view);
 * ``/team/target_j/estimate`` geometry_msgs/msg/PoseWithCovarianceStamped: the team's
   best estimate of target j (the most confident living UAV's, as the metrics take it),
   its x-y covariance in the 6 x 6 (z known: 0; rotations unknown: 1e9);
@@ -134,7 +136,8 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 )
                 write(f"/uav_{i}/fix", fix, ns)
                 transforms.append(transform_of(m.header(ns), f"uav_{i}", pose))
-            truth = []
+            # with targets that come and go (NaN while away) RViz forgets the last step's
+            truth = delete_all(m, ns) if np.isnan(trace.targets[..., 0]).any() else []
             for j in map(int, np.flatnonzero(~np.isnan(targets[:, 0]))):  # away: no pose
                 x, y, vx, vy = (float(v) for v in targets[j])
                 course = math.atan2(vy, vx)

@@ -39,8 +39,10 @@ def to_stonesoup(
     step `dt` [s].
 
     Returns (truths, tracks) as sets: the true targets as `GroundTruthPath`s (id
-    ``target-j``) and the estimates as `Track`s of `GaussianState`s (Stone Soup's state
-    order, x, vx, y, vy), with ``metadata`` saying whose they are:
+    ``target-j``; with targets that come and go, ``target.stay``, one per stay, the n-th
+    to take place j after the first ``target-j-n``) and the estimates as `Track`s of
+    `GaussianState`s (Stone Soup's state order, x, vx, y, vy), with ``metadata`` saying
+    whose they are:
 
     * ``tracks="best"``: one track per target from the team's best estimate (id
       ``best-j``, metadata ``{"target": j}``): at each step the estimate of the most
@@ -118,16 +120,32 @@ def _truths(trace: Trace, times: list[_dt.datetime]) -> set:
     from stonesoup.types.groundtruth import GroundTruthPath, GroundTruthState
 
     truths = set()
-    here = ~np.isnan(trace.targets[: len(times), :, 0])  # (T, Nt)
+    T = len(times)
+    here = ~np.isnan(trace.targets[:T, :, 0])  # (T, Nt)
+    stay = _stays(trace)[:T]
     for j in range(trace.targets.shape[1]):
-        steps = np.flatnonzero(here[:, j])
-        for n, stay in enumerate(np.split(steps, np.flatnonzero(np.diff(steps) > 1) + 1)):
+        for n in np.unique(stay[here[:, j], j]):
+            steps = np.flatnonzero(here[:, j] & (stay[:, j] == n))
             states = [
-                GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k]) for k in stay
+                GroundTruthState(trace.targets[k, j, ORDER], timestamp=times[k]) for k in steps
             ]
-            if states:
-                truths.add(GroundTruthPath(states, id=f"target-{j}" + (f"-{n}" if n else "")))
+            truths.add(GroundTruthPath(states, id=_path_id(j, n)))
     return truths
+
+
+def _stays(trace: Trace) -> np.ndarray:
+    """Which stay of its place each target is on at each step, (T, Nt): 0 for the target
+    present from step 0, n for the n-th to enter after it (``target.stay``)."""
+    here = ~np.isnan(trace.targets[..., 0])
+    entered = np.zeros(here.shape, dtype=np.int64)
+    entered[1:] = here[1:] & ~here[:-1]
+    return np.cumsum(entered, axis=0) - (~here[0])[None, :]
+
+
+def _path_id(target: int, stay: int) -> str:
+    """The id of a target's `GroundTruthPath`: ``target-j``, ``target-j-n`` for the n-th
+    target to take place j after the first."""
+    return f"target-{target}" + (f"-{stay}" if stay else "")
 
 
 def _labelled(trace: Trace, tracks: str, gaussian, Track) -> set:
@@ -186,6 +204,7 @@ def to_detections(
     T = trace.targets.shape[0]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
     paths = {path.id: path for path in (truths if truths is not None else _truths(trace, times))}
+    stay = _stays(trace)  # (T, Nt): which stay of its place each target is on
     out = []
     for k in range(T):
         found = set()
@@ -197,8 +216,8 @@ def to_detections(
             if origin >= 0:
                 found.add(
                     TrueDetection(
-                        vector, groundtruth_path=paths[f"target-{origin}"], timestamp=times[k],
-                        metadata=meta,
+                        vector, groundtruth_path=paths[_path_id(origin, stay[k, origin])],
+                        timestamp=times[k], metadata=meta,
                     )
                 )  # fmt: skip
             else:

@@ -3,10 +3,10 @@ results folder as one row per trial. Needs the io extra (xarray, pandas, pyarrow
 
 Tables (one row per ...):
 
-* ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of targets in
-  some UAV's disk), alive_uavs (how many), and from a trace file or a `Result` (which
-  carry the scenario) each metric's own value at the step, for plots
-  (`tracks.scoring.series`): observation_rate, rounds, bytes, with known association
+* ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of the
+  targets present in some UAV's disk), alive_uavs (how many), and from a trace file or
+  a `Result` (which carry the scenario) each metric's own value at the step, for plots
+  (`simulation.series`): observation_rate, rounds, bytes, with known association
   rmse, ospa, gospa, nees and their _best twins, with tracks gospa and its parts, the
   kinds of unassigned tracks, switches, SIAP, gospa_team, label_purity, and ospa2 and
   ospa2_team at the last step of each window (NaN elsewhere);
@@ -57,9 +57,8 @@ except ImportError as exc:  # an optional extra
 from ..config import Scenario
 from ..errors import UsageError
 from ..metrics import METRICS, team_best
-from ..simulation import TRACKED, Cycle, Trace
+from ..simulation import TRACKED, Cycle, Trace, series
 from ..tracks.manage import STATUS_NAMES
-from ..tracks.scoring import series
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -182,7 +181,8 @@ def to_xarray(
         "method": saved.method,
         "scenario": json.dumps(scenario.to_dict(), sort_keys=True),
         "uavtrack": saved.version,
-        "missing": "a failed UAV's estimate, covariance and bid are NaN from its failure",
+        "missing": "a failed UAV's estimate, covariance and bid are NaN from its failure; "
+        "a target away (target.stay) has a NaN state",
     }
     if saved.seed is not None:
         attrs["seed"] = int(saved.seed)
@@ -264,7 +264,7 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
             "delivered": trace.delivered,
             "conflicts": trace.conflicts,
             "node_bytes": trace.node_bytes,
-            "in_view": trace.observed.any(axis=1).mean(axis=1),
+            "in_view": _in_view_share(trace),
             "alive_uavs": trace.alive.sum(axis=1),
         }
     )
@@ -315,6 +315,17 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     for frame in frames.values():
         frame.attrs["units"] = {c: unit(c) for c in frame.columns if unit(c)}
     return frames
+
+
+def _in_view_share(trace: Trace) -> np.ndarray:
+    """The share of the targets present in some UAV's disk at each step (T,) (NaN at a
+    step with none present; every target is present with the paper's fixed set)."""
+    in_view = trace.observed.any(axis=1)
+    here = ~np.isnan(trace.targets[..., 0])
+    if here.all():
+        return in_view.mean(axis=1)
+    there = here.sum(axis=1)
+    return np.where(there > 0, (in_view & here).sum(axis=1) / np.maximum(there, 1), np.nan)
 
 
 def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:

@@ -40,15 +40,14 @@ second decimal.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..estimation import confidence, nees
 
 if TYPE_CHECKING:
-    from ..config import Scenario
-    from ..simulation import Cycle, Trace
+    from ..simulation import Cycle
 
 from ..airspace.separation import NAMES as SEPARATION
 from ..airspace.separation import Separation
@@ -417,7 +416,7 @@ class TrackScore:
     steps: int = 0
     log: list[dict[str, np.ndarray]] | None = None
     """With a list: each step's own values (B,) of the metrics that are means over the
-    steps, appended as the steps are added (`series`)."""
+    steps, appended as the steps are added (`simulation.series`)."""
     sums: dict[str, np.ndarray] = field(init=False)
     spread: NeesSpread = field(init=False)
     _nees: np.ndarray = field(init=False, repr=False)  # (2, B): sum, count
@@ -474,8 +473,9 @@ class TrackScore:
                 f"tracks must be (P, K, 2), labels and confirmed (P, K) with P = {P}; got "
                 f"{np.shape(tracks)}, {np.shape(labels)} and {np.shape(confirmed)}"
             )
-        present = np.ones((P, Nt), bool) if present is None else np.asarray(present, bool)
-        alive = np.ones(P, bool) if alive is None else np.asarray(alive, bool)
+        # copies: the windows of OSPA(2) hold them past this call
+        present = np.ones((P, Nt), bool) if present is None else np.array(present, bool)
+        alive = np.ones(P, bool) if alive is None else np.array(alive, bool)
         # a failed UAV holds no track (its slots may hold NaN)
         confirmed = np.asarray(confirmed, bool) & alive[:, None]
         in_view = np.asarray(in_view, bool)
@@ -493,7 +493,7 @@ class TrackScore:
             else nearest_truth(truth, present, tracks, confirmed, self.cutoff)
         )
         J, JT, N, NA = siap_counts(nearest, present, confirmed)
-        labels = np.asarray(labels, dtype=np.int64)
+        labels = np.array(labels, dtype=np.int64)
         key = (np.arange(P, dtype=np.int64)[:, None] << LABEL_BITS) | np.maximum(labels, 0)
         duplicate, stale, never = unassigned_kinds(
             assigned, within_c, confirmed,
@@ -563,7 +563,7 @@ class TrackScore:
                 self._logged["gospa_team"] = np.where(whole, team.distance, np.nan)
             B_ = slice(None, None, rows)  # each trial's first row: its truth
             self._window["team"].append(
-                (target[B_], present[B_], np.asarray(truth)[B_], np.maximum(label_, 0), held,
+                (target[B_], present[B_], np.array(truth)[B_], np.maximum(label_, 0), held,
                  where, whole)
             )  # fmt: skip
         if mean is not None and cov is not None and states is not None:
@@ -574,7 +574,7 @@ class TrackScore:
             self._nees[1] += counted.reshape(self.batch, -1).sum(axis=1)
         self.steps += 1
         if self.steps % self.window == 0:
-            self._close_windows()
+            self.close_windows()
         if self.log is not None:
             self.log.append(self._logged)
 
@@ -592,19 +592,28 @@ class TrackScore:
         for b in np.flatnonzero((time >= 0).any(axis=1)):
             self._team_times[b] = np.concatenate([self._team_times[b], time[b][time[b] >= 0]])
 
-    def _close_windows(self) -> None:
-        """Add the OSPA(2) of the steps held (a window) per row and for the team."""
+    def _window_ospa2(self, kind: str) -> tuple[np.ndarray, np.ndarray] | None:
+        """The OSPA(2) of the steps held (a window) of `kind` ("rows" or "team") and the
+        rows it counts for (alive at its last step), or None without any step held."""
+        held = self._window[kind]
+        if not held:
+            return None
+        target, present, truth, labels, exists, tracks, alive = (
+            _stacked(part) for part in zip(*held, strict=True)
+        )
+        X, x_exists = window_tracks(target, present, truth)
+        Y, y_exists = window_tracks(labels, exists, tracks)
+        return ospa2(X, x_exists, Y, y_exists, self.cutoff, self.order), alive[-1]
+
+    def close_windows(self) -> None:
+        """Add the OSPA(2) of the steps held (a window) per row and for the team: at
+        each window's last step, and once more at the end of a run for its last steps
+        (`Scores.series`; `summary` reads them without adding them)."""
         for kind, sums in (("rows", self.sums), ("team", self.team)):
-            held = self._window[kind]
-            if not held:
+            scored = self._window_ospa2(kind)
+            if scored is None:
                 continue
-            target, present, truth, labels, exists, tracks, alive = (
-                _stacked(part) for part in zip(*held, strict=True)
-            )
-            X, x_exists = window_tracks(target, present, truth)
-            Y, y_exists = window_tracks(labels, exists, tracks)
-            value = ospa2(X, x_exists, Y, y_exists, self.cutoff, self.order)
-            counted = alive[-1]  # a row that failed inside the window is left out
+            value, counted = scored  # a row that failed inside the window is left out
             sums["ospa2"] += np.where(counted, value, 0.0)
             sums["windows"] += counted
             if self.log is not None:  # at the window's last step
@@ -619,8 +628,12 @@ class TrackScore:
 
     def summary(self) -> dict[str, np.ndarray]:
         """The metrics of `TRACK_METRICS`, each an array over the B trials."""
-        self._close_windows()  # the last steps, a window shorter than the others
-        s = self.sums
+        s, team = dict(self.sums), dict(self.team)  # read, not changed: the run may go on
+        for kind, sums in (("rows", s), ("team", team)):
+            scored = self._window_ospa2(kind)  # the last steps, a shorter window
+            if scored is not None:
+                sums["ospa2"] = sums["ospa2"] + np.where(scored[1], scored[0], 0.0)
+                sums["windows"] = sums["windows"] + scored[1]
 
         running = (self._state["start"] >= 0).sum(axis=1)
         per_row = _row_values(s) | {
@@ -632,9 +645,9 @@ class TrackScore:
             name: mean_std(value.reshape(self.batch, self.rows), axis=1)[0]
             for name, value in per_row.items()
         }
-        out["gospa_team"] = ratio(self.team["gospa"], self.team["steps"])
-        out["label_purity"] = ratio(self.team["agreeing"], self.team["matched"])
-        out["ospa2_team"] = ratio(self.team["ospa2"], self.team["windows"])
+        out["gospa_team"] = ratio(team["gospa"], team["steps"])
+        out["label_purity"] = ratio(team["agreeing"], team["matched"])
+        out["ospa2_team"] = ratio(team["ospa2"], team["windows"])
         out["time_to_confirm_team"] = np.array(
             [np.median(t) if t.size else np.nan for t in self._team_times]
         )
@@ -721,31 +734,13 @@ class Scores:
         T = len(self.tally.log)
         rows = self.tally.log
         if self.tracks is not None and self.tracks.log is not None:
-            self.tracks.summary()  # closes the last window
+            self.tracks.close_windows()  # the last, shorter window: at the run's end
             rows = [a | b for a, b in zip(rows, self.tracks.log, strict=True)]
         if not T:
             return {}
         names = list(dict.fromkeys(name for row in rows for name in row))
         nothing = np.full(self.tally.batch, np.nan)
         return {name: np.stack([row.get(name, nothing) for row in rows]) for name in names}
-
-
-def series(trace: Trace, scenario: Scenario) -> dict[str, np.ndarray]:
-    """Each step's own value (T,) of every metric of a trial that is a mean over its steps
-    (the observation rate, GOSPA and its parts, the kinds of unassigned tracks, the team
-    picture's GOSPA, label purity, messages, bytes ...; OSPA(2) at the last step of each
-    window), from its trace and scenario: the run's metrics replayed step by step. The
-    mean of a series over the steps is the run's value wherever every UAV lives."""
-    from ..simulation import RECORDED, Cycle, scores
-
-    score = scores(scenario, 1, timed=True)
-    score.tally.log = []
-    arrays: dict[str, np.ndarray] = trace.arrays()  # the recorded fields, not None
-    names = [f.name for f in RECORDED] + [n for n in ("label", "status") if n in arrays]
-    for k in range(trace.targets.shape[0]):
-        fields: dict[str, Any] = {name: arrays[name][k][None] for name in names}
-        score.add(Cycle(**fields), trace.targets[k][None])
-    return {name: values[:, 0] for name, values in score.series().items()}
 
 
 def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -219,21 +219,34 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
         static=True,
     )
     ground = np.concatenate([trace.targets[..., :2], np.zeros((T, nt, 1))], axis=-1)
+    here = ~np.isnan(ground[..., 0])  # with targets that come and go: NaN while away
+    if here.all():
+        strips = np.swapaxes(ground, 0, 1)
+        names = np.broadcast_to(np.array([f"T{j}" for j in range(nt)]), (T, nt))
+    else:  # a path per stay, and the n-th target to take place j after the first: Tj.n
+        stay = np.cumsum(np.concatenate([np.zeros((1, nt), bool), here[1:] & ~here[:-1]]), 0)
+        strips = [
+            ground[here[:, j] & (stay[:, j] == n), j]
+            for j in range(nt)
+            for n in np.unique(stay[here[:, j], j])
+        ]
+        names = np.array(
+            [[f"T{j}.{n}" if n else f"T{j}" for j, n in enumerate(row)] for row in stay]
+        )
     rec.log(
         "world/targets/paths",
         # rerun takes an (S, P, 3) array of strips, which its LineStrip3DArrayLike omits
-        rr.LineStrips3D(np.swapaxes(ground, 0, 1), colors=[90, 90, 90], radii=0.2),  # pyright: ignore[reportArgumentType]
+        rr.LineStrips3D(strips, colors=[90, 90, 90], radii=0.2),  # pyright: ignore[reportArgumentType]
         static=True,
     )
-    everyone = np.ones((T, nt), dtype=bool)
     _send(
         rec,
         "world/targets",
         steps,
-        everyone,
+        here,
         rr.Points3D,
         positions=ground,
-        labels=np.broadcast_to(np.array([f"T{j}" for j in range(nt)]), (T, nt)),
+        labels=names,
         colors=np.broadcast_to(np.array([20, 20, 20]), (T, nt, 3)),
         radii=np.full((T, nt), 1.5),
     )

@@ -130,6 +130,7 @@ def _scene(trace, scenario, title: str):
             ellipses[j].width, ellipses[j].height = 4 * np.sqrt(np.maximum(vals[::-1], 0.0))
             ellipses[j].angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
             names[j].xy = trace.targets[k, j, :2]
+            names[j].set_visible(not np.isnan(trace.targets[k, j, 0]))  # away (target.stay)
         targets.set_offsets(trace.targets[k, :, :2])
         for i in range(nu):
             disks[i].set_center(uavs[i, :2])
@@ -141,7 +142,8 @@ def _scene(trace, scenario, title: str):
             label.xyann = offset
         arrows.set_offsets(uavs[:, :2])
         arrows.set_UVC(15 * np.cos(uavs[:, 4]), 15 * np.sin(uavs[:, 4]))
-        seen = trace.observed[: k + 1].any(axis=1).mean()
+        here = ~np.isnan(trace.targets[: k + 1, :, 0])  # the targets present
+        seen = (trace.observed[: k + 1].any(axis=1) & here).sum() / max(here.sum(), 1)
         heading.set_text(f"{title}, step {k}, observation rate so far {seen:.2f}")
 
     return fig, draw
