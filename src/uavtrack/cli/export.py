@@ -28,7 +28,7 @@ def export(
         typer.Argument(
             metavar="SOURCE",
             help="a trace file (run --trace FILE.npz) or a results folder (reproduce, "
-            "sweep, robustness, trackers, flight)",
+            "sweep, robustness, trackers, flight, sensing, ...)",
         ),
     ],
     out: Annotated[
@@ -36,8 +36,9 @@ def export(
         typer.Option(
             "--out",
             metavar="PATH",
-            help="a trace's parquet or csv tables: a new folder (steps, uavs, targets, pairs); "
-            "its netcdf: a new file; a results folder's table: a new file",
+            help="a trace's parquet or csv tables: a new folder (steps, uavs, targets, pairs; "
+            "with tracks, tracks and measurements for pairs); its netcdf: a new file; a "
+            "results folder's table: a new file",
         ),
     ],
     format_: Annotated[

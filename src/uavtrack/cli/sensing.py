@@ -51,10 +51,12 @@ def sensing(
     progress: ProgressOpt = None,
 ) -> None:
     """The three methods at detection probability 1, 0.9, 0.7 x clutter 0, 2, 10 per scan
-    x association gnn, jpda, and jpda without a briefing at 0.9 and 2, each paired with
-    known association on the same trials: observation rate, GOSPA and the team picture's,
-    duplicate, stale and never-followed tracks, label purity, switches, SIAP, NEES; into
-    a folder."""
+    x association gnn, jpda, each paired with known association on the same trials, and
+    at 0.9 and 2 jpda without a briefing (jpda-unbriefed) and without a briefing with
+    targets that come and go (jpda-births: target.stay 200, target.away 100; another
+    truth, so unpaired): observation rate, GOSPA, OSPA(2) and the team picture's,
+    duplicate, stale and never-followed tracks, label purity, switches, the team's time
+    to confirm, SIAP, NEES; into a folder."""
     from ..experiments import sensing as experiment
 
     scenario = load_scenario(config, set_, team)

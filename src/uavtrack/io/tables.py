@@ -6,7 +6,8 @@ Tables (one row per ...):
 * ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of the
   targets present in some UAV's disk), alive_uavs (how many), and from a trace file or
   a `Result` (which carry the scenario) each metric's own value at the step, for plots
-  (`simulation.series`): observation_rate, rounds, bytes, with known association
+  (`simulation.series`; in_view is the step's observation rate): rounds, bytes, with
+  known association
   rmse, ospa, gospa, nees and their _best twins, with tracks gospa and its parts, the
   kinds of unassigned tracks, switches, SIAP, gospa_team, label_purity, and ospa2 and
   ospa2_team at the last step of each window (NaN elsewhere);
@@ -268,9 +269,9 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
             "alive_uavs": trace.alive.sum(axis=1),
         }
     )
-    if scenario is not None:  # each metric's own value per step
+    if scenario is not None:  # each metric's own value per step (in_view: the rate's)
         for name, values in series(trace, scenario).items():
-            if name not in steps:
+            if name not in steps and name != "observation_rate":
                 steps[name] = values
     k, i = (a.ravel() for a in np.meshgrid(np.arange(T), np.arange(Nu), indexing="ij"))
     uavs = {"step": k, "time": time[k], "uav": i}
