@@ -34,7 +34,7 @@ TRACKED = {
 def test_a_series_averages_to_the_runs_value(overrides, names):
     scenario = uavtrack.Scenario(steps=73).with_overrides(overrides)
     result = uavtrack.simulate(scenario, "distributed", seed=6)
-    series = result.series()
+    series = uavtrack.series(result)
     for name in names:
         values = series[name]
         assert values.shape == (73,), name
@@ -53,7 +53,7 @@ def test_the_rate_of_a_step_counts_the_targets_present():
     here = ~np.isnan(result.trace.targets[..., 0])
     in_view = result.trace.observed.any(axis=1)
     expected = (in_view & here).sum(axis=1) / here.sum(axis=1)
-    assert np.allclose(result.series()["observation_rate"], expected, rtol=0, atol=1e-12)
+    assert np.allclose(uavtrack.series(result)["observation_rate"], expected, rtol=0, atol=1e-12)
 
 
 def test_the_steps_table_carries_the_series_with_units(tmp_path):
@@ -68,11 +68,11 @@ def test_the_steps_table_carries_the_series_with_units(tmp_path):
     path = tmp_path / "steps.parquet"
     write_table(steps, path)
     back = pd.read_parquet(path)
-    assert np.allclose(back["gospa"], result.series()["gospa"], rtol=0, atol=1e-12)
+    assert np.allclose(back["gospa"], uavtrack.series(result)["gospa"], rtol=0, atol=1e-12)
     assert steps.attrs["units"]["gospa_team"] == "m"
 
 
 def test_a_result_without_a_trace_has_no_series():
     result = uavtrack.simulate(uavtrack.Scenario(steps=5), seed=0, trace=False)
     with pytest.raises(ValueError, match="no trace"):
-        result.series()
+        uavtrack.series(result)

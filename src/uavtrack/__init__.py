@@ -36,9 +36,10 @@ _PUBLIC = {
     "UAVModel": "config",
     "METHODS": "methods",
     "Method": "methods",
-    "BatchResult": "simulation",
-    "Result": "simulation",
-    "Trace": "simulation",
+    "BatchResult": "records",
+    "Result": "records",
+    "Trace": "records",
+    "series": "tracks.scoring",
     "run": "simulation",
     "simulate": "simulation",
     "trial_seed": "simulation",
@@ -55,6 +56,7 @@ _MODULES = {
     "network",
     "planning",
     "radio",
+    "records",
     "robust",
     "sensing",
     "simulation",
@@ -145,7 +147,9 @@ if TYPE_CHECKING:
         UAVModel,
     )
     from .methods import METHODS, Method
-    from .simulation import BatchResult, Result, Trace, run, simulate, trial_seed
+    from .records import BatchResult, Result, Trace
+    from .simulation import run, simulate, trial_seed
+    from .tracks.scoring import series
 
 __all__ = [  # noqa: RUF022 (grouped as above)
     "BatchResult",
@@ -162,6 +166,7 @@ __all__ = [  # noqa: RUF022 (grouped as above)
     "UAVModel",
     "__version__",
     "run",
+    "series",
     "simulate",
     "trial_seed",
 ]

@@ -26,7 +26,7 @@ from .estimation import confidence, nees
 from .numerics import chisquare, lsap
 
 if TYPE_CHECKING:
-    from .simulation import Cycle
+    from .records import Cycle
 
 PER_UAV_SETS = 20
 """Up to this many targets the per-UAV OSPA and GOSPA are computed (an assignment per UAV
@@ -338,7 +338,7 @@ _Mask = np.ndarray | None
 @dataclass(kw_only=True)
 class Tally:
     """Running sums over the steps of a batch of B trials (Nu UAVs, Nt targets), fed
-    one `simulation.Cycle` at a time.
+    one `records.Cycle` at a time.
 
     Failed UAVs count in nothing: their estimates leave the RMSE and NEES, their rounds
     the mean. NEES is computed in blocks of steps covering about 4000 filters: few
@@ -356,7 +356,7 @@ class Tally:
     steps: int = 0
     log: list[dict[str, np.ndarray]] | None = None
     """With a list: each step's own values of the metrics that are means over the steps
-    (`simulation.series`), appended as the steps are added."""
+    (`tracks.scoring.series`), appended as the steps are added."""
     observed: np.ndarray = field(init=False)
     sums: dict[str, np.ndarray] = field(init=False)
     spread: dict[str, NeesSpread] = field(init=False)  # nees, nees_best
@@ -382,7 +382,7 @@ class Tally:
         self._block = int(np.clip(4096 // (self.batch * self.n_uavs * self.n_targets), 1, 64))
 
     def add(self, cycle: Cycle, truth: np.ndarray) -> None:
-        """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
+        """Add one step: a `records.Cycle` and the true targets (B, Nt, 4)."""
         s = self.sums
         self.steps += 1
         alive = cycle.alive

@@ -32,7 +32,7 @@ COUNTERS = ("rounds", "messages", "delivered", "late", "bytes", "node_bytes", "c
 def differences(a: object, b: object, atol: float = 1e-9, counters: bool = True) -> list[str]:
     """What differs between traces a and b, in words (empty when they agree).
 
-    A trace is any object with some of the fields named above (a `simulation.Trace`, or
+    A trace is any object with some of the fields named above (a `records.Trace`, or
     a part of one): a field either of them lacks is not compared.
     """
     out: list[str] = []

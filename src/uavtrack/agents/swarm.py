@@ -34,7 +34,8 @@ from ..config import Scenario
 from ..errors import RunError, UsageError, install_hint
 from ..methods import get
 from ..radio import RUN_CHARS
-from ..simulation import Result, result_of
+from ..records import Result
+from ..simulation import result_of
 from .agent import check_method
 from .launcher import Forked, Launcher
 from .program import serve

@@ -34,7 +34,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import simulation, world
+from .. import records, simulation, world
 from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
@@ -58,7 +58,7 @@ class Traffic:
     drops: messages dropped by the world and every program, by reason; failed: UAVs
     failed by the fault model (uav -> step); lost: programs gone or silent past their
     deadline (program -> step; the central node is program N), and why: why each was
-    lost, in one line; late: radio messages that missed their cycle (`simulation.Cycle.
+    lost, in one line; late: radio messages that missed their cycle (`records.Cycle.
     late`), by protocol, and late_from: the first step with one (-1: none), from which the
     trace may differ from the simulator's.
     """
@@ -206,7 +206,7 @@ class WorldProgram:
 
     def run_trial(
         self, trace: bool = True, realtime: bool = False, progress: Callable | None = None
-    ) -> simulation.BatchResult:
+    ) -> records.BatchResult:
         """Run every cycle; returns the trial's metrics and trace as `simulation.run` does."""
         s, ctx = self.scenario, self.ctx
         state, trajectory, sensor_rngs = simulation.initial_stream(s, self.seeds, keep=trace)
@@ -268,7 +268,7 @@ class WorldProgram:
             for reason, count in drops.items():
                 self.traffic.drops[reason] = self.traffic.drops.get(reason, 0) + count
         traces = recorder.traces(trajectory.whole()) if recorder is not None else None
-        return simulation.BatchResult(self.method.name, s, tally.summary(), traces)
+        return records.BatchResult(self.method.name, s, tally.summary(), traces)
 
     def _answer_joins(self) -> None:
         """A program that asked for a Hello hears this run's, with the step it is at: one
@@ -439,7 +439,7 @@ class WorldProgram:
             target[0, i], actions[0, i] = report.target, report.action
             rounds[0, i], decision[0, i] = report.rounds, report.decision_ms
             wall[0, i] = report.decision_wall_ms
-        cycle = simulation.Cycle(
+        cycle = records.Cycle(
             uavs=uavs,
             observed=observed,
             mean=mean,

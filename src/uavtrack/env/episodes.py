@@ -10,10 +10,9 @@ import numpy as np
 
 from ..config import Scenario
 from ..methods import Method
+from ..records import BatchResult, Pending
 from ..simulation import (
-    BatchResult,
     Context,
-    Pending,
     Recorder,
     check_memory,
     decide,

@@ -11,7 +11,8 @@ from pettingzoo import ParallelEnv
 
 from ..config import Scenario, flatten
 from ..methods import get
-from ..simulation import Recorder, Result, Trace, check_memory, finish, result_of
+from ..records import Result, Trace
+from ..simulation import Recorder, check_memory, finish, result_of
 from .episodes import Episodes
 from .spaces import Spaces, View, check_reward
 

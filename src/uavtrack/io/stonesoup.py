@@ -18,7 +18,7 @@ import numpy as np
 
 from ..errors import UsageError
 from ..metrics import team_best
-from ..simulation import Trace
+from ..records import Trace
 from . import trace as trace_file
 from .trace import EPOCH
 

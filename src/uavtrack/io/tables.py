@@ -6,7 +6,7 @@ Tables (one row per ...):
 * ``steps``: step: time [s], messages, delivered, conflicts, in_view (share of the
   targets present in some UAV's disk), alive_uavs (how many), and from a trace file or
   a `Result` (which carry the scenario) each metric's own value at the step, for plots
-  (`simulation.series`; in_view is the step's observation rate): rounds, bytes, with
+  (`tracks.scoring.series`; in_view is the step's observation rate): rounds, bytes, with
   known association
   rmse, ospa, gospa, nees and their _best twins, with tracks gospa and its parts, the
   kinds of unassigned tracks, switches, SIAP, gospa_team, label_purity, and ospa2 and
@@ -58,8 +58,9 @@ except ImportError as exc:  # an optional extra
 from ..config import Scenario
 from ..errors import UsageError
 from ..metrics import METRICS, team_best
-from ..simulation import TRACKED, Cycle, Trace, series
+from ..records import TRACKED, Cycle, Trace
 from ..tracks.manage import STATUS_NAMES
+from ..tracks.scoring import series
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -125,7 +126,7 @@ def to_xarray(
     covariances and bids are per track slot (dimension ``slot``, not ``target``), with
     each slot's ``label`` and ``status``, and the scans' measurements (dimension
     ``measurement``, padded: ``scan_valid``) as ``scan_range``, ``scan_bearing``,
-    ``scan_x``, ``scan_y`` and ``scan_origin`` (`simulation.TRACKED`)."""
+    ``scan_x``, ``scan_y`` and ``scan_origin`` (`records.TRACKED`)."""
     saved = trace_file.load(source, scenario, method, seed)
     trace, scenario = saved.trace, saved.scenario
     T, Nu = trace.uavs.shape[:2]
@@ -217,7 +218,7 @@ def to_xarray(
 
 
 def _track_variables(variables: dict[str, Any], trace: Trace, sus: tuple[str, ...]) -> None:
-    """The variables of `simulation.TRACKED`: labels and statuses per slot, the scans."""
+    """The variables of `records.TRACKED`: labels and statuses per slot, the scans."""
     variables["label"] = (sus, trace.label, {"long_name": TRACKED["label"][1]})
     variables["status"] = (sus, trace.status, {"long_name": TRACKED["status"][1]})
     sum_ = ("step", "uav", "measurement")

@@ -1,7 +1,7 @@
 """The trace file of ``uavtrack run --trace`` and ``swarm --trace`` (.npz).
 
 A compressed NumPy archive (read it with ``numpy.load``; no pickles) holding every array
-of `simulation.Trace` under its field's name, and what made them: ``scenario`` (the
+of `records.Trace` under its field's name, and what made them: ``scenario`` (the
 scenario as JSON text; `Scenario.from_dict(json.loads(...))` reads it back), ``method``,
 ``seed`` (absent when the trial had none), ``dt`` [s], ``uavtrack`` (the version that
 wrote it) and ``format`` (the trace format, `FORMAT`). A failed UAV's rows of ``mean``,
@@ -32,7 +32,7 @@ from .. import __version__
 from .._files import write_npz
 from ..config import Scenario, ScenarioError
 from ..errors import UsageError
-from ..simulation import RECORDED, TRACKED, Result, Trace
+from ..records import RECORDED, TRACKED, Result, Trace
 
 FORMAT = 3
 """The trace format this uavtrack writes and reads. It changes only when an array is

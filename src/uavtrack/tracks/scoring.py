@@ -40,18 +40,16 @@ second decimal.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING
+from typing import Any
 
 import numpy as np
 
-from ..estimation import confidence, nees
-
-if TYPE_CHECKING:
-    from ..simulation import Cycle
-
 from ..airspace.separation import NAMES as SEPARATION
 from ..airspace.separation import Separation
+from ..config import Scenario
+from ..estimation import confidence, nees
 from ..metrics import GOSPA, METRICS, PER_UAV_SETS, NeesSpread, Tally, cut_costs, matching, mean_std
+from ..records import RECORDED, Cycle, Result, Trace
 
 TRACK_METRICS: dict[str, tuple[str, str]] = {
     "gospa": ("m", "GOSPA distance (alpha = 2) of the row's confirmed tracks, mean per step"),
@@ -416,7 +414,7 @@ class TrackScore:
     steps: int = 0
     log: list[dict[str, np.ndarray]] | None = None
     """With a list: each step's own values (B,) of the metrics that are means over the
-    steps, appended as the steps are added (`simulation.series`)."""
+    steps, appended as the steps are added (`tracks.scoring.series`)."""
     sums: dict[str, np.ndarray] = field(init=False)
     spread: NeesSpread = field(init=False)
     _nees: np.ndarray = field(init=False, repr=False)  # (2, B): sum, count
@@ -678,8 +676,31 @@ class Scores:
     separation: Separation | None = None
     tracks: TrackScore | None = None
 
+    @classmethod
+    def of(cls, scenario: Scenario, batch: int, timed: bool) -> Scores:
+        """The metrics of a run of `batch` trials of `scenario`, fed one `Cycle` at a
+        time; decision times only if `timed`."""
+        e, u = scenario.evaluation, scenario.uav
+        return cls(
+            tally=Tally(
+                batch=batch,
+                n_uavs=scenario.n_uavs,
+                n_targets=scenario.n_targets,
+                timed=timed,
+                cutoff=e.ospa_cutoff,
+                order=e.ospa_order,
+            ),
+            separation=Separation(
+                batch=batch,
+                minimum=u.separation,
+                vertical=u.vertical_separation,
+                reach=max(scenario.comm_range, u.separation),
+                dt=scenario.dt,
+            ),
+        )
+
     def add(self, cycle: Cycle, truth: np.ndarray) -> None:
-        """Add one step: a `simulation.Cycle` and the true targets (B, Nt, 4)."""
+        """Add one step: a `records.Cycle` and the true targets (B, Nt, 4)."""
         self.tally.add(cycle, truth)
         if self.separation is not None:
             self.separation.add(cycle.uavs, cycle.alive)
@@ -741,6 +762,37 @@ class Scores:
         names = list(dict.fromkeys(name for row in rows for name in row))
         nothing = np.full(self.tally.batch, np.nan)
         return {name: np.stack([row.get(name, nothing) for row in rows]) for name in names}
+
+
+def series(source: Result | Trace, scenario: Scenario | None = None) -> dict[str, np.ndarray]:
+    """Each step's own value (T,) of every metric of a trial that is a mean over its steps
+    (the observation rate, GOSPA and its parts, the kinds of unassigned tracks, the team
+    picture's GOSPA, label purity, messages, bytes ...; OSPA(2) at the last step of each
+    window), for plots: the run's metrics replayed step by step from a `Result` with its
+    trace, or a `Trace` and its scenario (``uavtrack.series(result)``).
+
+    With the paper's fixed set of targets and every UAV alive, a series' mean over the
+    steps is the run's value for the metrics that are means over the steps; it is not for
+    those that are ratios of sums (rmse and rmse_best, the square root of a mean;
+    label_purity and SIAP, sums over the run divided), nor with targets that come and go,
+    where the run weighs each step by the targets present (a step's value by its count
+    of present targets, summed and divided by their total, gives the run's)."""
+    if isinstance(source, Result):
+        if source.trace is None:
+            raise ValueError("this result holds no trace: simulate(..., trace=True)")
+        trace, scenario = source.trace, source.scenario
+    else:
+        trace = source
+    if scenario is None:
+        raise ValueError("a bare Trace needs its scenario: series(trace, scenario)")
+    score = Scores.of(scenario, 1, timed=True)
+    score.tally.log = []
+    arrays: dict[str, np.ndarray] = trace.arrays()  # the recorded fields, not None
+    names = [f.name for f in RECORDED] + [n for n in ("label", "status") if n in arrays]
+    for k in range(trace.targets.shape[0]):
+        values: dict[str, Any] = {name: arrays[name][k][None] for name in names}
+        score.add(Cycle(**values), trace.targets[k][None])
+    return {name: values[:, 0] for name, values in score.series().items()}
 
 
 def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:
