@@ -292,6 +292,26 @@ def _usable(
     return usable if admitted is None else usable & admitted
 
 
+def combine(
+    rule: str,
+    own: Estimates,
+    offered: Estimates,
+    delivered: network.Links,
+    admitted: np.ndarray | None = None,
+    score: Callable[[Estimates], np.ndarray] | None = None,
+) -> Estimates:
+    """One round of the consensus rule (``fusion.rule``) for every receiver: eq. (27),
+    `adopt` then `pick`, each receiver taking per target the most confident of its own
+    tuple and those delivered (`score`, default the confidence gamma); or
+    covariance_intersection, `intersect_round`. The one function the batch's rounds
+    (`consensus`) and each agent's (`agents.agent.UavAgent`) call."""
+    if rule == "covariance_intersection":
+        return intersect_round(own, offered, delivered, admitted)
+    score = score if score is not None else (lambda t: required(t.gamma, "gamma"))
+    best = adopt(score(own), score(offered), delivered, admitted)
+    return pick(own, offered, best, delivered.heads if delivered.edges else None)
+
+
 def pick(
     own: Estimates,
     offered: Estimates,
@@ -541,28 +561,20 @@ def consensus(
         sent, delivered = count(inbox, active, sent, delivered)
         links = inbox.delivered.into(active)
         admitted = None if admit is None else admit(tuples, offered, links)
-        if rule == "covariance_intersection":  # tuples by value: mean and cov
-            if links.edges:
-                tuples = intersect_round(tuples, offered, links, admitted)
-            else:
-                fused = intersect_round(tuples, offered, links, admitted)
-                tuples = Estimates(
-                    **{
-                        name: np.where(
-                            active.reshape(active.shape + (1,) * (value.ndim - 2)),
-                            getattr(fused, name),
-                            value,
-                        )
-                        for name, value in tuples.items()
-                    }
-                )
-            continue
-        best = adopt(score(tuples), score(offered), links, admitted)
+        fused = combine(rule, tuples, offered, links, admitted, score)
         if links.edges:  # only the active receivers have links: only their rows change
-            tuples = pick(tuples, offered, best, links.heads)
-        else:
-            best = np.where(active[..., None], best, np.arange(n)[:, None])
-            tuples = pick(tuples, offered, best)
+            tuples = fused
+        else:  # the receivers past their rounds keep their tuples
+            tuples = Estimates(
+                **{
+                    name: np.where(
+                        active.reshape(active.shape + (1,) * (value.ndim - 2)),
+                        getattr(fused, name),
+                        value,
+                    )
+                    for name, value in tuples.items()
+                }
+            )
     if sending is None:
         return Outcome(tuples=tuples, sent=sent, delivered=delivered)
     return Outcome(tuples=tuples, sent=sent, delivered=delivered, carried=carried, last=last)

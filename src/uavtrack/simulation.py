@@ -714,17 +714,12 @@ def avoid(
         content = inbox.content
         got = inbox.delivered.adjacency()
         heard = heard.update(got, content["uavs"], content["stamp"], k, memory)
-    uav = scenario.uav
     values = None
     if pending.columns is None:  # each UAV's scores of its target, by first action
         target = np.maximum(pending.assigned.target, 0)[..., None, None]
         mean = np.take_along_axis(pending.fused.mean, target, axis=2)  # (B, Nu, 1, 4)
         values = first_values(pending.believed, mean, scenario)[:, :, 0]
-    chosen, _ = avoidance.choose(
-        actions, pending.believed, alive, heard, k, avoidance.minimum(scenario),
-        uav.vertical_separation,
-        np.radians(uav.bank_angle_deg), scenario.dt, values=values,
-    )  # fmt: skip
+    chosen = avoidance.choose_in(scenario, actions, pending.believed, alive, heard, k, values)
     counts: tuple[Any, Any] = (0, 0)
     if own:
         zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, Nu), dtype=bool)

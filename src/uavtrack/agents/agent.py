@@ -564,12 +564,7 @@ class UavAgent:
             admitted = gate.admitted(
                 links, estimates, estimates, measured, self.setting.gate, claimed
             )
-        if self.setting.rule == "covariance_intersection":
-            picked = fusion.intersect_round(candidates, candidates, links, admitted)
-        else:
-            gamma = fusion.required(candidates.gamma, "gamma")
-            best = fusion.adopt(gamma, gamma, links, admitted)
-            picked = fusion.pick(candidates, candidates, best)
+        picked = fusion.combine(self.setting.rule, candidates, candidates, links, admitted)
         return picked.map(lambda value: value[0, where])
 
     def _plausible(self, content: dict) -> dict:
@@ -662,10 +657,7 @@ class UavAgent:
         if values is not None:
             scores = np.zeros((1, n, 3))
             scores[0, me] = values
-        chosen, _ = avoidance.choose(
-            desired, believed, alive, self.beacons, k, avoidance.minimum(s),
-            s.uav.vertical_separation, np.radians(s.uav.bank_angle_deg), s.dt, values=scores,
-        )  # fmt: skip
+        chosen = avoidance.choose_in(s, desired, believed, alive, self.beacons, k, scores)
         return int(chosen[0, me]), (int(counts[0]), int(counts[1]))
 
     def _believable(self, q: int, state: np.ndarray, sent: int) -> str | None:

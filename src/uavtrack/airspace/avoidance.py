@@ -97,6 +97,26 @@ def minimum(scenario: Scenario) -> float:
     return scenario.uav.separation + scenario.planner.avoidance_margin
 
 
+def choose_in(
+    scenario: Scenario,
+    desired: np.ndarray,
+    believed: np.ndarray,
+    alive: np.ndarray,
+    heard: Heard,
+    k: int,
+    values: np.ndarray | None = None,
+) -> np.ndarray:
+    """`choose` with the scenario's settings (the separation kept, `minimum`; the vertical
+    separation; the bank angle; the step): the actions (B, N) the batch and each agent
+    fly, one place that reads them from the scenario."""
+    uav = scenario.uav
+    chosen, _ = choose(
+        desired, believed, alive, heard, k, minimum(scenario), uav.vertical_separation,
+        np.radians(uav.bank_angle_deg), scenario.dt, values=values,
+    )  # fmt: skip
+    return chosen
+
+
 def memory_of(delay: int, loss: float) -> int:
     """Steps a broadcast is kept: with no loss a UAV whose beacon of d steps ago did not
     arrive was out of radio range (or down) then, which the range assumption covers, so
