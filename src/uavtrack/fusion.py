@@ -526,7 +526,7 @@ def consensus(
     (`Sending`; None: all, the paper's).
     """
     score = score or (lambda t: required(t.gamma, "gamma"))
-    B, n = rounds.shape
+    B = rounds.shape[0]
     if rule not in ("max_consensus", "covariance_intersection"):
         raise ValueError(f"unknown fusion rule {rule!r}")
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
