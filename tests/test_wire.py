@@ -10,7 +10,7 @@ from hypothesis import strategies as st
 
 import uavtrack
 from uavtrack import radio
-from uavtrack.agents.messages import VERSION, Part, Radio, Spec, encode, packed
+from uavtrack.agents.messages import DOMAINS, VERSION, Part, Radio, Spec, encode, packed
 from uavtrack.agents.security import Gate
 from uavtrack.faults import PROTOCOLS
 from uavtrack.tracks import manage
@@ -102,6 +102,7 @@ def test_the_batch_layouts_are_what_the_agents_admit(tracked, avoid):
         admitted = spec.contents(protocol)
         assert admitted is not None
         assert {name: kind[:2] for name, kind in admitted.items()} == layout, protocol
+        assert {kind[2] for kind in admitted.values()} <= set(DOMAINS), protocol
     assert set(PARTS) <= set(PROTOCOLS)
 
 

@@ -470,7 +470,12 @@ Layout = dict[str, tuple[str, tuple[int, ...]]]
 F8, I8, B1 = "<f8", "<i8", "|b1"
 
 
-def layout(
+Field = tuple[str, tuple[int, ...], str]
+"""An array of a message's content: (dtype, shape, domain); the domain names what its
+values may be, which the agents' receivers check (`agents.messages.DOMAINS`)."""
+
+
+def described(
     protocol: str,
     n: int,
     m: int,
@@ -478,11 +483,12 @@ def layout(
     avoid: bool = False,
     tuples: str = "full",
     book: tuple[str, ...] = (),
-) -> Layout:
-    """The arrays of a protocol's content in the agent form, `n` UAVs, `m` targets, K =
-    `slots` track slots per UAV with unknown association (0: known), and with
-    ``planner.avoidance`` (`avoid`) a beacon that carries the sender's whole state. The
-    shapes `agents.messages.Spec.contents` admits (a test holds the two equal); (-1, ...)
+) -> dict[str, Field]:
+    """The arrays of a protocol's content in the agent form, with their domains: `n`
+    UAVs, `m` targets, K = `slots` track slots per UAV with unknown association (0:
+    known), and with ``planner.avoidance`` (`avoid`) a beacon that carries the sender's
+    whole state. The one declaration of the wire's content: the batch counts its bytes
+    (`layout`), the agents admit exactly it (`agents.messages.Spec.contents`). (-1, ...)
     is a scan's Z measurements, or the targets a consensus message carries.
 
     tuples: how the consensus carries its tuples: "full", every target's in float64;
@@ -495,36 +501,93 @@ def layout(
     if protocol == "consensus" and tuples != "full" and not slots:
         if tuples == "compact":
             return {
-                "targets": ("<u2", (-1,)), "mean": ("<f4", (-1, 4)), "cov": ("<f4", (-1, 10)),
-                "stamp": ("<i4", (-1,)), "origin": ("<u2", (-1,)),
-            }  # fmt: skip
-        listed = {"gamma": (F8, (-1,)), "mean": (F8, (-1, 4)), "cov": (F8, (-1, 4, 4))}
-        return {"targets": (I8, (-1,)), **listed, "stamp": (I8, (-1,)), "origin": (I8, (-1,))}
-    beacon = {"uav": (F8, (5,))} if avoid else {"position": (F8, (3,))}
+                "targets": ("<u2", (-1,), "targets"),
+                "mean": ("<f4", (-1, 4), "estimate"),
+                "cov": ("<f4", (-1, 10), "covariance triangle"),
+                "stamp": ("<i4", (-1,), "stamp"),
+                "origin": ("<u2", (-1,), "uav index"),
+            }
+        return {
+            "targets": (I8, (-1,), "targets"),
+            "gamma": (F8, (-1,), "confidence or none"),
+            "mean": (F8, (-1, 4), "estimate"),
+            "cov": (F8, (-1, 4, 4), "covariance"),
+            "stamp": (I8, (-1,), "stamp"),
+            "origin": (I8, (-1,), "uav index"),
+        }
+    beacon: dict[str, Field] = (
+        {"uav": (F8, (5,), "uav state")} if avoid else {"position": (F8, (3,), "position")}
+    )
     if slots:
         K = slots
-        tracks = {"mean": (F8, (K, 4)), "cov": (F8, (K, 4, 4)), "label": (I8, (K,))}
-        tracks |= {"status": (I8, (K,)), "stamp": (I8, (K,))}
-        counts = {"hits": (I8, (K,)), "scans": (I8, (K,)), "misses": (I8, (K,))}
-        counts |= {name: (F8 if name == "existence" else I8, (K,)) for name in book}
-        return {
-            "flood": {"known": (B1, (n,))},
-            "consensus": {**tracks, "tombs": (I8, (K, 2))},
+        tracks: dict[str, Field] = {
+            "mean": (F8, (K, 4), "track estimate"),
+            "cov": (F8, (K, 4, 4), "track covariance"),
+            "label": (I8, (K,), "label or none"),
+            "status": (I8, (K,), "track status"),
+            "stamp": (I8, (K,), "track stamp"),
+        }
+        counts: dict[str, Field] = {
+            name: (I8, (K,), "counts") for name in ("hits", "scans", "misses")
+        }
+        counts |= {
+            name: (F8, (K,), "existence") if name == "existence" else (I8, (K,), "counts")
+            for name in book
+        }
+        contents: dict[str, dict[str, Field]] = {
+            "flood": {"known": (B1, (n,), "known")},
+            "consensus": {**tracks, "tombs": (I8, (K, 2), "tombstones")},
             "beacon": beacon,
-            "bids": {"bids": (F8, (K,)), "label": (I8, (K,)), "stamp": (I8, ())},
-            "upload": {"z": (F8, (-1, 2)), "R": (F8, (-1, 2, 2)), "uav": (F8, (5,))},
-            "download": {**tracks, **counts, "serial": (I8, ()), "target": (I8, ())},
-        }[protocol]
-    known: Layout = {"gamma": (F8, (m,)), "mean": (F8, (m, 4)), "cov": (F8, (m, 4, 4))}
-    known |= {"stamp": (I8, (m,))}
-    return {
-        "flood": {"known": (B1, (n,))},
-        "consensus": {**known, "origin": (I8, (m,))},
+            "bids": {
+                "bids": (F8, (K,), "slot bids"),
+                "label": (I8, (K,), "bid labels"),
+                "stamp": (I8, (), "cycle"),
+            },
+            "upload": {
+                "z": (F8, (-1, 2), "ground positions"),
+                "R": (F8, (-1, 2, 2), "measurement covariance"),
+                "uav": (F8, (5,), "uav state"),
+            },
+            "download": {
+                **tracks, **counts, "serial": (I8, (), "counts"),
+                "target": (I8, (), "label or none"),
+            },
+        }  # fmt: skip
+        return contents[protocol]
+    known: dict[str, Field] = {
+        "gamma": (F8, (m,), "confidence"),
+        "mean": (F8, (m, 4), "estimate"),
+        "cov": (F8, (m, 4, 4), "covariance"),
+        "stamp": (I8, (m,), "stamp"),
+    }
+    contents = {
+        "flood": {"known": (B1, (n,), "known")},
+        "consensus": {**known, "origin": (I8, (m,), "uav index")},
         "beacon": beacon,
-        "bids": {"bids": (F8, (m,)), "stamp": (I8, ())},
-        "upload": {**known, "uav": (F8, (5,))},
-        "download": {**known, "target": (I8, ())},
-    }[protocol]
+        "bids": {"bids": (F8, (m,), "bids"), "stamp": (I8, (), "cycle")},
+        "upload": {**known, "uav": (F8, (5,), "uav state")},
+        "download": {
+            **known,
+            "gamma": (F8, (m,), "confidence or none"),
+            "target": (I8, (), "target or none"),
+        },
+    }
+    return contents[protocol]
+
+
+def layout(
+    protocol: str,
+    n: int,
+    m: int,
+    slots: int = 0,
+    avoid: bool = False,
+    tuples: str = "full",
+    book: tuple[str, ...] = (),
+) -> Layout:
+    """The arrays of a protocol's content, (dtype, shape) by name: `described` without
+    the domains, what the batch counts the bytes of."""
+    fields = described(protocol, n, m, slots, avoid, tuples, book)
+    return {name: (dtype, shape) for name, (dtype, shape, _) in fields.items()}
 
 
 _POSITIVE = (np.array([128, 256, 65536, 2**32]), np.array([1, 2, 3, 5, 9]))

@@ -37,7 +37,7 @@ import numpy as np
 
 from .. import estimation
 from ..faults import PROTOCOLS
-from ..radio import WIRE_VERSION, mirrored
+from ..radio import WIRE_VERSION, described, mirrored
 from ..robust.plausibility import CONSISTENT, Bounds
 from ..tracks import manage
 
@@ -344,101 +344,13 @@ class Spec:
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
         """The arrays of a protocol's content: name -> (dtype, shape, domain), the
-        domain one of `DOMAINS`."""
-        n, m = self.n, self.m
-        if self.slots:
-            return self._tracked(protocol)
-        tuples = {
-            "gamma": (F, (m,), "confidence"),
-            "mean": (F, (m, 4), "estimate"),
-            "cov": (F, (m, 4, 4), "covariance"),
-            "stamp": (I, (m,), "stamp"),
-        }
-        listed = {
-            "targets": (I, (-1,), "targets"),
-            "gamma": (F, (-1,), "confidence or none"),
-            "mean": (F, (-1, 4), "estimate"),
-            "cov": (F, (-1, 4, 4), "covariance"),
-            "stamp": (I, (-1,), "stamp"),
-            "origin": (I, (-1,), "uav index"),
-        }
-        if self.tuples == "compact":
-            listed = {
-                "targets": ("<u2", (-1,), "targets"),
-                "mean": ("<f4", (-1, 4), "estimate"),
-                "cov": ("<f4", (-1, 10), "covariance triangle"),
-                "stamp": ("<i4", (-1,), "stamp"),
-                "origin": ("<u2", (-1,), "uav index"),
-            }
-        return {
-            "presence": {"heard": (B, (self.programs,), "flags")},
-            "flood": {"known": (B, (n,), "known")},
-            "consensus": {**tuples, "origin": (I, (m,), "uav index")}
-            if self.tuples == "full"
-            else listed,
-            "beacon": self._beacon(),
-            "bids": {"bids": (F, (m,), "bids"), "stamp": (I, (), "cycle")},
-            "upload": {**tuples, "uav": (F, (5,), "uav state")},
-            "download": {
-                **tuples,
-                "gamma": (F, (m,), "confidence or none"),
-                "target": (I, (), "target or none"),
-            },
-        }.get(protocol)
-
-    def _beacon(self) -> dict[str, tuple[str, tuple[int, ...], str]]:
-        """Who, where: the sender's position, or with avoidance its whole state."""
-        if self.avoid:
-            return {"uav": (F, (5,), "uav state")}
-        return {"position": (F, (3,), "position")}
-
-    def _tracked(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
-        """`contents` with unknown association: the consensus carries a UAV's track
-        slots with their labels, status, stamps and tombstones (`tracks.team.TrackSet`),
-        the bids one per slot with its label; the centralized baseline's upload a UAV's
-        scan (Z measurements, converted, with their covariances; Z, shown as -1, at most
-        `scan`) and where it believes it is, its download the node's tracks with their
-        book (`tracks.manage.Book`) and the label the node assigns the UAV."""
-        K = self.slots
-        return {
-            "presence": {"heard": (B, (self.programs,), "flags")},
-            "flood": {"known": (B, (self.n,), "known")},
-            "consensus": {
-                "mean": (F, (K, 4), "track estimate"),
-                "cov": (F, (K, 4, 4), "track covariance"),
-                "label": (I, (K,), "label or none"),
-                "status": (I, (K,), "track status"),
-                "stamp": (I, (K,), "track stamp"),
-                "tombs": (I, (K, 2), "tombstones"),
-            },
-            "beacon": self._beacon(),
-            "bids": {
-                "bids": (F, (K,), "slot bids"),
-                "label": (I, (K,), "bid labels"),
-                "stamp": (I, (), "cycle"),
-            },
-            "upload": {
-                "z": (F, (-1, 2), "ground positions"),
-                "R": (F, (-1, 2, 2), "measurement covariance"),
-                "uav": (F, (5,), "uav state"),
-            },
-            "download": {
-                "mean": (F, (K, 4), "track estimate"),
-                "cov": (F, (K, 4, 4), "track covariance"),
-                "label": (I, (K,), "label or none"),
-                "status": (I, (K,), "track status"),
-                "stamp": (I, (K,), "track stamp"),
-                "hits": (I, (K,), "counts"),
-                "scans": (I, (K,), "counts"),
-                "misses": (I, (K,), "counts"),
-                **{
-                    name: (F, (K,), "existence") if name == "existence" else (I, (K,), "counts")
-                    for name in self.book
-                },
-                "serial": (I, (), "counts"),
-                "target": (I, (), "label or none"),
-            },
-        }.get(protocol)
+        domain one of `DOMAINS`: the wire's one declaration, `radio.described`, and
+        the programs' presence (None for a protocol that does not exist)."""
+        if protocol == "presence":
+            return {"heard": (B, (self.programs,), "flags")}
+        if protocol not in ("flood", "consensus", "beacon", "bids", "upload", "download"):
+            return None
+        return described(protocol, self.n, self.m, self.slots, self.avoid, self.tuples, self.book)
 
     def arrays(
         self, content: dict[str, Array], kinds: dict, k: int = 0, sender: int = 0, most: int = -1
