@@ -24,6 +24,7 @@ from numpy.typing import ArrayLike
 
 from .estimation import confidence, nees
 from .numerics import chisquare, lsap
+from .world import present
 
 if TYPE_CHECKING:
     from .records import Cycle
@@ -389,7 +390,7 @@ class Tally:
         everyone = bool(alive.all())
         in_view = cycle.observed.any(axis=1)
         self.observed += in_view
-        here = ~np.isnan(truth[..., 0])  # targets that come and go are NaN while away
+        here = present(truth)  # targets that come and go are NaN while away
         self.present += here
         if here.all():
             share = in_view.mean(axis=1)

@@ -163,39 +163,34 @@ def children(seed: int | np.random.SeedSequence) -> tuple[np.random.SeedSequence
     The children are derived from the seed's spawn key, not with `SeedSequence.spawn`,
     whose counter would give a reused seed object different streams.
     """
+    return tuple(_child(seed, k) for k in range(3))
+
+
+def _child(seed: int | np.random.SeedSequence, index: int) -> np.random.SeedSequence:
+    """Child `index` of a trial's seed, derived from its spawn key (see `children`)."""
     seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    return tuple(
-        np.random.SeedSequence(seq.entropy, spawn_key=(*seq.spawn_key, k), pool_size=seq.pool_size)
-        for k in range(3)
+    return np.random.SeedSequence(
+        seq.entropy, spawn_key=(*seq.spawn_key, index), pool_size=seq.pool_size
     )
 
 
 def flight_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     """The flight stream of one trial (turbulence, `flight.jsbsim`): a fourth child of its
     seed, so the three of `children` are the same with or without it."""
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    return np.random.SeedSequence(
-        seq.entropy, spawn_key=(*seq.spawn_key, 3), pool_size=seq.pool_size
-    )
+    return _child(seed, 3)
 
 
 def detection_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     """The detection stream of one trial (missed detections, clutter and the order of an
     unlabelled scan, `tracks.scan`): a fifth child of its seed, so the others are the
     same whatever the sensor's detection probability and clutter rate."""
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    return np.random.SeedSequence(
-        seq.entropy, spawn_key=(*seq.spawn_key, 4), pool_size=seq.pool_size
-    )
+    return _child(seed, 4)
 
 
 def presence_stream(seed: int | np.random.SeedSequence) -> np.random.SeedSequence:
     """The presence stream of one trial (targets leaving and entering, ``target.stay``):
     a sixth child of its seed, so the others are the same with or without it."""
-    seq = seed if isinstance(seed, np.random.SeedSequence) else np.random.SeedSequence(seed)
-    return np.random.SeedSequence(
-        seq.entropy, spawn_key=(*seq.spawn_key, 5), pool_size=seq.pool_size
-    )
+    return _child(seed, 5)
 
 
 def presence(here: np.ndarray, draws: np.ndarray, stay: float, away: float) -> np.ndarray:
@@ -212,6 +207,22 @@ def presence(here: np.ndarray, draws: np.ndarray, stay: float, away: float) -> n
         here = np.where(here, u >= 1.0 / stay, u < 1.0 / away)
         out[:, k] = here
     return out
+
+
+def present(targets: np.ndarray) -> np.ndarray:
+    """Which targets are in the field, (...,) bool, from their states (..., 4): a target
+    away (``target.stay``) has the state NaN."""
+    return ~np.isnan(targets[..., 0])
+
+
+def stays(targets: np.ndarray) -> np.ndarray:
+    """Which stay of its place each target is on at each step, (T, Nt) from the states
+    of a run (T, Nt, 4): 0 for the target present from step 0, n for the n-th to enter
+    the place after it (``target.stay``)."""
+    here = present(targets)
+    entered = np.zeros(here.shape, dtype=np.int64)
+    entered[1:] = here[1:] & ~here[:-1]
+    return np.cumsum(entered, axis=0)
 
 
 def streams(seed: int | np.random.SeedSequence) -> tuple[np.random.Generator, np.random.Generator]:

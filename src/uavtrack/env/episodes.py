@@ -24,6 +24,7 @@ from ..simulation import (
 )
 from ..tracks import association
 from ..tracks.scan import Scan
+from ..world import present
 from .spaces import Spaces, View, rewards
 
 
@@ -91,7 +92,7 @@ class Episodes:
         k, pending = self.state.k, self.pending
         self.state, cycle = finish(self.state, pending, self.ctx, actions)
         self.seen += pending.observed.any(axis=1)
-        self.present += ~np.isnan(self.trajectory.at(k)[..., 0])  # NaN: away (target.stay)
+        self.present += present(self.trajectory.at(k))  # NaN: away (target.stay)
         if self.tally is not None and self.recorder is not None:  # record=True: both
             self.tally.add(cycle, self.trajectory.at(k))
             self.recorder.record(k, cycle)
@@ -99,8 +100,8 @@ class Episodes:
         if self.pending is None:
             return np.zeros(pending.alive.shape)
         p = self.pending
-        present = ~np.isnan(self.trajectory.at(p.k)[..., 0])
-        earned = rewards(self.reward, p.observed, self.state.cov, p.belief[1], present)
+        there = present(self.trajectory.at(p.k))
+        earned = rewards(self.reward, p.observed, self.state.cov, p.belief[1], there)
         return np.where(pending.alive, earned, 0.0)  # a UAV already down did not act
 
     def view(self) -> View:

@@ -60,6 +60,7 @@ from .._files import check_new_folder, new_folder
 from ..metrics import team_best
 from ..network import radio_links
 from ..tracks.manage import CONFIRMED
+from ..world import present
 from .mavlink import LocalFrame
 from .ros2 import (
     Markers,
@@ -112,6 +113,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             counts[name] = counts.get(name, 0) + 1
 
         T_ = m.T
+        everyone = bool(present(trace.targets).all())  # else targets come and go
         for k in range(T):
             ns = k * dt_ns
             stamp = m.header(ns).stamp
@@ -137,8 +139,8 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 write(f"/uav_{i}/fix", fix, ns)
                 transforms.append(transform_of(m.header(ns), f"uav_{i}", pose))
             # with targets that come and go (NaN while away) RViz forgets the last step's
-            truth = delete_all(m, ns) if np.isnan(trace.targets[..., 0]).any() else []
-            for j in map(int, np.flatnonzero(~np.isnan(targets[:, 0]))):  # away: no pose
+            truth = [] if everyone else delete_all(m, ns)
+            for j in map(int, np.flatnonzero(present(targets))):  # away: no pose
                 x, y, vx, vy = (float(v) for v in targets[j])
                 course = math.atan2(vy, vx)
                 place = m.pose(x, y, 0.0, course)

@@ -19,6 +19,7 @@ import numpy as np
 from ..errors import UsageError
 from ..metrics import team_best
 from ..records import Trace
+from ..world import present, stays
 from . import trace as trace_file
 from .trace import EPOCH
 
@@ -121,8 +122,8 @@ def _truths(trace: Trace, times: list[_dt.datetime]) -> set:
 
     truths = set()
     T = len(times)
-    here = ~np.isnan(trace.targets[:T, :, 0])  # (T, Nt)
-    stay = _stays(trace)[:T]
+    here = present(trace.targets[:T])  # (T, Nt)
+    stay = stays(trace.targets)[:T]
     for j in range(trace.targets.shape[1]):
         for n in np.unique(stay[here[:, j], j]):
             steps = np.flatnonzero(here[:, j] & (stay[:, j] == n))
@@ -131,15 +132,6 @@ def _truths(trace: Trace, times: list[_dt.datetime]) -> set:
             ]
             truths.add(GroundTruthPath(states, id=_path_id(j, n)))
     return truths
-
-
-def _stays(trace: Trace) -> np.ndarray:
-    """Which stay of its place each target is on at each step, (T, Nt): 0 for the target
-    present from step 0, n for the n-th to enter after it (``target.stay``)."""
-    here = ~np.isnan(trace.targets[..., 0])
-    entered = np.zeros(here.shape, dtype=np.int64)
-    entered[1:] = here[1:] & ~here[:-1]
-    return np.cumsum(entered, axis=0) - (~here[0])[None, :]
 
 
 def _path_id(target: int, stay: int) -> str:
@@ -204,7 +196,7 @@ def to_detections(
     T = trace.targets.shape[0]
     times = [start + _dt.timedelta(seconds=k * dt) for k in range(T)]
     paths = {path.id: path for path in (truths if truths is not None else _truths(trace, times))}
-    stay = _stays(trace)  # (T, Nt): which stay of its place each target is on
+    stay = stays(trace.targets)  # (T, Nt): which stay of its place each target is on
     out = []
     for k in range(T):
         found = set()

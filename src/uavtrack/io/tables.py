@@ -61,6 +61,7 @@ from ..metrics import METRICS, team_best
 from ..records import TRACKED, Cycle, Trace
 from ..tracks.manage import STATUS_NAMES
 from ..tracks.scoring import series
+from ..world import present
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -292,8 +293,9 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     for c, name in enumerate(TARGET_STATE):
         targets[name] = trace.targets[..., c].ravel()
     targets["in_view"] = trace.observed.any(axis=1).ravel()
-    if np.isnan(trace.targets[..., 0]).any():  # targets that come and go: NaN while away
-        targets["present"] = ~np.isnan(trace.targets[..., 0]).ravel()
+    here = present(trace.targets)
+    if not here.all():  # targets that come and go: NaN while away
+        targets["present"] = here.ravel()
     frames = {"steps": steps, "uavs": pd.DataFrame(uavs)}
     if tracked:
         frames["targets"] = pd.DataFrame(targets)
@@ -323,7 +325,7 @@ def _in_view_share(trace: Trace) -> np.ndarray:
     """The share of the targets present in some UAV's disk at each step (T,) (NaN at a
     step with none present; every target is present with the paper's fixed set)."""
     in_view = trace.observed.any(axis=1)
-    here = ~np.isnan(trace.targets[..., 0])
+    here = present(trace.targets)
     if here.all():
         return in_view.mean(axis=1)
     there = here.sum(axis=1)

@@ -50,6 +50,7 @@ from ..config import Scenario
 from ..estimation import confidence, nees
 from ..metrics import GOSPA, METRICS, PER_UAV_SETS, NeesSpread, Tally, cut_costs, matching, mean_std
 from ..records import RECORDED, Cycle, Result, Trace
+from ..world import present as targets_present
 
 TRACK_METRICS: dict[str, tuple[str, str]] = {
     "gospa": ("m", "GOSPA distance (alpha = 2) of the row's confirmed tracks, mean per step"),
@@ -539,8 +540,9 @@ class TrackScore:
         st["life"] += born
         st["here"] = present
         target = (st["life"] << 20) | np.arange(Nt)  # a place and the target that holds it
+        held_truth = np.array(truth)  # a copy: the windows hold it past this call
         self._window["rows"].append(
-            (target, present, np.array(truth), labels, confirmed, np.array(tracks), alive)
+            (target, present, held_truth, labels, confirmed, np.array(tracks), alive)
         )
         if cov is not None:  # the team picture needs each track's confidence
             gamma = confidence(np.asarray(cov))
@@ -561,7 +563,7 @@ class TrackScore:
                 self._logged["gospa_team"] = np.where(whole, team.distance, np.nan)
             B_ = slice(None, None, rows)  # each trial's first row: its truth
             self._window["team"].append(
-                (target[B_], present[B_], np.array(truth)[B_], np.maximum(label_, 0), held,
+                (target[B_], present[B_], held_truth[B_], np.maximum(label_, 0), held,
                  where, whole)
             )  # fmt: skip
         if mean is not None and cov is not None and states is not None:
@@ -611,9 +613,8 @@ class TrackScore:
             scored = self._window_ospa2(kind)
             if scored is None:
                 continue
-            value, counted = scored  # a row that failed inside the window is left out
-            sums["ospa2"] += np.where(counted, value, 0.0)
-            sums["windows"] += counted
+            _count_window(sums, scored)
+            value, counted = scored
             if self.log is not None:  # at the window's last step
                 name = "ospa2" if kind == "rows" else "ospa2_team"
                 per = np.where(counted, value, np.nan)
@@ -630,8 +631,7 @@ class TrackScore:
         for kind, sums in (("rows", s), ("team", team)):
             scored = self._window_ospa2(kind)  # the last steps, a shorter window
             if scored is not None:
-                sums["ospa2"] = sums["ospa2"] + np.where(scored[1], scored[0], 0.0)
-                sums["windows"] = sums["windows"] + scored[1]
+                _count_window(sums, scored)
 
         running = (self._state["start"] >= 0).sum(axis=1)
         per_row = _row_values(s) | {
@@ -722,7 +722,7 @@ class Scores:
         cov = np.where(alive[:, None, None, None], cycle.cov.reshape(P, K, 4, 4), np.eye(4))
         self.tracks.add(
             truth=states[..., :2],
-            present=None if t.fixed else ~np.isnan(states[..., 0]),
+            present=None if t.fixed else targets_present(states),
             tracks=mean[..., :2],
             labels=cycle.label.reshape(P, K),
             confirmed=cycle.status.reshape(P, K) == 2,
@@ -793,6 +793,15 @@ def series(source: Result | Trace, scenario: Scenario | None = None) -> dict[str
         values: dict[str, Any] = {name: arrays[name][k][None] for name in names}
         score.add(Cycle(**values), trace.targets[k][None])
     return {name: values[:, 0] for name, values in score.series().items()}
+
+
+def _count_window(sums: dict[str, np.ndarray], scored: tuple[np.ndarray, np.ndarray]) -> None:
+    """Add a window's OSPA(2) (value, counted rows) to `sums`, binding new arrays: a copy
+    of the dict (`TrackScore.summary`) leaves the running sums as they were. A row that
+    failed inside the window is left out."""
+    value, counted = scored
+    sums["ospa2"] = sums["ospa2"] + np.where(counted, value, 0.0)
+    sums["windows"] = sums["windows"] + counted
 
 
 def ratio(a: np.ndarray, b: np.ndarray) -> np.ndarray:

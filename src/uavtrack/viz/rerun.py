@@ -51,6 +51,7 @@ from ..errors import RunError, UsageError
 from ..network import in_range
 from ..sensing import observation_radius
 from ..tracks.manage import CONFIRMED
+from ..world import present, stays
 
 ENTITIES = (
     "world/field",
@@ -219,12 +220,12 @@ def log(rec: rr.RecordingStream, trace, scenario) -> None:
         static=True,
     )
     ground = np.concatenate([trace.targets[..., :2], np.zeros((T, nt, 1))], axis=-1)
-    here = ~np.isnan(ground[..., 0])  # with targets that come and go: NaN while away
+    here = present(trace.targets)  # with targets that come and go: NaN while away
     if here.all():
         strips = np.swapaxes(ground, 0, 1)
         names = np.broadcast_to(np.array([f"T{j}" for j in range(nt)]), (T, nt))
     else:  # a path per stay, and the n-th target to take place j after the first: Tj.n
-        stay = np.cumsum(np.concatenate([np.zeros((1, nt), bool), here[1:] & ~here[:-1]]), 0)
+        stay = stays(trace.targets)
         strips = [
             ground[here[:, j] & (stay[:, j] == n), j]
             for j in range(nt)

@@ -21,6 +21,7 @@ from matplotlib.figure import Figure  # noqa: E402
 from matplotlib.patches import Circle, Ellipse, Rectangle  # noqa: E402
 
 from .._files import replacing  # noqa: E402
+from ..world import present  # noqa: E402
 
 
 def animation_frames(steps: int, every: int) -> list[int]:
@@ -119,6 +120,8 @@ def _scene(trace, scenario, title: str):
     ax.legend(handles=legend, loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     heading = ax.set_title("", fontsize=10)
 
+    here = present(trace.targets)  # (T, Nt): a target away (target.stay) is NaN
+
     def draw(k: int) -> None:
         uavs, mean, cov = trace.uavs[k], trace.mean[k], trace.cov[k]
         edges = np.argwhere(np.triu(adjacency(uavs, scenario.comm_range)))
@@ -130,7 +133,7 @@ def _scene(trace, scenario, title: str):
             ellipses[j].width, ellipses[j].height = 4 * np.sqrt(np.maximum(vals[::-1], 0.0))
             ellipses[j].angle = np.degrees(np.arctan2(vecs[1, 1], vecs[0, 1]))
             names[j].xy = trace.targets[k, j, :2]
-            names[j].set_visible(not np.isnan(trace.targets[k, j, 0]))  # away (target.stay)
+            names[j].set_visible(bool(here[k, j]))  # away (target.stay)
         targets.set_offsets(trace.targets[k, :, :2])
         for i in range(nu):
             disks[i].set_center(uavs[i, :2])
@@ -142,8 +145,8 @@ def _scene(trace, scenario, title: str):
             label.xyann = offset
         arrows.set_offsets(uavs[:, :2])
         arrows.set_UVC(15 * np.cos(uavs[:, 4]), 15 * np.sin(uavs[:, 4]))
-        here = ~np.isnan(trace.targets[: k + 1, :, 0])  # the targets present
-        seen = (trace.observed[: k + 1].any(axis=1) & here).sum() / max(here.sum(), 1)
+        so_far = here[: k + 1]
+        seen = (trace.observed[: k + 1].any(axis=1) & so_far).sum() / max(so_far.sum(), 1)
         heading.set_text(f"{title}, step {k}, observation rate so far {seen:.2f}")
 
     return fig, draw
