@@ -133,8 +133,6 @@ def test_the_centralized_method_refuses_what_it_does_not_encode():
             uavtrack.simulate(scenario(**overrides), "centralized", seed=0)
     with pytest.raises(ScenarioError, match="fusion.refresh"):
         scenario(**{"fusion.refresh": 3})
-    with pytest.raises(ScenarioError, match="track slots"):
-        scenario(**{"radio.encoding": "compact", "tracker.association": "gnn"})
 
 
 @pytest.mark.integration  # a swarm of programs
@@ -170,13 +168,16 @@ def test_the_listed_layouts_are_what_the_agents_admit():
         ({"radio.encoding": "compact"}, "compact"),
         ({"radio.encoding": "compact", "fusion.trigger": 0.1}, "compact"),
     ):
-        case = uavtrack.Scenario().with_overrides(overrides)
-        spec = Spec.of(case, central=False)
-        assert spec.tuples == kind
-        admitted = spec.contents("consensus")
-        assert admitted is not None
-        layout = radio.layout("consensus", case.n_uavs, case.n_targets, tuples=kind)
-        assert {name: k[:2] for name, k in admitted.items()} == layout
+        for tracked in (False, True):
+            case = uavtrack.Scenario().with_overrides(overrides | (TRACKED if tracked else {}))
+            spec = Spec.of(case, central=False)
+            assert spec.tuples == kind
+            admitted = spec.contents("consensus")
+            assert admitted is not None
+            slots = case.track_slots if tracked else 0
+            layout = radio.layout("consensus", case.n_uavs, case.n_targets, slots, tuples=kind)
+            assert {name: k[:2] for name, k in admitted.items()} == layout
+            assert ("slots" in layout) == tracked  # tracks list slots, tuples targets
 
 
 def test_a_listed_message_with_bad_targets_is_dropped_by_reason():
@@ -252,13 +253,16 @@ def test_an_ample_radio_changes_nothing():
     method=st.sampled_from(["distributed", "greedy", "centralized"]),
     seed=st.integers(0, 1000),
     compact=st.booleans(),
+    tracked=st.booleans(),
 )
-def test_no_program_sends_more_than_its_share(bps, method, seed, compact):
+def test_no_program_sends_more_than_its_share(bps, method, seed, compact, tracked):
     from uavtrack import network
 
     overrides = {"radio.bandwidth_bps": bps}
     if compact and method != "centralized":
         overrides["radio.encoding"] = "compact"
+    if tracked:  # track slots on the air, and with the centralized method scans
+        overrides |= TRACKED
     case = uavtrack.Scenario(steps=15).with_overrides(overrides)
     result = uavtrack.simulate(case, method, seed=seed)
     assert result.trace is not None
@@ -273,6 +277,10 @@ def test_no_program_sends_more_than_its_share(bps, method, seed, compact):
         assert result.trace.node_bytes[k] <= np.floor(channel / (case.n_uavs + 1))
 
 
+TRACKED = {
+    "tracker.association": "jpda", "sensor.detection_probability": 0.9,
+    "sensor.clutter_rate": 2.0,
+}  # fmt: skip
 SHARES = [
     {"radio.bandwidth_bps": 1e5},
     {"radio.bandwidth_bps": 2e5, "faults.loss": 0.2},
@@ -285,7 +293,9 @@ TRIGGERED = {"radio.bandwidth_bps": 1e5, "fusion.trigger": 0.1, "radio.encoding"
 @pytest.mark.parametrize(
     ("method", "overrides"),
     [(m, o) for m in ("distributed", "greedy", "centralized") for o in SHARES]
-    + [(m, TRIGGERED) for m in ("distributed", "greedy")],
+    + [(m, TRIGGERED) for m in ("distributed", "greedy")]
+    + [(m, TRIGGERED | TRACKED) for m in ("distributed", "greedy")]
+    + [("centralized", {"radio.bandwidth_bps": 3e4, "faults.loss": 0.2} | TRACKED)],
 )
 def test_a_swarm_keeps_the_same_shares_as_the_batch(method, overrides):
     from uavtrack.agents import run_swarm
@@ -302,8 +312,6 @@ def test_a_swarm_keeps_the_same_shares_as_the_batch(method, overrides):
 def test_the_refusals_of_a_limited_radio():
     with pytest.raises(ScenarioError, match="bandwidth_bps"):
         scenario(**{"radio.bandwidth_bps": 0})
-    with pytest.raises(ScenarioError, match="track consensus"):
-        scenario(**{"radio.bandwidth_bps": 1e5, "tracker.association": "gnn"})
     one = {"radio.bandwidth_bps": 1e5, "planner.avoidance": "loiter"}
     one |= {"uav.altitude_spacing": 0, "uav.separation": 10}
     with pytest.raises(ScenarioError, match="beacons outside"):

@@ -109,13 +109,14 @@ UNLIMITED = 2**31 - 1
 class Limit:
     """A radio of limited capacity (``radio.bandwidth_bps``) and the frames it schedules:
     the bytes per cycle a channel carries (capacity x dT / 8), the first-priority frame
-    per copy (the beacon with the bids; the centralized upload; 0: none), the largest
+    per copy (the beacon with the bids; the centralized upload, with tracks each UAV's
+    own (B, N); 0: none), the largest
     frame a round of D_i flooding and consensus can be (every target's tuple in it), the
     central node's download, and whether every UAV talks to the central node (then all
     share one channel)."""
 
     bytes_per_cycle: float
-    first: int
+    first: int | np.ndarray
     round: int
     download: int = 0
     central: bool = False
@@ -498,7 +499,9 @@ def described(
 
     book: the track book's fields beyond M-of-N's that the download carries
     (`tracks.manage.sent_fields`)."""
-    if protocol == "consensus" and tuples != "full" and not slots:
+    if protocol == "consensus" and tuples != "full" and slots:
+        return _listed_tracks(slots, tuples == "compact")
+    if protocol == "consensus" and tuples != "full":
         if tuples == "compact":
             return {
                 "targets": ("<u2", (-1,), "targets"),
@@ -573,6 +576,62 @@ def described(
         },
     }
     return contents[protocol]
+
+
+def _listed_tracks(slots: int, compact: bool) -> dict[str, Field]:
+    """A track consensus that lists its slots (``fusion.trigger``, ``radio.encoding``
+    compact): the confirmed slots it carries, each under its team label (the others are
+    not offered: a receiver reads only confirmed tracks), and the sender's tombstones.
+    Compact: float32 estimates, the covariance's upper triangle, 32-bit integers."""
+    if compact:
+        return {
+            "slots": ("<u2", (-1,), "slots"),
+            "mean": ("<f4", (-1, 4), "track estimate"),
+            "cov": ("<f4", (-1, 10), "covariance triangle"),
+            "label": ("<u4", (-1,), "team label"),
+            "stamp": ("<i4", (-1,), "track stamp"),
+            "tombs": ("<i4", (slots, 2), "tombstones"),
+        }
+    return {
+        "slots": (I8, (-1,), "slots"),
+        "mean": (F8, (-1, 4), "track estimate"),
+        "cov": (F8, (-1, 4, 4), "track covariance"),
+        "label": (I8, (-1,), "team label"),
+        "stamp": (I8, (-1,), "track stamp"),
+        "tombs": (I8, (slots, 2), "tombstones"),
+    }
+
+
+class Wire(NamedTuple):
+    """What shapes a run's messages, the arguments of `described`: n UAVs, m targets,
+    K track slots (0: known association), the beacon's whole state (``planner.avoidance``),
+    how the consensus carries its tuples and the book fields a download carries
+    (`methods.base.wire_of` reads them from a scenario)."""
+
+    n: int
+    m: int
+    slots: int = 0
+    avoid: bool = False
+    tuples: str = "full"
+    book: tuple[str, ...] = ()
+
+    def described(self, protocol: str, tuples: str | None = None) -> dict[str, Field]:
+        """`described` of a protocol in this run (tuples: another listing than the run's)."""
+        listing = self.tuples if tuples is None else tuples
+        return described(protocol, self.n, self.m, self.slots, self.avoid, listing, self.book)
+
+    def layout(self, protocol: str, tuples: str | None = None) -> Layout:
+        """`layout` of a protocol in this run (tuples: another listing than the run's)."""
+        fields = self.described(protocol, tuples)
+        return {name: (dtype, shape) for name, (dtype, shape, _) in fields.items()}
+
+    def bytes(self, protocol: str, rows: Any = None, tuples: str | None = None) -> Any:
+        """`content_bytes` of a protocol's content in this run (`rows`: of its variable
+        arrays, (B, N) or a number; a fixed layout's are cached)."""
+        listing = self.tuples if tuples is None else tuples
+        if rows is None and (protocol != "consensus" or listing == "full"):
+            return layout_bytes(protocol, self.n, self.m, self.slots, self.avoid, self.book)
+        return content_bytes(self.layout(protocol, tuples), rows)
 
 
 def layout(

@@ -78,6 +78,7 @@ class State:
     tombs: np.ndarray | None = None  # (B, Nu, T, 2) the tombstones each UAV knows
     beacons: avoidance.Heard | None = None  # with planner.avoidance: the states heard
     told: np.ndarray | None = None  # with fusion.trigger: the confidence each UAV last sent
+    told_labels: np.ndarray | None = None  # and with tracks the label of each slot it sent
 
 
 def _record(shape: str, doc: str, dtype: type = np.float64):

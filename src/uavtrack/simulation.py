@@ -34,18 +34,16 @@ from .config import G, Scenario, ScenarioError, SensorModel
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Distributed, Fused, Held, Inputs, Method, Setting, get
-from .methods.base import Local
+from .methods.base import Local, wire_of
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES
 from .numerics.buffers import Buffers
 from .radio import (
     Limit,
     Radio,
     RadioState,
-    content_bytes,
     counted,
     frame_bytes,
     int_bytes,
-    layout,
     layout_bytes,
     part_bytes,
 )
@@ -282,7 +280,8 @@ def decide(
         return _decide_tracked(state, targets, noise, ctx, plan)
     scenario, method = ctx.scenario, ctx.method
     k, uavs = state.k, state.uavs
-    alive, believed, radio = _world(state, ctx)
+    alive, believed = _world(state, ctx)
+    radio = _radio(state, ctx, alive)
     observed, polar = observe(uavs, targets, noise, alive, scenario)
     detected = observed
     if ctx.detection is not None:  # a missed target is not measured; clutter is known false
@@ -336,42 +335,50 @@ def decide(
     )
 
 
-def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray, Radio]:
-    """Who is alive at this step, where the UAVs believe they are, and the radio."""
+def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
+    """Who is alive at this step and where the UAVs believe they are."""
     faults, k = ctx.faults, state.k
     alive = faults.alive(k, state.alive) if ctx.setting.faulty else state.alive
-    believed = world.believed(state.uavs, faults.position_error(k))
+    return alive, world.believed(state.uavs, faults.position_error(k))
+
+
+def _radio(state: State, ctx: Context, alive: np.ndarray, rows: np.ndarray | None = None) -> Radio:
+    """The cycle's radio (`limit`: `rows`, the measurements each UAV's scan holds)."""
     links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
-    return alive, believed, Radio(k, links, alive, faults, state.radio, limit(ctx, k))
+    return Radio(state.k, links, alive, ctx.faults, state.radio, limit(ctx, state.k, rows))
 
 
-def limit(ctx: Context, k: int) -> Limit | None:
+def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
     """``radio.bandwidth_bps``: the channel and the frames its shares are counted in at
     cycle k (`radio.Limit`), each at its largest (every UAV number at its largest, every
-    target's tuple in a round); None: unlimited."""
+    tuple or track slot in a round); None: unlimited. With tracks the centralized upload
+    is each UAV's scan, `rows` (B, N) measurements."""
     scenario, method = ctx.scenario, ctx.method
     bps = scenario.radio.bandwidth_bps
     if bps is None:
         return None
-    n, m = scenario.n_uavs, scenario.n_targets
-    avoid = scenario.planner.avoidance != "none"
-    tuples = ctx.setting.tuples
+    shape = wire_of(scenario)
+    n = shape.n
 
-    def largest(parts: int, count: int) -> int:
-        return int(frame_bytes(k, n, parts, count) + int_bytes(n))
+    def largest(parts: Any, count: int) -> Any:
+        return frame_bytes(k, n, parts, count) + int_bytes(n)
 
-    def part(protocol: str, listing: str = "full", rows: int | None = None) -> int:
-        content = content_bytes(layout(protocol, n, m, avoid=avoid, tuples=listing), rows)
-        return int(part_bytes(protocol, 1, -1, int(content)))
+    def part(protocol: str, rows: Any = None) -> Any:
+        return part_bytes(protocol, 1, -1, shape.bytes(protocol, rows))
 
-    rounds = largest(part("flood") + part("consensus", tuples, m), 2)
+    listed = shape.slots or shape.m if shape.tuples != "full" else None
+    rounds = int(largest(part("flood") + part("consensus", listed), 2))
     if method.central:
-        upload, download = largest(part("upload"), 1), largest(part("download"), 1)
+        upload = largest(part("upload", rows), 1)
+        upload = int(upload) if np.ndim(upload) == 0 else np.asarray(upload, dtype=np.int64)
+        download = int(largest(part("download"), 1))
         return Limit(
             bytes_per_cycle=bps * scenario.dt / 8, first=upload, round=rounds,
             download=download, central=True,
         )  # fmt: skip
-    first = largest(part("beacon") + part("bids"), 2) if isinstance(method, Distributed) else 0
+    first = 0
+    if isinstance(method, Distributed):
+        first = int(largest(part("beacon") + part("bids"), 2))
     return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds)
 
 
@@ -414,9 +421,10 @@ def _decide_tracked(
     scenario, method = ctx.scenario, ctx.method
     k, uavs = state.k, state.uavs
     assert state.book is not None, "a run of unknown association starts with its tracks"
-    alive, believed, radio = _world(state, ctx)
+    alive, believed = _world(state, ctx)
     observed, polar = observe(uavs, targets, noise, alive, scenario)
     scan = measure_scan(uavs, believed, observed, polar, alive, ctx)
+    radio = _radio(state, ctx, alive, scan.valid.sum(axis=-1) if method.central else None)
     local = Local(
         book=state.book,
         mean=state.mean,
@@ -440,6 +448,8 @@ def _decide_tracked(
         previous=state.target,
         held=state.held,
         setting=ctx.setting,
+        told=state.told,
+        told_labels=state.told_labels,
     )
     tracks = method.fuse_tracks(inputs, local)
     B, Nu = alive.shape
@@ -544,6 +554,8 @@ def _finish_tracked(
         labels=pending.labels,
         tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
         beacons=beacons,
+        told=tracks.told,
+        told_labels=tracks.told_labels,
     )
     return new, cycle
 

@@ -37,9 +37,9 @@ import numpy as np
 
 from .. import estimation
 from ..faults import PROTOCOLS
+from ..methods.base import wire_of
 from ..radio import WIRE_VERSION, described, mirrored
 from ..robust.plausibility import CONSISTENT, Bounds
-from ..tracks import manage
 
 VERSION = WIRE_VERSION
 """Schema version; a message of another version is dropped."""
@@ -263,6 +263,9 @@ DOMAINS = {
     "them); the other fields' rows are theirs",
     "covariance triangle": "each row the upper triangle (row by row) of a covariance, "
     "which must be as covariance once mirrored",
+    "slots": "the track slots a listed consensus carries, each once, 0 to K - 1 (up to K "
+    "of them); the other fields' rows are theirs, each a confirmed track",
+    "team label": "a team label (below the run's largest), each once",
     "afford": "per UAV: its first-priority frame (0 or 1), its rounds (0 or more), whether "
     "the central node's download reaches it (0 or 1)",
 }
@@ -314,32 +317,28 @@ class Spec:
 
     @classmethod
     def of(cls, scenario, central: bool) -> Spec:
-        n = scenario.n_uavs
-        budget = scenario.faults.round_budget or 0
-        tracked = scenario.tracker.association != "known"
+        wire = wire_of(scenario)
+        n, budget = wire.n, scenario.faults.round_budget or 0
+        tracked = wire.slots > 0
         return cls(
             n=n,
-            m=scenario.n_targets,
+            m=wire.m,
             programs=n + int(central),
             actions=3,
             rounds=n + scenario.robust.extra_rounds + budget + 3,
             behind=scenario.faults.delay + 1,
             bounds=Bounds.of(scenario),
-            slots=scenario.track_slots if tracked else 0,
+            slots=wire.slots,
             labels=scenario.n_targets + (scenario.track_slots * (scenario.steps + 1) + 1) * n,
             # a Poisson count of clutter beyond 10 times its mean and 50 has a
             # probability below 1e-20 at any rate
             scan=scenario.n_targets + 50 + 10 * math.ceil(scenario.sensor.clutter_rate)
             if tracked
             else 0,
-            avoid=scenario.planner.avoidance != "none",
-            tuples="compact"
-            if scenario.radio.encoding == "compact"
-            else "listed"
-            if scenario.fusion.trigger is not None
-            else "full",
+            avoid=wire.avoid,
+            tuples=wire.tuples,
             limited=scenario.radio.bandwidth_bps is not None,
-            book=manage.sent_fields(scenario.tracker) if tracked else (),
+            book=wire.book,
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -459,6 +458,13 @@ class Spec:
                 return "track status out of range"
             return None if _distinct(label) else "labels not distinct"
         labels = (value >= -1) & (value < self.labels)
+        if domain == "slots":
+            inside = ((value >= 0) & (value < self.slots)).all()
+            return None if inside and _distinct(value.astype(np.int64)) else "index out of range"
+        if domain == "team label":
+            if not (labels & (value >= 0)).all():
+                return "index out of range"
+            return None if _distinct(value.astype(np.int64)) else "labels not distinct"
         if domain == "label or none":
             return None if labels.all() else "index out of range"
         if domain == "bid labels":
@@ -559,7 +565,8 @@ class Spec:
                 return "round out of range"
             content = None
             if part.content is not None:
-                most = self.m if part.protocol == "consensus" else -1  # targets listed
+                # the targets, or the track slots, a consensus lists
+                most = (self.slots or self.m) if part.protocol == "consensus" else -1
                 content = self.arrays(part.content, kinds, message.k, message.sender, most)
                 if isinstance(content, str):
                     return content
@@ -672,7 +679,7 @@ def _implausible(
 TRACK_DOMAINS = frozenset(
     ("track status", "label or none", "bid labels", "track covariance", "track stamp")
     + ("tombstones", "slot bids", "track estimate", "measurement covariance", "counts")
-    + ("ground positions",)
+    + ("ground positions", "slots", "team label")
 )
 
 
@@ -681,10 +688,10 @@ def _buried(label: np.ndarray, step: np.ndarray, arrays: dict) -> str | None:
     a track under a label it says was deleted after the track's stamp. An honest UAV
     buries such a track before it sends (`tracks.team.bury`), so this is a lie about the
     deletion or about the track."""
-    if "status" not in arrays or not label.size:
+    if not ("status" in arrays or "slots" in arrays) or not label.size:
         return None
-    live = arrays["status"] != 0
-    held, stamp = arrays["label"][live], arrays["stamp"][live]
+    live = arrays["status"] != 0 if "status" in arrays else slice(None)  # listed: all
+    held, stamp = arrays["label"][live].astype(np.int64), arrays["stamp"][live]
     order = np.argsort(label)
     at = np.minimum(np.searchsorted(label[order], held), label.size - 1)
     named = label[order][at] == held

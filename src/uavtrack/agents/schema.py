@@ -4,6 +4,7 @@ classes, the key layout, the schema version), so that it cannot drift from them:
 
 from __future__ import annotations
 
+import dataclasses
 import json
 
 import msgspec
@@ -123,6 +124,23 @@ def _admits() -> list[str]:
         "|---|---|---|---|---|",
     ]
     lines += _rows(tracked, ("consensus", "bids", "upload", "download"), size)
+    lines += [
+        "",
+        "With ``fusion.trigger`` (listed) or ``radio.encoding`` compact the consensus part "
+        "lists what it carries: the targets' tuples, or with tracks the confirmed slots "
+        "(the others are not offered); compact sends float32 values, the covariance's upper "
+        "triangle (row by row) and no confidence (the receiver computes it):",
+        "",
+        "| encoding | association | field | dtype | shape | domain |",
+        "|---|---|---|---|---|---|",
+    ]
+    for tuples in ("listed", "compact"):
+        for kind, base in (("known", spec), ("tracks", tracked)):
+            listing = dataclasses.replace(base, tuples=tuples)
+            lines += [
+                f"| {tuples} | {kind} |{row.split('|', 2)[2]}"
+                for row in _rows(listing, ("consensus",), size)
+            ]
     lines += [
         "",
         "The download's `existence` comes with ``tracker.confirmation`` existence (the "

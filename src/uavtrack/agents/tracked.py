@@ -23,7 +23,7 @@ import numpy as np
 from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
 from ..methods.base import Held, scanned_tracks
-from ..radio import counted
+from ..radio import counted, mirrored, upper
 from ..tracks import association, columns, manage, team
 from .agent import CentralAgent, UavAgent, closed, dropped, part
 from .messages import VERSION, Report, packed
@@ -45,6 +45,7 @@ class TrackedUav(UavAgent):
         self.mean, self.cov, self.modes = self.ctx.const.tracker.start(mean, cov)
         self.tombs = np.full((1, 1, K, 2), -1, dtype=np.int64)
         self.threshold = association.threshold(scenario.tracker.gate_probability, 4)
+        self.told_labels: np.ndarray | None = None  # with fusion.trigger: the labels sent
         self.target = -1  # the team label followed
         self.serial = 0  # its births so far: its labels n_targets + s n + me, s < serial
         self.kept: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
@@ -55,7 +56,7 @@ class TrackedUav(UavAgent):
         s, tracker = self.scenario, self.ctx.const.tracker
         believed = self.believed = sense["believed"]
         alive = sense["alive"]
-        self.radio.begin(k, sense["links"], alive, central)
+        self.radio.begin(k, sense["links"], alive, central, sense.get("afford"))
         raw = sense["z"]
         z, R = simulation.convert(np.repeat(believed[None], len(raw), axis=0), raw, s)
         if self.central:
@@ -70,7 +71,7 @@ class TrackedUav(UavAgent):
         own = scanned_tracks(scanned, self.tombs, k)
         state = (own, np.zeros(own.status.shape, dtype=np.int8))
         (agreed, changed), rounds, sent, delivered = self.rounds(
-            k, state, lambda state: _content(state[0]), self._agree
+            k, state, self._track_content(k, own), self._agree
         )
         book = manage.after_fusion(
             scanned.book, agreed.label, agreed.status, changed, s, agreed.stamp
@@ -168,6 +169,7 @@ class TrackedUav(UavAgent):
         mailbox, node = self.mailbox, self.n
         lost = bool(self.radio.lost(k, "download", 0, np.array(node), self.me))
         expect = self.radio.central[k] and not lost
+        expect = expect and self.radio.affords(k, self.me, "download")  # sent to it at all
         if expect:  # two rounds: the node waits up to a round's deadline for the uploads
             mailbox.wait(
                 lambda: (
@@ -182,6 +184,7 @@ class TrackedUav(UavAgent):
             content, reasons = self.spec.tracks(content)
             dropped(self.mailbox, reasons)
         mine = int(self.radio.alive[k][self.me]) if s.faulty else one
+        mine *= int(self.radio.affords(k, self.me, "download"))
         return content, [(mine, mine * int(content is not None))]
 
     def _close(self, scanned, agreed: team.TrackSet, changed, book) -> None:
@@ -200,6 +203,38 @@ class TrackedUav(UavAgent):
 
     # ------------------------------------------------------------ fusion
 
+    def _track_content(self, k: int, own: team.TrackSet):
+        """content(state): what each consensus round sends of the tracks, every slot or,
+        with ``fusion.trigger`` or the compact encoding, the slots `team.Listing` picks
+        (as the batch's `methods.base.track_listing`), listed (`listed_slots`); keeps what it
+        told of each slot."""
+        s = self.setting
+        if s.trigger is None and not s.compact:
+            return lambda state: _content(state[0])
+        first = None
+        if s.trigger is not None:
+            first = team.triggered(own, self.told, self.told_labels, k, s.trigger, s.refresh)
+        how = team.Listing(first=first, compact=s.compact)
+        K = own.status.shape[-1]
+        told = np.full((1, 1, K), np.nan) if self.told is None else self.told.copy()
+        told_labels = np.full((1, 1, K), -1) if self.told_labels is None else self.told_labels
+        told_labels = told_labels.copy()
+        if s.trigger is not None:
+            self.told, self.told_labels = told, told_labels
+        sent: list[team.TrackSet] = []  # the tracks of each round so far
+
+        def content(state) -> dict[str, np.ndarray]:
+            tracks = state[0]
+            r = len(sent) + 1
+            mask = how.mask(r, tracks, sent[-1] if sent else None)
+            sent.append(tracks)
+            if self.radio.affords(k, self.me, "consensus", r):  # what the share sends
+                told[mask] = estimation.confidence(tracks.cov)[mask]
+                told_labels[mask] = tracks.label[mask]
+            return listed_slots(tracks, mask[0, 0], s.compact)
+
+        return content
+
     def _agree(self, state, contents: dict[int, dict]):
         """One round of `team.agree_round` over this UAV's closed neighbourhood: itself
         and the senders whose tracks arrived, in index order (the senders' tracks beyond
@@ -208,7 +243,7 @@ class TrackedUav(UavAgent):
         own, changed = state
         offered = {}
         for q, content in contents.items():
-            content, reasons = self.spec.tracks(content)
+            content, reasons = self.spec.tracks(unlisted_slots(content, self.scenario.track_slots))
             dropped(self.mailbox, reasons)
             offered[q] = self._issued(content)
         ids = sorted({self.me, *offered})
@@ -327,6 +362,49 @@ def _content(tracks: team.TrackSet) -> dict[str, np.ndarray]:
     }
 
 
+def listed_slots(tracks: team.TrackSet, mask: np.ndarray, compact: bool) -> dict[str, np.ndarray]:
+    """A round's listed consensus content (`radio.described`): the slots of `mask` (K,)
+    with their estimates, labels and stamps, and the tombstones; compact: float32, the
+    covariance's upper triangle and 32-bit integers."""
+    assert tracks.stamp is not None and tracks.tombs is not None
+    slots = np.flatnonzero(mask)
+    mean, cov = tracks.mean[0, 0, slots], tracks.cov[0, 0, slots]
+    label, stamp = tracks.label[0, 0, slots], tracks.stamp[0, 0, slots]
+    tombs = tracks.tombs[0, 0]
+    if compact:
+        return {
+            "slots": slots.astype("<u2"), "mean": mean.astype("<f4"),
+            "cov": upper(cov).astype("<f4"), "label": label.astype("<u4"),
+            "stamp": stamp.astype("<i4"), "tombs": tombs.astype("<i4"),
+        }  # fmt: skip
+    return {
+        "slots": slots.astype(np.int64), "mean": mean, "cov": cov,
+        "label": label.astype(np.int64), "stamp": stamp.astype(np.int64), "tombs": tombs,
+    }  # fmt: skip
+
+
+def unlisted_slots(content: dict[str, np.ndarray], K: int) -> dict[str, np.ndarray]:
+    """A consensus content as every slot's (`listed_slots` undone): a slot not listed is
+    empty (mean 0, covariance I, label -1, stamp 0), a listed one confirmed; a compact
+    content's values in float64, its covariances mirrored from their upper triangle as
+    `radio.wire_cov` delivers them. A full content is as it is."""
+    if "slots" not in content:
+        return content
+    slots = content["slots"].astype(np.int64)
+    mean, cov = np.zeros((K, 4)), np.broadcast_to(np.eye(4), (K, 4, 4)).copy()
+    label, status = np.full(K, -1, dtype=np.int64), np.zeros(K, dtype=np.int64)
+    stamp = np.zeros(K, dtype=np.int64)
+    mean[slots] = content["mean"].astype(np.float64)
+    given = content["cov"]
+    cov[slots] = mirrored(given) if given.ndim == 2 else given
+    label[slots], status[slots] = content["label"], team.CONFIRMED
+    stamp[slots] = content["stamp"]
+    return {
+        "mean": mean, "cov": cov, "label": label, "status": status, "stamp": stamp,
+        "tombs": content["tombs"].astype(np.int64),
+    }  # fmt: skip
+
+
 def _stamp(tracks: team.TrackSet) -> np.ndarray:
     assert tracks.stamp is not None  # a UAV's tracks carry their stamps
     return tracks.stamp[0, 0]
@@ -375,7 +453,7 @@ class TrackedCentral(CentralAgent):
         s, n, scenario = self.setting, self.n, self.scenario
         tracker = self.ctx.const.tracker
         alive = tick["alive"]
-        self.radio.begin(k, np.zeros(n, dtype=bool), alive)
+        self.radio.begin(k, np.zeros(n, dtype=bool), alive, afford=tick.get("afford"))
         start = timing.start()
         uploads, offered = self.uploads(k)
         uploads = uploads or {}

@@ -320,11 +320,13 @@ class WorldProgram:
             f"than the Zenoh session's lease ({LEASE:g} s)"
         )
 
-    def afford(self, k: int, graph: np.ndarray, alive: np.ndarray) -> Array | None:
+    def afford(self, k: int, graph: np.ndarray, alive: np.ndarray, scan=None) -> Array | None:
         """With ``radio.bandwidth_bps``, what every share affords at cycle k (`Sense`,
-        `radio.Budget` of the radio graph (N, N) the cycle's links are), as the batch's
-        radio counts it; None: an unlimited radio."""
-        limit = simulation.limit(self.ctx, k)
+        `radio.Budget` of the radio graph (N, N) the cycle's links are, and with tracks
+        the measurements of each UAV's scan), as the batch's radio counts it; None: an
+        unlimited radio."""
+        rows = None if scan is None or not self.method.central else scan.valid.sum(axis=-1)
+        limit = simulation.limit(self.ctx, k, rows)
         if limit is None:
             return None
         others = graph & ~np.eye(len(graph), dtype=bool)
@@ -338,7 +340,7 @@ class WorldProgram:
         measurements unlabelled, in the order of its scan, and no target's index."""
         rows = np.nonzero(observed)[0]  # the UAV of each measurement, in order
         alive_array = Array.of(alive)
-        afford = self.afford(k, graph, alive)
+        afford = self.afford(k, graph, alive, scan)
         self.asked = {}
         for i in np.flatnonzero(told):
             seen, mine = observed[i], z[rows == i]

@@ -225,17 +225,6 @@ class Scenario(Part):
                 f"robust.gate reads measurements by target; with tracker.association = "
                 f"{self.tracker.association} the tracks' own gates apply: leave robust.gate unset"
             )
-        if self.radio.bandwidth_bps is not None:
-            raise ValueError(
-                f"radio.bandwidth_bps is not enforced yet on the track consensus of "
-                f"tracker.association = {self.tracker.association}: leave it unset"
-            )
-        if self.radio.encoding != "full" or self.fusion.trigger is not None:
-            raise ValueError(
-                f"radio.encoding = compact and fusion.trigger send tuples of known targets; "
-                f"with tracker.association = {self.tracker.association} the consensus carries "
-                "track slots, which they do not encode yet: leave both unset"
-            )
         return self
 
     @model_validator(mode="after")

@@ -8,14 +8,14 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
-from typing import ClassVar
+from typing import Any, ClassVar
 
 import numpy as np
 
 from .. import estimation, fusion, network
 from ..config import Scenario
 from ..numerics.buffers import Buffers, take
-from ..radio import Radio, content_bytes, counted, layout, layout_bytes, wire_cov, wire_mean
+from ..radio import Radio, Wire, counted, wire_cov, wire_mean
 from ..robust import gate
 from ..tracks import association, manage, team
 from ..tracks.columns import Columns
@@ -105,7 +105,10 @@ class Inputs:
     results of fusion; None: every result a new array."""
     told: np.ndarray | None = None
     """With ``fusion.trigger``: the confidence each UAV last sent of each target (B, N,
-    M) (NaN: never)."""
+    M) (NaN: never); with tracks, of each slot (B, N, K)."""
+    told_labels: np.ndarray | None = None
+    """With ``fusion.trigger`` and tracks: the label each UAV last sent of each slot
+    (B, N, K) (-1: never)."""
     columns: Columns | None = None
     """With tracks: the team labels of the bids' columns and the column of each track
     slot (`tracks.columns.Columns`); None with known association (column j: target j)."""
@@ -184,6 +187,8 @@ class FusedTracks:
     own: manage.Slots | None = None
     central: manage.Slots | None = None
     tombs: np.ndarray | None = None
+    told: np.ndarray | None = None  # with fusion.trigger: `Inputs.told` after this cycle
+    told_labels: np.ndarray | None = None  # and `Inputs.told_labels`
 
 
 class Method:
@@ -231,20 +236,39 @@ def fusion_rounds(inputs: Inputs) -> tuple[fusion.Depth, np.ndarray]:
     return depth, rounds
 
 
-def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.ndarray | int:
-    """The bytes of `protocol`'s content as the agent form sends it (`radio.layout`),
-    for this cycle's team and the run's trackers and avoidance (`rows`: a scan's
-    measurements, (B, N))."""
-    n = inputs.alive.shape[1]
+def wire_of(scenario: Scenario) -> Wire:
+    """What shapes a run's messages (`radio.Wire`): its team, its track slots and the
+    download's book fields with unknown association, the avoidance beacon and the
+    consensus listing. The one reading of these settings the batch's bytes, the radio's
+    shares and the agents' admission share."""
+    tracked = scenario.tracker.association != "known"
+    return Wire(
+        n=scenario.n_uavs,
+        m=scenario.n_targets,
+        slots=scenario.track_slots if tracked else 0,
+        avoid=scenario.planner.avoidance != "none",
+        tuples="compact"
+        if scenario.radio.encoding == "compact"
+        else "listed"
+        if scenario.fusion.trigger is not None
+        else "full",
+        book=manage.sent_fields(scenario.tracker) if tracked else (),
+    )
+
+
+def shaped(inputs: Inputs) -> Wire:
+    """The run's `radio.Wire` (`wire_of`; a method run without a scenario: the team and
+    targets of its inputs)."""
     scenario = inputs.setting.scenario
-    known = scenario is None or scenario.tracker.association == "known"
-    slots = 0 if known or scenario is None else scenario.track_slots
-    avoid = scenario is not None and scenario.planner.avoidance != "none"
-    book = () if known or scenario is None else manage.sent_fields(scenario.tracker)
-    m = inputs.gamma.shape[-1]
-    if rows is not None:
-        return content_bytes(layout(protocol, n, m, slots, avoid, book=book), rows)
-    return layout_bytes(protocol, n, m, slots, avoid, book)
+    if scenario is None:
+        return Wire(n=inputs.alive.shape[1], m=inputs.gamma.shape[-1])
+    return wire_of(scenario)
+
+
+def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.ndarray | int:
+    """The bytes of `protocol`'s content as the agent form sends it (`radio.Wire.bytes`;
+    `rows`: a scan's measurements, (B, N))."""
+    return shaped(inputs).bytes(protocol, rows)
 
 
 def rounds_on_air(
@@ -252,11 +276,12 @@ def rounds_on_air(
 ) -> None:
     """The frames of the D_i flooding with the consensus (`radio.Radio.rounds_on_air`):
     every round's tuples, or with `carried` (`fusion.Outcome.carried`) those listed."""
-    flood, tuples = wire(inputs, "flood"), wire(inputs, "consensus")
-    if carried is not None:
-        n, m = inputs.gamma.shape[1:]
-        listed = layout("consensus", n, m, tuples=inputs.setting.tuples)
-        tuples = [content_bytes(listed, rows) for rows in carried]
+    shape = shaped(inputs)
+    flood = shape.bytes("flood")
+    if carried is None:
+        tuples: Any = shape.bytes("consensus", tuples="full")
+    else:
+        tuples = [shape.bytes("consensus", rows) for rows in carried]
     inputs.radio.rounds_on_air(depth.ran, rounds, int(flood), tuples, inputs.alive)
 
 
@@ -470,11 +495,14 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         inputs.believed, alive, scenario, local.modes, local.tracker, inputs.k,
     )  # fmt: skip
     depth, rounds = fusion_rounds(inputs)
-    rounds_on_air(inputs, depth, rounds, None)
     book = scanned.book
     own = scanned_tracks(scanned, local.tombs, inputs.k)
     threshold = association.threshold(scenario.tracker.gate_probability, 4)
-    agreed, changed, sent, delivered = team.agree(radio, own, rounds, threshold, s.rule)
+    listing = track_listing(inputs, own)
+    out = team.agree(radio, own, rounds, threshold, s.rule, listing)
+    agreed, changed, sent, delivered = out.tracks, out.changed, out.sent, out.delivered
+    rounds_on_air(inputs, depth, rounds, out.carried)
+    told = told_tracks(inputs, out)
     book = manage.after_fusion(book, agreed.label, agreed.status, changed, scenario, agreed.stamp)
     sent, delivered = counted(
         s.delay,
@@ -493,4 +521,37 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
             book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
         ),
         tombs=agreed.tombs,
+        told=told[0],
+        told_labels=told[1],
     )
+
+
+def told_tracks(inputs: Inputs, out: team.Agreement) -> tuple[np.ndarray | None, np.ndarray | None]:
+    """With ``fusion.trigger``: what each UAV last sent of each slot after this cycle
+    (`Inputs.told`, `Inputs.told_labels`), this cycle's where it sent one; (None, None)
+    without."""
+    if inputs.setting.trigger is None or out.told is None or out.told_labels is None:
+        return None, None
+    if inputs.told is None or inputs.told_labels is None:
+        return out.told, out.told_labels
+    unsent = np.isnan(out.told)
+    told = np.where(unsent, inputs.told, out.told)
+    return told, np.where(unsent, inputs.told_labels, out.told_labels)
+
+
+def track_listing(inputs: Inputs, tracks: team.TrackSet) -> team.Listing | None:
+    """Which slots the track consensus lists (`team.Listing`), as `sending` for tuples:
+    with ``fusion.trigger`` those `team.triggered` picks in the first round, with the
+    compact encoding every confirmed one; in later rounds what changed. None: every
+    slot in every round, the full encoding."""
+    s = inputs.setting
+    if s.trigger is None and not s.compact:
+        return None
+    first = None
+    if s.trigger is not None:
+        first = team.triggered(
+            tracks, inputs.told, inputs.told_labels, inputs.k, s.trigger, s.refresh
+        )
+    budget = inputs.radio.now.budget
+    until = None if budget is None else budget.rounds
+    return team.Listing(first=first, compact=s.compact, until=until)

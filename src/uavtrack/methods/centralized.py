@@ -127,10 +127,10 @@ class Centralized(Method):
             raise ValueError("the central tracker needs the scenario and its own tracks")
         B, n = alive.shape
         self.on_air(inputs, local.valid.sum(axis=-1))
-        heard, take = alive, alive
+        heard, take, upload = alive, alive, None
         sent = delivered = np.full(B, 2 * n if n > 1 else 0, dtype=np.int64)
-        if s.faulty:
-            radio.send("upload", {"alive": alive})
+        if s.faulty:  # the uploads sent: what the shares afford
+            radio.send("upload", {"alive": radio.afforded(alive)})
             upload, up_ok = radio.receive_central("upload")
             heard = up_ok & upload["alive"] if upload is not None else np.zeros_like(alive)
         node = local.central
@@ -145,14 +145,16 @@ class Centralized(Method):
                 book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
             )
         book, mean, cov = node.book, node.mean, node.cov
-        if s.faulty:
-            radio.send("download", {"alive": alive})
+        if s.faulty:  # the downloads the node's share sends
+            radio.send("download", {"alive": radio.afforded(alive, "served")})
             download, down_ok = radio.receive_central("download")
-            take = down_ok & alive if download is not None else np.zeros_like(alive)
-            arrived = [
-                (alive.sum(axis=1), heard.sum(axis=1)),
-                (alive.sum(axis=1), take.sum(axis=1)),
-            ]
+            take = np.zeros_like(alive)
+            arrived = []
+            if upload is not None:
+                arrived.append((upload["alive"].sum(axis=1), heard.sum(axis=1)))
+            if download is not None:
+                take = down_ok & alive & download["alive"]
+                arrived.append((download["alive"].sum(axis=1), take.sum(axis=1)))
             sent, delivered = counted(
                 s.delay,
                 lambda: (radio.transmitted_central(p) for p in ("upload", "download")),

@@ -23,13 +23,14 @@ message count).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 
 from .. import fusion, network
 from ..estimation import confidence
 from ..numerics import lsap
-from ..radio import Radio
+from ..radio import Radio, wire_cov, wire_mean
 from .association import components
 
 EMPTY, TENTATIVE, CONFIRMED = 0, 1, 2
@@ -266,13 +267,98 @@ def _newest(key: np.ndarray, cand: np.ndarray, stamp: np.ndarray) -> np.ndarray:
     return np.maximum.reduceat(stamp[cand], np.flatnonzero(_starts(key)))
 
 
+@dataclass(frozen=True, kw_only=True)
+class Listing:
+    """Which track slots a UAV's consensus messages carry (``fusion.trigger``,
+    ``radio.encoding`` compact), as `fusion.Sending` does for tuples.
+
+    Round 1 carries the confirmed slots of `first` (B, N, K) (None: every confirmed
+    slot); a later round the confirmed slots that changed since the UAV's previous round
+    (estimate, label, stamp or status); past its rounds a UAV repeats its last round's
+    message. A slot not listed is not offered: receivers read confirmed tracks only
+    (`team_round`), so listing every confirmed slot loses nothing. compact: estimates
+    arrive as float32 with the covariance's upper triangle (`radio.wire_mean`,
+    `radio.wire_cov`). until: the rounds (B, N) each UAV's share affords (None: all)."""
+
+    first: np.ndarray | None = None
+    compact: bool = False
+    until: np.ndarray | None = None
+
+    def mask(self, r: int, tracks: TrackSet, previous: TrackSet | None) -> np.ndarray:
+        """The slots (B, N, K) round r carries, from this round's and the previous
+        round's tracks."""
+        has = tracks.status == CONFIRMED
+        if r == 1 or previous is None:
+            return has if self.first is None else self.first & has
+        changed = (
+            (tracks.label != previous.label)
+            | (tracks.status != previous.status)
+            | (_stamp(tracks) != _stamp(previous))
+            | (tracks.mean != previous.mean).any(axis=-1)
+            | (tracks.cov != previous.cov).any(axis=(-2, -1))
+        )
+        return changed & has
+
+    def carrying(self, tracks: TrackSet, mask: np.ndarray) -> TrackSet:
+        """The tracks as a message carries them: the slots not in `mask` empty, the
+        others as they arrive."""
+        mean, cov = tracks.mean, tracks.cov
+        if self.compact:
+            mean, cov = wire_mean(mean), wire_cov(cov)
+        return TrackSet(
+            mean=mean,
+            cov=cov,
+            label=np.where(mask, tracks.label, -1),
+            status=np.where(mask, tracks.status, EMPTY).astype(tracks.status.dtype),
+            stamp=tracks.stamp,
+            tombs=tracks.tombs,
+        )
+
+
+def triggered(
+    tracks: TrackSet,
+    told: np.ndarray | None,
+    told_labels: np.ndarray | None,
+    k: int,
+    trigger: float,
+    refresh: int,
+) -> np.ndarray | None:
+    """``fusion.trigger`` on tracks: the slots (B, N, K) a UAV lists in a cycle's first
+    round, those whose confidence moved by more than `trigger` of the confidence it last
+    sent of the slot (`told`, NaN: never), or whose label is not the one it sent then
+    (`told_labels`); None (all) in a refresh cycle or before anything was sent
+    (`fusion.triggered`)."""
+    gamma = confidence(tracks.cov)
+    first = fusion.triggered(gamma, told, k, trigger, refresh)
+    if first is None or told_labels is None:
+        return first
+    return first | (tracks.label != told_labels)
+
+
+class Agreement(NamedTuple):
+    """What `agree` returns: each UAV's tracks and `changed` (B, N, K) int8, messages
+    sent and delivered (B,), and with a `Listing` the slots each UAV's message of round
+    r carried, carried[r - 1] (B, N), and the confidence and label of the last track
+    each UAV sent of each slot this cycle, told and told_labels (B, N, K) (NaN, -1:
+    none)."""
+
+    tracks: TrackSet
+    changed: np.ndarray
+    sent: np.ndarray
+    delivered: np.ndarray
+    carried: list[np.ndarray] | None = None
+    told: np.ndarray | None = None
+    told_labels: np.ndarray | None = None
+
+
 def agree(
     radio: Radio,
     tracks: TrackSet,
     rounds: np.ndarray,
     threshold: float,
     rule: str = "max_consensus",
-) -> tuple[TrackSet, np.ndarray, np.ndarray, np.ndarray]:
+    listing: Listing | None = None,
+) -> Agreement:
     """The team's track agreement over the radio: UAV i runs rounds[b, i] rounds of
     `team_round` (protocol "consensus", as `fusion.consensus`): every UAV transmits its
     current tracks each round, receivers still within their rounds associate and fuse
@@ -283,9 +369,11 @@ def agree(
     holds every confirmed target of its component under the smallest label any UAV had
     for it.
 
-    rounds: (B, N) int. Returns (tracks, changed (B, N, K) int8, sent (B,), delivered
-    (B,)): changed says per final slot whether it holds the UAV's own track as its filter
-    left it (0), its own track with a fused estimate, label or status (1), a track new to
+    rounds: (B, N) int. listing: which slots the messages carry (`Listing`; None: all,
+    the full encoding). Returns an `Agreement` (tracks, changed (B, N, K) int8, sent (B,),
+    delivered (B,), and with a listing what it carried): changed says per final slot
+    whether it holds the UAV's own track as its filter left it (0), its own track with
+    a fused estimate, label or status (1), a track new to
     this UAV (2: adopted in some round, whatever befell it later but a tombstone), or
     nothing where it held a track (3: buried by a tombstone, `bury`; `team_round` itself
     never empties a slot); sent and delivered count the messages as `fusion.count` does.
@@ -303,8 +391,29 @@ def agree(
         raise ValueError(f"rounds {rounds.shape} do not match tracks {tracks.status.shape}")
     sent, delivered = np.zeros(B, dtype=np.int64), np.zeros(B, dtype=np.int64)
     changed = np.zeros(tracks.status.shape, dtype=np.int8)
-    for r in range(1, int(rounds.max(initial=0)) + 1):
-        radio.send("consensus", tracks)
+    carried: list[np.ndarray] = []
+    previous = frozen = None
+    told = np.full(tracks.status.shape, np.nan)
+    told_labels = np.full(tracks.status.shape, -1, dtype=np.int64)
+    top = int(rounds.max(initial=0))
+    for r in range(1, top + 2):
+        content = tracks
+        if listing is not None:
+            mask = listing.mask(r, tracks, previous)
+            if frozen is not None:  # past its rounds: its last round's message again
+                mask = np.where(np.greater(r, rounds + 1)[..., None], frozen, mask)
+            final = np.equal(r, rounds + 1)[..., None]
+            frozen = mask if frozen is None else np.where(final, mask, frozen)
+            on_air = mask & np.less_equal(r, rounds + 1)[..., None]
+            if listing.until is not None:
+                on_air &= np.less_equal(r, listing.until)[..., None]
+            told = np.where(on_air, confidence(tracks.cov), told)
+            told_labels = np.where(on_air, tracks.label, told_labels)
+            carried.append(mask.sum(axis=-1))
+            previous, content = tracks, listing.carrying(tracks, mask)
+        radio.send("consensus", content)  # after the last round: the final tracks
+        if r > top:  # (for later rounds, with delay)
+            break
         inbox = radio.receive("consensus", r)
         if inbox is None:  # nothing in flight yet (delay)
             continue
@@ -314,8 +423,10 @@ def agree(
         if not links.edges:  # the dense form keeps every receiver: mute the finished
             links = network.Links(batch=B, n=n, dense=links.matrix & active[:, :, None])
         tracks, changed = agree_round(tracks, changed, inbox.content, links, threshold, rule)
-    radio.send("consensus", tracks)  # the final tracks, for later rounds (with delay)
-    return tracks, changed.astype(np.int8), sent, delivered
+    changed = changed.astype(np.int8)
+    if listing is None:
+        return Agreement(tracks, changed, sent, delivered)
+    return Agreement(tracks, changed, sent, delivered, carried, told, told_labels)
 
 
 def agree_round(
