@@ -15,7 +15,6 @@ from uavtrack.experiments import bandwidth
     [
         (["--set", "radio.bandwidth_bps=1000"], "radio.bandwidth_bps"),
         (["--set", "fusion.trigger=0.2"], "fusion.trigger"),
-        (["--set", 'planner.avoidance="loiter"'], "planner.avoidance"),
         (["--set", "comm_range=-3"], "comm_range"),
         (["--trials", "0"], "--trials"),
     ],

@@ -112,7 +112,8 @@ def test_every_uav_ends_with_every_target_under_the_smallest_label(case):
     diameter = nx.diameter(nx.from_numpy_array(adj.astype(int)))
     radio = fusion.perfect_radio(adj[None], form)
     rounds = np.full((1, n), diameter)
-    out, changed, *_ = team.agree(radio, tracks, rounds, GATE)
+    agreed = team.agree(radio, tracks, rounds, GATE)
+    out, changed = agreed.tracks, agreed.changed
 
     for j in range(m):
         holders = np.flatnonzero(holds[:, j])
@@ -161,9 +162,14 @@ def test_thirty_uavs_in_the_edge_form_agree_as_in_the_dense_form():
     rounds = np.full((B, n), n - 1)  # the path's diameter
     edges = fusion.perfect_radio(adj, "auto")
     assert edges.now.links.edges
-    out, changed, sent, delivered, *_ = team.agree(edges, tracks, rounds, GATE)
-    ref, ref_changed, ref_sent, ref_delivered, *_ = team.agree(
-        fusion.perfect_radio(adj, "dense"), tracks, rounds, GATE
+    agreed = team.agree(edges, tracks, rounds, GATE)
+    out, changed, sent, delivered = agreed.tracks, agreed.changed, agreed.sent, agreed.delivered
+    agreed = team.agree(fusion.perfect_radio(adj, "dense"), tracks, rounds, GATE)
+    ref, ref_changed, ref_sent, ref_delivered = (
+        agreed.tracks,
+        agreed.changed,
+        agreed.sent,
+        agreed.delivered,
     )
     assert np.array_equal(out.label, ref.label) and np.array_equal(out.status, ref.status)
     assert np.array_equal(changed, ref_changed)
@@ -196,9 +202,8 @@ def test_with_known_labels_max_consensus_equals_the_per_target_consensus(form, d
         rounds = fusion.learn_depth(fusion.perfect_radio(adj, form), np.ones((B, n), bool)).depth
     else:
         rounds = rng.integers(0, 3, size=(B, n))
-    out, changed, sent, delivered, *_ = team.agree(
-        fusion.perfect_radio(adj, form), tracks, rounds, GATE
-    )
+    agreed = team.agree(fusion.perfect_radio(adj, form), tracks, rounds, GATE)
+    out, changed, sent, delivered = agreed.tracks, agreed.changed, agreed.sent, agreed.delivered
 
     gamma = confidence(tracks.cov)
     oracle = fusion.consensus(
@@ -263,14 +268,16 @@ def pair(distance_squared):
 def test_tracks_outside_the_gate_stay_apart_with_their_own_labels():
     tracks = pair(GATE * 1.01)
     radio = fusion.perfect_radio(network.complete(2, (1,)))
-    out, changed, *_ = team.agree(radio, tracks, np.ones((1, 2), dtype=int), GATE)
+    agreed = team.agree(radio, tracks, np.ones((1, 2), dtype=int), GATE)
+    out, changed = agreed.tracks, agreed.changed
     for i in range(2):  # each keeps its own and adopts the other's, separate
         assert sorted(out.label[0, i][out.status[0, i] > 0].tolist()) == [3, 8]
     assert changed[0, 0].tolist() == [team.KEPT, team.ADOPTED, team.KEPT]
 
     tracks = pair(GATE * 0.99)
     radio = fusion.perfect_radio(network.complete(2, (1,)))
-    out, changed, *_ = team.agree(radio, tracks, np.ones((1, 2), dtype=int), GATE)
+    agreed = team.agree(radio, tracks, np.ones((1, 2), dtype=int), GATE)
+    out, changed = agreed.tracks, agreed.changed
     for i in range(2):  # inside the gate: one track, the smaller label
         assert out.label[0, i][out.status[0, i] > 0].tolist() == [3]
     assert changed[0, 1].tolist() == [team.KEPT, team.KEPT, team.FUSED]
@@ -444,7 +451,8 @@ def test_messages_count_as_the_consensus_counts_them(form):
             put(tracks, b, i, 0, rng.normal(size=4), spd(rng), 10 * i + b)
     rounds = rng.integers(0, 4, size=(B, n))
     radio, _ = lossy(adj, 0.3, form)
-    _, _, sent, delivered, *_ = team.agree(radio, tracks, rounds, GATE)
+    agreed = team.agree(radio, tracks, rounds, GATE)
+    sent, delivered = agreed.sent, agreed.delivered
     gamma = confidence(tracks.cov)
     radio, _ = lossy(adj, 0.3, form)
     oracle = fusion.consensus(
@@ -463,7 +471,8 @@ def test_a_receiver_uses_only_the_offers_delivered(form):
         for i in range(n):  # UAV i holds target i, far from the others, label 10 i + 1
             put(tracks, b, i, 0, np.array([1000.0 * i, 0, 0, 0]), np.eye(4), 10 * i + 1)
     radio, realisation = lossy(adj, 0.5, form)
-    out, changed, *_ = team.agree(radio, tracks, np.ones((B, n), dtype=int), GATE)
+    agreed = team.agree(radio, tracks, np.ones((B, n), dtype=int), GATE)
+    out, changed = agreed.tracks, agreed.changed
     t, i, q = np.nonzero(adj)
     lost = realisation.lost(0, "consensus", 1, t, q, i)
     assert lost.any() and (~lost).any()
@@ -495,7 +504,8 @@ def test_with_every_message_lost_every_uav_keeps_its_tracks(form):
     for i in range(n):
         put(tracks, 0, i, 1, np.array([100.0 * i, 0, 0, 0]), np.eye(4), i + 1)
     radio, _ = lossy(network.complete(n, (B,)), 1.0, form)
-    out, changed, sent, delivered, *_ = team.agree(radio, tracks, np.full((B, n), 2), GATE)
+    agreed = team.agree(radio, tracks, np.full((B, n), 2), GATE)
+    out, changed, sent, delivered = agreed.tracks, agreed.changed, agreed.sent, agreed.delivered
     assert np.array_equal(out.label, tracks.label) and (changed == team.KEPT).all()
     assert sent.tolist() == [2 * n * (n - 1)] * B and delivered.tolist() == [0] * B
 
@@ -550,9 +560,8 @@ def test_a_deletion_travels_through_the_team_and_is_not_undone_by_its_copies():
         tombs = np.full((1, 3, 2, 2), -1, dtype=np.int64)
         tombs[0, 0, 0] = (7, 10)
         start = with_life(tracks, [[[0, 0], [5, 0], [stamp_2, 0]]], tombs)
-        out, changed, *_ = team.agree(
-            fusion.perfect_radio(adjacency), start, np.full((1, 3), 2), GATE
-        )
+        agreed = team.agree(fusion.perfect_radio(adjacency), start, np.full((1, 3), 2), GATE)
+        out, changed = agreed.tracks, agreed.changed
         assert out.tombs is not None and (out.tombs[0, :, :, 0] == 7).any(axis=1).all()
         holds = (out.label[0] == 7) & (out.status[0] == team.CONFIRMED)
         if kept:  # the fresher copy spreads back, and the tombstone stays below it

@@ -254,8 +254,9 @@ def test_an_ample_radio_changes_nothing():
     seed=st.integers(0, 1000),
     compact=st.booleans(),
     tracked=st.booleans(),
+    avoid=st.booleans(),
 )
-def test_no_program_sends_more_than_its_share(bps, method, seed, compact, tracked):
+def test_no_program_sends_more_than_its_share(bps, method, seed, compact, tracked, avoid):
     from uavtrack import network
 
     overrides = {"radio.bandwidth_bps": bps}
@@ -263,6 +264,8 @@ def test_no_program_sends_more_than_its_share(bps, method, seed, compact, tracke
         overrides["radio.encoding"] = "compact"
     if tracked:  # track slots on the air, and with the centralized method scans
         overrides |= TRACKED
+    if avoid:  # every method's beacons
+        overrides |= AVOID
     case = uavtrack.Scenario(steps=15).with_overrides(overrides)
     result = uavtrack.simulate(case, method, seed=seed)
     assert result.trace is not None
@@ -277,6 +280,7 @@ def test_no_program_sends_more_than_its_share(bps, method, seed, compact, tracke
         assert result.trace.node_bytes[k] <= np.floor(channel / (case.n_uavs + 1))
 
 
+AVOID = {"planner.avoidance": "loiter", "uav.altitude_spacing": 0, "uav.separation": 10}
 TRACKED = {
     "tracker.association": "jpda", "sensor.detection_probability": 0.9,
     "sensor.clutter_rate": 2.0,
@@ -295,7 +299,8 @@ TRIGGERED = {"radio.bandwidth_bps": 1e5, "fusion.trigger": 0.1, "radio.encoding"
     [(m, o) for m in ("distributed", "greedy", "centralized") for o in SHARES]
     + [(m, TRIGGERED) for m in ("distributed", "greedy")]
     + [(m, TRIGGERED | TRACKED) for m in ("distributed", "greedy")]
-    + [("centralized", {"radio.bandwidth_bps": 3e4, "faults.loss": 0.2} | TRACKED)],
+    + [("centralized", {"radio.bandwidth_bps": 3e4, "faults.loss": 0.2} | TRACKED)]
+    + [(m, {"radio.bandwidth_bps": 1e5} | AVOID | TRACKED) for m in ("greedy", "centralized")],
 )
 def test_a_swarm_keeps_the_same_shares_as_the_batch(method, overrides):
     from uavtrack.agents import run_swarm
@@ -312,8 +317,15 @@ def test_a_swarm_keeps_the_same_shares_as_the_batch(method, overrides):
 def test_the_refusals_of_a_limited_radio():
     with pytest.raises(ScenarioError, match="bandwidth_bps"):
         scenario(**{"radio.bandwidth_bps": 0})
-    one = {"radio.bandwidth_bps": 1e5, "planner.avoidance": "loiter"}
-    one |= {"uav.altitude_spacing": 0, "uav.separation": 10}
-    with pytest.raises(ScenarioError, match="beacons outside"):
-        uavtrack.simulate(scenario(**one), "greedy", seed=0)
-    assert uavtrack.simulate(scenario(**one), "distributed", seed=0).bytes > 0
+
+
+def test_every_methods_beacons_go_in_its_share():
+    # greedy sends its beacon alone as its first priority, centralized beside its upload
+    one = {"radio.bandwidth_bps": 1e5} | AVOID
+    for method in ("greedy", "centralized", "distributed"):
+        limited = uavtrack.simulate(scenario(**one), method, seed=0)
+        assert limited.trace is not None and limited.bytes > 0
+        starved = uavtrack.simulate(
+            scenario(**(one | {"radio.bandwidth_bps": 1.0})), method, seed=0
+        )
+        assert starved.trace is not None and starved.trace.bytes.sum() == 0

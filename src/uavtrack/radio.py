@@ -109,8 +109,8 @@ UNLIMITED = 2**31 - 1
 class Limit:
     """A radio of limited capacity (``radio.bandwidth_bps``) and the frames it schedules:
     the bytes per cycle a channel carries (capacity x dT / 8), the first-priority frame
-    per copy (the beacon with the bids; the centralized upload, with tracks each UAV's
-    own (B, N); 0: none), the largest
+    per copy (the beacon with the bids; the greedy method's beacon; the centralized
+    upload, with tracks each UAV's own (B, N); 0: none), the largest
     frame a round of D_i flooding and consensus can be (every target's tuple in it), the
     central node's download, and whether every UAV talks to the central node (then all
     share one channel)."""
@@ -120,6 +120,9 @@ class Limit:
     round: int
     download: int = 0
     central: bool = False
+    beacon: int = 0
+    """A centralized method's avoidance beacon per copy (one to each UAV in range), sent
+    with its upload as one first priority (0: none)."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -149,7 +152,7 @@ class Budget:
         else:
             contenders, copies = receivers + 1, receivers
         share = np.floor(limit.bytes_per_cycle / contenders).astype(np.int64)
-        cost = limit.first * copies
+        cost = limit.first * copies + limit.beacon * receivers
         first = cost <= share
         left = share - np.where(first, cost, 0)
         per_round = np.maximum(limit.round * receivers, 1)
@@ -602,7 +605,8 @@ def _listed_tracks(slots: int, compact: bool) -> dict[str, Field]:
     }
 
 
-class Wire(NamedTuple):
+@dataclass(frozen=True, kw_only=True)
+class Wire:
     """What shapes a run's messages, the arguments of `described`: n UAVs, m targets,
     K track slots (0: known association), the beacon's whole state (``planner.avoidance``),
     how the consensus carries its tuples and the book fields a download carries

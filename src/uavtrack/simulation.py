@@ -155,16 +155,11 @@ class Context:
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
         listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
-        bandwidth = scenario.radio.bandwidth_bps is not None
-        if (
-            bandwidth
-            and scenario.planner.avoidance != "none"
-            and not isinstance(method, Distributed)
-        ):
+        if method.central and scenario.faults.delay > 0 and scenario.tracker.association != "known":
             raise ScenarioError(
-                f"radio.bandwidth_bps with planner.avoidance: method {method.name} sends its "
-                "beacons outside the radio's shares; leave one of them unset (the distributed "
-                "method sends them with its bids)"
+                f"faults.delay with tracker.association = {scenario.tracker.association}: "
+                "the centralized method's node does not take scans that arrive cycles late "
+                "yet; leave faults.delay at 0, or run the distributed or greedy method"
             )
         if method.central and listed:
             raise ScenarioError(
@@ -368,15 +363,16 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
 
     listed = shape.slots or shape.m if shape.tuples != "full" else None
     rounds = int(largest(part("flood") + part("consensus", listed), 2))
+    beacon = int(largest(part("beacon"), 1)) if shape.avoid else 0  # sent alone
     if method.central:
         upload = largest(part("upload", rows), 1)
         upload = int(upload) if np.ndim(upload) == 0 else np.asarray(upload, dtype=np.int64)
         download = int(largest(part("download"), 1))
         return Limit(
             bytes_per_cycle=bps * scenario.dt / 8, first=upload, round=rounds,
-            download=download, central=True,
+            download=download, central=True, beacon=beacon,
         )  # fmt: skip
-    first = 0
+    first = beacon  # the greedy method's first priority: its beacon alone
     if isinstance(method, Distributed):
         first = int(largest(part("beacon") + part("bids"), 2))
     return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds)
@@ -462,7 +458,7 @@ def _decide_tracked(
         seconds=np.zeros((B, Nu, 2)),
     )
     confirmed = tracks.book.confirmed & alive[..., None]
-    cols = columns.of(tracks.book.label, confirmed)
+    cols = columns.of(tracks.book.label, confirmed, arriving_labels(radio))
     held = state.held
     if held is not None and state.labels is not None:  # the held bids by this step's labels
         held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)
@@ -510,6 +506,18 @@ def _decide_tracked(
         columns=taken,
         labels=cols.labels,
     )
+
+
+def arriving_labels(radio: Radio) -> np.ndarray | None:
+    """The labels (B, L') of the bids sent cycles ago that arrive now (``faults.delay``),
+    which this cycle's columns hold too: a receiver knows them from the bids (None: no
+    delay, or no bids by label)."""
+    if radio.delay == 0:
+        return None
+    inbox = radio.receive("bids")
+    if inbox is None or "labels" not in inbox.content:
+        return None
+    return inbox.content["labels"]
 
 
 def _finish_tracked(
@@ -714,8 +722,8 @@ def avoid(
     own = not radio.sending("beacon")
     if own:
         radio.send("beacon", {"uavs": pending.believed, "stamp": np.full((B, Nu), k)})
-        beacon = layout_bytes("beacon", Nu, 0, avoid=True)
-        radio.on_air(part_bytes("beacon", 0, -1, beacon), 1, alive)
+        beacon = layout_bytes("beacon", Nu, 0, avoid=True)  # what the shares afford
+        radio.on_air(part_bytes("beacon", 0, -1, beacon), 1, radio.afforded(alive))
     inbox = radio.receive("beacon")
     heard = state.beacons if state.beacons is not None else avoidance.Heard.nothing(B, Nu)
     memory = avoidance.memory_of(ctx.setting.delay, scenario.faults.loss)

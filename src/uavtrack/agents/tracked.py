@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
-from ..methods.base import Held, scanned_tracks
+from ..methods.base import Held, forwarded, scanned_tracks
 from ..radio import counted, mirrored, upper
 from ..tracks import association, columns, manage, team
 from .agent import CentralAgent, UavAgent, closed, dropped, part
@@ -71,7 +71,7 @@ class TrackedUav(UavAgent):
         own = scanned_tracks(scanned, self.tombs, k)
         state = (own, np.zeros(own.status.shape, dtype=np.int8))
         (agreed, changed), rounds, sent, delivered = self.rounds(
-            k, state, self._track_content(k, own), self._agree
+            k, state, self._track_content(k, own), lambda state, got: self._agree(state, got, k)
         )
         book = manage.after_fusion(
             scanned.book, agreed.label, agreed.status, changed, s, agreed.stamp
@@ -235,15 +235,21 @@ class TrackedUav(UavAgent):
 
         return content
 
-    def _agree(self, state, contents: dict[int, dict]):
-        """One round of `team.agree_round` over this UAV's closed neighbourhood: itself
-        and the senders whose tracks arrived, in index order (the senders' tracks beyond
-        the run's plausibility bounds left out, `messages.Spec.tracks`, and those under a
-        label of this UAV's own it has not issued, `_issued`)."""
+    def _agree(self, state, contents: dict[int, dict], k: int = 0):
+        """One round of `team.agree_round` over this UAV's closed neighbourhood at cycle
+        k: itself and the senders whose tracks arrived, in index order (the senders'
+        tracks beyond the run's plausibility bounds left out, `messages.Spec.tracks`, and
+        those under a label of this UAV's own it has not issued, `_issued`); with
+        ``faults.delay`` their estimates predicted to k (`methods.base.forwarded`)."""
         own, changed = state
         offered = {}
         for q, content in contents.items():
             content, reasons = self.spec.tracks(unlisted_slots(content, self.scenario.track_slots))
+            if self.setting.delay > 0:  # sent cycles ago: predicted to this scan
+                mean, cov = forwarded(
+                    self.setting, content["mean"], content["cov"], k - self.setting.delay, k
+                )
+                content = dict(content, mean=mean, cov=cov)
             dropped(self.mailbox, reasons)
             offered[q] = self._issued(content)
         ids = sorted({self.me, *offered})

@@ -65,11 +65,6 @@ def bandwidth(
             "leave it out of --set"
         )
     scenario = load_scenario(config, set_)
-    if scenario.planner.avoidance != "none":
-        raise UsageError(
-            "bandwidth runs the methods without avoidance (greedy and centralized send "
-            "their beacons outside the radio's shares): leave planner.avoidance unset"
-        )
     options = dict(locals())  # the command's options, by name
     summary, out, info = run_experiment(
         "bandwidth",

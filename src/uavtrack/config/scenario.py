@@ -215,11 +215,6 @@ class Scenario(Part):
                 f"tracker.max_tracks {self.tracker.max_tracks} cannot hold the "
                 f"{self.n_targets} targets every UAV starts with; give at least {self.n_targets}"
             )
-        if self.faults.delay > 0:
-            raise ValueError(
-                f"tracker.association = {self.tracker.association} runs on a radio without "
-                "delay: set faults.delay = 0 (tracks sent a cycle late are not predicted yet)"
-            )
         if self.robust.gate is not None:
             raise ValueError(
                 f"robust.gate reads measurements by target; with tracker.association = "

@@ -499,7 +499,13 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
     own = scanned_tracks(scanned, local.tombs, inputs.k)
     threshold = association.threshold(scenario.tracker.gate_probability, 4)
     listing = track_listing(inputs, own)
-    out = team.agree(radio, own, rounds, threshold, s.rule, listing)
+
+    def late(offered: team.TrackSet) -> team.TrackSet:  # sent cycles ago: to this scan
+        mean, cov = forwarded(s, offered.mean, offered.cov, inputs.k - s.delay, inputs.k)
+        return dataclasses.replace(offered, mean=mean, cov=cov)
+
+    receive = late if s.delay > 0 else None
+    out = team.agree(radio, own, rounds, threshold, s.rule, listing, receive)
     agreed, changed, sent, delivered = out.tracks, out.changed, out.sent, out.delivered
     rounds_on_air(inputs, depth, rounds, out.carried)
     told = told_tracks(inputs, out)
@@ -524,6 +530,17 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         told=told[0],
         told_labels=told[1],
     )
+
+
+def forwarded(
+    setting: Setting, mean: np.ndarray, cov: np.ndarray, sent: int, k: int
+) -> tuple[np.ndarray, np.ndarray]:
+    """Track estimates (..., 4), (..., 4, 4) sent at step `sent` predicted to step k
+    (`Setting.forward`, the targets' model), as a receiver takes tracks that arrive late."""
+    stamp = np.full(mean.shape[:-1], sent, dtype=np.int64)
+    tuples = fusion.Estimates(gamma=np.zeros(stamp.shape), mean=mean, cov=cov, stamp=stamp)
+    out = setting.forward(tuples, k)
+    return fusion.required(out.mean, "mean"), fusion.required(out.cov, "cov")
 
 
 def told_tracks(inputs: Inputs, out: team.Agreement) -> tuple[np.ndarray | None, np.ndarray | None]:

@@ -18,6 +18,7 @@ import numpy as np
 
 from .. import assignment, fusion, timing
 from ..radio import counted, part_bytes
+from ..tracks import columns
 from .base import Assigned, Fused, Held, Inputs, Method, Setting, wire
 
 
@@ -50,7 +51,10 @@ class Distributed(Method):
         s, radio, k = inputs.setting, inputs.radio, inputs.k
         B, n, m = bids.shape
         radio.send("beacon", {"uavs": inputs.believed, "stamp": np.full((B, n), k)})
-        radio.send("bids", {"bids": bids, "stamp": np.full((B, n), k)})
+        sent_bids = {"bids": bids, "stamp": np.full((B, n), k)}
+        if inputs.columns is not None and inputs.holds is not None:  # the labels they are for
+            sent_bids |= {"labels": inputs.columns.labels, "holds": inputs.holds}
+        radio.send("bids", sent_bids)
         beacon, inbox = radio.receive("beacon"), radio.receive("bids")
         parts = sum(part_bytes(p, 0, -1, wire(inputs, p)) for p in ("beacon", "bids"))
         radio.on_air(parts, 2, radio.afforded(inputs.alive))  # one frame: beacon, bids
@@ -73,16 +77,14 @@ class Distributed(Method):
         else:
             got = inbox.delivered.adjacency()  # bids that arrived this cycle
             heard = beacon.delivered.adjacency() if beacon is not None else got
+            arrived, holds = inbox.content["bids"], inputs.holds
+            if s.delay > 0 and inputs.columns is not None:  # sent under that cycle's labels
+                arrived, holds = relabelled(inbox.content, inputs.columns.labels)
             members, view, stamp = bid_view(
-                got,
-                inbox.content["bids"][:, None],
-                inbox.content["stamp"][:, None],
-                heard,
-                held,
-                s.stale,
+                got, arrived[:, None], inbox.content["stamp"][:, None], heard, held, s.stale
             )
-            if inputs.holds is not None:  # labels: only those this UAV knows this cycle
-                view = known_labels(view, got, inputs.holds)
+            if holds is not None:  # labels: only those this UAV knows this cycle
+                view = known_labels(view, got, holds)
             held = held if held is None else Held(view, stamp)
             view = np.array(np.broadcast_to(view, (B, n, n, m)))
             view[:, idx, idx] = bids  # a UAV's own bids are current
@@ -97,6 +99,17 @@ class Distributed(Method):
             delivered=delivered,
             held=held,
         )
+
+
+def relabelled(content: dict[str, np.ndarray], labels: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Bids sent cycles ago by columns of that cycle's labels (content's "bids" (B, N, L')
+    and "holds" (B, N, L') under "labels" (B, L')) laid out by this cycle's `labels`
+    (B, L) (`tracks.columns.relabel`). The columns hold every label such bids carry
+    (`tracks.columns.of`), so nothing a sender held is lost."""
+    before = content["labels"]
+    bids = columns.relabel(content["bids"], before, labels)
+    holds = columns.relabel(content["holds"].astype(np.float64), before, labels) > 0
+    return bids, holds
 
 
 def known_labels(view: np.ndarray, got: np.ndarray, holds: np.ndarray) -> np.ndarray:

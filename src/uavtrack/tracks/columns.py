@@ -45,10 +45,14 @@ class Columns:
         return out
 
 
-def of(label: np.ndarray, confirmed: np.ndarray) -> Columns:
-    """The columns of the confirmed slots: label (B, N, K) int64, confirmed (B, N, K)."""
+def of(label: np.ndarray, confirmed: np.ndarray, more: np.ndarray | None = None) -> Columns:
+    """The columns of the confirmed slots: label (B, N, K) int64, confirmed (B, N, K);
+    more (B, X): labels to lay out beside them (-1: none), as those of bids sent cycles
+    ago that arrive now (``faults.delay``)."""
     B, N, K = label.shape
     key = np.where(confirmed, label, -1).reshape(B, N * K)
+    if more is not None:
+        key = np.concatenate([key, more.reshape(B, -1)], axis=1)
     ordered = np.sort(key, axis=1)
     fresh = ordered >= 0
     fresh[:, 1:] &= ordered[:, 1:] != ordered[:, :-1]

@@ -22,8 +22,8 @@ message count).
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import NamedTuple
 
 import numpy as np
 
@@ -335,7 +335,8 @@ def triggered(
     return first | (tracks.label != told_labels)
 
 
-class Agreement(NamedTuple):
+@dataclass(frozen=True, kw_only=True)
+class Agreement:
     """What `agree` returns: each UAV's tracks and `changed` (B, N, K) int8, messages
     sent and delivered (B,), and with a `Listing` the slots each UAV's message of round
     r carried, carried[r - 1] (B, N), and the confidence and label of the last track
@@ -358,6 +359,7 @@ def agree(
     threshold: float,
     rule: str = "max_consensus",
     listing: Listing | None = None,
+    receive: Callable[[TrackSet], TrackSet] | None = None,
 ) -> Agreement:
     """The team's track agreement over the radio: UAV i runs rounds[b, i] rounds of
     `team_round` (protocol "consensus", as `fusion.consensus`): every UAV transmits its
@@ -370,8 +372,10 @@ def agree(
     for it.
 
     rounds: (B, N) int. listing: which slots the messages carry (`Listing`; None: all,
-    the full encoding). Returns an `Agreement` (tracks, changed (B, N, K) int8, sent (B,),
-    delivered (B,), and with a listing what it carried): changed says per final slot
+    the full encoding). receive(offered): what a receiver makes of the tracks that arrive
+    (with ``faults.delay``: predicted to now; None: as they are). Returns an `Agreement`
+    (tracks, changed (B, N, K) int8, sent (B,), delivered (B,), and with a listing what
+    it carried): changed says per final slot
     whether it holds the UAV's own track as its filter left it (0), its own track with
     a fused estimate, label or status (1), a track new to
     this UAV (2: adopted in some round, whatever befell it later but a tombstone), or
@@ -422,11 +426,15 @@ def agree(
         links = inbox.delivered.into(active)
         if not links.edges:  # the dense form keeps every receiver: mute the finished
             links = network.Links(batch=B, n=n, dense=links.matrix & active[:, :, None])
-        tracks, changed = agree_round(tracks, changed, inbox.content, links, threshold, rule)
+        offered = inbox.content if receive is None else receive(inbox.content)
+        tracks, changed = agree_round(tracks, changed, offered, links, threshold, rule)
     changed = changed.astype(np.int8)
     if listing is None:
-        return Agreement(tracks, changed, sent, delivered)
-    return Agreement(tracks, changed, sent, delivered, carried, told, told_labels)
+        return Agreement(tracks=tracks, changed=changed, sent=sent, delivered=delivered)
+    return Agreement(
+        tracks=tracks, changed=changed, sent=sent, delivered=delivered, carried=carried,
+        told=told, told_labels=told_labels,
+    )  # fmt: skip
 
 
 def agree_round(
