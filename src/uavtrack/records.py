@@ -241,13 +241,15 @@ class Pending:
     detected: np.ndarray | None = None  # (B, Nu, Nt) the pairs measured (None: all observed)
     tracks: FusedTracks | None = None  # with unknown association: the tracks after fusion
     scan: scans.Scan | None = None  # with unknown association: the scans
-    columns: np.ndarray | None = None  # with unknown association: the column each UAV took
+    columns: np.ndarray | None = None  # with unknown association: the held label each took
     labels: np.ndarray | None = None  # (B, L) with unknown association: the columns' labels
+    held: int | None = None  # with unknown association: the labels held confirmed
 
     @property
     def width(self) -> int:
-        """The columns of the assignment: targets, or labels with unknown association."""
-        return self.bids.shape[-1] if self.labels is None else self.labels.shape[1]
+        """What a conflict is counted over: the targets, or with unknown association the
+        labels the living UAVs hold confirmed (`columns` indexes them)."""
+        return self.bids.shape[-1] if self.held is None else self.held
 
 
 @dataclass(frozen=True)

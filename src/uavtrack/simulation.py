@@ -458,7 +458,8 @@ def _decide_tracked(
         seconds=np.zeros((B, Nu, 2)),
     )
     confirmed = tracks.book.confirmed & alive[..., None]
-    cols = columns.of(tracks.book.label, confirmed, arriving_labels(radio))
+    more = arriving_labels(radio)
+    cols = columns.of(tracks.book.label, confirmed, more)
     held = state.held
     if held is not None and state.labels is not None:  # the held bids by this step's labels
         held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)
@@ -475,7 +476,7 @@ def _decide_tracked(
     belief = (tracks.mean, tracks.cov, None)
     if not plan:
         pending = _unplanned(state, believed, alive, observed, radio, fused, belief)
-        return replace(pending, tracks=tracks, scan=scan, labels=cols.labels)
+        return replace(pending, tracks=tracks, scan=scan, labels=cols.labels, held=cols.width)
     start = timing.start()
     slot_bids, best = ctx.setting.plan(believed, tracks.mean)
     slot_bids = manage.weighed(slot_bids, tracks.book, scenario)
@@ -487,7 +488,8 @@ def _decide_tracked(
     own = np.where(alive & (slot >= 0), chosen, STRAIGHT)
     label = np.take_along_axis(tracks.book.label, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
     followed = np.where(alive & (slot >= 0), label, -1)
-    taken = np.where(alive, columns.label_column(followed, cols.labels), -1)
+    owned = cols if more is None else columns.of(tracks.book.label, confirmed)  # no late ones
+    taken = np.where(alive, columns.label_column(followed, owned.labels), -1)
     return Pending(
         k=k,
         uavs=uavs,
@@ -505,6 +507,7 @@ def _decide_tracked(
         scan=scan,
         columns=taken,
         labels=cols.labels,
+        held=owned.width,
     )
 
 

@@ -329,7 +329,7 @@ class Spec:
             behind=scenario.faults.delay + 1,
             bounds=Bounds.of(scenario),
             slots=wire.slots,
-            labels=scenario.n_targets + (scenario.track_slots * (scenario.steps + 1) + 1) * n,
+            labels=scenario.labels,
             # a Poisson count of clutter beyond 10 times its mean and 50 has a
             # probability below 1e-20 at any rate
             scan=scenario.n_targets + 50 + 10 * math.ceil(scenario.sensor.clutter_rate)

@@ -210,6 +210,12 @@ class Scenario(Part):
         """What tracks of unknown association cannot do yet, said before a run starts."""
         if self.tracker.association == "known":
             return self
+        if self.radio.encoding == "compact" and self.labels >= 2**31:
+            raise ValueError(
+                f"radio.encoding = compact sends team labels in 32 bits, and a run of "
+                f"{self.steps} steps of {self.n_uavs} UAVs may issue {self.labels:,}: "
+                "shorten the run or send the full encoding"
+            )
         if self.track_slots < self.n_targets:
             raise ValueError(
                 f"tracker.max_tracks {self.tracker.max_tracks} cannot hold the "
@@ -324,6 +330,13 @@ class Scenario(Part):
         """Track slots K per UAV with unknown association (``tracker.max_tracks``, whose 0
         means twice n_targets plus 4)."""
         return self.tracker.max_tracks or 2 * self.n_targets + 4
+
+    @property
+    def labels(self) -> int:
+        """With unknown association the run's team labels are below this: the briefed
+        targets', then a UAV starts at most K tracks a scan, each under a label of its
+        own (`tracks.manage`)."""
+        return self.n_targets + (self.track_slots * (self.steps + 1) + 1) * self.n_uavs
 
     def acceleration_std(self) -> tuple[float, float]:
         """Std of the targets' white acceleration per axis [m/s^2], as eq. (15) is read

@@ -83,8 +83,8 @@ class Distributed(Method):
             members, view, stamp = bid_view(
                 got, arrived[:, None], inbox.content["stamp"][:, None], heard, held, s.stale
             )
-            if holds is not None:  # labels: only those this UAV knows this cycle
-                view = known_labels(view, got, holds)
+            if holds is not None and inputs.holds is not None:  # only the labels it knows
+                view = known_labels(view, got, inputs.holds, holds)
             held = held if held is None else Held(view, stamp)
             view = np.array(np.broadcast_to(view, (B, n, n, m)))
             view[:, idx, idx] = bids  # a UAV's own bids are current
@@ -112,13 +112,17 @@ def relabelled(content: dict[str, np.ndarray], labels: np.ndarray) -> tuple[np.n
     return bids, holds
 
 
-def known_labels(view: np.ndarray, got: np.ndarray, holds: np.ndarray) -> np.ndarray:
+def known_labels(
+    view: np.ndarray, got: np.ndarray, holds: np.ndarray, sent: np.ndarray | None = None
+) -> np.ndarray:
     """The bids a receiver holds (B, N, N, L), by columns of team labels, kept only for
-    the labels it knows this cycle: those it holds confirmed and those of the senders
-    whose bids arrived (got (B, N, N)); holds (B, N, L). A label known to the batch but
-    not to the receiver (held by nobody it heard from, or by nobody any more) is
-    nothing it could bid on: 0, as for a label a sender does not hold."""
-    heard = np.einsum("bis,bsl->bil", got.astype(np.int64), holds.astype(np.int64)) > 0
+    the labels it knows this cycle: those it holds confirmed, holds (B, N, L), and those
+    the senders whose bids arrived (got (B, N, N)) held when they sent them, `sent` (B, N,
+    L; None: `holds`, bids of this cycle). A label known to the batch but not to the
+    receiver (held by nobody it heard from, or by nobody any more) is nothing it could
+    bid on: 0, as for a label a sender does not hold."""
+    sent = holds if sent is None else sent
+    heard = np.einsum("bis,bsl->bil", got.astype(np.int64), sent.astype(np.int64)) > 0
     known = holds | heard
     return np.where(known[:, :, None, :], view, 0.0)
 
