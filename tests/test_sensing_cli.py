@@ -32,11 +32,6 @@ def test_run_with_tracks_shows_the_track_scores(capsys):
         (["--set", "tracker.association=jdpa"], "tracker.association"),
         (["--set", "tracker.confirm=[3,2]", "--set", "tracker.association=gnn"], "confirm"),
         (["--set", "tracker.max_tracks=9"], "tracker.max_tracks needs"),
-        (
-            ["--method", "centralized", "--set", "tracker.association=gnn"]
-            + ["--set", "faults.delay=1"],
-            "faults.delay",
-        ),
         (["--set", "sensor.clutter_rate=-1"], "sensor.clutter_rate"),
     ],
 )

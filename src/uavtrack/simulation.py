@@ -155,12 +155,6 @@ class Context:
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
         listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
-        if method.central and scenario.faults.delay > 0 and scenario.tracker.association != "known":
-            raise ScenarioError(
-                f"faults.delay with tracker.association = {scenario.tracker.association}: "
-                "the centralized method's node does not take scans that arrive cycles late "
-                "yet; leave faults.delay at 0, or run the distributed or greedy method"
-            )
         if method.central and listed:
             raise ScenarioError(
                 "radio.encoding = compact and fusion.trigger act on the consensus of the "
@@ -460,6 +454,8 @@ def _decide_tracked(
     confirmed = tracks.book.confirmed & alive[..., None]
     more = arriving_labels(radio)
     cols = columns.of(tracks.book.label, confirmed, more)
+    if tracks.target is not None:  # a central node's labels, as columns
+        fused = replace(fused, target=columns.label_column(tracks.target, cols.labels))
     held = state.held
     if held is not None and state.labels is not None:  # the held bids by this step's labels
         held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)

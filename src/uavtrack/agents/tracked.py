@@ -23,8 +23,9 @@ import numpy as np
 from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
 from ..methods.base import Held, forwarded, scanned_tracks
+from ..methods.centralized import node_targets
 from ..radio import counted, mirrored, upper
-from ..tracks import association, columns, manage, team
+from ..tracks import association, manage, team
 from .agent import CentralAgent, UavAgent, closed, dropped, part
 from .messages import VERSION, Report, packed
 
@@ -148,9 +149,11 @@ class TrackedUav(UavAgent):
             )
             mean, cov = content["mean"][None, None], content["cov"][None, None]
             target = int(content["target"])
+            if s.delay > 0:  # the node's tracks of k - 2d (at the start: of 0), sent at k - d
+                mean, cov = forwarded(s, mean, cov, max(k - 2 * s.delay, 0), k)
         slot_bids, best, plan_seconds = self._plan(book, mean)
         labels, confirmed = book.label[0, 0], book.confirmed[0, 0]
-        follow = target if not s.faulty else self.target
+        follow = target if target >= 0 or not s.faulty else self.target
         held = np.array([follow]) if follow >= 0 else np.zeros(0, dtype=np.int64)
         slot = _slot_of(0 if held.size else -1, held, labels, confirmed, slot_bids)
         report = self._report(
@@ -163,28 +166,31 @@ class TrackedUav(UavAgent):
         return report
 
     def _tracks_download(self, k: int):
-        """The node's download of this cycle (its checked content, or None when it did
-        not come) and (offered, came) as `UavAgent.upload` counts it."""
+        """The node's download sent `delay` cycles ago (its checked content, or None when
+        it did not come, or none was sent yet) and (offered, came) as `UavAgent.upload`
+        counts it."""
         s, one = self.setting, int(self.n > 1)
-        mailbox, node = self.mailbox, self.n
-        lost = bool(self.radio.lost(k, "download", 0, np.array(node), self.me))
-        expect = self.radio.central[k] and not lost
-        expect = expect and self.radio.affords(k, self.me, "download")  # sent to it at all
+        mailbox, node, then = self.mailbox, self.n, k - self.radio.delay
+        if then < 0:  # nothing sent yet
+            return None, []
+        lost = bool(self.radio.lost(then, "download", 0, np.array(node), self.me))
+        expect = self.radio.central[then] and not lost
+        expect = expect and self.radio.affords(then, self.me, "download")  # sent to it at all
         if expect:  # two rounds: the node waits up to a round's deadline for the uploads
             mailbox.wait(
                 lambda: (
-                    mailbox.content(k, "download", node, 0) is not None or mailbox.is_gone(node)
+                    mailbox.content(then, "download", node, 0) is not None or mailbox.is_gone(node)
                 ),
                 time.monotonic() + 2 * self.radio.deadline,
             )
-        content = mailbox.content(k, "download", node, 0) if expect else None
+        content = mailbox.content(then, "download", node, 0) if expect else None
         if expect and content is None:  # late, or the node's token went: it never came
             self.radio.missed("download", 1)
         if content is not None:
             content, reasons = self.spec.tracks(content)
             dropped(self.mailbox, reasons)
-        mine = int(self.radio.alive[k][self.me]) if s.faulty else one
-        mine *= int(self.radio.affords(k, self.me, "download"))
+        mine = int(self.radio.alive[then][self.me]) if s.faulty else one
+        mine *= int(self.radio.affords(then, self.me, "download"))
         return content, [(mine, mine * int(content is not None))]
 
     def _close(self, scanned, agreed: team.TrackSet, changed, book) -> None:
@@ -462,30 +468,26 @@ class TrackedCentral(CentralAgent):
         self.radio.begin(k, np.zeros(n, dtype=bool), alive, afford=tick.get("afford"))
         start = timing.start()
         uploads, offered = self.uploads(k)
+        processed = uploads is not None  # with delay: none before the first arrive
         uploads = uploads or {}
         node = self.node
-        for _, content in sorted(uploads.items()):
+        for _, content in sorted(uploads.items()):  # the scans of k - delay
             scanned = manage.scan(
                 node.book, node.mean, node.cov, content["z"][None, None],
                 content["R"][None, None], np.ones((1, 1, len(content["z"])), dtype=bool),
                 content["uav"][None, None], np.ones((1, 1), dtype=bool), scenario,
-                node.modes, tracker, k,
+                node.modes, tracker, k - s.delay,
             )  # fmt: skip
             node = manage.Slots(
                 book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
             )
         targets = np.full(n, -1, dtype=np.int64)
-        if not s.faulty and uploads:  # one assignment over every UAV's bids by label
-            heard = np.array(sorted(uploads))
-            believed = np.stack([uploads[i]["uav"] for i in heard])[None]
-            slot_bids = np.full((1, n, self.scenario.track_slots), np.nan)
-            slot_bids[0, heard] = s.plan(believed, np.repeat(node.mean, heard.size, axis=1))[0]
-            slot_bids = manage.weighed(slot_bids, node.book, scenario)  # (1, 1, K) broadcast
-            confirmed = np.repeat(node.book.confirmed, n, axis=1) & alive[None, :, None]
-            slot_bids = np.where(confirmed, slot_bids, np.nan)
-            cols = columns.of(np.repeat(node.book.label, n, axis=1), confirmed)
-            column, _ = assignment.centralized(columns.bids(np.nan_to_num(slot_bids), cols))
-            targets = np.where(column[0] >= 0, cols.labels[0, np.maximum(column[0], 0)], -1)
+        if processed:  # one assignment of the UAVs heard from to the node's labels
+            heard = np.zeros((1, n), dtype=bool)
+            reported = np.zeros((1, n, 5))
+            for i, content in uploads.items():
+                heard[0, i], reported[0, i] = True, content["uav"]
+            targets = node_targets(node, reported, heard, s, scenario)[0]
         book = node.book
         shared = {
             "mean": node.mean[0, 0], "cov": node.cov[0, 0], "label": book.label[0, 0],
@@ -498,8 +500,9 @@ class TrackedCentral(CentralAgent):
             int(i): dict(shared, target=np.array(targets[i], dtype=np.int64))
             for i in np.flatnonzero(alive)
         }
-        mean, cov, modes = tracker.close(node.mean, node.cov, node.modes, node.mean, node.cov)
-        self.node = manage.Slots(
-            book=manage.survive(book, self.scenario), mean=mean, cov=cov, modes=modes
-        )
+        if processed:  # its tracks predicted to the next scan it takes
+            mean, cov, modes = tracker.close(node.mean, node.cov, node.modes, node.mean, node.cov)
+            self.node = manage.Slots(
+                book=manage.survive(book, self.scenario), mean=mean, cov=cov, modes=modes
+            )
         return self.downloads(k, alive, contents, offered, start)

@@ -189,6 +189,7 @@ class FusedTracks:
     tombs: np.ndarray | None = None
     told: np.ndarray | None = None  # with fusion.trigger: `Inputs.told` after this cycle
     told_labels: np.ndarray | None = None  # and `Inputs.told_labels`
+    target: np.ndarray | None = None  # the labels a central node sent to follow (B, N)
 
 
 class Method:

@@ -19,10 +19,11 @@ from __future__ import annotations
 import numpy as np
 
 from .. import assignment, fusion, timing
+from ..config import Scenario
 from ..radio import counted, part_bytes
 from ..robust import gate
-from ..tracks import manage
-from .base import Assigned, Fused, FusedTracks, Inputs, Local, Method, Setting, wire
+from ..tracks import columns, manage
+from .base import Assigned, Fused, FusedTracks, Inputs, Local, Method, Setting, forwarded, wire
 
 
 class Centralized(Method):
@@ -120,33 +121,48 @@ class Centralized(Method):
         node runs the association rule of the run on the scans one UAV after another
         (`manage.scan` on its own tracks, the UAV's disk as the sensor's), and every UAV
         downloads the node's tracks. A lost upload leaves that scan out; a lost download
-        leaves the UAV with the tracks it downloaded before, predicted."""
+        leaves the UAV with the tracks it downloaded before, predicted.
+
+        With ``faults.delay`` d the node takes at cycle k the scans of k - d (its tracks
+        run d steps behind, and stay at the start until the first scans arrive), and a
+        UAV takes at k the download sent at k - d, whose tracks are of k - 2d: predicted
+        to k (`forwarded`)."""
         s, radio, alive = inputs.setting, inputs.radio, inputs.alive
         scenario = s.scenario
         if scenario is None or local.central is None:
             raise ValueError("the central tracker needs the scenario and its own tracks")
         B, n = alive.shape
         self.on_air(inputs, local.valid.sum(axis=-1))
+        scans = {"z": local.z, "R": local.R, "valid": local.valid, "uavs": inputs.believed}
         heard, take, upload = alive, alive, None
         sent = delivered = np.full(B, 2 * n if n > 1 else 0, dtype=np.int64)
         if s.faulty:  # the uploads sent: what the shares afford
-            radio.send("upload", {"alive": radio.afforded(alive)})
+            radio.send("upload", {"alive": radio.afforded(alive), **scans})
             upload, up_ok = radio.receive_central("upload")
             heard = up_ok & upload["alive"] if upload is not None else np.zeros_like(alive)
-        node = local.central
-        for i in range(n):
-            one = slice(i, i + 1)
-            scanned = manage.scan(
-                node.book, node.mean, node.cov, local.z[:, one], local.R[:, one],
-                local.valid[:, one], inputs.believed[:, one], heard[:, one], scenario,
-                node.modes, local.tracker, inputs.k,
-            )  # fmt: skip
-            node = manage.Slots(
-                book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
-            )
+            if upload is not None:
+                scans = upload
+        node, when = local.central, inputs.k - s.delay  # the step of the scans taken now
+        if upload is not None or not s.faulty:
+            for i in range(n):
+                one = slice(i, i + 1)
+                scanned = manage.scan(
+                    node.book, node.mean, node.cov, scans["z"][:, one], scans["R"][:, one],
+                    scans["valid"][:, one], scans["uavs"][:, one], heard[:, one], scenario,
+                    node.modes, local.tracker, when,
+                )  # fmt: skip
+                node = manage.Slots(
+                    book=scanned.book, mean=scanned.mean, cov=scanned.cov, modes=scanned.modes
+                )
         book, mean, cov = node.book, node.mean, node.cov
-        if s.faulty:  # the downloads the node's share sends
-            radio.send("download", {"alive": radio.afforded(alive, "served")})
+        target = None
+        if s.faulty:  # the downloads the node's share sends, each with its label to follow
+            label = np.full((B, n), -1, dtype=np.int64)
+            if upload is not None:
+                label = node_targets(node, scans["uavs"], heard, s, scenario)
+            served = radio.afforded(alive, "served")
+            content = {"alive": served, "book": book, "mean": mean, "cov": cov, "target": label}
+            radio.send("download", content)
             download, down_ok = radio.receive_central("download")
             take = np.zeros_like(alive)
             arrived = []
@@ -155,6 +171,11 @@ class Centralized(Method):
             if download is not None:
                 take = down_ok & alive & download["alive"]
                 arrived.append((download["alive"].sum(axis=1), take.sum(axis=1)))
+                book, mean, cov = download["book"], download["mean"], download["cov"]
+                target = np.where(take, download["target"], -1)
+                if s.delay > 0:  # tracks of k - 2d (at the start: of 0), sent at k - d
+                    at = max(inputs.k - 2 * s.delay, 0)
+                    mean, cov = forwarded(s, mean, cov, at, inputs.k)
             sent, delivered = counted(
                 s.delay,
                 lambda: (radio.transmitted_central(p) for p in ("upload", "download")),
@@ -171,7 +192,8 @@ class Centralized(Method):
             rounds=np.where(alive, 1 if n > 1 else 0, 0),
             sent=sent,
             delivered=delivered,
-            central=node,
+            central=node if upload is not None or not s.faulty else None,
+            target=target,
         )
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
@@ -202,6 +224,31 @@ def nothing_heard(B: int, n: int, m: int) -> fusion.Estimates:
         cov=np.zeros((B, n, m, 4, 4)),
         stamp=np.zeros((B, n, m), dtype=np.int64),
     )
+
+
+def node_targets(
+    node: manage.Slots,
+    uavs: np.ndarray,
+    heard: np.ndarray,
+    setting: Setting,
+    scenario: Scenario,
+) -> np.ndarray:
+    """The label each UAV heard from is to follow (B, N) (-1: none, or not heard), with
+    tracks: bids planned from the states the UAVs reported, `uavs` (B, N, 5), over the
+    node's confirmed tracks (N = 1 slots), one global assignment of the UAVs heard
+    (`heard` (B, N)) to their labels, as `central_node` does with known targets."""
+    B, n = heard.shape
+    slot_bids = np.full(heard.shape + node.book.label.shape[-1:], np.nan)
+    t, i = np.nonzero(heard)
+    if t.size:  # planned for the UAVs heard from alone
+        slot_bids[t, i] = setting.plan(uavs[t, i][None], node.mean[t, 0][None])[0][0]
+    slot_bids = manage.weighed(slot_bids, node.book, scenario)
+    confirmed = np.repeat(node.book.confirmed, n, axis=1) & heard[..., None]
+    slot_bids = np.where(confirmed, slot_bids, np.nan)
+    cols = columns.of(np.repeat(node.book.label, n, axis=1), confirmed)
+    column, _ = assignment.centralized(columns.bids(np.nan_to_num(slot_bids), cols), heard)
+    b = np.arange(B)[:, None]
+    return np.where(column >= 0, cols.labels[b, np.maximum(column, 0)], -1)
 
 
 def central_node(
