@@ -1,6 +1,7 @@
-"""Command line: ``uavtrack run | compare | params | reproduce | sweep | animate | bandwidth |
-bench | export | flight | robustness | sensing | separation | swarm | agent | trackers``,
-each in a module of its name (`app`: run, compare, params and the shared options;
+"""Command line: ``uavtrack run | compare | params | reproduce | sweep | animate |
+bandwidth | bench | export | flight | realistic | robustness | sensing | separation |
+swarm | agent | trackers``, each in a module of its name (`app`: run, compare, params
+and the shared options;
 `experiments`: reproduce, sweep, animate; `benchmark`: bench; `swarm`: swarm, agent).
 
 Exit codes: 0 done; 1 the run failed (finished work is kept); 2 bad input (one line
@@ -15,6 +16,7 @@ from . import (  # noqa: F401
     experiments,
     export,
     flight,
+    realistic,
     robustness,
     sensing,
     separation,
