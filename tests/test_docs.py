@@ -293,31 +293,50 @@ def test_what_a_page_says_its_code_prints_is_what_it_prints(tmp_path, monkeypatc
         assert out.getvalue() == output, f"{page}: its printed output is not what it prints"
 
 
-def collected(marks: str) -> int:
-    """How many tests `pytest -m MARKS` collects (in a process of its own)."""
+MARKS_PLUGIN = """
+import json, os
+
+def pytest_collection_modifyitems(session, config, items):
+    rows = [sorted({m.name for m in item.iter_markers()}) for item in items]
+    with open(os.environ["UAVTRACK_MARKS"], "w") as f:
+        json.dump(rows, f)
+"""
+"""A pytest plugin that writes every collected test's markers, before any selection."""
+
+
+def collected(tmp_path) -> dict[str, int]:
+    """How many tests each of the suites collects (`pytest -m MARKS`), from one
+    collection in a process of its own: every test's markers, counted per suite."""
+    import json
+    import os
     import subprocess
 
+    (tmp_path / "uavtrack_marks.py").write_text(MARKS_PLUGIN)
+    out = tmp_path / "marks.json"
+    env = dict(os.environ, UAVTRACK_MARKS=str(out))
+    env["PYTHONPATH"] = os.pathsep.join(filter(None, [str(tmp_path), env.get("PYTHONPATH")]))
     done = subprocess.run(
         [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider",
-         "-m", marks, str(ROOT / "tests")],
-        capture_output=True, text=True, cwd=ROOT, timeout=600,
+         "-p", "uavtrack_marks", str(ROOT / "tests")],
+        capture_output=True, text=True, cwd=ROOT, timeout=600, env=env,
     )  # fmt: skip
-    last = done.stdout.strip().splitlines()[-1]
-    match = re.match(r"(\d+)(?:/\d+)? tests? collected", last)
-    assert match, last
-    return int(match[1])
+    assert out.exists(), done.stdout[-2000:] + done.stderr[-2000:]
+    marks = [set(row) for row in json.loads(out.read_text())]
+    slow = [m for m in marks if "slow" in m]
+    rest = [m for m in marks if "slow" not in m]
+    return {
+        "fast": sum("integration" not in m for m in rest),
+        "default": len(rest),
+        "slow": len(slow),
+        "integration": sum("integration" in m for m in rest),
+    }
 
 
 @pytest.mark.integration  # collects the suite in a process of its own
-def test_the_test_counts_the_pages_give_are_the_suites():
+def test_the_test_counts_the_pages_give_are_the_suites(tmp_path):
     """The README's and docs/tests.md's counts are what pytest collects: a test added
     without them fails here, so they cannot drift."""
-    counts = {
-        "fast": collected("not integration and not slow"),
-        "default": collected("not slow"),
-        "slow": collected("slow"),
-        "integration": collected("integration and not slow"),
-    }
+    counts = collected(tmp_path)
     readme, page = (ROOT / "README.md").read_text(), (DOCS / "tests.md").read_text()
     expected = {
         "README default": (readme, f"({counts['default']:,} tests,"),

@@ -419,7 +419,7 @@ def test_a_member_offering_every_label_at_one_point_stops_no_honest_program(monk
     an honest UAV held one twice and its own messages were refused (2 of 4 honest
     programs lost at step 5 of seed 2). They are left out and counted."""
     member_alters(monkeypatch, "consensus", every_label_at_one_point)
-    scenario = uavtrack.Scenario(steps=30).with_overrides(
+    scenario = uavtrack.Scenario(steps=15).with_overrides(
         {"tracker.association": "jpda", **TRACKED}
     )
     swarm = run_swarm(scenario, "distributed", seed=2, transport="memory", deadline=0.5)

@@ -218,8 +218,8 @@ def test_progress_is_called_once_per_step(short):
     "fields,batch,trace",
     [
         ({"n_uavs": 50, "n_targets": 50, "steps": 20, "uav": {"altitude_spacing": 0.4}}, 1, False),
-        ({"n_uavs": 20, "n_targets": 20, "steps": 600, "uav": {"altitude_spacing": 1}}, 1, True),
-        ({"n_uavs": 10, "n_targets": 4, "steps": 2000}, 4, False),
+        ({"n_uavs": 20, "n_targets": 20, "steps": 300, "uav": {"altitude_spacing": 1}}, 1, True),
+        ({"n_uavs": 10, "n_targets": 4, "steps": 1000}, 4, False),
         ({"n_uavs": 30, "n_targets": 30, "steps": 5, "planner": {"horizon": 6}}, 1, False),
     ],
 )

@@ -87,8 +87,8 @@ ConfigOpt = Annotated[
     typer.Option(
         "--config",
         metavar="FILE",
-        help="scenario TOML file, or a shipped preset by name: one-altitude (missing "
-        "fields keep their defaults)",
+        help="scenario TOML file, or a shipped preset by name: one-altitude, realistic "
+        "(missing fields keep their defaults)",
     ),
 ]
 SetOpt = Annotated[

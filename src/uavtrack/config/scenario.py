@@ -405,7 +405,7 @@ class Scenario(Part):
     @classmethod
     def from_toml(cls, path: str | Path) -> Scenario:
         """Load a scenario from a TOML file; missing fields keep their defaults. A bare
-        name that is no file names a shipped preset (`presets`): "one-altitude"."""
+        name that is no file names a shipped preset (`presets`): "one-altitude", "realistic"."""
         file = config_file(path)
         origin = str(path) if file == Path(path) else f"preset {path}"
         return cls.from_dict(read_toml(file), origin=origin)

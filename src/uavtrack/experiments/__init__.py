@@ -4,8 +4,9 @@
   in-process comparisons as lists of jobs;
 * `statistics`: every mean, spread, paired difference, interval and number format;
 * `reproduce`: the paper's Section 7 (Figs. 5-9), the first guess and the sensitivity study;
-* `robustness`, `trackers`, `flight`, `sensing`, `separation`, `bandwidth`: the faults,
-  trackers, real-flight, sensing, one-altitude and radio-load experiments;
+* `robustness`, `trackers`, `flight`, `sensing`, `separation`, `bandwidth`, `realistic`:
+  the faults, trackers, real-flight, sensing, one-altitude, radio-load and
+  realistic-mission experiments;
 * `store`: the output folder that never loses work, and the local and Dask engines;
 * `report`, `figures`: report.md and the paper's figures from a summary;
 * `bench`: speed measurements beside their references.
