@@ -16,7 +16,6 @@ from .experiments import (
     EngineOpt,
     ProgressOpt,
     SeedOpt,
-    StepsOpt,
     WorkersOpt,
     run_experiment,
 )
@@ -36,7 +35,9 @@ def realistic(
         int | None,
         typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [50]"),
     ] = None,
-    steps: StepsOpt = None,
+    steps: Annotated[
+        int | None, typer.Option(min=1, metavar="N", help="steps per trial [200]")
+    ] = None,
     quick: Annotated[
         bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 30 steps")
     ] = False,
