@@ -626,8 +626,8 @@ class Wire:
 
     def layout(self, protocol: str, tuples: str | None = None) -> Layout:
         """`layout` of a protocol in this run (tuples: another listing than the run's)."""
-        fields = self.described(protocol, tuples)
-        return {name: (dtype, shape) for name, (dtype, shape, _) in fields.items()}
+        listing = self.tuples if tuples is None else tuples
+        return layout(protocol, self.n, self.m, self.slots, self.avoid, listing, self.book)
 
     def bytes(self, protocol: str, rows: Any = None, tuples: str | None = None) -> Any:
         """`content_bytes` of a protocol's content in this run (`rows`: of its variable
