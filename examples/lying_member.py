@@ -7,12 +7,16 @@ estimate moved by `SHIFT` metres along x and y (folded back into the field, velo
 kept) with the most confidence the run admits: a covariance at the floor of the
 sensor's accuracy (`uavtrack.robust.plausibility.Bounds.floor`) and gamma = 1 / trace of it.
 With ``--lie bids`` it bids instead the largest bid the run admits for every target.
+With ``--association jpda`` (or gnn) the team keeps tracks, and the liar moves every
+track it offers alike; the gate then checks offered tracks against the slots a
+receiver's own scans met and against its scan (`uavtrack.robust.gate.tracks_admitted`).
 The lying swarm runs over the in-process transport, so each trial is the agent form
 itself; the honest runs are the simulator's (the agent form equals it, seed for seed).
 
     python examples/lying_member.py                      # 20 trials of 500 steps
     python examples/lying_member.py --trials 4 --steps 100 --gate-memory 4
     python examples/lying_member.py --lie bids
+    python examples/lying_member.py --association jpda --trials 4 --steps 200
 
 prints, as JSON, the mean observation rate of each run and the paired differences (95%
 t intervals) that matter: the liar without and with the gate against the honest team
@@ -50,8 +54,10 @@ def lie(content: dict[str, Array], scenario) -> dict[str, Array]:
     moved = np.abs((mean[:, :2] + SHIFT) % (2 * size))  # the walls are mirrors
     mean[:, :2] = np.where(moved > size, 2 * size - moved, moved)
     cov = np.broadcast_to(1.01 * bounds.floor * np.eye(4), (len(mean), 4, 4)).copy()
-    gamma = 1.0 / np.trace(cov, axis1=-2, axis2=-1)
-    return dict(content, gamma=Array.of(gamma), mean=Array.of(mean), cov=Array.of(cov))
+    out = dict(content, mean=Array.of(mean), cov=Array.of(cov))
+    if "gamma" in content:  # tuples by target; tracks carry no confidence of their own
+        out["gamma"] = Array.of(1.0 / np.trace(cov, axis1=-2, axis2=-1))
+    return out
 
 
 def bid_lie(content: dict[str, Array], scenario) -> dict[str, Array]:
@@ -108,11 +114,13 @@ def honest_rates(scenario, n_trials: int) -> np.ndarray:
 
 
 def honest_runs(scenario, n_trials: int) -> dict[str, np.ndarray]:
-    """The observation rate and the RMSE of each trial (seed t) of the honest team."""
+    """The observation rate and the estimation error of each trial (seed t) of the
+    honest team: the RMSE with known association, the team's GOSPA with tracks."""
     runs = [uavtrack.simulate(scenario, "distributed", seed=t) for t in range(n_trials)]
+    tracked = scenario.tracker.association != "known"
     return {
         "observation_rate": np.array([r.observation_rate for r in runs]),
-        "rmse": np.array([r.rmse for r in runs]),
+        "error": np.array([r.gospa_best if tracked else r.rmse for r in runs]),
     }
 
 
@@ -124,8 +132,12 @@ def main() -> None:
     memory = uavtrack.Scenario().robust.gate_memory
     parser.add_argument("--gate-memory", type=int, default=memory, help="robust.gate_memory")
     parser.add_argument("--lie", choices=sorted(LIES), default="estimates", help="what about")
+    parser.add_argument(
+        "--association", choices=("known", "gnn", "jpda"), default="known",
+        help="tracker.association",
+    )  # fmt: skip
     args = parser.parse_args()
-    base = uavtrack.Scenario(steps=args.steps)
+    base = uavtrack.Scenario(steps=args.steps, tracker={"association": args.association})
     gated = base.with_overrides({"robust.gate": args.gate, "robust.gate_memory": args.gate_memory})
     honest = {"off": honest_runs(base, args.trials), "on": honest_runs(gated, args.trials)}
     rates = {
@@ -135,6 +147,7 @@ def main() -> None:
         "liar, robust.gate": swarm_rates(gated, args.trials, LIAR, args.lie),
     }
     out = {"lie": args.lie, "trials": args.trials, "steps": args.steps, "gate": args.gate}
+    out["association"] = args.association
     out["gate_memory"] = args.gate_memory
     out["rate"] = {name: float(r.mean()) for name, r in rates.items()}
     out["liar minus honest"] = paired(rates["liar"], rates["honest"])
@@ -142,8 +155,9 @@ def main() -> None:
         rates["liar, robust.gate"], rates["honest, robust.gate"]
     )
     out["robust.gate minus off, honest"] = paired(rates["honest, robust.gate"], rates["honest"])
-    out["robust.gate minus off, honest, RMSE [m]"] = paired(
-        honest["on"]["rmse"], honest["off"]["rmse"]
+    error = "RMSE" if args.association == "known" else "GOSPA"
+    out[f"robust.gate minus off, honest, {error} [m]"] = paired(
+        honest["on"]["error"], honest["off"]["error"]
     )
     print(json.dumps(out, indent=1))
 

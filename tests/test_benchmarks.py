@@ -97,6 +97,17 @@ def test_the_cycle_profile_finds_every_stage_of_each_method(method, tmp_path):
     assert files_in(tmp_path) == ["benchmarks/profile_cycle.py"]
 
 
+def test_the_cycle_profile_names_the_stages_of_the_track_pipeline(tmp_path):
+    tracked = ("tracker.association=jpda", "sensor.detection_probability=0.9")
+    done = run("profile_cycle.py", tmp_path, "distributed", "1", "steps=20", *tracked)
+    assert done.returncode == 0, done.stderr
+    shown = {line.split()[0]: float(line.split()[1]) for line in done.stdout.splitlines()[1:]}
+    assert {"scan", "tracking", "agreement", "columns", "metrics"} <= set(shown)
+    assert "fusion" not in shown  # the oracle's consensus does not run
+    # the named stages hold most of the cycle: "other" is the driver's share
+    assert shown["other"] < 0.5 * shown["total"], shown
+
+
 def test_the_trackers_head_to_head_replays_the_run_and_scores_both(tmp_path):
     """uavtrack's central tracker replayed on a run's scans must give the run's tracks
     (the script stops otherwise); Stone Soup's tracker runs on the same scans; both

@@ -237,6 +237,37 @@ def test_a_wrong_sweep_is_refused_before_the_experiment_modules_load():
     assert proc.stdout == "[]\n" and "did you mean comm_range?" in proc.stderr
 
 
+EXPERIMENTS = (
+    "bandwidth", "realistic", "separation", "sensing", "robustness", "trackers", "flight",
+)  # fmt: skip
+"""The commands built on `experiments.protocol.Experiment`."""
+
+
+@pytest.mark.parametrize("name", EXPERIMENTS)
+def test_each_experiment_command_implements_the_protocol_and_names_its_profile(name, capsys):
+    import importlib
+    import inspect
+
+    from uavtrack.experiments import protocol
+
+    module = importlib.import_module(f"uavtrack.experiments.{name}")
+    assert module.NAME == name
+    assert issubclass(module.Profile, protocol.Profile)
+    for part in ("plan", "summarize", "figures", "figure", "report"):
+        declared = inspect.signature(getattr(protocol.Experiment, part)).parameters
+        given = inspect.signature(getattr(module, part)).parameters
+        assert len(given) == len(declared) - 1, part  # less self
+    full, quick = module.Profile(), module.Profile.quick()
+    assert quick.trials < full.trials and quick.steps < full.steps
+    code, out, _ = run_cli(capsys, name, "--help")
+    said = " ".join(out.split())  # the help is wrapped to the terminal
+    assert code == 0
+    assert f"Profile: {full.trials} trials of {full.steps} steps" in said
+    assert f"--quick: {quick.trials} trials of {quick.steps} steps" in said
+    for option in ("--out", "--trials", "--steps", "--quick", "--workers"):
+        assert option in said
+
+
 @pytest.mark.parametrize(
     "args,message",
     [

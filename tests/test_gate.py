@@ -77,3 +77,73 @@ def test_the_gate_is_off_by_default_and_on_changes_the_paper_s_run():
     off = uavtrack.simulate(base, "distributed", seed=3)
     on = uavtrack.simulate(base.with_overrides({"robust.gate": 0.9}), "distributed", seed=3)
     assert not np.array_equal(on.trace.mean, off.trace.mean)
+
+
+# ------------------------------------------------------------------ with tracks
+
+
+def tracks_scanned(z=(), recent=((False, False),), uav=(0.0, 0.0, 100.0, 0.0, 25.0)):
+    """One receiver's scan for `gate.tracks_admitted`: measurements z (Z, 2) of noise I."""
+    z = np.array(z, dtype=float).reshape(1, -1, 2)
+    Z = z.shape[1]
+    return gate.Scanned(
+        z=z,
+        R=np.broadcast_to(np.eye(2), (1, Z, 2, 2)).copy(),
+        valid=np.ones((1, Z), dtype=bool),
+        uav=np.array([uav]),
+        recent=np.array(recent),
+    )
+
+
+def admitted_tracks(offers, slot, scanned, own=((0.0, 0.0),) * 2, sender=None):
+    from uavtrack.config import Scenario
+
+    mean = np.zeros((len(offers), 4))
+    mean[:, :2] = offers
+    cov = np.broadcast_to(np.eye(4), (len(offers), 4, 4))
+    own_mean = np.zeros((len(own), 4))
+    own_mean[:, :2] = own
+    own_cov = np.broadcast_to(np.eye(4), (len(own), 4, 4))
+    sender = np.ones(len(offers), dtype=np.int64) if sender is None else np.array(sender)
+    row = np.zeros(len(offers), dtype=np.int64)
+    return gate.tracks_admitted(
+        row, sender, mean, cov, np.array(slot), (own_mean, own_cov), scanned,
+        Scenario().sensor, gate.threshold(0.9999),
+    )  # fmt: skip
+
+
+def test_a_track_offered_for_a_recently_met_slot_must_agree_with_it():
+    scanned = tracks_scanned(recent=((True, False),))
+    near, far = (1.0, 1.0), (60.0, 0.0)
+    assert admitted_tracks([near], [0], scanned).tolist() == [True]
+    assert admitted_tracks([far], [0], scanned).tolist() == [False]
+    # a slot not met recently checks nothing against its estimate
+    assert admitted_tracks([far], [1], tracks_scanned(z=[far])).tolist() == [True]
+
+
+def test_a_sender_caught_against_a_met_slot_is_believed_on_nothing_that_round():
+    scanned = tracks_scanned(z=[(300.0, 0.0)], recent=((True, False),))
+    offers = [(60.0, 0.0), (300.5, 0.0)]  # a lie about slot 0, then a true new track
+    assert admitted_tracks(offers, [0, -1], scanned, sender=[1, 1]).tolist() == [False, False]
+    assert admitted_tracks(offers, [0, -1], scanned, sender=[1, 2]).tolist() == [False, True]
+
+
+def test_a_new_track_in_view_must_meet_a_measurement_and_one_out_of_view_passes():
+    from uavtrack.config import Scenario
+    from uavtrack.sensing import observation_radius
+
+    reach = float(observation_radius(np.array(100.0), Scenario().sensor))
+    inside, outside = (reach / 2, 0.0), (reach * 2, 0.0)
+    seen = tracks_scanned(z=[(reach / 2 + 1.0, 0.0)])
+    assert admitted_tracks([inside], [-1], seen).tolist() == [True]
+    assert admitted_tracks([inside], [-1], tracks_scanned()).tolist() == [False]
+    assert admitted_tracks([outside], [-1], tracks_scanned()).tolist() == [True]
+
+
+def test_with_tracks_the_gate_changes_nothing_honest_at_a_wide_gate_and_refuses_centralized():
+    base = uavtrack.Scenario(steps=30).with_overrides({"tracker.association": "jpda"})
+    off = uavtrack.simulate(base, "distributed", seed=2)
+    on = uavtrack.simulate(base.with_overrides({"robust.gate": 0.9999}), "distributed", seed=2)
+    assert on.observation_rate == pytest.approx(off.observation_rate, abs=0.05)
+    with pytest.raises(uavtrack.ScenarioError, match="robust.gate with tracks"):
+        uavtrack.simulate(base.with_overrides({"robust.gate": 0.9}), "centralized", seed=2)

@@ -472,6 +472,21 @@ def test_a_member_lying_within_the_bounds_takes_the_team_over_unless_the_gate_is
 
 
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
+def test_with_tracks_a_lying_member_takes_the_team_over_unless_the_gate_is_on():
+    """The liar moves every track it offers 100 m at the most confidence the run admits;
+    with the gate a receiver refuses what contradicts the slots its own scans met and
+    its scan, and catches the liar."""
+    example = lying_member()
+    base = uavtrack.Scenario(steps=60).with_overrides({"tracker.association": "jpda"})
+    gated = base.with_overrides({"robust.gate": 0.9999})
+    honest = example["honest_rates"](base, 2)
+    liar = example["swarm_rates"](base, 2, example["LIAR"])
+    guarded = example["swarm_rates"](gated, 2, example["LIAR"])
+    assert liar.mean() < honest.mean() - 0.3
+    assert guarded.mean() >= example["honest_rates"](gated, 2).mean() - 0.05
+
+
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
 @pytest.mark.parametrize("method", ["distributed", "centralized", "greedy"])
 @pytest.mark.parametrize(
     "overrides",
@@ -492,6 +507,27 @@ def test_memory_swarm_with_the_gate_equals_the_simulator(method, overrides):
     from uavtrack.testing import assert_same_trace
 
     scenario = uavtrack.Scenario(steps=40).with_overrides(overrides)
+    swarm = run_swarm(scenario, method, seed=3, transport="memory")
+    reference = uavtrack.simulate(scenario, method, seed=3)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.dropped == 0
+
+
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+@pytest.mark.parametrize("method", ["distributed", "greedy"])
+def test_memory_swarm_with_the_gate_and_tracks_equals_the_simulator(method):
+    from uavtrack.testing import assert_same_trace
+
+    scenario = uavtrack.Scenario(steps=40).with_overrides(
+        {
+            "tracker.association": "jpda",
+            "sensor.detection_probability": 0.9,
+            "sensor.clutter_rate": 2.0,
+            "robust.gate": 0.9,
+            "robust.gate_memory": 2,
+            "faults.loss": 0.2,
+        }
+    )
     swarm = run_swarm(scenario, method, seed=3, transport="memory")
     reference = uavtrack.simulate(scenario, method, seed=3)
     assert_same_trace(swarm.result.trace, reference.trace)

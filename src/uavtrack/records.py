@@ -16,7 +16,7 @@ derived from it.
 from __future__ import annotations
 
 from dataclasses import dataclass, field, fields, make_dataclass
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -190,12 +190,13 @@ TRACKED: dict[str, tuple[str, str, type]] = {
 (shape per step, meaning, dtype)."""
 
 
-def _trace_arrays(self: Any) -> dict[str, np.ndarray]:
-    out = {name: getattr(self, name) for name in self.__dataclass_fields__}
+def _trace_arrays(self: DataclassInstance) -> dict[str, np.ndarray]:
+    out = {f.name: getattr(self, f.name) for f in fields(self)}
     return {name: value for name, value in out.items() if value is not None}
 
 
 if TYPE_CHECKING:  # what a checker knows of Trace, whose fields are made from Cycle's
+    from _typeshed import DataclassInstance
 
     class Trace:
         def __init__(self, targets: np.ndarray, **recorded: np.ndarray | None) -> None: ...
@@ -238,7 +239,7 @@ class Pending:
     own: np.ndarray  # (B, Nu) the method's actions, indices into the action set
     plan_seconds: np.ndarray  # (2,): CPU, wall (`timing`)
     belief: estimation.Belief  # each UAV's own (mean, cov, modes) after its update, before fusion
-    detected: np.ndarray | None = None  # (B, Nu, Nt) the pairs measured (None: all observed)
+    detected: np.ndarray  # (B, Nu, Nt) the pairs measured (missed targets not)
     tracks: FusedTracks | None = None  # with unknown association: the tracks after fusion
     scan: scans.Scan | None = None  # with unknown association: the scans
     columns: np.ndarray | None = None  # with unknown association: the held label each took
@@ -250,6 +251,10 @@ class Pending:
         """What a conflict is counted over: the targets, or with unknown association the
         labels the living UAVs hold confirmed (`columns` indexes them)."""
         return self.bids.shape[-1] if self.held is None else self.held
+
+
+Summary = str | int | float | list[float] | None
+"""A value of `Result.summary`: the method, the seed, a metric, or per-target rates."""
 
 
 @dataclass(frozen=True)
@@ -330,10 +335,10 @@ class Result:
     decision_wall_ms: float
     trace: Trace | None = field(default=None, repr=False)
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> dict[str, Summary]:
         """JSON-ready metrics (the names of `metrics.METRICS`, in its order: the fields
         after the scenario, a test holds them equal)."""
-        out: dict[str, Any] = {"method": self.method, "seed": self.seed}
+        out: dict[str, Summary] = {"method": self.method, "seed": self.seed}
         for name in RESULT_METRICS:
             value = getattr(self, name)
             out[name] = [float(x) for x in value] if name == "per_target" else float(value)

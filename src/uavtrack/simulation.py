@@ -24,7 +24,7 @@ from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
 from functools import cache
 from numbers import Integral
-from typing import Any
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -34,7 +34,7 @@ from .config import G, Scenario, ScenarioError, SensorModel
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Distributed, Fused, Held, Inputs, Method, Setting, get
-from .methods.base import Local, wire_of
+from .methods.base import FusedTracks, Local, wire_of
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES
 from .numerics.buffers import Buffers
 from .radio import (
@@ -146,21 +146,18 @@ class Context:
     updated in place. None: a cycle leaves the state it is given untouched."""
 
     @property
-    def tracked(self) -> bool:
-        """Whether the UAVs keep tracks of unknown association (gnn, jpda)."""
-        return self.scenario.tracker.association != "known"
+    def associator(self) -> Associator:
+        """How the cycle reads measurements: the oracle (known association) or tracks."""
+        return ORACLE if self.scenario.tracker.association == "known" else TRACKING
 
     @classmethod
     def of(
         cls, scenario: Scenario, method: Method, seeds: Sequence[np.random.SeedSequence]
     ) -> Context:
-        listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
-        if method.central and listed:
-            raise ScenarioError(
-                "radio.encoding = compact and fusion.trigger act on the consensus of the "
-                f"distributed and greedy methods; method {method.name} uploads and downloads "
-                "whole tables, which they do not encode yet: leave both unset"
-            )
+        why = refusal(scenario, method)
+        if why is not None:
+            raise ScenarioError(why)
+        tracked = scenario.tracker.association != "known"
         const = Constants.of(scenario)
         keys = np.stack([trial_key(world.children(s)[2]) for s in seeds])
         faults = Faults(scenario.faults, keys, scenario.n_uavs)
@@ -182,7 +179,7 @@ class Context:
             compact=scenario.radio.encoding == "compact",
         )
         detection = None
-        if not scenario.sensor.ideal or scenario.tracker.association != "known":
+        if not scenario.sensor.ideal or tracked:
             detection = scans.Draws.of([detection_stream(s) for s in seeds])
         return cls(
             scenario=scenario,
@@ -192,6 +189,26 @@ class Context:
             setting=setting,
             detection=detection,
         )
+
+
+def refusal(scenario: Scenario, method: Method) -> str | None:
+    """Why `method` cannot run `scenario` (a piece not built yet, docs/how-to/pairs.md),
+    or None: what `Context.of` refuses, for a caller to check every run before any."""
+    listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
+    if method.central and listed:
+        return (
+            "radio.encoding = compact and fusion.trigger act on the consensus of the "
+            f"distributed and greedy methods; method {method.name} uploads and downloads "
+            "whole tables, which they do not encode yet: leave both unset"
+        )
+    tracked = scenario.tracker.association != "known"
+    if method.central and tracked and scenario.robust.gate is not None:
+        return (
+            "robust.gate with tracks checks the tracks a neighbour offers in the consensus; "
+            f"method {method.name}'s UAVs take the central node's whole table, which it "
+            "does not check yet: leave robust.gate unset"
+        )
+    return None
 
 
 def _plan(
@@ -254,76 +271,6 @@ def _forward(
     return forward
 
 
-def decide(
-    state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context, plan: bool = True
-) -> Pending:
-    """The first part of the cycle at step k = state.k for every trial: faults, sensing,
-    local filters, fusion, planning and assignment.
-
-    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals.
-    plan=False stops after fusion, for agents that choose every action themselves: no
-    bids (NaN), no auction (no messages; every UAV keeps its last target) and the
-    method's own actions fly straight. What the UAVs sense and know is unchanged.
-    """
-    if ctx.tracked:
-        return _decide_tracked(state, targets, noise, ctx, plan)
-    scenario, method = ctx.scenario, ctx.method
-    k, uavs = state.k, state.uavs
-    alive, believed = _world(state, ctx)
-    radio = _radio(state, ctx, alive)
-    observed, polar = observe(uavs, targets, noise, alive, scenario)
-    detected = observed
-    if ctx.detection is not None:  # a missed target is not measured; clutter is known false
-        detected = scans.detected(
-            ctx.detection.detect, observed, scenario.sensor.detection_probability
-        )
-        polar = polar[detected[observed]]
-    b, i, _ = np.nonzero(detected)
-    z, R = convert(believed[b, i], polar, scenario)
-    owned = ctx.buffers is not None
-    belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, detected, z, R, owned)
-    mean, cov = belief[:2]
-    inputs = Inputs(
-        k=k,
-        radio=radio,
-        mean=mean,
-        cov=cov,
-        gamma=estimation.confidence(cov),
-        believed=believed,
-        alive=alive,
-        previous=state.target,
-        held=state.held,
-        setting=ctx.setting,
-        measured=measured(state, detected, z, R, ctx),
-        buffers=ctx.buffers,
-        told=state.told,
-    )
-    fused = method.fuse(inputs)
-    if not plan:
-        return _unplanned(state, believed, alive, observed, radio, fused, belief, detected)
-    start = timing.start()
-    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
-    plan_seconds = timing.since(start)
-    assigned = method.assign(inputs, fused, bids)
-    chosen = np.take_along_axis(best, np.maximum(assigned.target, 0)[..., None], axis=-1)[..., 0]
-    own = np.where(alive, chosen, STRAIGHT)
-    return Pending(
-        k=k,
-        uavs=uavs,
-        believed=believed,
-        alive=alive,
-        observed=observed,
-        radio=radio,
-        fused=fused,
-        bids=bids,
-        assigned=assigned,
-        own=own,
-        plan_seconds=plan_seconds,
-        belief=belief,
-        detected=detected,
-    )
-
-
 def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
     """Who is alive at this step and where the UAVs believe they are."""
     faults, k = ctx.faults, state.k
@@ -372,141 +319,6 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
     return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds)
 
 
-def measure_scan(
-    uavs: np.ndarray,
-    believed: np.ndarray,
-    observed: np.ndarray,
-    polar: np.ndarray,
-    alive: np.ndarray,
-    ctx: Context,
-) -> scans.Scan:
-    """Each UAV's unlabelled scan (`tracks.scan`): the detected targets' measurements
-    (polar (K, 2) of the observing pairs in the order of ``np.nonzero(observed)``) and
-    the clutter, shuffled, converted from where each UAV believes it is."""
-    sensor, draws = ctx.scenario.sensor, ctx.detection
-    assert draws is not None, "a run of unknown association has its detection streams"
-    got = scans.detected(draws.detect, observed, sensor.detection_probability)
-    polar = polar[got[observed]]
-    nothing = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
-    false = [
-        scans.clutter(rng, uavs[b], alive[b], sensor) if sensor.clutter_rate > 0 else nothing
-        for b, rng in enumerate(draws.clutter)
-    ]
-    raw, valid, origin = scans.assemble(draws.order, got, polar, false, shuffle=True)
-    where = np.broadcast_to(believed[:, :, None], raw.shape[:3] + believed.shape[-1:])
-    z, R = convert(where[valid], raw[valid], ctx.scenario)
-    zz = np.zeros(raw.shape)
-    RR = np.broadcast_to(np.eye(2), raw.shape + (2,)).copy()
-    zz[valid], RR[valid] = z, R
-    return scans.Scan(polar=raw, z=zz, R=RR, valid=valid, origin=origin)
-
-
-def _decide_tracked(
-    state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context, plan: bool
-) -> Pending:
-    """`decide` with unknown association: each UAV's scan comes unlabelled, its tracks
-    and the team's agreement on them (`Method.fuse_tracks`) replace the per-target
-    filters and max-consensus, and the auction runs over team labels
-    (`tracks.columns`)."""
-    scenario, method = ctx.scenario, ctx.method
-    k, uavs = state.k, state.uavs
-    assert state.book is not None, "a run of unknown association starts with its tracks"
-    alive, believed = _world(state, ctx)
-    observed, polar = observe(uavs, targets, noise, alive, scenario)
-    scan = measure_scan(uavs, believed, observed, polar, alive, ctx)
-    radio = _radio(state, ctx, alive, scan.valid.sum(axis=-1) if method.central else None)
-    local = Local(
-        book=state.book,
-        mean=state.mean,
-        cov=state.cov,
-        z=scan.z,
-        R=scan.R,
-        valid=scan.valid,
-        tracker=ctx.const.tracker,
-        modes=state.modes,
-        central=state.central,
-        tombs=state.tombs,
-    )
-    inputs = Inputs(
-        k=k,
-        radio=radio,
-        mean=state.mean,
-        cov=state.cov,
-        gamma=estimation.confidence(state.cov),
-        believed=believed,
-        alive=alive,
-        previous=state.target,
-        held=state.held,
-        setting=ctx.setting,
-        told=state.told,
-        told_labels=state.told_labels,
-    )
-    tracks = method.fuse_tracks(inputs, local)
-    B, Nu = alive.shape
-    fused = Fused(
-        mean=tracks.mean,
-        cov=tracks.cov,
-        rounds=tracks.rounds,
-        sent=tracks.sent,
-        delivered=tracks.delivered,
-        seconds=np.zeros((B, Nu, 2)),
-    )
-    confirmed = tracks.book.confirmed & alive[..., None]
-    more = arriving_labels(radio)
-    cols = columns.of(tracks.book.label, confirmed, more)
-    if tracks.target is not None:  # a central node's labels, as columns
-        fused = replace(fused, target=columns.label_column(tracks.target, cols.labels))
-    held = state.held
-    if held is not None and state.labels is not None:  # the held bids by this step's labels
-        held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)
-    inputs = replace(
-        inputs,
-        mean=tracks.mean,
-        cov=tracks.cov,
-        gamma=estimation.confidence(tracks.cov),
-        previous=columns.label_column(state.target, cols.labels),
-        held=held,
-        holds=columns.holds(cols),
-        columns=cols,
-    )
-    belief = (tracks.mean, tracks.cov, None)
-    if not plan:
-        pending = _unplanned(state, believed, alive, observed, radio, fused, belief)
-        return replace(pending, tracks=tracks, scan=scan, labels=cols.labels, held=cols.width)
-    start = timing.start()
-    slot_bids, best = ctx.setting.plan(believed, tracks.mean)
-    slot_bids = manage.weighed(slot_bids, tracks.book, scenario)
-    plan_seconds = timing.since(start)
-    slot_bids = np.where(confirmed, slot_bids, np.nan)
-    assigned = method.assign(inputs, fused, columns.bids(np.nan_to_num(slot_bids), cols))
-    slot = columns.slot_of(assigned.target, cols, np.where(confirmed, slot_bids, -np.inf))
-    chosen = np.take_along_axis(best, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
-    own = np.where(alive & (slot >= 0), chosen, STRAIGHT)
-    label = np.take_along_axis(tracks.book.label, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
-    followed = np.where(alive & (slot >= 0), label, -1)
-    owned = cols if more is None else columns.of(tracks.book.label, confirmed)  # no late ones
-    taken = np.where(alive, columns.label_column(followed, owned.labels), -1)
-    return Pending(
-        k=k,
-        uavs=uavs,
-        believed=believed,
-        alive=alive,
-        observed=observed,
-        radio=radio,
-        fused=fused,
-        bids=slot_bids,
-        assigned=replace(assigned, target=followed),
-        own=own,
-        plan_seconds=plan_seconds,
-        belief=belief,
-        tracks=tracks,
-        scan=scan,
-        columns=taken,
-        labels=cols.labels,
-        held=owned.width,
-    )
-
-
 def arriving_labels(radio: Radio) -> np.ndarray | None:
     """The labels (B, L') of the bids sent cycles ago that arrive now (``faults.delay``),
     which this cycle's columns hold too: a receiver knows them from the bids (None: no
@@ -517,54 +329,6 @@ def arriving_labels(radio: Radio) -> np.ndarray | None:
     if inbox is None or "labels" not in inbox.content:
         return None
     return inbox.content["labels"]
-
-
-def _finish_tracked(
-    state: State,
-    pending: Pending,
-    ctx: Context,
-    cycle: Cycle,
-    new_uavs: np.ndarray,
-    beacons: avoidance.Heard | None = None,
-) -> tuple[State, Cycle]:
-    """`finish` with unknown association: every UAV's tracks (and a central node's)
-    predicted to the next scan (eq. 23), the labels of the bids held kept beside them."""
-    tracks, tracker = pending.tracks, ctx.const.tracker
-    assert tracks is not None
-    own, modes = tracks.own, None
-    if own is not None and own.modes is not None:  # an IMM: fused tracks restart their modes
-        modes = manage.restart(own.modes, tracks.changed == 2, tracks.mean, tracks.cov, tracker)
-        mean, cov, modes = tracker.close(own.mean, own.cov, modes, tracks.mean, tracks.cov)
-    else:
-        mean, cov = estimation.predict(tracks.mean, tracks.cov, tracker.A, tracker.Q)
-    central = state.central
-    if tracks.central is not None:
-        c = tracks.central
-        m, P, node_modes = tracker.close(c.mean, c.cov, c.modes, c.mean, c.cov)
-        central = manage.Slots(
-            book=manage.survive(c.book, ctx.scenario), mean=m, cov=P, modes=node_modes
-        )
-    target = pending.assigned.target
-    new = State(
-        k=pending.k + 1,
-        uavs=new_uavs,
-        mean=mean,
-        cov=cov,
-        alive=pending.alive,
-        target=np.where(target >= 0, target, state.target),
-        radio=pending.radio.close(),
-        held=pending.assigned.held,
-        flight=state.flight,
-        modes=modes,
-        book=manage.survive(tracks.book, ctx.scenario),
-        central=central,
-        labels=pending.labels,
-        tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
-        beacons=beacons,
-        told=tracks.told,
-        told_labels=tracks.told_labels,
-    )
-    return new, cycle
 
 
 def measured(
@@ -578,25 +342,31 @@ def measured(
     return gate.Measured.of(observed, z, R, recent)
 
 
-def _unplanned(
-    state: State,
-    believed: np.ndarray,
-    alive: np.ndarray,
-    observed: np.ndarray,
-    radio: Radio,
-    fused: Any,
-    belief: estimation.Belief,
-    detected: np.ndarray | None = None,
+def decide(
+    state: State, targets: np.ndarray, noise: np.ndarray, ctx: Context, plan: bool = True
 ) -> Pending:
-    B, Nu = alive.shape
-    nothing = np.zeros(B, dtype=np.int64)
-    keep = np.where(alive, state.target, -1)
-    assigned = Assigned(
-        target=keep, seconds=np.zeros((B, Nu)), sent=nothing, delivered=nothing, held=state.held
-    )
-    bids = np.full(keep.shape + (state.mean.shape[2],), np.nan)
-    own = np.full((B, Nu), STRAIGHT)
-    return Pending(
+    """The first part of the cycle at step k = state.k for every trial: faults, sensing,
+    local filters, fusion, planning and assignment.
+
+    targets: (B, Nt, 4) true target states at k; noise: (B, Nu, Nt, 2) standard normals.
+    plan=False stops after fusion, for agents that choose every action themselves: no
+    bids (NaN), no auction (no messages; every UAV keeps its last target) and the
+    method's own actions fly straight. What the UAVs sense and know is unchanged.
+
+    The run's associator (`Context.associator`) reads the measurements: the oracle of
+    known association (the paper) or the trackers of unlabelled scans. Every other
+    stage is the same call for both.
+    """
+    scenario, method, associator = ctx.scenario, ctx.method, ctx.associator
+    alive, believed = _world(state, ctx)
+    observed, polar = observe(state.uavs, targets, noise, alive, scenario)
+    sensed = detect(state.uavs, believed, observed, polar, alive, ctx)
+    rows = sensed.scan.valid.sum(axis=-1) if method.central and sensed.scan is not None else None
+    radio = _radio(state, ctx, alive, rows)
+    fusion = associator.fuse(state, ctx, sensed, believed, alive, radio)
+    fused, owned = fusion.fused, fusion.owned
+    kept = np.where(alive, state.target, -1)
+    pending = Pending(
         k=state.k,
         uavs=state.uavs,
         believed=believed,
@@ -604,13 +374,364 @@ def _unplanned(
         observed=observed,
         radio=radio,
         fused=fused,
-        bids=bids,
-        assigned=assigned,
-        own=own,
+        bids=np.full(alive.shape + (fused.mean.shape[2],), np.nan),
+        assigned=Assigned(
+            target=kept,
+            seconds=np.zeros(alive.shape),
+            sent=np.zeros(alive.shape[0], dtype=np.int64),
+            delivered=np.zeros(alive.shape[0], dtype=np.int64),
+            held=state.held,
+        ),
+        own=np.full(alive.shape, STRAIGHT),
         plan_seconds=np.zeros(2),
-        belief=belief,
-        detected=detected,
+        belief=fusion.belief,
+        detected=sensed.detected,
+        tracks=fusion.tracks,
+        scan=sensed.scan,
+        columns=None if owned is None else columns.label_column(kept, owned.labels),
+        labels=None if fusion.cols is None else fusion.cols.labels,
+        held=None if owned is None else owned.width,
     )
+    if not plan:
+        return pending
+    start = timing.start()
+    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
+    bids = associator.weigh(bids, fusion, alive, scenario)
+    plan_seconds = timing.since(start)
+    auction = associator.auction(ctx, fusion, bids, alive)
+    chosen = np.take_along_axis(best, np.maximum(auction.slot, 0)[..., None], axis=-1)[..., 0]
+    return replace(
+        pending,
+        bids=bids,
+        assigned=auction.assigned,
+        own=np.where(alive & (auction.slot >= 0), chosen, STRAIGHT),
+        plan_seconds=plan_seconds,
+        columns=auction.taken,
+    )
+
+
+@dataclass(frozen=True, kw_only=True)
+class Sensed:
+    """What the sensors gave at a step: detected (B, Nu, Nt) the pairs measured, polar
+    (M, 2) their measurements in ``np.nonzero(detected)`` order, and, for an associator
+    that reads scans (gnn, jpda), each UAV's unlabelled scan with its clutter."""
+
+    detected: np.ndarray
+    polar: np.ndarray
+    scan: scans.Scan | None = None
+
+
+def detect(
+    uavs: np.ndarray,
+    believed: np.ndarray,
+    observed: np.ndarray,
+    polar: np.ndarray,
+    alive: np.ndarray,
+    ctx: Context,
+) -> Sensed:
+    """What each UAV measures of the pairs `observed` (polar (K, 2) in the order of
+    ``np.nonzero(observed)``): a missed target is not measured; with unknown association
+    the rest, with the clutter, comes as one unlabelled scan per UAV, shuffled and
+    converted from where each UAV believes it is (`tracks.scan`)."""
+    sensor, draws = ctx.scenario.sensor, ctx.detection
+    detected = observed
+    if draws is not None:
+        detected = scans.detected(draws.detect, observed, sensor.detection_probability)
+        polar = polar[detected[observed]]
+    if draws is None or not ctx.associator.scans:
+        return Sensed(detected=detected, polar=polar)
+    nothing = (np.zeros(0, dtype=np.int64), np.zeros((0, 2)))
+    false = [
+        scans.clutter(rng, uavs[b], alive[b], sensor) if sensor.clutter_rate > 0 else nothing
+        for b, rng in enumerate(draws.clutter)
+    ]
+    raw, valid, origin = scans.assemble(draws.order, detected, polar, false, shuffle=True)
+    where = np.broadcast_to(believed[:, :, None], raw.shape[:3] + believed.shape[-1:])
+    z, R = convert(where[valid], raw[valid], ctx.scenario)
+    zz = np.zeros(raw.shape)
+    RR = np.broadcast_to(np.eye(2), raw.shape + (2,)).copy()
+    zz[valid], RR[valid] = z, R
+    scan = scans.Scan(polar=raw, z=zz, R=RR, valid=valid, origin=origin)
+    return Sensed(detected=detected, polar=polar, scan=scan)
+
+
+@dataclass(frozen=True, kw_only=True)
+class Fusion:
+    """What an associator's filters and the team's fusion give: the inputs the auction
+    reads, the fused estimates per slot, each UAV's own belief before the fusion (the
+    oracle's filters), and with tracks the tracks and the step's label columns (`cols`;
+    `owned` without the late bids' labels)."""
+
+    inputs: Inputs
+    fused: Fused
+    belief: estimation.Belief
+    tracks: FusedTracks | None = None
+    cols: columns.Columns | None = None
+    owned: columns.Columns | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Auction:
+    """The auction's outcome: assigned (targets, or with tracks labels, to follow),
+    slot (B, Nu) the slot whose best action each UAV flies (-1: none, it flies
+    straight), and with tracks the column of the label each took (conflicts count them)."""
+
+    assigned: Assigned
+    slot: np.ndarray
+    taken: np.ndarray | None = None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Predicted:
+    """The state's estimates at k + 1 (`Associator.close`): each UAV's slots and modes,
+    with ``robust.gate`` the step each slot last met a measurement (`gate.seen`), and
+    with tracks what the book, the central node, the held bids' labels, the tombstones
+    and the trigger carry over."""
+
+    mean: np.ndarray
+    cov: np.ndarray
+    modes: estimation.Modes | None
+    book: manage.Book | None = None
+    central: manage.Slots | None = None
+    labels: np.ndarray | None = None
+    tombs: np.ndarray | None = None
+    told_labels: np.ndarray | None = None
+    seen: np.ndarray | None = None
+
+
+class Associator(Protocol):
+    """How the one cycle turns measurements into slots: the oracle of known association
+    (`Oracle`, the paper: slot j is target j) or a tracker of unlabelled scans
+    (`Tracking`, gnn or jpda). `decide` and `finish` call these four stages."""
+
+    scans: bool
+    """Whether the UAVs' measurements come as unlabelled scans with clutter."""
+
+    def fuse(
+        self,
+        state: State,
+        ctx: Context,
+        sensed: Sensed,
+        believed: np.ndarray,
+        alive: np.ndarray,
+        radio: Radio,
+    ) -> Fusion:
+        """Each UAV's local update and the team's fusion."""
+        ...
+
+    def weigh(
+        self, bids: np.ndarray, fusion: Fusion, alive: np.ndarray, scenario: Scenario
+    ) -> np.ndarray:
+        """The planner's bids per slot (B, Nu, K), as the auction reads them."""
+        ...
+
+    def auction(self, ctx: Context, fusion: Fusion, bids: np.ndarray, alive: np.ndarray) -> Auction:
+        """The method's assignment over the slots' bids."""
+        ...
+
+    def close(self, state: State, pending: Pending, ctx: Context) -> Predicted:
+        """The estimates after fusion predicted to the next step (eq. 23)."""
+        ...
+
+
+class Oracle:
+    """Known association (the paper): each measurement's true origin is known, slot j
+    holds target j on every UAV and its label is j. The local filters are the paper's
+    converted-measurement Kalman filters (or the IMM), the fusion the method's
+    max-consensus per target (`Method.fuse`), the bids by target."""
+
+    scans = False
+
+    def fuse(
+        self,
+        state: State,
+        ctx: Context,
+        sensed: Sensed,
+        believed: np.ndarray,
+        alive: np.ndarray,
+        radio: Radio,
+    ) -> Fusion:
+        b, i, _ = np.nonzero(sensed.detected)
+        z, R = convert(believed[b, i], sensed.polar, ctx.scenario)
+        owned = ctx.buffers is not None
+        detected = sensed.detected
+        belief = ctx.const.tracker.update(state.mean, state.cov, state.modes, detected, z, R, owned)
+        mean, cov = belief[:2]
+        inputs = Inputs(
+            k=state.k,
+            radio=radio,
+            mean=mean,
+            cov=cov,
+            gamma=estimation.confidence(cov),
+            believed=believed,
+            alive=alive,
+            previous=state.target,
+            held=state.held,
+            setting=ctx.setting,
+            measured=measured(state, detected, z, R, ctx),
+            buffers=ctx.buffers,
+            told=state.told,
+        )
+        return Fusion(inputs=inputs, fused=ctx.method.fuse(inputs), belief=belief)
+
+    def weigh(
+        self, bids: np.ndarray, fusion: Fusion, alive: np.ndarray, scenario: Scenario
+    ) -> np.ndarray:
+        return bids
+
+    def auction(self, ctx: Context, fusion: Fusion, bids: np.ndarray, alive: np.ndarray) -> Auction:
+        assigned = ctx.method.assign(fusion.inputs, fusion.fused, bids)
+        # a living UAV told no target (the central node unheard) flies its best action
+        # for target 0, as the paper's road always has
+        return Auction(assigned=assigned, slot=np.where(alive, np.maximum(assigned.target, 0), -1))
+
+    def close(self, state: State, pending: Pending, ctx: Context) -> Predicted:
+        fused = pending.fused
+        mean, cov, modes = ctx.const.tracker.close(
+            *pending.belief, fused.mean, fused.cov, ctx.buffers
+        )
+        seen = None
+        if ctx.setting.gate is not None:
+            seen = gate.seen(state.seen, pending.detected, state.k)
+        return Predicted(mean=mean, cov=cov, modes=modes, seen=seen)
+
+
+class Tracking:
+    """Unknown association (gnn, jpda): each UAV's scan comes unlabelled, its tracks and
+    the team's agreement on them (`Method.fuse_tracks`) replace the per-target filters
+    and max-consensus, and the auction runs over team labels (`tracks.columns`)."""
+
+    scans = True
+
+    def fuse(
+        self,
+        state: State,
+        ctx: Context,
+        sensed: Sensed,
+        believed: np.ndarray,
+        alive: np.ndarray,
+        radio: Radio,
+    ) -> Fusion:
+        scan = sensed.scan
+        assert state.book is not None and scan is not None, "a tracked run has tracks and scans"
+        local = Local(
+            book=state.book,
+            mean=state.mean,
+            cov=state.cov,
+            z=scan.z,
+            R=scan.R,
+            valid=scan.valid,
+            tracker=ctx.const.tracker,
+            modes=state.modes,
+            central=state.central,
+            tombs=state.tombs,
+            seen=state.seen,
+        )
+        inputs = Inputs(
+            k=state.k,
+            radio=radio,
+            mean=state.mean,
+            cov=state.cov,
+            gamma=estimation.confidence(state.cov),
+            believed=believed,
+            alive=alive,
+            previous=state.target,
+            held=state.held,
+            setting=ctx.setting,
+            told=state.told,
+            told_labels=state.told_labels,
+        )
+        tracks = ctx.method.fuse_tracks(inputs, local)
+        B, Nu = alive.shape
+        fused = Fused(
+            mean=tracks.mean,
+            cov=tracks.cov,
+            rounds=tracks.rounds,
+            sent=tracks.sent,
+            delivered=tracks.delivered,
+            seconds=np.zeros((B, Nu, 2)),
+            told=tracks.told,
+        )
+        confirmed = tracks.book.confirmed & alive[..., None]
+        more = arriving_labels(radio)
+        cols = columns.of(tracks.book.label, confirmed, more)
+        if tracks.target is not None:  # a central node's labels, as columns
+            fused = replace(fused, target=columns.label_column(tracks.target, cols.labels))
+        held = state.held
+        if held is not None and state.labels is not None:  # the held bids by this step's labels
+            held = Held(columns.relabel(held.value, state.labels, cols.labels), held.stamp)
+        inputs = replace(
+            inputs,
+            mean=tracks.mean,
+            cov=tracks.cov,
+            gamma=estimation.confidence(tracks.cov),
+            previous=columns.label_column(state.target, cols.labels),
+            held=held,
+            holds=columns.holds(cols),
+            columns=cols,
+        )
+        owned = cols if more is None else columns.of(tracks.book.label, confirmed)  # no late ones
+        return Fusion(
+            inputs=inputs,
+            fused=fused,
+            belief=(tracks.mean, tracks.cov, None),
+            tracks=tracks,
+            cols=cols,
+            owned=owned,
+        )
+
+    def weigh(
+        self, bids: np.ndarray, fusion: Fusion, alive: np.ndarray, scenario: Scenario
+    ) -> np.ndarray:
+        assert fusion.tracks is not None
+        book = fusion.tracks.book
+        return np.where(
+            book.confirmed & alive[..., None], manage.weighed(bids, book, scenario), np.nan
+        )
+
+    def auction(self, ctx: Context, fusion: Fusion, bids: np.ndarray, alive: np.ndarray) -> Auction:
+        cols, owned, tracks = fusion.cols, fusion.owned, fusion.tracks
+        assert cols is not None and owned is not None and tracks is not None
+        inputs, fused = fusion.inputs, fusion.fused
+        assigned = ctx.method.assign(inputs, fused, columns.bids(np.nan_to_num(bids), cols))
+        confirmed = tracks.book.confirmed & alive[..., None]
+        slot = columns.slot_of(assigned.target, cols, np.where(confirmed, bids, -np.inf))
+        slot = np.where(alive, slot, -1)
+        label = np.take_along_axis(tracks.book.label, np.maximum(slot, 0)[..., None], axis=-1)
+        followed = np.where(slot >= 0, label[..., 0], -1)
+        taken = np.where(alive, columns.label_column(followed, owned.labels), -1)
+        return Auction(assigned=replace(assigned, target=followed), slot=slot, taken=taken)
+
+    def close(self, state: State, pending: Pending, ctx: Context) -> Predicted:
+        tracks, tracker = pending.tracks, ctx.const.tracker
+        assert tracks is not None
+        own, modes = tracks.own, None
+        if own is not None and own.modes is not None:  # an IMM: fused tracks restart their modes
+            modes = manage.restart(own.modes, tracks.changed == 2, tracks.mean, tracks.cov, tracker)
+            mean, cov, modes = tracker.close(own.mean, own.cov, modes, tracks.mean, tracks.cov)
+        else:
+            mean, cov = estimation.predict(tracks.mean, tracks.cov, tracker.A, tracker.Q)
+        central = state.central
+        if tracks.central is not None:
+            c = tracks.central
+            m, P, node_modes = tracker.close(c.mean, c.cov, c.modes, c.mean, c.cov)
+            book = manage.survive(c.book, ctx.scenario)
+            central = manage.Slots(book=book, mean=m, cov=P, modes=node_modes)
+        return Predicted(
+            mean=mean,
+            cov=cov,
+            modes=modes,
+            book=manage.survive(tracks.book, ctx.scenario),
+            central=central,
+            labels=pending.labels,
+            tombs=tracks.tombs if tracks.tombs is not None else state.tombs,
+            told_labels=tracks.told_labels,
+            seen=tracks.seen,
+        )
+
+
+ORACLE: Associator = Oracle()
+TRACKING: Associator = Tracking()
 
 
 def finish(
@@ -652,6 +773,7 @@ def finish(
         recorded = tuple(
             np.where(alive.reshape(alive.shape + (1,) * (x.ndim - 2)), x, np.nan) for x in recorded
         )
+    tracks = pending.tracks
     cycle = Cycle(
         uavs=uavs,
         observed=pending.observed,
@@ -674,37 +796,32 @@ def finish(
         decision_wall_ms=np.where(alive, ms[..., timing.WALL], np.nan),
         confidence=fused.gamma,
         # a failed UAV holds no track (its slots stay as they were, unread)
-        label=None
-        if pending.tracks is None
-        else np.where(alive[..., None], pending.tracks.book.label, -1),
+        label=None if tracks is None else np.where(alive[..., None], tracks.book.label, -1),
         status=None
-        if pending.tracks is None
-        else np.where(alive[..., None], pending.tracks.book.status, 0).astype(np.int8),
+        if tracks is None
+        else np.where(alive[..., None], tracks.book.status, 0).astype(np.int8),
         scan=pending.scan,
     )
-    if pending.tracks is not None:
-        return _finish_tracked(state, pending, ctx, cycle, new_uavs, beacons)
-    mean, cov, modes = const.tracker.close(*pending.belief, fused.mean, fused.cov, ctx.buffers)
+    predicted = ctx.associator.close(state, pending, ctx)
     new = State(
         k=pending.k + 1,
         uavs=new_uavs,
-        mean=mean,
-        cov=cov,
+        mean=predicted.mean,
+        cov=predicted.cov,
         alive=alive,
         target=np.where(target >= 0, target, state.target),
         radio=pending.radio.close(),
         held=assigned.held,
         flight=state.flight,
-        modes=modes,
-        told=fused.told,
-        seen=None
-        if ctx.setting.gate is None
-        else gate.seen(
-            state.seen,
-            pending.observed if pending.detected is None else pending.detected,
-            state.k,
-        ),
+        modes=predicted.modes,
+        seen=predicted.seen,
+        book=predicted.book,
+        central=predicted.central,
+        labels=predicted.labels,
+        tombs=predicted.tombs,
         beacons=beacons,
+        told=fused.told,
+        told_labels=predicted.told_labels,
     )
     return new, cycle
 
@@ -912,7 +1029,7 @@ def run(
         raise ValueError("seeds is empty: give at least one seed (one per trial)")
     check_memory(scenario, len(seeds), trace)
     ctx = Context.of(scenario, method, seeds)
-    if not ctx.tracked:  # this loop owns its states: their arrays are reused
+    if not ctx.associator.scans:  # this loop owns its states: their arrays are reused
         ctx = replace(ctx, buffers=Buffers())
         if len(seeds) * scenario.n_uavs * scenario.n_targets * 128 >= LARGE_STATE:
             _process.keep_freed_memory()

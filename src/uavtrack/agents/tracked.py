@@ -22,7 +22,7 @@ import numpy as np
 
 from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
-from ..methods.base import Held, forwarded, scanned_tracks
+from ..methods.base import NEVER, Held, forwarded, gated_tracks, scanned_tracks
 from ..methods.centralized import node_targets
 from ..radio import counted, mirrored, upper
 from ..tracks import association, manage, team
@@ -47,6 +47,7 @@ class TrackedUav(UavAgent):
         self.tombs = np.full((1, 1, K, 2), -1, dtype=np.int64)
         self.threshold = association.threshold(scenario.tracker.gate_probability, 4)
         self.told_labels: np.ndarray | None = None  # with fusion.trigger: the labels sent
+        self.seen: np.ndarray | None = None  # with robust.gate: the step a scan met a slot
         self.target = -1  # the team label followed
         self.serial = 0  # its births so far: its labels n_targets + s n + me, s < serial
         self.kept: dict[int, tuple[np.ndarray, np.ndarray, int]] = {}
@@ -71,9 +72,14 @@ class TrackedUav(UavAgent):
         self.serial = int(scanned.book.serial[0, 0])  # the labels it has issued
         own = scanned_tracks(scanned, self.tombs, k)
         state = (own, np.zeros(own.status.shape, dtype=np.int8))
+        scan = (z[None, None], R[None, None], np.ones((1, 1, len(raw)), dtype=bool))
+        seen, admit = gated_tracks(self.setting, k, self.seen, scanned.met, scan, believed)
         (agreed, changed), rounds, sent, delivered = self.rounds(
-            k, state, self._track_content(k, own), lambda state, got: self._agree(state, got, k)
-        )
+            k, state, self._track_content(k, own),
+            lambda state, got: self._agree(state, got, k, admit),
+        )  # fmt: skip
+        if seen is not None:
+            self.seen = np.where(changed >= team.ADOPTED, NEVER, seen)
         book = manage.after_fusion(
             scanned.book, agreed.label, agreed.status, changed, s, agreed.stamp
         )
@@ -194,7 +200,7 @@ class TrackedUav(UavAgent):
         return content, [(mine, mine * int(content is not None))]
 
     def _close(self, scanned, agreed: team.TrackSet, changed, book) -> None:
-        """The tracks predicted to the next scan (`simulation._finish_tracked`)."""
+        """The tracks predicted to the next scan (`simulation.Tracking.close`)."""
         tracker = self.ctx.const.tracker
         if scanned.modes is not None:  # an IMM: fused tracks restart their modes
             modes = manage.restart(scanned.modes, changed == 2, agreed.mean, agreed.cov, tracker)
@@ -241,12 +247,14 @@ class TrackedUav(UavAgent):
 
         return content
 
-    def _agree(self, state, contents: dict[int, dict], k: int = 0):
+    def _agree(self, state, contents: dict[int, dict], k: int = 0, admit=None):
         """One round of `team.agree_round` over this UAV's closed neighbourhood at cycle
         k: itself and the senders whose tracks arrived, in index order (the senders'
         tracks beyond the run's plausibility bounds left out, `messages.Spec.tracks`, and
         those under a label of this UAV's own it has not issued, `_issued`); with
-        ``faults.delay`` their estimates predicted to k (`methods.base.forwarded`)."""
+        ``faults.delay`` their estimates predicted to k (`methods.base.forwarded`); with
+        ``robust.gate`` the offers `admit` refuses left out (`methods.base.gated_tracks`,
+        on this UAV's row)."""
         own, changed = state
         offered = {}
         for q, content in contents.items():
@@ -277,7 +285,9 @@ class TrackedUav(UavAgent):
         where, links = closed(ids, self.me)
         every = np.zeros(tracks.status.shape, dtype=np.int8)
         every[0, where] = changed[0, 0]
-        out, now = team.agree_round(tracks, every, tracks, links, self.threshold, self.setting.rule)
+        mine_only = None if admit is None else _own_row(admit)
+        rule = self.setting.rule
+        out, now = team.agree_round(tracks, every, tracks, links, self.threshold, rule, mine_only)
         mine = team.TrackSet(
             mean=out.mean[:, where : where + 1],
             cov=out.cov[:, where : where + 1],
@@ -359,6 +369,15 @@ class TrackedUav(UavAgent):
             self.held = held
         target, seconds = self.solve(view.copy(), members, alive, own)
         return target, known, seconds, more
+
+
+def _own_row(admit: team.Admit) -> team.Admit:
+    """`admit` of a batch whose receivers are this UAV alone: every offer is to row 0."""
+
+    def mine(row, sender, mean, cov, slot, own) -> np.ndarray:
+        return admit(np.zeros_like(row), sender, mean, cov, slot, own)
+
+    return mine
 
 
 def _content(tracks: team.TrackSet) -> dict[str, np.ndarray]:

@@ -41,7 +41,6 @@ from ..flight.unicycle import Unicycle
 from ..methods import get
 from ..radio import Budget
 from ..tracks import columns
-from ..tracks import scan as scans
 from ..tracks.team import CONFIRMED
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
 from .security import WORLD, Gate, Keyring
@@ -241,14 +240,11 @@ class WorldProgram:
             graph = simulation.graph(uavs, alive, s)
             targets = trajectory.at(k)
             observed, z = simulation.observe(uavs, targets, noise, alive, s)
-            scan, detected, measured = None, observed, z
-            if ctx.tracked:  # each UAV's unlabelled scan: detections and clutter
-                scan = simulation.measure_scan(uavs, believed, observed, z, alive, ctx)
-            elif ctx.detection is not None:  # a missed target is not measured (as `decide`)
-                p_d = s.sensor.detection_probability
-                detected = scans.detected(ctx.detection.detect, observed, p_d)
-                measured = z[detected[observed]]
-            self.send(k, believed[0], detected[0], measured, graph[0], alive[0], told, scan)
+            sensed = simulation.detect(uavs, believed, observed, z, alive, ctx)  # as `decide`
+            scan = sensed.scan
+            self.send(
+                k, believed[0], sensed.detected[0], sensed.polar, graph[0], alive[0], told, scan
+            )
             told = alive[0].copy()
             cycle, actions = self.collect(k, uavs, observed, alive, scan)
             self.traffic.count_late(k, cycle.late[0])

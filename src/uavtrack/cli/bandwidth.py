@@ -4,19 +4,20 @@ without the compact encoding and the event trigger, paired."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
-from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, app, console, load_scenario, parse_overrides
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
+    TrialsOpt,
     WorkersOpt,
     run_experiment,
 )
@@ -24,22 +25,10 @@ from .experiments import (
 
 @app.command()
 def bandwidth(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/bandwidth; results/bandwidth-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [50]"),
-    ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 40 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -52,7 +41,9 @@ def bandwidth(
     shared by each UAV's neighbourhood), distributed and greedy also with the compact
     encoding, the event trigger and both: observation rate, bytes per UAV and step, the
     cost paired against the unlimited paper exchange, and the capacity that keeps 95 %
-    of it; into a folder."""
+    of it; into a folder.
+
+    Profile: 50 trials of 500 steps; --quick: 2 trials of 40 steps."""
     from ..errors import UsageError
     from ..experiments import bandwidth as experiment
 
@@ -66,15 +57,7 @@ def bandwidth(
         )
     scenario = load_scenario(config, set_)
     options = dict(locals())  # the command's options, by name
-    summary, out, info = run_experiment(
-        "bandwidth",
-        experiment,
-        scenario,
-        options,
-        lambda jobs: ["bandwidth.png"],
-        lambda summary, out: experiment.figure(summary, out / "bandwidth.png"),
-        experiment.report,
-    )
+    summary, out, info = run_experiment(experiment, scenario, options)
     _print(summary, out, info)
 
 

@@ -3,11 +3,11 @@
 from __future__ import annotations
 
 import sys
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from contextlib import contextmanager
 from enum import StrEnum
 from pathlib import Path
-from typing import Annotated, Any
+from typing import TYPE_CHECKING, Annotated, Any
 
 import typer
 
@@ -30,6 +30,10 @@ from .app import (
     steps_bar,
     with_steps,
 )
+
+if TYPE_CHECKING:
+    from ..config import Scenario
+    from ..experiments.protocol import Experiment
 
 
 class EngineName(StrEnum):
@@ -65,6 +69,29 @@ ProgressOpt = Annotated[
     ),
 ]
 StepsOpt = Annotated[int | None, typer.Option(min=1, metavar="N", help="steps per trial [500]")]
+
+# the options of every experiment command (`experiments.protocol`), declared once; each
+# command's help names its profile
+OutOpt = Annotated[
+    Path | None,
+    typer.Option(
+        "--out",
+        metavar="DIR",
+        help="results folder [results/COMMAND; results/COMMAND-quick with --quick]",
+    ),
+]
+TrialsOpt = Annotated[
+    int | None,
+    typer.Option(
+        min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [the profile's]"
+    ),
+]
+ProfileStepsOpt = Annotated[
+    int | None, typer.Option("--steps", min=1, metavar="N", help="steps per trial [the profile's]")
+]
+QuickOpt = Annotated[
+    bool, typer.Option("--quick", help="the small profile, for smoke tests (in the help above)")
+]
 
 
 def note(message: str) -> None:
@@ -158,24 +185,19 @@ def manifest_of(kind: str, seed: int, profile, scenario) -> dict:
 
 
 def run_experiment(
-    kind: str,
-    experiment,
-    scenario,
-    options: dict,
-    figures,
-    draw,
-    write_report,
-    before=None,
-):
-    """The body every experiment command shares: size the profile from --quick,
-    --trials and --steps, plan the jobs, run them into the folder, and write
-    summary.json, the figures (`draw(summary, out)`) and report.md
-    (`write_report(summary, scenario, info)`). `experiment` is the experiment's module
-    (Profile, plan, summarize); `figures(jobs)` names the figures the folder will hold;
-    `before(scenario)` adds to the summary what is measured before the jobs (a dict).
-    `options`: the command's quick, trials, steps, config, set_, seed, out, engine,
-    workers, address and progress. Returns the summary, the folder and the run's info."""
-    o = options
+    experiment: Experiment,
+    scenario: Scenario,
+    options: dict[str, Any],
+    before: Callable[[Scenario], dict[str, Any]] | None = None,
+) -> tuple[dict[str, Any], Path, dict[str, Any]]:
+    """The body every experiment command shares (`experiments.protocol.Experiment`): size
+    the profile from --quick, --trials and --steps, plan the jobs, run them into the
+    folder (results/NAME unless --out), and write summary.json, the figures and
+    report.md. `before(scenario)` adds to the summary what is measured before the jobs
+    (a dict). `options`: the command's quick, trials, steps, config, set_, seed, out,
+    engine, workers, address and progress. Returns the summary, the folder and the run's
+    info."""
+    o, kind = options, experiment.NAME
     steps = explicit_steps(o["config"], o["set_"], o["steps"])
     quick = o["quick"]
     profile = sized(
@@ -185,19 +207,32 @@ def run_experiment(
     scenario = scenario.with_overrides({"steps": profile.steps}, origin="--steps")
     seed = o["seed"]
     jobs = experiment.plan(scenario, profile, seed)
+    refuse_any(jobs)
     manifest = manifest_of(kind, seed, profile, scenario)
     measured = before(scenario) if before is not None else {}
     run = run_jobs(jobs, out, manifest, o["engine"], o["workers"], o["address"], o["progress"],
-                   figures(jobs))  # fmt: skip
+                   experiment.figures(jobs))  # fmt: skip
     with run as (results, info):
         info["seed"] = seed
         summary = experiment.summarize(jobs, results, profile, scenario)
         summary.update(measured)
         summary["settings"] = {"profile": profile.to_dict(), "seed": seed, **info}
         write_json(out / "summary.json", summary)
-        draw(summary, out)
-        write_text(out / "report.md", write_report(summary, scenario, info))
+        experiment.figure(summary, out)
+        write_text(out / "report.md", experiment.report(summary, scenario, info))
     return summary, out, info
+
+
+def refuse_any(jobs: dict[str, list[Any]]) -> None:
+    """Every job's scenario and method checked before any work: a pair a method does not
+    run yet (`simulation.refusal`) stops the command in one line, naming its cell."""
+    from ..methods import get
+    from ..simulation import refusal
+
+    for job in (j for group in jobs.values() for j in group):
+        why = refusal(job.scenario, get(job.method))
+        if why is not None:
+            raise ScenarioError(f"{job.label or 'the base'}, {job.method}: {why}")
 
 
 def explicit_steps(config: Path | None, set_: list[str] | None, steps: int | None) -> int | None:

@@ -3,20 +3,21 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
 from ..errors import UsageError
-from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
+    TrialsOpt,
     WorkersOpt,
     refuse_set,
     run_experiment,
@@ -25,22 +26,10 @@ from .experiments import (
 
 @app.command()
 def flight(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/flight; results/flight-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per condition [50]"),
-    ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 40 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -56,7 +45,9 @@ def flight(
 
     Conditions: unicycle; jsbsim in calm air, in a west wind of 5 and 10 m/s, in
     moderate turbulence; and the two winds with planner.wind (the planner knows the
-    wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps."""
+    wind). --quick: the unicycle and the 10 m/s wind, 2 trials x 40 steps.
+
+    Profile: 50 trials of 500 steps; --quick: 2 trials of 40 steps."""
     from ..config import Scenario, flatten, read_toml
     from ..config.scenario import config_file
     from ..experiments import flight as experiment
@@ -76,16 +67,12 @@ def flight(
     Scenario().with_overrides(experiment.JSBSIM, origin="uavtrack flight")  # JSBSim there?
     scenario = load_scenario(config, set_, team)
     refuse_set(scenario, own, "flight", "uav.dynamics, planner.wind and the wind")
-    summary, out, info = run_experiment(
-        "flight",
-        experiment,
-        scenario,
-        dict(locals()),  # the command's options, by name
-        lambda jobs: ["flight.png"],
-        lambda summary, out: experiment.figure(summary, out / "flight.png"),
-        experiment.report,
-        before=lambda s: {"autopilot": experiment.characterise(s, 10.0 if quick else 60.0, seed)},
-    )
+    options = dict(locals())  # the command's options, by name
+
+    def autopilot(s: Scenario) -> dict:
+        return {"autopilot": experiment.characterise(s, 10.0 if quick else 60.0, seed)}
+
+    summary, out, info = run_experiment(experiment, scenario, options, before=autopilot)
     _print(summary, out, info)
 
 

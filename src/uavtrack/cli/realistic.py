@@ -4,18 +4,20 @@ options and with one realism removed at a time, paired."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
-from ..limits import MAX_TRIALS
 from .app import SetOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
+    TrialsOpt,
     WorkersOpt,
     run_experiment,
 )
@@ -23,24 +25,10 @@ from .experiments import (
 
 @app.command()
 def realistic(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/realistic; results/realistic-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [50]"),
-    ] = None,
-    steps: Annotated[
-        int | None, typer.Option(min=1, metavar="N", help="steps per trial [200]")
-    ] = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 30 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -51,7 +39,9 @@ def realistic(
     """The three methods in the realistic preset (--config realistic), with the robust
     options, and with each realism removed in turn: observation rate, separation losses,
     bytes, the gain of each removal paired with the preset, and each method's distance
-    from its oracle-sensor rate; into a folder. --set changes the preset for every cell."""
+    from its oracle-sensor rate; into a folder. --set changes the preset for every cell.
+
+    Profile: 50 trials of 200 steps; --quick: 2 trials of 30 steps."""
     from ..experiments import realistic as experiment
 
     config = Path("realistic")  # the shipped preset, by name
@@ -60,15 +50,7 @@ def realistic(
         for variant in experiment.variants():
             experiment.scenario_of(scenario, method, variant)
     options = dict(locals())  # the command's options, by name
-    summary, out, info = run_experiment(
-        "realistic",
-        experiment,
-        scenario,
-        options,
-        lambda jobs: ["realistic.png"],
-        lambda summary, out: experiment.figure(summary, out / "realistic.png"),
-        experiment.report,
-    )
+    summary, out, info = run_experiment(experiment, scenario, options)
     _print(summary, out, info)
 
 

@@ -13,9 +13,11 @@ from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
     WorkersOpt,
     refuse_set,
     run_experiment,
@@ -24,21 +26,12 @@ from .experiments import (
 
 @app.command()
 def robustness(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/robustness; results/robustness-quick with --quick]",
-        ),
-    ] = None,
+    out: OutOpt = None,
     trials: Annotated[
         int | None, typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per point [50]")
     ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 4 trials x 60 steps")
-    ] = False,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -49,20 +42,17 @@ def robustness(
     progress: ProgressOpt = None,
 ) -> None:
     """Every method under message loss, bursts, delay, a round budget, UAV failures and
-    position error, with and without the robustness options, into a folder."""
-    from ..experiments import figures, report
+    position error, with and without the robustness options, into a folder.
+
+    Profile: 50 trials of 500 steps; --quick: 4 trials of 60 steps."""
     from ..experiments import robustness as experiment
 
     scenario = load_scenario(config, set_, team)
     refuse_set(scenario, ("faults.", "robust."), "robustness", "the faults and the robust options")
     summary, out, info = run_experiment(
-        "robustness",
         experiment,
         scenario,
         dict(locals()),  # the command's options, by name
-        lambda jobs: [f"fault_{name}.png" for name in jobs if name != "ablation"],
-        figures.robustness_figures,
-        report.robustness,
     )
     _print(summary, out, info)
 

@@ -4,19 +4,20 @@ methods, paired against known association."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
-from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
+    TrialsOpt,
     WorkersOpt,
     refuse_set,
     run_experiment,
@@ -25,22 +26,10 @@ from .experiments import (
 
 @app.command()
 def sensing(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/sensing; results/sensing-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per cell and method [50]"),
-    ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 60 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -56,7 +45,9 @@ def sensing(
     targets that come and go (jpda-births: target.stay 200, target.away 100; another
     truth, so unpaired): observation rate, GOSPA, OSPA(2) and the team picture's,
     duplicate, stale and never-followed tracks, label purity, switches, the team's time
-    to confirm, SIAP, NEES; into a folder."""
+    to confirm, SIAP, NEES; into a folder.
+
+    Profile: 50 trials of 500 steps; --quick: 2 trials of 60 steps."""
     from ..experiments import sensing as experiment
 
     scenario = load_scenario(config, set_, team)
@@ -67,13 +58,9 @@ def sensing(
         "the detection probability, the clutter rate and the association",
     )
     summary, out, info = run_experiment(
-        "sensing",
         experiment,
         scenario,
         dict(locals()),  # the command's options, by name
-        lambda jobs: ["sensing.png"],
-        lambda summary, out: experiment.figure(summary, out / "sensing.png"),
-        experiment.report,
     )
     _print(summary, out, info)
 

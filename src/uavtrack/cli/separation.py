@@ -4,19 +4,20 @@ and without the avoidance filter, paired."""
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
-from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, app, console, load_scenario, parse_overrides
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
+    TrialsOpt,
     WorkersOpt,
     run_experiment,
 )
@@ -27,24 +28,10 @@ PRESET = "one-altitude"
 
 @app.command()
 def separation(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/separation; results/separation-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(
-            min=1, max=MAX_TRIALS, metavar="N", help="trials per cell, side and method [50]"
-        ),
-    ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 40 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -57,7 +44,9 @@ def separation(
     paper's team and on 20 x 16, with the paper's radio and the range where the filter's
     guarantee holds, unicycle and JSBSim: losses of separation, closest approach and the
     filter's cost in observation rate, paired; into a folder. The base is the preset
-    one-altitude unless --config gives another."""
+    one-altitude unless --config gives another.
+
+    Profile: 50 trials of 500 steps; --quick: 2 trials of 40 steps."""
     from ..errors import UsageError
     from ..experiments import separation as experiment
 
@@ -71,15 +60,7 @@ def separation(
     scenario = load_scenario(config, set_)
     options = dict(locals())  # the command's options, by name
     options["config"] = config
-    summary, out, info = run_experiment(
-        "separation",
-        experiment,
-        scenario,
-        options,
-        lambda jobs: ["separation.png"],
-        lambda summary, out: experiment.figure(summary, out / "separation.png"),
-        experiment.report,
-    )
+    summary, out, info = run_experiment(experiment, scenario, options)
     _print(summary, out, info)
 
 

@@ -3,19 +3,20 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Annotated
 
 import typer
 
-from ..limits import MAX_TRIALS
 from .app import ConfigOpt, SetOpt, TeamOpt, app, console, load_scenario
 from .experiments import (
     AddressOpt,
     EngineName,
     EngineOpt,
+    OutOpt,
+    ProfileStepsOpt,
     ProgressOpt,
+    QuickOpt,
     SeedOpt,
-    StepsOpt,
+    TrialsOpt,
     WorkersOpt,
     refuse_set,
     run_experiment,
@@ -24,22 +25,10 @@ from .experiments import (
 
 @app.command()
 def trackers(
-    out: Annotated[
-        Path | None,
-        typer.Option(
-            "--out",
-            metavar="DIR",
-            help="results folder [results/trackers; results/trackers-quick with --quick]",
-        ),
-    ] = None,
-    trials: Annotated[
-        int | None,
-        typer.Option(min=1, max=MAX_TRIALS, metavar="N", help="trials per tracker and motion [50]"),
-    ] = None,
-    steps: StepsOpt = None,
-    quick: Annotated[
-        bool, typer.Option("--quick", help="small profile for smoke tests: 2 trials x 60 steps")
-    ] = False,
+    out: OutOpt = None,
+    trials: TrialsOpt = None,
+    steps: ProfileStepsOpt = None,
+    quick: QuickOpt = False,
     workers: WorkersOpt = None,
     engine: EngineOpt = EngineName.local,
     address: AddressOpt = None,
@@ -51,7 +40,9 @@ def trackers(
 ) -> None:
     """The distributed method with the paper's tracker (cv + max_consensus), the IMM,
     covariance intersection and both, on the paper's and on manoeuvring targets:
-    observation rate, RMSE, NEES against its band, OSPA; into a folder."""
+    observation rate, RMSE, NEES against its band, OSPA; into a folder.
+
+    Profile: 50 trials of 500 steps; --quick: 2 trials of 60 steps."""
     from ..experiments import trackers as experiment
 
     scenario = load_scenario(config, set_, team)
@@ -62,13 +53,9 @@ def trackers(
         "target.motion, the tracker and fusion.rule",
     )
     summary, out, info = run_experiment(
-        "trackers",
         experiment,
         scenario,
         dict(locals()),  # the command's options, by name
-        lambda jobs: ["trackers.png"],
-        lambda summary, out: experiment.figure(summary, out / "trackers.png"),
-        experiment.report,
     )
     _print(summary, out, info)
 

@@ -999,6 +999,10 @@ class RobustModel(Part):
             "0.9999: 18.4), its own estimate included, nor, within robust.gate_memory cycles "
             "of its last measurement of the target, one that contradicts its own estimate the "
             "same way; a neighbour caught on one target is believed on none in that round; "
+            "with tracks (gnn, jpda) an offered track must agree with the receiver's slot of "
+            "its label if the receiver's own scans met it within robust.gate_memory cycles, "
+            "else with a measurement of its scan unless it lies out of view (not with the "
+            "centralized method); "
             "assumed as an option against a member that lies with high confidence; not set: "
             "the paper's rule, the most confident estimate is adopted"
         ),

@@ -221,11 +221,6 @@ class Scenario(Part):
                 f"tracker.max_tracks {self.tracker.max_tracks} cannot hold the "
                 f"{self.n_targets} targets every UAV starts with; give at least {self.n_targets}"
             )
-        if self.robust.gate is not None:
-            raise ValueError(
-                f"robust.gate reads measurements by target; with tracker.association = "
-                f"{self.tracker.association} the tracks' own gates apply: leave robust.gate unset"
-            )
         return self
 
     @model_validator(mode="after")

@@ -6,7 +6,9 @@
 * `reproduce`: the paper's Section 7 (Figs. 5-9), the first guess and the sensitivity study;
 * `robustness`, `trackers`, `flight`, `sensing`, `separation`, `bandwidth`, `realistic`:
   the faults, trackers, real-flight, sensing, one-altitude, radio-load and
-  realistic-mission experiments;
+  realistic-mission experiments, each an implementation of `protocol.Experiment`;
+* `protocol`: what an experiment command implements (its profile, plan, summary,
+  figures and report);
 * `store`: the output folder that never loses work, and the local and Dask engines;
 * `report`, `figures`: report.md and the paper's figures from a summary;
 * `bench`: speed measurements beside their references.

@@ -12,11 +12,13 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci95, describe, paired
 
@@ -47,20 +49,8 @@ quoted for it."""
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a bandwidth run."""
-
-    trials: int = 50
-    steps: int = 500
-    chunk: int = 10
-
-    @classmethod
-    def quick(cls) -> Profile:
-        """A smoke-test profile: 2 trials of 40 steps."""
-        return cls(trials=2, steps=40, chunk=2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+class Profile(protocol.Profile):
+    """The size of a bandwidth run (--quick: 2 trials of 40 steps)."""
 
 
 def variants(method: str) -> list[str]:
@@ -196,9 +186,19 @@ def alone_rate(row: dict[str, Any]) -> float | None:
     return least["observation_rate"]["mean"] if least["bytes"]["mean"] == 0 else None
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "bandwidth"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["bandwidth.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """bandwidth.png: the observation rate (95 % CI) and the bytes per UAV and step of
     each method and variant against the capacity; the unlimited value at the right."""
+    path = out / "bandwidth.png"
     import matplotlib
 
     matplotlib.use("Agg")

@@ -9,12 +9,14 @@ from __future__ import annotations
 
 import math
 import textwrap
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Self
 
 import numpy as np
 
 from ..config import G, Scenario
+from . import protocol
 from .jobs import Job, collect, describe, difference, label_of, paired, trial_jobs, unique
 from .statistics import ci, ci95, pm
 
@@ -48,21 +50,16 @@ METHODS = ("distributed", "centralized", "greedy")
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a flight run."""
+class Profile(protocol.Profile):
+    """The size of a flight run (--quick: 2 trials of 40 steps, calm air and the strong
+    wind)."""
 
-    trials: int = 50
-    steps: int = 500
-    chunk: int = 10
     conditions: tuple[str, ...] = tuple(CONDITIONS)
 
     @classmethod
-    def quick(cls) -> Profile:
+    def quick(cls) -> Self:
         """A smoke-test profile: 2 trials of 40 steps, calm air and the strong wind."""
-        return cls(trials=2, steps=40, chunk=2, conditions=("unicycle", "jsbsim, wind 10 m/s"))
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+        return replace(super().quick(), conditions=("unicycle", "jsbsim, wind 10 m/s"))
 
 
 def plan(base: Scenario, profile: Profile, seed: int = 0) -> dict[str, list[Job]]:
@@ -203,9 +200,19 @@ def characterise(scenario: Scenario, seconds: float = 60.0, seed: int = 0) -> di
     }
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "flight"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["flight.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """flight.png: the observation rate per condition and method (95% CI), and the bank
     angle the autopilot flies against its commands."""
+    path = out / "flight.png"
     import matplotlib
 
     matplotlib.use("Agg")

@@ -4,8 +4,9 @@ realism's cost is measured and the methods' distance from their oracle-sensor ra
 
 Every cell runs the same trials (common random numbers): each variant is paired trial by
 trial with its method's preset. The robust options are ``robust.stale`` and one extra
-consensus round; the measurement gate (``robust.gate``) is not built for tracks
-(docs/how-to/pairs.md). The centralized method's uploads and downloads are whole tables,
+consensus round; the measurement gate (``robust.gate``), which with tracks acts on the
+consensus only (docs/how-to/pairs.md), is left out so that the three methods run the
+same options. The centralized method's uploads and downloads are whole tables,
 on which the compact encoding and the trigger do not act: it runs every cell with the
 full encoding and no trigger.
 """
@@ -13,11 +14,13 @@ full encoding and no trigger.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci95, paired
 
@@ -76,20 +79,11 @@ SCORED = ("observation_rate", "separation_losses", "bytes", "conflicts", "gospa_
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a realistic run."""
+class Profile(protocol.Profile):
+    """The size of a realistic run (--quick: 2 trials of 30 steps)."""
 
-    trials: int = 50
     steps: int = 200
-    chunk: int = 10
-
-    @classmethod
-    def quick(cls) -> Profile:
-        """A smoke-test profile: 2 trials of 30 steps."""
-        return cls(trials=2, steps=30, chunk=2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+    QUICK: ClassVar[tuple[int, int, int]] = (2, 30, 2)
 
 
 def variants() -> list[str]:
@@ -177,9 +171,19 @@ def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
     ]
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "realistic"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["realistic.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """realistic.png: per method, the paired gain in observation rate (95 % CI) of the
     robust options and of removing each realism from the preset."""
+    path = out / "realistic.png"
     import matplotlib
 
     matplotlib.use("Agg")
@@ -227,7 +231,8 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
         "a shared 1 Mbit/s radio with the compact encoding and a trigger of 0.1, the "
         "whole team at one altitude with the avoidance filter and a radio range of 240 m "
         "(its sound range at a delay of one cycle). Robust: `robust.stale` and one extra "
-        "consensus round (the measurement gate is not built for tracks). The centralized "
+        "consensus round (the measurement gate, which with tracks acts on the consensus only, "
+        "is left out so that the three methods run the same options). The centralized "
         "method runs every cell with the full encoding and no trigger (its uploads and "
         "downloads are whole tables). Gain: the cell's rate minus the method's preset, "
         "paired trial by trial.",

@@ -17,12 +17,14 @@ one helps where. The experiment is a job list on the same resumable store as
 
 from __future__ import annotations
 
-from dataclasses import dataclass
-from typing import Any
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, ClassVar, Self
 
 import numpy as np
 
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci95, describe, paired
 
@@ -112,16 +114,16 @@ FAULTS = (
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a robustness run."""
+class Profile(protocol.Profile):
+    """The size of a robustness run (--quick: 4 trials of 60 steps, three levels per
+    fault)."""
 
-    trials: int = 50
-    steps: int = 500
     chunk: int = 25
     faults: tuple[Fault, ...] = FAULTS
+    QUICK: ClassVar[tuple[int, int, int]] = (4, 60, 4)
 
     @classmethod
-    def quick(cls) -> Profile:
+    def quick(cls) -> Self:
         """A smoke-test profile: a few short trials, three levels per fault."""
         short = tuple(
             Fault(
@@ -134,7 +136,7 @@ class Profile:
             )
             for f in FAULTS
         )
-        return cls(trials=4, steps=60, chunk=4, faults=short)
+        return replace(super().quick(), faults=short)
 
     def to_dict(self) -> dict[str, Any]:
         return {
@@ -234,3 +236,25 @@ def summarize(
         ablation[fault.name] = entry
     out["ablation"] = ablation
     return out
+
+
+NAME = "robustness"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """One figure per fault (fault_<name>.png)."""
+    return [f"fault_{name}.png" for name in jobs if name != "ablation"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
+    from .figures import robustness_figures
+
+    robustness_figures(summary, out)
+
+
+def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) -> str:
+    """report.md (`report.robustness`)."""
+    from . import report as reports
+
+    return reports.robustness(summary, scenario, info)

@@ -16,11 +16,13 @@ its confirmed tracks), so its ratio says what unknown association costs in estim
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci95, describe, paired
 
@@ -44,20 +46,11 @@ SCORED = (
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a sensing run."""
+class Profile(protocol.Profile):
+    """The size of a sensing run (--quick: 2 trials of 60 steps)."""
 
-    trials: int = 50
-    steps: int = 500
     chunk: int = 25
-
-    @classmethod
-    def quick(cls) -> Profile:
-        """A smoke-test profile: 2 trials of 60 steps."""
-        return cls(trials=2, steps=60, chunk=2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+    QUICK: ClassVar[tuple[int, int, int]] = (2, 60, 2)
 
 
 UNBRIEFED = "-unbriefed"
@@ -229,9 +222,19 @@ def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
     ]  # fmt: skip
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "sensing"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["sensing.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """sensing.png: per clutter level, the observation rate against P_D for each method
     and association (known association dotted), and GOSPA likewise."""
+    path = out / "sensing.png"
     import matplotlib
 
     matplotlib.use("Agg")

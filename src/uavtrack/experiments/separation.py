@@ -15,12 +15,14 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..airspace import avoidance
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci95, describe, paired
 
@@ -45,20 +47,8 @@ COST = 0.03
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a separation run."""
-
-    trials: int = 50
-    steps: int = 500
-    chunk: int = 10
-
-    @classmethod
-    def quick(cls) -> Profile:
-        """A smoke-test profile: 2 trials of 40 steps."""
-        return cls(trials=2, steps=40, chunk=2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+class Profile(protocol.Profile):
+    """The size of a separation run (--quick: 2 trials of 40 steps)."""
 
 
 def sound(base: Scenario) -> float:
@@ -191,9 +181,19 @@ def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
     ]  # fmt: skip
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "separation"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["separation.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """separation.png: per cell, the observation rate with and without the filter for each
     method (95 % CI), and the losses per trial (log scale)."""
+    path = out / "separation.png"
     import matplotlib
 
     matplotlib.use("Agg")

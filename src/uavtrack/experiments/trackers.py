@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import textwrap
 from dataclasses import dataclass
-from typing import Any
+from pathlib import Path
+from typing import Any, ClassVar
 
 import numpy as np
 
 from ..config import Scenario
+from . import protocol
 from .jobs import Job, collect, difference, label_of, trial_jobs, unique
 from .statistics import ci, ci95, describe, nees_band, paired, pm
 
@@ -55,20 +57,11 @@ METHOD = "distributed"
 
 
 @dataclass(frozen=True)
-class Profile:
-    """The size of a trackers run."""
+class Profile(protocol.Profile):
+    """The size of a trackers run (--quick: 2 trials of 60 steps)."""
 
-    trials: int = 50
-    steps: int = 500
     chunk: int = 25
-
-    @classmethod
-    def quick(cls) -> Profile:
-        """A smoke-test profile: 2 trials of 60 steps."""
-        return cls(trials=2, steps=60, chunk=2)
-
-    def to_dict(self) -> dict[str, Any]:
-        return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+    QUICK: ClassVar[tuple[int, int, int]] = (2, 60, 2)
 
 
 def overrides(motion: str, tracker: str) -> dict[str, Any]:
@@ -126,9 +119,19 @@ def summarize(
     return out
 
 
-def figure(summary: dict[str, Any], path) -> None:
+NAME = "trackers"
+"""The command, and the results folder's name."""
+
+
+def figures(jobs: dict[str, list[Job]]) -> list[str]:
+    """The one figure it draws."""
+    return ["trackers.png"]
+
+
+def figure(summary: dict[str, Any], out: Path) -> None:
     """trackers.png: mean NEES (log scale, with the consistent value 4) and the team's
     best RMSE per tracker, on both target motions."""
+    path = out / "trackers.png"
     import matplotlib
 
     matplotlib.use("Agg")

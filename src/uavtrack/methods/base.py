@@ -8,6 +8,7 @@ from __future__ import annotations
 import dataclasses
 from collections.abc import Callable
 from dataclasses import dataclass
+from functools import partial
 from typing import Any, ClassVar
 
 import numpy as np
@@ -166,6 +167,7 @@ class Local:
     modes: estimation.Modes | None = None
     central: manage.Slots | None = None
     tombs: np.ndarray | None = None
+    seen: np.ndarray | None = None  # with robust.gate: the step each slot last met a scan
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -190,6 +192,7 @@ class FusedTracks:
     told: np.ndarray | None = None  # with fusion.trigger: `Inputs.told` after this cycle
     told_labels: np.ndarray | None = None  # and `Inputs.told_labels`
     target: np.ndarray | None = None  # the labels a central node sent to follow (B, N)
+    seen: np.ndarray | None = None  # with robust.gate: `Local.seen` after this cycle
 
 
 class Method:
@@ -506,7 +509,9 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         return dataclasses.replace(offered, mean=mean, cov=cov)
 
     receive = late if s.delay > 0 else None
-    out = team.agree(radio, own, rounds, threshold, s.rule, listing, receive)
+    scan = (local.z, local.R, local.valid)
+    seen, admit = gated_tracks(s, inputs.k, local.seen, scanned.met, scan, inputs.believed)
+    out = team.agree(radio, own, rounds, threshold, s.rule, listing, receive, admit)
     agreed, changed, sent, delivered = out.tracks, out.changed, out.sent, out.delivered
     rounds_on_air(inputs, depth, rounds, out.carried)
     told = told_tracks(inputs, out)
@@ -530,7 +535,46 @@ def team_fusion(inputs: Inputs, local: Local) -> FusedTracks:
         tombs=agreed.tombs,
         told=told[0],
         told_labels=told[1],
+        seen=None if seen is None else np.where(changed >= team.ADOPTED, NEVER, seen),
     )
+
+
+NEVER = -(2**40)
+"""The step a slot's own scans last met it when they never did (a track adopted from
+the team, or an empty slot): long enough ago for any ``robust.gate_memory``."""
+
+
+def gated_tracks(
+    setting: Setting,
+    k: int,
+    seen: np.ndarray | None,
+    met: np.ndarray,
+    local: tuple[np.ndarray, np.ndarray, np.ndarray],
+    believed: np.ndarray,
+) -> tuple[np.ndarray | None, team.Admit | None]:
+    """``robust.gate`` with tracks: the step each slot last met a scan of its own UAV
+    (`gate.seen`, B, N, K), and which offered tracks each receiver may take
+    (`gate.tracks_admitted` against its slots met within ``robust.gate_memory`` and its
+    scan); (None, None) without the gate. seen: the steps before this scan (None: the
+    run's start); met (B, N, K): the slots this scan met (`manage.Scanned`); local: the
+    scan's z (B, N, Z, 2), R and valid; believed (B, N, 5). The agent form calls it on
+    its own row."""
+    if setting.gate is None or setting.scenario is None:
+        return None, None
+    threshold, scenario = setting.gate, setting.scenario
+    seen = gate.seen(seen, met, k)
+    z, R, valid = local
+    (B, N, Z), K = valid.shape, seen.shape[-1]
+    scans = gate.Scanned(
+        z=z.reshape(B * N, Z, 2),
+        R=R.reshape(B * N, Z, 2, 2),
+        valid=valid.reshape(B * N, Z),
+        uav=believed.reshape(B * N, -1),
+        recent=(k - seen <= scenario.robust.gate_memory).reshape(B * N, K),
+    )
+
+    admit = partial(gate.tracks_admitted, scanned=scans, sensor=scenario.sensor, gate=threshold)
+    return seen, admit
 
 
 def forwarded(

@@ -39,6 +39,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import network
+from ..config import SensorModel
+from ..sensing import in_view
 
 
 def threshold(probability: float) -> float:
@@ -145,3 +147,54 @@ def admitted(
         caught &= claimed[t, q]
     # a sender caught on one target is believed on none this round
     return ~(caught.any(axis=-1, keepdims=True) | (observed & far))
+
+
+@dataclass(frozen=True, kw_only=True)
+class Scanned:
+    """What the gate reads of each receiver's own scan, with tracks: z (R, Z, 2), R (R,
+    Z, 2, 2), valid (R, Z) its converted measurements, uav (R, 5) where it believes it
+    is, and recent (R, K) which of its slots its own scans met within the last
+    ``robust.gate_memory`` cycles (this one included); R receivers in `row` order."""
+
+    z: np.ndarray
+    R: np.ndarray
+    valid: np.ndarray
+    uav: np.ndarray
+    recent: np.ndarray
+
+
+def tracks_admitted(
+    row: np.ndarray,
+    sender: np.ndarray,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    slot: np.ndarray,
+    own: tuple[np.ndarray, np.ndarray],
+    scanned: Scanned,
+    sensor: SensorModel,
+    gate: float,
+) -> np.ndarray:
+    """Which offered tracks each receiver may take, the rule of `admitted` with tracks.
+
+    An offer of a label the receiver holds, in a slot its own scans met recently, must
+    agree with that slot's estimate (position covariances summed). Any other offer must
+    agree with one of the receiver's measurements this scan, unless it lies outside the
+    receiver's view (where it saw nothing, it can refute nothing). A sender caught
+    against a recently met slot is believed on nothing more in this round.
+
+    row (O,) each offer's receiver (a row of `scanned`), sender (O,), mean (O, 4), cov
+    (O, 4, 4); slot (O,) the receiver's slot holding the offer's label in `own`, flat
+    (-1: none; slot k of a receiver is some multiple of K plus k); own: the receivers'
+    current slots, flat (mean (S, 4), cov (S, 4, 4)). Returns (O,) bool."""
+    at = np.maximum(slot, 0)
+    checked = (slot >= 0) & scanned.recent[row, at % scanned.recent.shape[-1]]
+    apart = distance(mean, cov, own[0][at, :2], own[1][at, :2, :2]) > gate
+    near = (
+        scanned.valid[row]
+        & (distance(mean[:, None], cov[:, None], scanned.z[row], scanned.R[row]) <= gate)
+    ).any(axis=-1)
+    unseen = ~in_view(scanned.uav[row], mean, sensor)
+    caught = checked & apart
+    key = row * (int(sender.max(initial=0)) + 1) + sender
+    liar = np.isin(key, key[caught])
+    return np.where(checked, ~apart, near | unseen) & ~liar

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 from dataclasses import dataclass
+from typing import Protocol
 
 import numpy as np
 
@@ -79,12 +80,30 @@ class TrackSet:
             raise ValueError(f"tombs must be (B, N, T, 2) for status {lead}")
 
 
+class Admit(Protocol):
+    """Which confirmed offers their receivers may take: row (O,) each offer's receiver
+    (b * N + i), sender (O,), mean (O, 4), cov (O, 4, 4), slot (O,) the receiver's slot
+    holding the offer's label (flat, row * K + k; -1: none), own the receivers' slots
+    (mean (S, 4), cov (S, 4, 4), flat). Returns (O,) bool."""
+
+    def __call__(
+        self,
+        row: np.ndarray,
+        sender: np.ndarray,
+        mean: np.ndarray,
+        cov: np.ndarray,
+        slot: np.ndarray,
+        own: tuple[np.ndarray, np.ndarray],
+    ) -> np.ndarray: ...
+
+
 def team_round(
     own: TrackSet,
     offered: TrackSet,
     links: network.Links,
     threshold: float,
     rule: str = "max_consensus",
+    admit: Admit | None = None,
 ) -> tuple[TrackSet, np.ndarray]:
     """One round of track agreement for every receiver at once.
 
@@ -128,6 +147,9 @@ def team_round(
     5. Labels are unique within a UAV after the round: every label that enters a slot
        is one the receiver did not hold, each taken once.
 
+    admit: which confirmed offers a receiver may take at all (`Admit`, ``robust.gate``:
+    `robust.gate.tracks_admitted`); None: all.
+
     own, offered: (B, N, K) `TrackSet`s. threshold: the gate on d2. Returns the new
     `TrackSet` and `changed` (B, N, K) int8: 0 the slot is as it was, 1 the slot's track
     stayed but its estimate, label or status changed (fused, relabelled, confirmed), 2 a
@@ -162,6 +184,13 @@ def team_round(
     # 2. same label: the slot of the receiver holding it (labels are distinct within a
     # UAV: one slot at most), found by a sorted join on (receiver, label)
     held, held_slot = _holding(own, row, o_label)
+    if admit is not None:  # the offers a receiver refuses are as if never delivered
+        slot = np.full(held.shape, -1)
+        slot[held] = held_slot
+        keep = np.flatnonzero(admit(row, sender, o_mean, o_cov, slot, (mean0, cov0)))
+        row, sender, o_mean, o_cov = row[keep], sender[keep], o_mean[keep], o_cov[keep]
+        o_label, o_gamma, o_stamp = o_label[keep], o_gamma[keep], o_stamp[keep]
+        held, held_slot = held[keep], slot[keep][held[keep]]
 
     # 3. the other labels, the most confident offer of each per receiver
     free = np.flatnonzero(~held)
@@ -360,6 +389,7 @@ def agree(
     rule: str = "max_consensus",
     listing: Listing | None = None,
     receive: Callable[[TrackSet], TrackSet] | None = None,
+    admit: Admit | None = None,
 ) -> Agreement:
     """The team's track agreement over the radio: UAV i runs rounds[b, i] rounds of
     `team_round` (protocol "consensus", as `fusion.consensus`): every UAV transmits its
@@ -373,7 +403,8 @@ def agree(
 
     rounds: (B, N) int. listing: which slots the messages carry (`Listing`; None: all,
     the full encoding). receive(offered): what a receiver makes of the tracks that arrive
-    (with ``faults.delay``: predicted to now; None: as they are). Returns an `Agreement`
+    (with ``faults.delay``: predicted to now; None: as they are). admit: the offers a
+    receiver may take (`team_round`; None: all). Returns an `Agreement`
     (tracks, changed (B, N, K) int8, sent (B,), delivered (B,), and with a listing what
     it carried): changed says per final slot
     whether it holds the UAV's own track as its filter left it (0), its own track with
@@ -427,7 +458,7 @@ def agree(
         if not links.edges:  # the dense form keeps every receiver: mute the finished
             links = network.Links(batch=B, n=n, dense=links.matrix & active[:, :, None])
         offered = inbox.content if receive is None else receive(inbox.content)
-        tracks, changed = agree_round(tracks, changed, offered, links, threshold, rule)
+        tracks, changed = agree_round(tracks, changed, offered, links, threshold, rule, admit)
     changed = changed.astype(np.int8)
     if listing is None:
         return Agreement(tracks=tracks, changed=changed, sent=sent, delivered=delivered)
@@ -444,6 +475,7 @@ def agree_round(
     links: network.Links,
     threshold: float,
     rule: str = "max_consensus",
+    admit: Admit | None = None,
 ) -> tuple[TrackSet, np.ndarray]:
     """One round of `agree` for the receivers of `links`: the senders' tombstones merged
     and applied (`merge_tombs`, `bury`), then `team_round`, then the tombstones applied
@@ -453,7 +485,7 @@ def agree_round(
         before = tracks.status
         tracks = bury(tracks, merge_tombs(tracks.tombs, offered.tombs, links))
         changed = np.where((before != EMPTY) & (tracks.status == EMPTY), EMPTIED, changed)
-    tracks, now = team_round(tracks, offered, links, threshold, rule)
+    tracks, now = team_round(tracks, offered, links, threshold, rule, admit)
     # a new track stays new; an emptied slot that takes a new track holds a new track
     changed = np.where(now == ADOPTED, ADOPTED, np.maximum(changed, now))
     if tracks.tombs is not None:  # and not kept, if adopted from a UAV that knew less
