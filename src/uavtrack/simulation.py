@@ -22,7 +22,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Sequence
 from dataclasses import dataclass, replace
-from functools import cache
+from functools import cache, cached_property
 from numbers import Integral
 from typing import Any, Protocol
 
@@ -145,7 +145,7 @@ class Context:
     arrays its cycles reuse (`numerics.buffers`), and each state's estimates are
     updated in place. None: a cycle leaves the state it is given untouched."""
 
-    @property
+    @cached_property
     def associator(self) -> Associator:
         """How the cycle reads measurements: the oracle (known association) or tracks."""
         return ORACLE if self.scenario.tracker.association == "known" else TRACKING
@@ -365,8 +365,27 @@ def decide(
     radio = _radio(state, ctx, alive, rows)
     fusion = associator.fuse(state, ctx, sensed, believed, alive, radio)
     fused, owned = fusion.fused, fusion.owned
-    kept = np.where(alive, state.target, -1)
-    pending = Pending(
+    if plan:
+        start = timing.start()
+        top = method.top(ctx.setting, fused.largest)
+        bids, best = ctx.setting.plan(believed, fused.mean, top)
+        bids = associator.weigh(bids, fusion, alive, scenario)
+        plan_seconds = timing.since(start)
+        auction = associator.auction(ctx, fusion, bids, alive)
+        slot, assigned, taken = auction.slot, auction.assigned, auction.taken
+        chosen = np.take_along_axis(best, np.maximum(slot, 0)[..., None], axis=-1)[..., 0]
+        own = np.where(alive & (slot >= 0), chosen, STRAIGHT)
+    else:  # no bids, no auction: every UAV keeps its target, and flies straight
+        kept = np.where(alive, state.target, -1)
+        nothing = np.zeros(alive.shape[0], dtype=np.int64)
+        assigned = Assigned(
+            target=kept, seconds=np.zeros(alive.shape), sent=nothing, delivered=nothing,
+            held=state.held,
+        )  # fmt: skip
+        bids = np.full(alive.shape + (fused.mean.shape[2],), np.nan)
+        own, plan_seconds = np.full(alive.shape, STRAIGHT), np.zeros(2)
+        taken = None if owned is None else columns.label_column(kept, owned.labels)
+    return Pending(
         k=state.k,
         uavs=state.uavs,
         believed=believed,
@@ -374,43 +393,21 @@ def decide(
         observed=observed,
         radio=radio,
         fused=fused,
-        bids=np.full(alive.shape + (fused.mean.shape[2],), np.nan),
-        assigned=Assigned(
-            target=kept,
-            seconds=np.zeros(alive.shape),
-            sent=np.zeros(alive.shape[0], dtype=np.int64),
-            delivered=np.zeros(alive.shape[0], dtype=np.int64),
-            held=state.held,
-        ),
-        own=np.full(alive.shape, STRAIGHT),
-        plan_seconds=np.zeros(2),
+        bids=bids,
+        assigned=assigned,
+        own=own,
+        plan_seconds=plan_seconds,
         belief=fusion.belief,
         detected=sensed.detected,
         tracks=fusion.tracks,
         scan=sensed.scan,
-        columns=None if owned is None else columns.label_column(kept, owned.labels),
+        columns=taken,
         labels=None if fusion.cols is None else fusion.cols.labels,
         held=None if owned is None else owned.width,
     )
-    if not plan:
-        return pending
-    start = timing.start()
-    bids, best = ctx.setting.plan(believed, fused.mean, method.top(ctx.setting, fused.largest))
-    bids = associator.weigh(bids, fusion, alive, scenario)
-    plan_seconds = timing.since(start)
-    auction = associator.auction(ctx, fusion, bids, alive)
-    chosen = np.take_along_axis(best, np.maximum(auction.slot, 0)[..., None], axis=-1)[..., 0]
-    return replace(
-        pending,
-        bids=bids,
-        assigned=auction.assigned,
-        own=np.where(alive & (auction.slot >= 0), chosen, STRAIGHT),
-        plan_seconds=plan_seconds,
-        columns=auction.taken,
-    )
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(kw_only=True, slots=True)  # made once a cycle, read, dropped
 class Sensed:
     """What the sensors gave at a step: detected (B, Nu, Nt) the pairs measured, polar
     (M, 2) their measurements in ``np.nonzero(detected)`` order, and, for an associator
@@ -455,7 +452,7 @@ def detect(
     return Sensed(detected=detected, polar=polar, scan=scan)
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(kw_only=True, slots=True)  # made once a cycle, read, dropped
 class Fusion:
     """What an associator's filters and the team's fusion give: the inputs the auction
     reads, the fused estimates per slot, each UAV's own belief before the fusion (the
@@ -470,7 +467,7 @@ class Fusion:
     owned: columns.Columns | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(kw_only=True, slots=True)  # made once a cycle, read, dropped
 class Auction:
     """The auction's outcome: assigned (targets, or with tracks labels, to follow),
     slot (B, Nu) the slot whose best action each UAV flies (-1: none, it flies
@@ -481,7 +478,7 @@ class Auction:
     taken: np.ndarray | None = None
 
 
-@dataclass(frozen=True, kw_only=True)
+@dataclass(kw_only=True, slots=True)  # made once a cycle, read, dropped
 class Predicted:
     """The state's estimates at k + 1 (`Associator.close`): each UAV's slots and modes,
     with ``robust.gate`` the step each slot last met a measurement (`gate.seen`), and
@@ -581,9 +578,7 @@ class Oracle:
 
     def auction(self, ctx: Context, fusion: Fusion, bids: np.ndarray, alive: np.ndarray) -> Auction:
         assigned = ctx.method.assign(fusion.inputs, fusion.fused, bids)
-        # a living UAV told no target (the central node unheard) flies its best action
-        # for target 0, as the paper's road always has
-        return Auction(assigned=assigned, slot=np.where(alive, np.maximum(assigned.target, 0), -1))
+        return Auction(assigned=assigned, slot=assigned.target)  # slot j is target j
 
     def close(self, state: State, pending: Pending, ctx: Context) -> Predicted:
         fused = pending.fused
