@@ -140,10 +140,38 @@ def test_a_new_track_in_view_must_meet_a_measurement_and_one_out_of_view_passes(
     assert admitted_tracks([outside], [-1], tracks_scanned()).tolist() == [True]
 
 
-def test_with_tracks_the_gate_changes_nothing_honest_at_a_wide_gate_and_refuses_centralized():
+def test_with_tracks_the_gate_changes_little_honest_at_a_wide_gate_for_every_method():
     base = uavtrack.Scenario(steps=30).with_overrides({"tracker.association": "jpda"})
-    off = uavtrack.simulate(base, "distributed", seed=2)
-    on = uavtrack.simulate(base.with_overrides({"robust.gate": 0.9999}), "distributed", seed=2)
-    assert on.observation_rate == pytest.approx(off.observation_rate, abs=0.05)
-    with pytest.raises(uavtrack.ScenarioError, match="robust.gate with tracks"):
-        uavtrack.simulate(base.with_overrides({"robust.gate": 0.9}), "centralized", seed=2)
+    gated = base.with_overrides({"robust.gate": 0.9999})
+    for method in ("distributed", "greedy", "centralized"):
+        off = uavtrack.simulate(base, method, seed=2)
+        on = uavtrack.simulate(gated, method, seed=2)
+        assert on.observation_rate == pytest.approx(off.observation_rate, abs=0.05), method
+
+
+def test_a_centralized_uav_keeps_its_own_copy_of_a_downloaded_slot_its_scan_refutes():
+    from uavtrack.methods.base import Setting
+    from uavtrack.methods.centralized import download_admitted
+    from uavtrack.tracks import manage
+
+    scenario = uavtrack.Scenario(tracker={"association": "jpda"}, robust={"gate": 0.9999})
+    setting = Setting(
+        faulty=False, delay=0, budget=None, extra_rounds=0, stale=False, forward=None,
+        plan=None, gate=gate.threshold(0.9999), scenario=scenario,
+    )  # fmt: skip
+    K = 3
+    book = manage.Book(
+        label=np.arange(K)[None, None], status=np.array([[[2, 2, 1]]], dtype=np.int8),
+        hits=np.zeros((1, 1, K), int), scans=np.zeros((1, 1, K), int),
+        misses=np.zeros((1, 1, K), int), serial=np.zeros((1, 1), int),
+        stamp=np.zeros((1, 1, K), int),
+    )  # fmt: skip
+    mean = np.zeros((1, 1, K, 4))
+    mean[0, 0, :, 0] = [5.0, -5.0, -5.0]  # slot 0 where the UAV measured, 1 and 2 elsewhere
+    cov = np.broadcast_to(np.eye(4), (1, 1, K, 4, 4))
+    z = np.array([[[[5.0, 0.0]]]])
+    scan = (z, np.broadcast_to(np.eye(2), (1, 1, 1, 2, 2)), np.ones((1, 1, 1), dtype=bool))
+    uav = np.array([[[0.0, 0.0, 100.0, 0.0, 25.0]]])  # its view: a disk of 8.7 m
+    ok = download_admitted(book, mean, cov, scan, uav, setting)
+    # slot 0 agrees with the measurement; slot 1 is refuted; slot 2 is tentative: no claim
+    assert ok.tolist() == [[[True, False, True]]]

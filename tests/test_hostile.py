@@ -479,11 +479,11 @@ def test_with_tracks_a_lying_member_takes_the_team_over_unless_the_gate_is_on():
     example = lying_member()
     base = uavtrack.Scenario(steps=60).with_overrides({"tracker.association": "jpda"})
     gated = base.with_overrides({"robust.gate": 0.9999})
-    honest = example["honest_rates"](base, 2)
-    liar = example["swarm_rates"](base, 2, example["LIAR"])
-    guarded = example["swarm_rates"](gated, 2, example["LIAR"])
-    assert liar.mean() < honest.mean() - 0.3
-    assert guarded.mean() >= example["honest_rates"](gated, 2).mean() - 0.05
+    honest = example["honest_rates"](base, 1)
+    liar = example["swarm_rates"](base, 1, example["LIAR"])
+    guarded = example["swarm_rates"](gated, 1, example["LIAR"])
+    assert liar.mean() < honest.mean() - 0.3  # one trial: 0.04 against 0.73
+    assert guarded.mean() >= example["honest_rates"](gated, 1).mean() - 0.05
 
 
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
@@ -514,11 +514,11 @@ def test_memory_swarm_with_the_gate_equals_the_simulator(method, overrides):
 
 
 @pytest.mark.integration  # a swarm: the agent form against real deadlines
-@pytest.mark.parametrize("method", ["distributed", "greedy"])
+@pytest.mark.parametrize("method", ["distributed", "greedy", "centralized"])
 def test_memory_swarm_with_the_gate_and_tracks_equals_the_simulator(method):
     from uavtrack.testing import assert_same_trace
 
-    scenario = uavtrack.Scenario(steps=40).with_overrides(
+    scenario = uavtrack.Scenario(steps=30).with_overrides(
         {
             "tracker.association": "jpda",
             "sensor.detection_probability": 0.9,

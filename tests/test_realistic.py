@@ -56,7 +56,7 @@ def test_every_cell_removes_what_it_names_and_only_that():
     [
         (["--set", "comm_range=-3"], "comm_range"),
         (["--trials", "0"], "--trials"),
-        (["--set", "robust.gate=0.99"], "robust.gate"),
+        (["--set", "faults.delay=-1"], "faults.delay"),
     ],
 )
 def test_realistic_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, args, named, capsys):

@@ -177,6 +177,7 @@ class Context:
             trigger=scenario.fusion.trigger,
             refresh=scenario.fusion.refresh,
             compact=scenario.radio.encoding == "compact",
+            wire=wire_of(scenario),
         )
         detection = None
         if not scenario.sensor.ideal or tracked:
@@ -200,13 +201,6 @@ def refusal(scenario: Scenario, method: Method) -> str | None:
             "radio.encoding = compact and fusion.trigger act on the consensus of the "
             f"distributed and greedy methods; method {method.name} uploads and downloads "
             "whole tables, which they do not encode yet: leave both unset"
-        )
-    tracked = scenario.tracker.association != "known"
-    if method.central and tracked and scenario.robust.gate is not None:
-        return (
-            "robust.gate with tracks checks the tracks a neighbour offers in the consensus; "
-            f"method {method.name}'s UAVs take the central node's whole table, which it "
-            "does not check yet: leave robust.gate unset"
         )
     return None
 
@@ -293,7 +287,7 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
     bps = scenario.radio.bandwidth_bps
     if bps is None:
         return None
-    shape = wire_of(scenario)
+    shape = ctx.setting.wire or wire_of(scenario)
     n = shape.n
 
     def largest(parts: Any, count: int) -> Any:

@@ -23,7 +23,7 @@ import numpy as np
 from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
 from ..methods.base import NEVER, Held, forwarded, gated_tracks, scanned_tracks
-from ..methods.centralized import node_targets
+from ..methods.centralized import download_admitted, node_targets
 from ..radio import counted, mirrored, upper
 from ..tracks import association, manage, team
 from .agent import CentralAgent, UavAgent, closed, dropped, part
@@ -157,6 +157,12 @@ class TrackedUav(UavAgent):
             target = int(content["target"])
             if s.delay > 0:  # the node's tracks of k - 2d (at the start: of 0), sent at k - d
                 mean, cov = forwarded(s, mean, cov, max(k - 2 * s.delay, 0), k)
+            scan = (z[None, None], R[None, None], np.ones((1, 1, len(z)), dtype=bool))
+            ok = download_admitted(book, mean, cov, scan, self.believed[None, None], s)
+            if ok is not None:  # the slots the gate refuses stay as this UAV had them
+                book = manage.where(ok, book, self.book)
+                mean = np.where(ok[..., None], mean, self.mean)
+                cov = np.where(ok[..., None, None], cov, self.cov)
         slot_bids, best, plan_seconds = self._plan(book, mean)
         labels, confirmed = book.label[0, 0], book.confirmed[0, 0]
         follow = target if target >= 0 or not s.faulty else self.target

@@ -1001,8 +1001,8 @@ class RobustModel(Part):
             "same way; a neighbour caught on one target is believed on none in that round; "
             "with tracks (gnn, jpda) an offered track must agree with the receiver's slot of "
             "its label if the receiver's own scans met it within robust.gate_memory cycles, "
-            "else with a measurement of its scan unless it lies out of view (not with the "
-            "centralized method); "
+            "else with a measurement of its scan unless it lies out of view (a centralized "
+            "UAV checks the download's tracks by its scan alone); "
             "assumed as an option against a member that lies with high confidence; not set: "
             "the paper's rule, the most confident estimate is adopted"
         ),

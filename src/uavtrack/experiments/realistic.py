@@ -4,9 +4,9 @@ realism's cost is measured and the methods' distance from their oracle-sensor ra
 
 Every cell runs the same trials (common random numbers): each variant is paired trial by
 trial with its method's preset. The robust options are ``robust.stale`` and one extra
-consensus round; the measurement gate (``robust.gate``), which with tracks acts on the
-consensus only (docs/how-to/pairs.md), is left out so that the three methods run the
-same options. The centralized method's uploads and downloads are whole tables,
+consensus round; the measurement gate (``robust.gate``) guards against a lying member,
+which this mission has none of (its cost without one: docs/tutorials/faults.md). The
+centralized method's uploads and downloads are whole tables,
 on which the compact encoding and the trigger do not act: it runs every cell with the
 full encoding and no trigger.
 """
@@ -231,8 +231,8 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
         "a shared 1 Mbit/s radio with the compact encoding and a trigger of 0.1, the "
         "whole team at one altitude with the avoidance filter and a radio range of 240 m "
         "(its sound range at a delay of one cycle). Robust: `robust.stale` and one extra "
-        "consensus round (the measurement gate, which with tracks acts on the consensus only, "
-        "is left out so that the three methods run the same options). The centralized "
+        "consensus round (the measurement gate guards against a lying member, which this "
+        "mission has none of). The centralized "
         "method runs every cell with the full encoding and no trigger (its uploads and "
         "downloads are whole tables). Gain: the cell's rate minus the method's preset, "
         "paired trial by trial.",

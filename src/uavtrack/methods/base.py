@@ -54,6 +54,8 @@ class Setting:
     trigger: float | None = None
     refresh: int = 10
     compact: bool = False
+    wire: Wire | None = None
+    """The run's message shapes (`wire_of`), read once per run; None: read on use."""
 
     @property
     def tuples(self) -> str:
@@ -263,10 +265,12 @@ def wire_of(scenario: Scenario) -> Wire:
 def shaped(inputs: Inputs) -> Wire:
     """The run's `radio.Wire` (`wire_of`; a method run without a scenario: the team and
     targets of its inputs)."""
-    scenario = inputs.setting.scenario
-    if scenario is None:
+    setting = inputs.setting
+    if setting.wire is not None:
+        return setting.wire
+    if setting.scenario is None:
         return Wire(n=inputs.alive.shape[1], m=inputs.gamma.shape[-1])
-    return wire_of(scenario)
+    return wire_of(setting.scenario)
 
 
 def wire(inputs: Inputs, protocol: str, rows: np.ndarray | None = None) -> np.ndarray | int:

@@ -182,8 +182,12 @@ class Centralized(Method):
                 arrived,
             )
         every = manage.broadcast(book, n)
-        out = manage.where(take, every, local.book)
         pick = take[..., None]
+        scan = (local.z, local.R, local.valid)
+        ok = download_admitted(every, mean, cov, scan, inputs.believed, s)
+        if ok is not None:  # the slots the gate refuses stay as the UAV had them
+            pick = pick & ok
+        out = manage.where(pick, every, local.book)
         return FusedTracks(
             book=out,
             mean=np.where(pick[..., None], mean, local.mean),
@@ -214,6 +218,41 @@ class Centralized(Method):
         target = np.where(inputs.alive, target, -1)
         assert fused.seconds is not None, "the fusion under faults times the central node"
         return Assigned(target=target, seconds=fused.seconds, sent=none, delivered=none)
+
+
+def download_admitted(
+    book: manage.Book,
+    mean: np.ndarray,
+    cov: np.ndarray,
+    scan: tuple[np.ndarray, np.ndarray, np.ndarray],
+    believed: np.ndarray,
+    setting: Setting,
+) -> np.ndarray | None:
+    """``robust.gate`` with tracks on the central node's download: which slots each UAV
+    takes (B, N, K). A confirmed slot must agree with a measurement of the UAV's scan
+    unless it lies out of the UAV's view (`gate.tracks_admitted`; a centralized UAV
+    keeps no track of its own to check against). book (B, N, K): the download as each
+    UAV reads it; mean (B, 1 or N, K, 4), cov; scan: z (B, N, Z, 2), R, valid; believed
+    (B, N, 5). None without the gate. The agent form calls it on its own row."""
+    if setting.gate is None or setting.scenario is None:
+        return None
+    B, N, K = book.label.shape
+    if not K:
+        return np.ones((B, N, K), dtype=bool)
+    z, R, valid = scan
+    Z = valid.shape[-1]
+    rows = B * N
+    scanned = gate.Scanned(
+        z=z.reshape(rows, Z, 2), R=R.reshape(rows, Z, 2, 2), valid=valid.reshape(rows, Z),
+        uav=believed.reshape(rows, -1), recent=np.zeros((rows, K), dtype=bool),
+    )  # fmt: skip
+    m = np.broadcast_to(mean, (B, N, K, 4)).reshape(-1, 4)
+    P = np.broadcast_to(cov, (B, N, K, 4, 4)).reshape(-1, 4, 4)
+    row = np.repeat(np.arange(rows), K)
+    none = np.full(row.shape, -1)
+    sensor = setting.scenario.sensor
+    ok = gate.tracks_admitted(row, none, m, P, none, (m, P), scanned, sensor, setting.gate)
+    return ok.reshape(B, N, K) | ~book.confirmed
 
 
 def nothing_heard(B: int, n: int, m: int) -> fusion.Estimates:

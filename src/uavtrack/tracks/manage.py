@@ -581,11 +581,12 @@ def broadcast(book: Book, n: int) -> Book:
 
 
 def where(take: np.ndarray, a: Book, b: Book) -> Book:
-    """Per UAV (take (B, N) bool) the slots of book a, else those of b."""
-    pick = take[..., None]
+    """Per UAV (take (B, N) bool), or per slot (take (B, N, K)), the slots of book a,
+    else those of b; a UAV's serial is a's where it takes any slot of a."""
+    pick = take if take.ndim == 3 else take[..., None]
     return Book(
         **{name: np.where(pick, getattr(a, name), getattr(b, name)) for name in SLOT_FIELDS},
-        serial=np.where(take, a.serial, b.serial),
+        serial=np.where(pick.any(axis=-1), a.serial, b.serial),
     )
 
 
