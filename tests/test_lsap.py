@@ -112,3 +112,30 @@ def test_chisquare_bad_input():
     for p in (0.0, 1.0, 1.2):
         with pytest.raises(ValueError, match="probability"):
             chisquare.ppf(p, 4)
+
+
+@pytest.mark.integration  # two fresh interpreters: whether scipy.optimize gets loaded
+def test_a_long_tracked_run_loads_the_compiled_solver_and_scores_the_same():
+    import json
+    import subprocess
+    import sys
+
+    code = (
+        "import json, sys, uavtrack\n"
+        "from uavtrack.numerics import lsap\n"
+        "lsap.IMPORT_SECONDS = float(sys.argv[1])\n"
+        "s = uavtrack.Scenario(steps=200, tracker={'association': 'jpda'})\n"
+        "m = uavtrack.run(s, 'distributed', [0, 1, 2, 3]).metrics\n"
+        "print(json.dumps({'loaded': 'scipy.optimize' in sys.modules,\n"
+        "    **{k: m[k].tolist() for k in ('gospa', 'switches', 'label_purity')}}))\n"
+    )
+    runs = [
+        json.loads(
+            subprocess.run(
+                [sys.executable, "-c", code, limit], capture_output=True, text=True, check=True
+            ).stdout
+        )
+        for limit in ("0.5", "1e9")  # as shipped; never worth it
+    ]
+    assert runs[0].pop("loaded") and not runs[1].pop("loaded")
+    assert runs[0] == runs[1]  # the same answers, ties included

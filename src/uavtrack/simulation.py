@@ -35,7 +35,8 @@ from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Distributed, Fused, Held, Inputs, Method, Setting, get
 from .methods.base import FusedTracks, Local, wire_of
-from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES
+from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, PER_UAV_SETS
+from .numerics import lsap
 from .numerics.buffers import Buffers
 from .radio import (
     Limit,
@@ -1018,6 +1019,10 @@ def run(
         raise ValueError("seeds is empty: give at least one seed (one per trial)")
     check_memory(scenario, len(seeds), trace)
     ctx = Context.of(scenario, method, seeds)
+    if ctx.associator.scans and scenario.n_targets <= PER_UAV_SETS:  # the track scoring's
+        # GOSPA: one problem of max(Nt, K) a side per UAV and step, and the team's
+        side = max(scenario.n_targets, scenario.track_slots)
+        lsap.load_if_worth(len(seeds) * scenario.steps * (scenario.n_uavs + 1), side)
     if not ctx.associator.scans:  # this loop owns its states: their arrays are reused
         ctx = replace(ctx, buffers=Buffers())
         if len(seeds) * scenario.n_uavs * scenario.n_targets * 128 >= LARGE_STATE:

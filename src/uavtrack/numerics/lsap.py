@@ -23,11 +23,14 @@ raises ValueError, as does a NaN entry.
 Importing scipy.optimize costs about half a second of CPU, many times what a single
 trial's problems cost to solve here (tens of microseconds each), so small problems
 (`SMALL`) are solved here and larger ones by scipy, whose compiled loop then pays.
+Once scipy.optimize is loaded (by a caller, or by `load_if_worth` for a run that will
+solve many problems) every problem goes to it: the answers are the same.
 """
 
 from __future__ import annotations
 
 import math
+import sys
 from typing import Any
 
 import numpy as np
@@ -38,6 +41,20 @@ solver is faster than its import costs, in the problems a run meets (a 16 x 16 p
 takes about 2 ms here)."""
 
 INF = math.inf
+
+
+IMPORT_SECONDS = 0.5
+"""About what loading scipy.optimize costs, in CPU seconds."""
+
+SECONDS_PER_CUBE = 7e-8
+"""About what a problem of n x n costs here, per n^3, in CPU seconds (12 x 12: 0.12 ms)."""
+
+
+def load_if_worth(problems: int, n: int) -> None:
+    """Load scipy.optimize when `problems` problems of n x n would cost more here than
+    loading it does (a run's track scoring: one per UAV and step)."""
+    if "scipy.optimize" not in sys.modules and problems * n**3 * SECONDS_PER_CUBE > IMPORT_SECONDS:
+        import scipy.optimize  # noqa: F401  # pyright: ignore[reportMissingTypeStubs]
 
 
 def small(rows: int, columns: int) -> bool:
@@ -52,7 +69,7 @@ def solve(cost: Any, maximize: bool = False) -> tuple[np.ndarray, np.ndarray]:
     matrix = np.asarray(cost, dtype=float)
     if matrix.ndim != 2:
         raise ValueError(f"expected a matrix (2-d array), got a {matrix.ndim}-d array")
-    if not small(*matrix.shape):
+    if not small(*matrix.shape) or "scipy.optimize" in sys.modules:
         from scipy.optimize import linear_sum_assignment  # pyright: ignore[reportMissingTypeStubs]
 
         rows, cols = linear_sum_assignment(matrix, maximize=maximize)
