@@ -149,7 +149,7 @@ class Context:
     @cached_property
     def associator(self) -> Associator:
         """How the cycle reads measurements: the oracle (known association) or tracks."""
-        return ORACLE if self.scenario.tracker.association == "known" else TRACKING
+        return TRACKING if self.scenario.tracker.unlabelled else ORACLE
 
     @classmethod
     def of(
@@ -158,7 +158,7 @@ class Context:
         why = refusal(scenario, method)
         if why is not None:
             raise ScenarioError(why)
-        tracked = scenario.tracker.association != "known"
+        tracked = scenario.tracker.unlabelled
         const = Constants.of(scenario)
         keys = np.stack([trial_key(world.children(s)[2]) for s in seeds])
         faults = Faults(scenario.faults, keys, scenario.n_uavs)
@@ -963,7 +963,7 @@ def initial_stream(
     pilot, uavs = flight.start(scenario, seeds, uavs)
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
     book = central = labels = tombs = None
-    if scenario.tracker.association != "known":  # the briefed targets as confirmed tracks
+    if scenario.tracker.unlabelled:  # the briefed targets as confirmed tracks
         briefing = scenario.tracker.briefing
         node = manage.briefed(mean[:, :1], cov[:, :1], scenario.track_slots, briefing)
         central = manage.Slots(

@@ -126,7 +126,7 @@ def serve(
     faults = Faults(scenario.faults, hello.key.array()[None].astype(np.uint32), n)
     prior = (hello.prior_mean.array().copy(), hello.prior_cov.array().copy())
     prior = (prior[0], np.broadcast_to(prior[1], (scenario.n_targets, 4, 4)).copy())
-    tracked = scenario.tracker.association != "known"
+    tracked = scenario.tracker.unlabelled
     if me == n and tracked:
         program = TrackedCentral(scenario, faults, link, mailbox, hello.deadline, prior)
     elif me == n:
@@ -140,7 +140,7 @@ def serve(
 
         if not isinstance(transport, ZenohTransport):
             raise ValueError("ROS 2 topics need the Zenoh transport")
-        tracks = scenario.tracker.association != "known"
+        tracks = scenario.tracker.unlabelled
         node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt, tracks)
     try:
         return _cycles(transport, link, mailbox, program, node, run, me, n, programs,

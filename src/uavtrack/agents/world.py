@@ -469,7 +469,7 @@ class WorldProgram:
     def _conflicts(self, target, alive, label, status) -> np.ndarray:
         """`simulation.conflicts` of the targets followed; with tracks, of the team labels
         followed, among the labels the living UAVs hold confirmed (`tracks.columns`)."""
-        if self.scenario.tracker.association == "known":
+        if not self.scenario.tracker.unlabelled:
             return simulation.conflicts(target, alive, self.scenario.n_targets)
         cols = columns.of(label, (status == CONFIRMED) & alive[..., None])
         taken = np.where(alive, columns.label_column(target, cols.labels), -1)

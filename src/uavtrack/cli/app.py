@@ -494,7 +494,7 @@ def show(
 
     central = get(summary["method"]).central
     rows_shown = RUN_ROWS
-    if scenario.tracker.association != "known":
+    if scenario.tracker.unlabelled:
         keep = ("rounds", "messages", "bytes", "decision_time_ms", "decision_wall_ms")
         rows_shown = TRACK_ROWS + tuple(r for r in RUN_ROWS if r[0] in keep)
         table.caption = TRACK_CAPTION
@@ -563,7 +563,7 @@ def compare(
 
     scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     names = chosen_methods(methods)
-    tracked = scenario.tracker.association != "known"
+    tracked = scenario.tracker.unlabelled
     with steps_bar(scenario, trials * len(names), "trial-steps") as advance:
         raw = run_compare(scenario, names, trials, seed, progress=advance)
     results: dict[str, dict[str, Any]] = {m: summarize(v) for m, v in raw.items()}

@@ -437,7 +437,7 @@ def sweep(
         info,
     ):
         info["seed"] = seed
-        tracked = scenario.tracker.association != "known"
+        tracked = scenario.tracker.unlabelled
         summary = summarize_sweep(plan, results, axes, names, TRACK_METRICS if tracked else ())
         summary["units"] = {name: scenario.unit(name) for name in axes}
         if one:

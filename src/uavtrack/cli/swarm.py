@@ -263,9 +263,7 @@ def swarm(
             realtime=realtime,
             trace=trace is not None or bag is not None,
             progress=lambda _: advance(1),
-            announce=_ros2_announcer(
-                ros2, n, scenario.n_targets, scenario.tracker.association != "known"
-            )
+            announce=_ros2_announcer(ros2, n, scenario.n_targets, scenario.tracker.unlabelled)
             if spawn
             else _announcer(n + central, sign, options.tls, ros2),
             sign=sign,

@@ -635,6 +635,13 @@ class TrackerModel(Part):
                 raise ValueError(f"transition row {i} sums to {sum(row):g}, not 1")
         return self
 
+    @property
+    def unlabelled(self) -> bool:
+        """Whether each UAV's measurements come as an unlabelled scan that its tracks read
+        (gnn, jpda); with known association (the oracle) each names its target. The one
+        reading of the association that the cycle's forms and outputs branch on."""
+        return self.association != "known"
+
 
 class FusionModel(Part):
     """How a UAV combines its estimate with its neighbours' (Algorithm 2, lines 15-25)."""

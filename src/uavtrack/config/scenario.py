@@ -191,14 +191,14 @@ class Scenario(Part):
                 "target.stay or leave target.away unset"
             )
         if self.planner.existence and (
-            self.tracker.association == "known" or self.tracker.confirmation != "existence"
+            not self.tracker.unlabelled or self.tracker.confirmation != "existence"
         ):
             raise ValueError(
                 "planner.existence needs tracks with an existence probability: set "
                 "tracker.association=jpda (or gnn) with tracker.confirmation=existence, or "
                 "leave planner.existence unset"
             )
-        if t.stay > 0 and self.tracker.association == "known":
+        if t.stay > 0 and not self.tracker.unlabelled:
             raise ValueError(
                 "target.stay > 0 (targets that come and go) needs tracker.association = gnn "
                 "or jpda: known association holds one filter per target for the whole run"
@@ -208,7 +208,7 @@ class Scenario(Part):
     @model_validator(mode="after")
     def _tracks(self) -> Scenario:
         """What tracks of unknown association cannot do yet, said before a run starts."""
-        if self.tracker.association == "known":
+        if not self.tracker.unlabelled:
             return self
         if self.radio.encoding == "compact" and self.labels >= 2**31:
             raise ValueError(
@@ -247,7 +247,7 @@ class Scenario(Part):
             ),
             (
                 self.tracker,
-                "known" if self.tracker.association == "known" else "tracks",
+                "tracks" if self.tracker.unlabelled else "known",
                 "tracker.association = gnn or jpda",
                 "tracks",
                 tracks,

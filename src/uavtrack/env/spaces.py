@@ -97,7 +97,7 @@ class Spaces:
         if observation not in OBSERVATIONS:
             raise ValueError(f"observation must be one of {OBSERVATIONS}, got {observation!r}")
         nu, nt = scenario.n_uavs, scenario.n_targets
-        self.tracked = scenario.tracker.association != "known"
+        self.tracked = scenario.tracker.unlabelled
         # with tracks a UAV holds up to K slots; its rows default to the n_targets it
         # was briefed on: more confirmed tracks than targets are false or duplicates,
         # and the nearest first keep those that matter to its flight
@@ -314,7 +314,7 @@ def check_reward(kind: str, scenario: Scenario | None = None) -> str:
     if kind not in REWARDS:
         raise ValueError(f"reward must be one of {sorted(REWARDS)}, got {kind!r}")
     if kind == "information" and scenario is not None:
-        if scenario.tracker.association != "known":
+        if scenario.tracker.unlabelled:
             # its gain compares each target's filter before and after the UAV's own
             # update; a track slot is fused with teammates' tracks, born or emptied
             # within the scan, so no one filter holds the UAV's own gain

@@ -268,7 +268,7 @@ def _check_shapes(path: Path, arrays: dict[str, np.ndarray], scenario: Scenario)
 def _sizes(scenario: Scenario) -> dict[str, int]:
     """The sizes a trace's shapes name: Nu UAVs, Nt targets, K track slots (the targets
     with known association, `Scenario.track_slots` with gnn or jpda)."""
-    known = scenario.tracker.association == "known"
+    known = not scenario.tracker.unlabelled
     return {
         "Nu": scenario.n_uavs,
         "Nt": scenario.n_targets,

@@ -247,7 +247,7 @@ def wire_of(scenario: Scenario) -> Wire:
     download's book fields with unknown association, the avoidance beacon and the
     consensus listing. The one reading of these settings the batch's bytes, the radio's
     shares and the agents' admission share."""
-    tracked = scenario.tracker.association != "known"
+    tracked = scenario.tracker.unlabelled
     return Wire(
         n=scenario.n_uavs,
         m=scenario.n_targets,
