@@ -534,6 +534,25 @@ def test_memory_swarm_with_the_gate_and_tracks_equals_the_simulator(method):
     assert swarm.traffic.dropped == 0
 
 
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+def test_a_centralized_swarm_with_the_gate_and_tracks_and_no_faults_equals_the_simulator():
+    # without faults the batch's assignment is the node's over its own tracks, as the
+    # agent form's: the UAVs' tracks, which the gate may keep from the download, differ
+    from uavtrack.testing import assert_same_trace
+
+    scenario = uavtrack.Scenario(steps=40).with_overrides(
+        {
+            "tracker.association": "jpda",
+            "sensor.clutter_rate": 1.0,
+            "n_uavs": 7,
+            "n_targets": 2,
+            "robust.gate": 0.99,
+        }
+    )
+    swarm = run_swarm(scenario, "centralized", seed=3, transport="memory")
+    assert_same_trace(swarm.result.trace, uavtrack.simulate(scenario, "centralized", seed=3).trace)
+
+
 # ------------------------------------------------------------------ what passes is usable
 
 

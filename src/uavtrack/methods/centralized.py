@@ -187,6 +187,8 @@ class Centralized(Method):
         ok = download_admitted(every, mean, cov, scan, inputs.believed, s)
         if ok is not None:  # the slots the gate refuses stay as the UAV had them
             pick = pick & ok
+            if not s.faulty:  # the UAVs' tracks may now differ from the node's: its labels
+                target = node_targets(node, inputs.believed, alive, s, scenario)
         out = manage.where(pick, every, local.book)
         return FusedTracks(
             book=out,
@@ -203,6 +205,13 @@ class Centralized(Method):
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         B, n, _ = bids.shape
         none = np.zeros(B, dtype=np.int64)
+        if not inputs.setting.faulty and fused.target is not None:  # the node's labels
+            return Assigned(
+                target=np.where(inputs.alive, fused.target, -1),
+                seconds=np.zeros((B, n, 2)) if fused.seconds is None else fused.seconds,
+                sent=none,
+                delivered=none,
+            )
         if not inputs.setting.faulty:
             target, seconds = assignment.centralized(bids, clock=timing)
             return Assigned(
