@@ -184,6 +184,7 @@ def test_killing_a_program_mid_run_still_exits_0_with_the_trace(tmp_path, capsys
         assert arrays["alive"][:, [0, 1, 2, 4]].all()
 
 
+@pytest.mark.slow  # 30 s of a realtime run: kept out of CI's 15 minutes
 def test_programs_cannot_join_a_run_under_way(tmp_path):
     # the world started with --no-spawn, its programs by hand with their key files; once
     # the run is under way a program already running, one of another number, or one

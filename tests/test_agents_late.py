@@ -491,6 +491,7 @@ def test_a_world_stopped_for_15_s_mid_run_loses_no_program(tmp_path):
     equal_until_counted(swarm, uavtrack.simulate(scenario, "distributed", seed=1).trace)
 
 
+@pytest.mark.slow  # the programs wait out their full patience: kept out of CI's 15 minutes
 def test_a_world_silent_past_the_programs_wait_ends_the_run_saying_why():
     """The world stops answering (its cycle held, as a stopped process) for longer than
     a program waits for its next cycle: every program ends, saying the world went

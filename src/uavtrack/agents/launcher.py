@@ -364,6 +364,8 @@ def _fork(spec: dict, log: int, link: socket.socket, wake: tuple[int, int]) -> i
     """Fork one program; the child never returns. The child's pid, or -1. Returns once
     the child holds its own streams and name (it closes `named` then)."""
     waiting, named = os.pipe()
+    parent = os.getpid()  # read before the fork: once the child has named itself the
+    # launcher may be gone, and os.getppid() would name whoever adopted the child
     try:
         pid = os.fork()
     except OSError:
@@ -391,7 +393,7 @@ def _fork(spec: dict, log: int, link: socket.socket, wake: tuple[int, int]) -> i
         os.close(null)
         _name(NAME % int(spec["program"]))
         os.close(named)
-        code = run_program(spec, os.getppid())
+        code = run_program(spec, parent)
     except SystemExit as exc:
         code = exc.code if isinstance(exc.code, int) else 1
     except BaseException:
