@@ -240,13 +240,13 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     """report.md of `uavtrack bandwidth`."""
     first = summary["methods"]["distributed"]["paper"]["unlimited"]
     out = [
-        "# Bandwidth: a radio with a byte budget",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{first['trials']} trials per cell and method, {scenario.steps} steps, seed "
-        f"{info['seed']}; {info['workers']} worker{'s' if info['workers'] != 1 else ''}; "
-        f"{info['seconds']:.0f} s ({info['jobs_run']} jobs run, {info['jobs_skipped']} "
-        "already done).",
+        *protocol.header(
+            "Bandwidth: a radio with a byte budget",
+            first["trials"],
+            "cell and method",
+            scenario,
+            info,
+        ),  # fmt: skip
         "",
         f"The channel's capacity is shared: each UAV gets capacity x dT / 8 bytes a cycle "
         f"(dT = {scenario.dt:g} s) over its closed neighbourhood (with the centralized "

@@ -253,12 +253,13 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     conditions = summary["conditions"]
     trials = next(iter(conditions.values()))["methods"]["distributed"]["trials"]
     out = [
-        "# Real flight: the paper's method with every UAV a JSBSim aircraft",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{trials} trials per condition and method, {scenario.steps} steps, seed "
-        f"{info['seed']}; {info['workers']} workers; {info['seconds']:.0f} s "
-        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+        *protocol.header(
+            "Real flight: the paper's method with every UAV a JSBSim aircraft",
+            trials,
+            "condition and method",
+            scenario,
+            info,
+        ),  # fmt: skip
         "",
         "## The autopilot (trackwing, calm air)",
         "",

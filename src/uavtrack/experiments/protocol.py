@@ -18,7 +18,7 @@ if TYPE_CHECKING:
     from ..config import Scenario
     from .jobs import Job
 
-__all__ = ["Experiment", "Profile"]
+__all__ = ["Experiment", "Profile", "header"]
 
 
 @dataclass(frozen=True)
@@ -40,6 +40,22 @@ class Profile:
 
     def to_dict(self) -> dict[str, Any]:
         return {"trials": self.trials, "steps": self.steps, "chunk": self.chunk}
+
+
+def header(
+    title: str, trials: int, per: str, scenario: Scenario, info: dict[str, Any], how: str = ""
+) -> list[str]:
+    """A report's first lines: its title, the command that made it, and how the run went
+    (`trials` per `per`, the steps, `how`, the seed, the workers, the time, the jobs)."""
+    workers = info["workers"]
+    return [
+        f"# {title}",
+        "",
+        f"Command: `{info['command']}`  ",
+        f"{trials} trials per {per}, {scenario.steps} steps{how}, seed {info['seed']}; "
+        f"{workers} worker{'s' if workers != 1 else ''}; {info['seconds']:.0f} s "
+        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+    ]
 
 
 class Experiment(Protocol):

@@ -217,13 +217,7 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     first = summary["methods"]["distributed"]["cells"]["preset"]
     diff = summary["distributed_minus_greedy"]
     out = [
-        "# A realistic mission",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{first['trials']} trials per cell and method, {scenario.steps} steps, seed "
-        f"{info['seed']}; {info['workers']} worker{'s' if info['workers'] != 1 else ''}; "
-        f"{info['seconds']:.0f} s ({info['jobs_run']} jobs run, {info['jobs_skipped']} "
-        "already done).",
+        *protocol.header("A realistic mission", first["trials"], "cell and method", scenario, info),
         "",
         "The preset (`--config realistic`, each value's reason in its file): P_D 0.9 and 2 "
         "false detections a scan, JPDA, an IMM with covariance intersection on manoeuvring "

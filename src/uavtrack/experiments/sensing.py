@@ -275,12 +275,13 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     """report.md of `uavtrack sensing`."""
     first = next(iter(summary["methods"]["distributed"].values()))
     out = [
-        "# Sensing: missed detections, clutter and unknown association",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{first['trials']} trials per cell and method, {scenario.steps} steps, seed "
-        f"{info['seed']}; {info['workers']} workers; {info['seconds']:.0f} s "
-        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+        *protocol.header(
+            "Sensing: missed detections, clutter and unknown association",
+            first["trials"],
+            "cell and method",
+            scenario,
+            info,
+        ),  # fmt: skip
         "",
         "Each tracked cell is paired trial by trial with known association at the same P_D "
         "(the same missed detections). GOSPA: each UAV's confirmed tracks (with known "

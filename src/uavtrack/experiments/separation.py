@@ -233,13 +233,13 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     """report.md of `uavtrack separation`."""
     first = next(iter(summary["methods"]["distributed"].values()))
     out = [
-        "# Separation: collision avoidance at one altitude",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{first['none']['trials']} trials per cell, side and method, {scenario.steps} "
-        f"steps, seed {info['seed']}; {info['workers']} worker"
-        f"{'s' if info['workers'] != 1 else ''}; {info['seconds']:.0f} s "
-        f"({info['jobs_run']} jobs run, {info['jobs_skipped']} already done).",
+        *protocol.header(
+            "Separation: collision avoidance at one altitude",
+            first["none"]["trials"],
+            "cell, side and method",
+            scenario,
+            info,
+        ),  # fmt: skip
         "",
         f"Separation {avoidance.minimum(scenario):g} m between UAVs closer than "
         f"{scenario.uav.vertical_separation:g} m in altitude. Radio: the scenario's r_C "

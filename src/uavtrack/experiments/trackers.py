@@ -171,13 +171,14 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
     first = summary["motions"][MOTIONS[0]]
     trials = next(iter(first.values()))["trials"]
     out = [
-        "# Trackers: the paper's filter and fusion against the IMM and covariance intersection",
-        "",
-        f"Command: `{info['command']}`  ",
-        f"{trials} trials per target motion and tracker, {scenario.steps} steps, the "
-        f"distributed method, seed {info['seed']}; {info['workers']} workers; "
-        f"{info['seconds']:.0f} s ({info['jobs_run']} jobs run, {info['jobs_skipped']} "
-        "already done).",
+        *protocol.header(
+            "Trackers: the paper's filter and fusion against the IMM and covariance intersection",
+            trials,
+            "target motion and tracker",
+            scenario,
+            info,
+            ", the distributed method",
+        ),  # fmt: skip
         "",
         "NEES over every estimate (walls and manoeuvres included): every UAV's fused "
         "estimate (`nees`) and the team's best (`nees_best`), with the 95% band of the mean "
