@@ -460,6 +460,7 @@ class Fusion:
     tracks: FusedTracks | None = None
     cols: columns.Columns | None = None
     owned: columns.Columns | None = None
+    confirmed: np.ndarray | None = None  # (B, Nu, K): the living UAVs' confirmed slots
 
 
 @dataclass(kw_only=True, slots=True)  # made once a cycle, read, dropped
@@ -668,23 +669,23 @@ class Tracking:
             tracks=tracks,
             cols=cols,
             owned=owned,
+            confirmed=confirmed,
         )
 
     def weigh(
         self, bids: np.ndarray, fusion: Fusion, alive: np.ndarray, scenario: Scenario
     ) -> np.ndarray:
-        assert fusion.tracks is not None
+        assert fusion.tracks is not None and fusion.confirmed is not None
         book = fusion.tracks.book
-        return np.where(
-            book.confirmed & alive[..., None], manage.weighed(bids, book, scenario), np.nan
-        )
+        return np.where(fusion.confirmed, manage.weighed(bids, book, scenario), np.nan)
 
     def auction(self, ctx: Context, fusion: Fusion, bids: np.ndarray, alive: np.ndarray) -> Auction:
         cols, owned, tracks = fusion.cols, fusion.owned, fusion.tracks
         assert cols is not None and owned is not None and tracks is not None
         inputs, fused = fusion.inputs, fusion.fused
         assigned = ctx.method.assign(inputs, fused, columns.bids(np.nan_to_num(bids), cols))
-        confirmed = tracks.book.confirmed & alive[..., None]
+        confirmed = fusion.confirmed
+        assert confirmed is not None
         slot = columns.slot_of(assigned.target, cols, np.where(confirmed, bids, -np.inf))
         slot = np.where(alive, slot, -1)
         label = np.take_along_axis(tracks.book.label, np.maximum(slot, 0)[..., None], axis=-1)
