@@ -231,6 +231,80 @@ def test_centralized_equals_one_solve_per_trial(n, m, levels, seed):
             assert np.array_equal(target[b], expected)
 
 
+def _over_known(bids, known):
+    """The problem over the known columns alone, solved, as columns of the whole."""
+    cols = np.flatnonzero(known)
+    if not cols.size:
+        return np.full(bids.shape[0], -1)
+    return cols[assignment._solve(bids[:, cols])]
+
+
+@settings(max_examples=80, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 6), st.integers(2, 5), st.integers(0, 2**32 - 1))
+def test_an_auction_over_the_columns_each_receiver_knows(n, m, levels, seed):
+    """With `known`, each receiver solves its neighbourhood over its known columns only,
+    on every path (lists, one by one, together; shared bids and views): a column it
+    does not know is never taken, and a receiver that knows none takes -1."""
+    rng = np.random.default_rng(seed)
+    B = 6
+    bids = rng.integers(0, levels, (B, n, m)).astype(float)
+    members = rng.random((B, n, n)) < 0.5
+    members |= members.transpose(0, 2, 1)
+    members[:, np.arange(n), np.arange(n)] = True
+    known = rng.random((B, n, m)) < 0.6
+    views = np.where(rng.random((B, n, n, m)) < 0.3, bids[:, None] + 1, bids[:, None])
+    for held in (bids, views):
+        expected = np.empty((B, n), dtype=np.int64)
+        for b, i in itertools.product(range(B), range(n)):
+            rows = np.flatnonzero(members[b, i])
+            problem = held[b, i, rows] if held.ndim == 4 else held[b, rows]
+            if rows.size == 1:
+                cols = np.flatnonzero(known[b, i])
+                best = cols[np.argmax(problem[0, cols])] if cols.size else -1
+                expected[b, i] = best
+            else:
+                expected[b, i] = _over_known(problem, known[b, i])[np.searchsorted(rows, i)]
+        for few, together in ((assignment.FEW, 8), (0, 8), (0, 1)):
+            with pytest.MonkeyPatch.context() as patch:
+                patch.setattr(assignment, "FEW", few)
+                patch.setattr(assignment, "TOGETHER", together)
+                target, _ = assignment.auction(held, members, known=known)
+                alone = lambda p: assignment._solve(p)  # noqa: E731
+                custom, _ = assignment.auction(held, members, alone, known=known)
+            assert np.array_equal(target, expected), (few, together)
+            assert np.array_equal(custom, expected)
+    everything, _ = assignment.auction(bids, members, known=np.ones((B, n, m), dtype=bool))
+    assert np.array_equal(everything, assignment.auction(bids, members)[0])
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.integers(1, 7), st.integers(1, 6), st.integers(2, 5), st.integers(0, 2**32 - 1))
+def test_centralized_over_each_trials_known_columns(n, m, levels, seed):
+    """With `known` (B, M), each trial's one assignment is over its known columns only:
+    a trial padded with columns it does not have decides as it would alone."""
+    rng = np.random.default_rng(seed)
+    bids = rng.integers(0, levels, (9, n, m)).astype(float)
+    members = rng.random((9, n)) < 0.7
+    known = rng.random((9, m)) < 0.6
+    for together in (assignment.TOGETHER, 1):
+        with pytest.MonkeyPatch.context() as patch:
+            patch.setattr(assignment, "TOGETHER", together)
+            target, _ = assignment.centralized(bids, members, known=known)
+        for b in range(9):
+            rows = np.flatnonzero(members[b])
+            expected = np.full(n, -1)
+            if rows.size:
+                expected[rows] = _over_known(bids[b, rows], known[b])
+            assert np.array_equal(target[b], expected)
+
+
+def test_greedy_takes_only_a_known_column():
+    bids = np.array([[3.0, 1.0, 2.0], [0.0, 0.0, 0.0]])
+    known = np.array([[False, True, True], [False, False, False]])
+    assert assignment.greedy(bids, known).tolist() == [2, -1]
+    assert assignment.greedy(bids).tolist() == [0, 0]
+
+
 def test_assignment_and_planning_read_no_clock():
     """Timing belongs to the caller: the maths imports neither `time` nor `timing`."""
     import ast

@@ -76,6 +76,32 @@ def test_batch_equals_one_trial_at_a_time(short):
         assert batch.metrics["observation_rate"][t] == alone.observation_rate
 
 
+@pytest.mark.parametrize("method", uavtrack.METHODS)
+def test_a_tracked_trial_is_the_same_alone_and_in_a_batch(method):
+    """With tracks the auction's columns are the labels of the batch: a trial with
+    fewer pads them. It must decide over its own labels (each UAV over those it knows),
+    so a trial of a batch equals the same trial alone (the batch is wide enough for
+    the array paths of the auction, `assignment.FEW`)."""
+    scenario = uavtrack.Scenario().with_overrides(
+        {
+            "tracker.association": "gnn",
+            "sensor.detection_probability": 0.9,
+            "sensor.clutter_rate": 2.0,
+            "faults.loss": 0.2,
+            "steps": 20,
+        }
+    )
+    seeds = list(range(8))
+    batch = uavtrack.run(scenario, method, seeds, trace=True)
+    for t in (3, 5):
+        alone = uavtrack.run(scenario, method, [seeds[t]], trace=True)
+        ours, theirs = batch.traces[t], alone.traces[0]
+        assert np.array_equal(ours.assignment, theirs.assignment)
+        assert np.array_equal(ours.conflicts, theirs.conflicts)
+        assert np.array_equal(ours.label, theirs.label)
+        assert np.allclose(ours.uavs, theirs.uavs, rtol=1e-12, atol=1e-9)
+
+
 def test_trial_seed_is_spawned_child():
     children = np.random.SeedSequence(11).spawn(4)
     for t, child in enumerate(children):

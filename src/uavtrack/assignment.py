@@ -434,6 +434,7 @@ def auction(
     members: np.ndarray,
     solve: Solver | None = None,
     clock: Clock | None = None,
+    known: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Every UAV's `local` rule over the members of its closed neighbourhood, for B trials.
 
@@ -442,6 +443,10 @@ def auction(
     hold different bids of the same neighbour). members: (B, N, N) bool [trial,
     receiver, sender], the UAVs in each receiver's auction; a receiver is always a
     member of its own. solve: the neighbourhood problem's solver (default `hungarian`).
+    known: (B, N, M) bool, the columns each receiver's problem has (None: all): with
+    tracks, the labels it knows (`methods.distributed.known_labels`). Its problem is
+    over those columns alone, in their order, as the agent's over the labels it knows;
+    a receiver that knows none takes -1.
 
     Returns (target (B, N), seconds (B, N, 2)): the time of the solve each UAV needed on
     the caller's `clock`, CPU and wall (zeros without one), charged to every UAV that
@@ -455,14 +460,17 @@ def auction(
         solve = _solve  # the same, without checking every problem again
     _check(bids)
     B, n = members.shape[:2]
+    m = bids.shape[-1]
     views = bids.ndim == 4
+    if known is not None and known.all():
+        known = None  # every problem over every column: the paper's case
     own = bids[:, np.arange(n), np.arange(n)] if views else bids  # (B, N, M)
     stage, tick = clock.start(), clock.tick
     begun = tick()
-    out = greedy(own)
+    out = greedy(own, known)
     wall = np.full(out.shape, (tick() - begun) / max(out.size, 1))
     if solve is _solve and not views and B * n <= FEW:
-        _auction_lists(bids, members, out, wall, clock)
+        _auction_lists(bids, members, out, wall, clock, known)
         return out, charged(wall, clock, stage)
     idx = np.arange(n)
     members = members.copy()
@@ -471,15 +479,27 @@ def auction(
     if not b.size:
         return out, charged(wall, clock, stage)
     rows = members[b, i]  # (K, N)
-    if views:
-        first, which = _distinct(b, rows, bids[b, i])
-    else:
-        first, which = _distinct(b, rows)
+    keys = rows if known is None else np.concatenate([rows, known[b, i]], axis=1)
+    first, which = _distinct(b, keys, n, bids[b, i] if views else None)
     row = np.cumsum(rows, axis=1)[np.arange(b.size), i] - 1  # UAV i's row in its problem
     choice = np.empty((first.size, n), dtype=np.int64)
-    cost = np.empty(first.size)
+    cost = np.zeros(first.size)
     size = rows[first].sum(axis=1)
-    m = bids.shape[-1]
+    if known is not None:  # problems over some columns: solved apart
+        _auction_known(
+            bids,
+            b[first],
+            i[first],
+            rows[first],
+            known[b[first], i[first]],
+            choice,
+            cost,
+            solve,
+            clock,
+        )
+        out[b, i] = choice[which, row]
+        wall[b, i] = cost[which]
+        return out, charged(wall, clock, stage)
     lists, share = None, 0.0
     if solve is _solve and not views and (size < m).any():
         # the built-in solver reads each member's k best bids only: rank every bidder's
@@ -531,6 +551,44 @@ def auction(
     return out, charged(wall, clock, stage)
 
 
+def _auction_known(
+    bids: np.ndarray,
+    trial: np.ndarray,
+    receiver: np.ndarray,
+    rows: np.ndarray,
+    known: np.ndarray,
+    choice: np.ndarray,
+    cost: np.ndarray,
+    solve: Solver,
+    clock: Clock,
+) -> None:
+    """`auction`'s problems, each over the columns its receiver knows. trial, receiver
+    (P,): each problem's; rows (P, N) its members; known (P, M) its columns. Writes each
+    problem's column of every member (-1 with no column) into `choice` (P, N), and its
+    solve's wall seconds into `cost` (P,)."""
+    tick = clock.tick
+    size, span = rows.sum(axis=1), known.sum(axis=1)
+    for u in np.flatnonzero(span == 0).tolist():
+        choice[u, : size[u]] = -1
+    for width, count in np.unique(np.stack([size, span], axis=1)[span > 0], axis=0).tolist():
+        group = np.flatnonzero((size == width) & (span == count))
+        who = np.nonzero(rows[group])[1].reshape(-1, width)  # members, in index order
+        cols = np.nonzero(known[group])[1].reshape(-1, count)  # columns, in order
+        begun = tick()
+        if bids.ndim == 4:
+            problem = bids[trial[group][:, None], receiver[group][:, None], who]
+        else:
+            problem = bids[trial[group][:, None], who]
+        problem = np.take_along_axis(problem, cols[:, None, :], axis=2)
+        if solve is _solve and group.size >= TOGETHER:
+            solved = solve_many(problem, clock=clock)
+        else:
+            one = (lambda p: _solve(p, clock)) if solve is _solve else solve
+            solved = np.stack([one(p) for p in problem])
+        choice[group, :width] = np.take_along_axis(cols, solved, axis=1)
+        cost[group] = (tick() - begun) / group.size
+
+
 FEW = 32
 """Most UAVs (trials x team) whose auctions run on Python lists (`_auction_lists`): in a
 single trial's small team each problem is a few bids, and a numpy call per step of the
@@ -538,24 +596,39 @@ rule costs more than the arithmetic."""
 
 
 def _auction_lists(
-    bids: np.ndarray, members: np.ndarray, out: np.ndarray, wall: np.ndarray, clock: Clock
+    bids: np.ndarray,
+    members: np.ndarray,
+    out: np.ndarray,
+    wall: np.ndarray,
+    clock: Clock,
+    known: np.ndarray | None = None,
 ) -> None:
     """`auction`'s rule with the built-in solver on Python lists, for few UAVs: the same
-    problems (one per distinct trial and neighbourhood) solved by the same rule
-    (`_solve_lists`), the same targets. Writes the target and the solve's wall seconds
-    of every UAV with others in its auction into `out` and `wall` (B, N)."""
+    problems (one per distinct trial, neighbourhood and columns known) solved by the
+    same rule (`_solve_lists`), the same targets. Writes the target and the solve's wall
+    seconds of every UAV with others in its auction into `out` and `wall` (B, N)."""
     tick = clock.tick
     values = bids.tolist()
-    solved: dict[tuple[int, tuple[int, ...]], tuple[float, list[int]]] = {}
+    m = bids.shape[-1]
+    everything = tuple(range(m))
+    knows = None if known is None else known.tolist()
+    solved: dict[tuple[int, tuple[int, ...], tuple[int, ...]], tuple[float, list[int]]] = {}
     for b, team in enumerate(members.tolist()):
         for i, row in enumerate(team):
             who = tuple(q for q in range(len(row)) if row[q] or q == i)
             if len(who) < 2:
                 continue
-            key = (b, who)
+            cols = everything if knows is None else tuple(c for c in everything if knows[b][i][c])
+            key = (b, who, cols)
             if key not in solved:
                 begun = tick()
-                choice = _solve_lists([values[b][q] for q in who], clock)
+                if not cols:  # no column to take
+                    choice = [-1] * len(who)
+                elif knows is None:
+                    choice = _solve_lists([values[b][q] for q in who], clock)
+                else:
+                    problem = [[values[b][q][c] for c in cols] for q in who]
+                    choice = [cols[c] for c in _solve_lists(problem, clock)]
                 solved[key] = (tick() - begun, choice)
             seconds, choice = solved[key]
             out[b, i] = choice[who.index(i)]
@@ -600,10 +673,11 @@ def _solve_lists(bids: list[list[float]], clock: Clock) -> list[int]:
 
 
 def _distinct(
-    trial: np.ndarray, members: np.ndarray, views: np.ndarray | None = None
+    trial: np.ndarray, members: np.ndarray, n: int, views: np.ndarray | None = None
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Group equal (trial, neighbourhood[, bids held]) rows: (first row of each group,
-    group of each row)."""
+    """Group equal (trial, neighbourhood[, columns known][, bids held]) rows: (first row
+    of each group, group of each row). members (K, n [+ M]) bool: the neighbourhood,
+    then the columns known when given."""
     if views is not None or trial.size <= 8:  # a dictionary: few rows, or bids in the key
         groups: dict[tuple[int | bytes, ...], int] = {}
         heads: list[int] = []
@@ -611,13 +685,13 @@ def _distinct(
         for k in range(trial.size):
             key: tuple[int | bytes, ...] = (int(trial[k]), members[k].tobytes())
             if views is not None:
-                key += (views[k][members[k]].tobytes(),)
+                key += (views[k][members[k, :n]].tobytes(),)
             if key not in groups:
                 groups[key] = len(heads)
                 heads.append(k)
             which[k] = groups[key]
         return np.array(heads), which
-    n = members.shape[1]
+    n = members.shape[1]  # with the columns known, their bits too
     if n + int(trial.max()).bit_length() <= 62:  # the neighbourhood as an integer bitmask
         keys = (trial << n) | (members @ (1 << np.arange(n, dtype=np.int64)))
         _, first, which = np.unique(keys, return_index=True, return_inverse=True)
@@ -630,39 +704,55 @@ def _distinct(
 
 
 def centralized(
-    bids: np.ndarray, members: np.ndarray | None = None, clock: Clock | None = None
+    bids: np.ndarray,
+    members: np.ndarray | None = None,
+    clock: Clock | None = None,
+    known: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """One global assignment per trial over the member UAVs (all by default).
 
-    bids: (B, N, M); members: (B, N) bool. Returns (target (B, N), -1 for a UAV left
-    out; seconds (B, 2) of each trial's solve on the caller's `clock`, CPU and wall
-    (zeros without one), the solve of trials with as many members shared among them).
+    bids: (B, N, M); members: (B, N) bool; known: (B, M) bool, the columns of each
+    trial's problem (None: all), in their order. Returns (target (B, N), -1 for a UAV
+    left out or with no column; seconds (B, 2) of each trial's solve on the caller's
+    `clock`, CPU and wall (zeros without one), the solve of trials with as many members
+    and columns shared among them).
     """
     clock = NO_CLOCK if clock is None else clock
-    B, n, _ = bids.shape
+    B, n, m = bids.shape
     members = np.ones((B, n), dtype=bool) if members is None else members
     _check(bids[members])
+    known = np.ones((B, m), dtype=bool) if known is None else known
     out = np.full((B, n), -1, dtype=np.int64)
     wall = np.zeros(B)
     stage, tick = clock.start(), clock.tick
-    count = members.sum(axis=1)
-    for size in np.unique(count[count > 0]).tolist():  # trials with as many members together
-        trials = np.flatnonzero(count == size)
+    count, span = members.sum(axis=1), known.sum(axis=1)
+    shapes = np.stack([count, span], axis=1)[(count > 0) & (span > 0)]
+    for size, width in np.unique(shapes, axis=0).tolist():  # trials of one shape together
+        trials = np.flatnonzero((count == size) & (span == width))
+        cols = np.nonzero(known[trials])[1].reshape(-1, width)
         if trials.size < TOGETHER:  # a few: each alone
-            for b in trials.tolist():
+            for t, b in enumerate(trials.tolist()):
                 rows = np.flatnonzero(members[b])
                 begun = tick()
-                out[b, rows] = _solve(bids[b, rows], clock)
+                out[b, rows] = cols[t, _solve(bids[b, rows][:, cols[t]], clock)]
                 wall[b] = tick() - begun
             continue
         who = np.nonzero(members[trials])[1].reshape(-1, size)
         begun = tick()
-        out[trials[:, None], who] = solve_many(bids[trials[:, None], who], clock=clock)
+        problem = np.take_along_axis(bids[trials[:, None], who], cols[:, None, :], axis=2)
+        solved = solve_many(problem, clock=clock)
+        out[trials[:, None], who] = np.take_along_axis(cols, solved, axis=1)
         wall[trials] = (tick() - begun) / trials.size
     return out, charged(wall, clock, stage)
 
 
-def greedy(bids: np.ndarray) -> np.ndarray:
+def greedy(bids: np.ndarray, known: np.ndarray | None = None) -> np.ndarray:
     """Each UAV takes its own best bid, no interaction (the greedy baseline); a bid not
-    scored (NaN) is never the best; ties to the lowest target."""
-    return np.argmax(np.where(np.isnan(bids), -np.inf, bids), axis=-1)
+    scored (NaN) is never the best; ties to the lowest target.
+
+    known: which columns each row may take (bids' shape, bool; None: all). A row that
+    knows none takes -1."""
+    if known is None:
+        return np.argmax(np.where(np.isnan(bids), -np.inf, bids), axis=-1)
+    best = np.argmax(np.where(known & ~np.isnan(bids), bids, -np.inf), axis=-1)
+    return np.where(known.any(axis=-1), best, -1)

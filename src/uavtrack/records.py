@@ -244,13 +244,13 @@ class Pending:
     scan: scans.Scan | None = None  # with unknown association: the scans
     columns: np.ndarray | None = None  # with unknown association: the held label each took
     labels: np.ndarray | None = None  # (B, L) with unknown association: the columns' labels
-    held: int | None = None  # with unknown association: the labels held confirmed
+    held: np.ndarray | None = None  # (B,) with unknown association: labels held confirmed
 
     @property
     def width(self) -> int:
         """What a conflict is counted over: the targets, or with unknown association the
-        labels the living UAVs hold confirmed (`columns` indexes them)."""
-        return self.bids.shape[-1] if self.held is None else self.held
+        labels the living UAVs hold confirmed (`columns` indexes them; `held` per trial)."""
+        return self.bids.shape[-1] if self.held is None else int(self.held.max(initial=1))
 
 
 Summary = str | int | float | list[float] | None

@@ -398,7 +398,7 @@ def decide(
         scan=sensed.scan,
         columns=taken,
         labels=None if fusion.cols is None else fusion.cols.labels,
-        held=None if owned is None else owned.width,
+        held=None if owned is None else (owned.labels >= 0).sum(axis=1),
     )
 
 
@@ -780,7 +780,10 @@ def finish(
         bytes=pending.radio.bytes[:, :Nu],
         node_bytes=pending.radio.bytes[:, Nu],
         conflicts=conflicts(
-            target if pending.columns is None else pending.columns, alive, pending.width
+            target if pending.columns is None else pending.columns,
+            alive,
+            pending.width,
+            pending.held,
         ),
         alive=alive,
         decision_time_ms=np.where(alive, ms[..., timing.CPU], np.nan),
@@ -922,16 +925,23 @@ def convert(believed: np.ndarray, z: np.ndarray, scenario: Scenario):
     return zc, R
 
 
-def conflicts(target: np.ndarray, alive: np.ndarray, n_targets: int) -> np.ndarray:
+def conflicts(
+    target: np.ndarray, alive: np.ndarray, n_targets: int, present: np.ndarray | None = None
+) -> np.ndarray:
     """Per trial, the targets followed by two or more UAVs while another target has none.
 
-    target: (B, Nu) (-1 for a failed UAV); alive (B, Nu). Returns (B,) int.
+    target: (B, Nu) (-1 for a failed UAV); alive (B, Nu); present (B,): how many of the
+    n_targets each trial has (None: all; with tracks, the labels held confirmed, as the
+    trial would count them alone). Returns (B,) int.
     """
     B = target.shape[0]
     valid = alive & (target >= 0)
     code = (np.arange(B)[:, None] * n_targets + target)[valid]
     counts = np.bincount(code, minlength=B * n_targets).reshape(B, n_targets)
-    return np.where((counts == 0).any(axis=-1), (counts >= 2).sum(axis=-1), 0)
+    empty = counts == 0
+    if present is not None:
+        empty &= np.arange(n_targets) < present[:, None]
+    return np.where(empty.any(axis=-1), (counts >= 2).sum(axis=-1), 0)
 
 
 def initial_state(

@@ -213,7 +213,8 @@ class Centralized(Method):
                 delivered=none,
             )
         if not inputs.setting.faulty:
-            target, seconds = assignment.centralized(bids, clock=timing)
+            known = None if inputs.columns is None else inputs.columns.labels >= 0
+            target, seconds = assignment.centralized(bids, clock=timing, known=known)
             return Assigned(
                 target=target,
                 seconds=np.repeat(seconds[:, None], n, axis=1),
@@ -223,7 +224,7 @@ class Centralized(Method):
         # the node's target if its download arrived, else the previous one, else the own best
         target = fused.target if fused.target is not None else np.full((B, n), -1)
         target = np.where(target >= 0, target, inputs.previous)
-        target = np.where(target >= 0, target, assignment.greedy(bids))
+        target = np.where(target >= 0, target, assignment.greedy(bids, inputs.holds))
         target = np.where(inputs.alive, target, -1)
         assert fused.seconds is not None, "the fusion under faults times the central node"
         return Assigned(target=target, seconds=fused.seconds, sent=none, delivered=none)
@@ -294,7 +295,8 @@ def node_targets(
     confirmed = np.repeat(node.book.confirmed, n, axis=1) & heard[..., None]
     slot_bids = np.where(confirmed, slot_bids, np.nan)
     cols = columns.of(np.repeat(node.book.label, n, axis=1), confirmed)
-    column, _ = assignment.centralized(columns.bids(np.nan_to_num(slot_bids), cols), heard)
+    value = columns.bids(np.nan_to_num(slot_bids), cols)
+    column, _ = assignment.centralized(value, heard, known=cols.labels >= 0)  # its labels
     b = np.arange(B)[:, None]
     return np.where(column >= 0, cols.labels[b, np.maximum(column, 0)], -1)
 

@@ -67,13 +67,15 @@ class Distributed(Method):
         )
         alive = inputs.alive
         idx = np.arange(n)
-        held = inputs.held
+        held, known = inputs.held, inputs.holds  # with tracks: the labels each UAV knows
         if inbox is None:  # nothing has arrived yet: every UAV alone
             members = np.zeros((B, n, n), dtype=bool)
             view = bids
         elif s.delay == 0 and held is None:  # all bids current, none lost: one shared view
             members = inbox.delivered.adjacency()
             view = bids
+            if inputs.holds is not None:
+                known = known_labels(members, inputs.holds)
         else:
             got = inbox.delivered.adjacency()  # bids that arrived this cycle
             heard = beacon.delivered.adjacency() if beacon is not None else got
@@ -84,14 +86,15 @@ class Distributed(Method):
                 got, arrived[:, None], inbox.content["stamp"][:, None], heard, held, s.stale
             )
             if holds is not None and inputs.holds is not None:  # only the labels it knows
-                view = known_labels(view, got, inputs.holds, holds)
+                known = known_labels(got, inputs.holds, holds)
+                view = np.where(known[:, :, None, :], view, 0.0)
             held = held if held is None else Held(view, stamp)
             view = np.array(np.broadcast_to(view, (B, n, n, m)))
             view[:, idx, idx] = bids  # a UAV's own bids are current
         if not alive.all():
             members = members & alive[:, :, None] & alive[:, None, :]
         solve = None if self.built_in_solve else self.solve  # None: the auction's own fast path
-        target, seconds = assignment.auction(view, members, solve, timing)
+        target, seconds = assignment.auction(view, members, solve, timing, known)
         return Assigned(
             target=np.where(alive, target, -1),
             seconds=seconds,
@@ -112,19 +115,17 @@ def relabelled(content: dict[str, np.ndarray], labels: np.ndarray) -> tuple[np.n
     return bids, holds
 
 
-def known_labels(
-    view: np.ndarray, got: np.ndarray, holds: np.ndarray, sent: np.ndarray | None = None
-) -> np.ndarray:
-    """The bids a receiver holds (B, N, N, L), by columns of team labels, kept only for
-    the labels it knows this cycle: those it holds confirmed, holds (B, N, L), and those
-    the senders whose bids arrived (got (B, N, N)) held when they sent them, `sent` (B, N,
-    L; None: `holds`, bids of this cycle). A label known to the batch but not to the
-    receiver (held by nobody it heard from, or by nobody any more) is nothing it could
-    bid on: 0, as for a label a sender does not hold."""
+def known_labels(got: np.ndarray, holds: np.ndarray, sent: np.ndarray | None = None) -> np.ndarray:
+    """The labels each receiver knows this cycle (B, N, L), by columns of team labels:
+    those it holds confirmed, holds (B, N, L), and those the senders whose bids arrived
+    (got (B, N, N)) held when they sent them, `sent` (B, N, L; None: `holds`, bids of
+    this cycle). Its auction is over these columns alone (`assignment.auction`): a label
+    of the trial that nobody it heard from holds is nothing it could bid on or know of.
+    The bids it holds of a label it does not know are 0, as for one a sender does not
+    hold."""
     sent = holds if sent is None else sent
     heard = np.einsum("bis,bsl->bil", got.astype(np.int64), sent.astype(np.int64)) > 0
-    known = holds | heard
-    return np.where(known[:, :, None, :], view, 0.0)
+    return holds | heard
 
 
 def bid_view(

@@ -23,7 +23,7 @@ class Greedy(Method):
 
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         start = timing.start()
-        out = assignment.greedy(bids)
+        out = assignment.greedy(bids, inputs.holds)  # with tracks: over the labels it holds
         seconds = np.empty(out.shape + (2,))
         seconds[...] = timing.since(start) / out.size
         none = np.zeros(bids.shape[0], dtype=np.int64)

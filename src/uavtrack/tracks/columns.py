@@ -8,7 +8,9 @@ any UAV of the trial holds confirmed, in increasing label order, so that the met
 assignment rules (`assignment.auction`, `.centralized`, `.greedy`) run unchanged. A UAV
 bids 0 for a label it does not hold (it has no estimate of it: the value of following
 it is nothing it can plan). Columns are an arrangement of the batch, not knowledge: a
-UAV's auction reads only its neighbourhood's columns.
+UAV's auction is over the labels it knows alone (its own and those its neighbours' bids
+carry, `methods.distributed.known_labels`), and a central assignment over its trial's
+labels, so a trial decides the same in any batch (`assignment.auction`'s ``known``).
 """
 
 # pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
