@@ -30,6 +30,7 @@ FEATURES = {
     "compact": {"radio.encoding": "compact"},
     "trigger": {"fusion.trigger": 0.1},
     "capacity": {"radio.bandwidth_bps": 1e5},
+    "broadcast": {"radio.frames": "broadcast"},
     "avoidance": {"planner.avoidance": "loiter", "uav.altitude_spacing": 0, "uav.separation": 10},
     "births": {"target.stay": 30.0, "tracker.association": "jpda"},
     "jsbsim": {"uav.dynamics": "jsbsim"},

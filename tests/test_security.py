@@ -27,6 +27,7 @@ from uavtrack.testing import assert_same_trace
 pytest.importorskip("cryptography")
 
 RUN = "0123456789ab"
+SEQ = 2**32 + 5
 
 
 def gates(programs=3):
@@ -112,6 +113,68 @@ def test_malformed_and_unknown_envelopes_are_dropped_by_reason():
         ),
     ):
         assert g1.open(payload) == reason
+
+
+def test_a_frame_to_several_opens_at_each_receiver_named_and_nowhere_else():
+    # radio.frames = "broadcast": one envelope, a tag per receiver under that pair's key
+    _, world, gates_ = gates(4)
+    g0, g1, g2, g3 = gates_
+    payload = g0.seal_for([1, 3], b"bids")
+    assert g1.open(payload) == (0, b"bids")
+    assert g3.open(payload) == (0, b"bids")
+    assert g1.open(payload) == "replayed"
+    assert g2.open(payload) == "not for this program"
+    assert world.open(payload) == "not for this program"
+
+
+def test_a_member_who_hears_a_frame_to_several_cannot_change_it_for_the_others():
+    """Program 1 receives 0's frame to 1 and 2, with 2's tag in it. Whatever it changes
+    (the body, the sequence number, its own tag moved to 2's place, 2 dropped or
+    itself named twice, the sender), 2 opens nothing; it can only pass the frame on
+    unchanged, which delivers to 2 what 0 said to 2 (a relay, as any radio allows)."""
+    _, _, (g0, g1, g2, _) = gates(4)
+    payload = g0.seal_for([1, 2], b"bids")
+    genuine = msgspec.msgpack.decode(payload, type=Envelope)
+    assert isinstance(genuine.tag, list) and isinstance(genuine.receiver, list)
+    mine, theirs = genuine.tag
+    forged = [
+        dict(body=b"other bids"),
+        dict(seq=genuine.seq + 1),
+        dict(tag=[mine, mine]),
+        dict(sender=1, tag=[theirs, theirs]),
+        dict(receiver=2, tag=mine),  # as a frame to 2 alone, with 1's tag
+        dict(receiver=[2, 1]),  # the receivers swapped, the tags not
+    ]
+    fields = ("sender", "receiver", "seq", "body", "tag")
+    reasons = []
+    for change in forged:
+        values = {f: change.get(f, getattr(genuine, f)) for f in fields}
+        reasons.append(g2.open(msgspec.msgpack.encode(Envelope(**values))))
+    assert reasons == ["not authentic"] * 6
+    # the receivers are not in the tags: a list that keeps 2's own tag is a relay of the
+    # frame, and delivers to 2 what 0 said to 2, once
+    relayed = Envelope(
+        sender=0, receiver=[1, 2, 3], seq=genuine.seq, body=genuine.body, tag=[mine, theirs, mine]
+    )
+    assert g2.open(msgspec.msgpack.encode(relayed)) == (0, b"bids")
+    assert g2.open(payload) == "replayed"
+
+
+def test_a_malformed_list_of_receivers_is_dropped_before_any_tag_is_checked():
+    _, _, (g0, g1, _, _) = gates(4)
+    tag = b"t" * 16
+    for receiver, tags in (
+        ([1], [tag]),  # a list of one: a plain envelope names its receiver
+        ([1, 1], [tag, tag]),  # a receiver twice
+        ([1, 2], [tag]),  # lists of different lengths
+        (list(range(6)), [tag] * 6),  # more receivers than the run has programs
+        ([1, 2], tag),  # a list of receivers with one tag
+        (1, [tag, tag]),  # one receiver with a list of tags
+    ):
+        envelope = Envelope(sender=0, receiver=receiver, seq=SEQ, body=b"x", tag=tags)
+        assert g1.open(msgspec.msgpack.encode(envelope)) == "malformed", receiver
+    with pytest.raises(ValueError, match="two or more"):
+        g0.seal_for([1, 1], b"x")
 
 
 def test_the_replay_window_takes_late_numbers_once_and_refuses_old_ones():

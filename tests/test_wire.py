@@ -73,6 +73,40 @@ def test_the_counted_bytes_of_a_frame_are_those_the_agents_put_on_the_wire(frame
     assert on_wire == int(radio.frame_bytes(k, sender, counted, count) + radio.int_bytes(receiver))
 
 
+@settings(max_examples=100, deadline=None)
+@given(
+    st.integers(2, 300).flatmap(
+        lambda n: st.tuples(
+            st.just(n),
+            st.lists(st.integers(0, n), min_size=2, max_size=min(n + 1, 40), unique=True),
+        )
+    ),
+    st.integers(0, 70000),
+    st.booleans(),
+)
+def test_a_frame_to_several_receivers_is_counted_as_the_agents_put_it_on_the_wire(
+    team, body_bytes, sign
+):
+    # radio.frames = "broadcast": one copy, less its receiver's number, plus
+    # `broadcast_bytes` and every receiver's number; keyed or not, the same size
+    n, receivers = team
+    run = "0123456789ab"
+    credential = None
+    if sign:
+        from uavtrack.agents.security import Keyring
+
+        ring = Keyring(run, n + 1)
+        credential = ring.credential(0)
+    gate = Gate(run=run, me=0, programs=n + 1, credential=credential)
+    if sign:
+        gate.learn(ring.public())
+    body = b"x" * body_bytes
+    copy = len(gate.seal(receivers[0], body)) - radio.int_bytes(receivers[0])
+    named = sum(radio.int_bytes(r) for r in receivers)
+    counted = copy + radio.broadcast_bytes(len(receivers)) + named
+    assert len(gate.seal_for(receivers, body)) == counted
+
+
 def test_the_int_sizes_are_messagepacks_at_every_boundary():
     import msgspec
 
@@ -136,11 +170,30 @@ def test_bytes_follow_the_team_and_its_links():
 
 
 @pytest.mark.integration  # a swarm of programs
-@pytest.mark.parametrize("method", ["distributed", "greedy", "centralized"])
-def test_a_swarms_frames_on_the_wire_are_the_bytes_the_batch_counts(method):
+@pytest.mark.parametrize(
+    ("method", "frames"),
+    [
+        ("distributed", "unicast"),
+        ("greedy", "unicast"),
+        ("centralized", "unicast"),
+        ("distributed", "broadcast"),
+        ("centralized", "broadcast"),
+    ],
+)
+def test_a_swarms_frames_on_the_wire_are_the_bytes_the_batch_counts(method, frames):
     from uavtrack.agents import run_swarm
 
-    scenario = uavtrack.Scenario(steps=8).with_overrides({"faults.loss": 0.2})
+    scenario = uavtrack.Scenario(steps=8).with_overrides(
+        {
+            "faults.loss": 0.2,
+            "radio.frames": frames,
+            "planner.avoidance": "loiter",
+            # a budget that binds: rounds (downloads) are left unsent
+            "radio.bandwidth_bps": 6e4 if method == "distributed" else 1.5e5,
+        }
+        if frames == "broadcast"
+        else {"faults.loss": 0.2}
+    )
     batch = uavtrack.simulate(scenario, method, seed=4)
     swarm = run_swarm(scenario, method, seed=4, transport="memory")
     assert batch.trace is not None and swarm.result.trace is not None
@@ -149,7 +202,9 @@ def test_a_swarms_frames_on_the_wire_are_the_bytes_the_batch_counts(method):
     # the radio is most of what the programs publish (the rest: reports to the world)
     assert np.array_equal(swarm.result.trace.node_bytes, batch.trace.node_bytes)
     on_air = batch.trace.bytes.sum() + batch.trace.node_bytes.sum()
-    assert 0.5 * swarm.traffic.bytes < on_air <= swarm.traffic.bytes
+    assert on_air <= swarm.traffic.bytes
+    if frames == "unicast":  # a frame to several is published to each receiver's key
+        assert 0.5 * swarm.traffic.bytes < on_air
 
 
 @settings(max_examples=60, deadline=None)
@@ -168,10 +223,13 @@ def test_the_rounds_counted_at_once_are_those_counted_frame_by_frame(uavs):
     adjacency = np.random.default_rng(len(uavs)).random((1, 6, 6)) < 0.5
     adjacency = (adjacency | adjacency.transpose(0, 2, 1)) & alive[:, None] & alive[:, :, None]
     realised = Faults(FaultModel(), np.array([[1, 2]], dtype=np.uint32), 6)
-    counts = []
-    for method in ("rounds_on_air", "_rounds_one_by_one"):
-        wireless = radio.Radio(300, links(adjacency), alive, realised, radio.RadioState())
-        getattr(wireless, method)(ran, rounds, 70, 900, alive)
-        counts.append(wireless.bytes)
-    assert np.array_equal(*counts)
-    assert (counts[0][0, :6][~alive[0]] == 0).all()
+    for broadcast in (False, True):
+        counts = []
+        for method in ("rounds_on_air", "_rounds_one_by_one"):
+            wireless = radio.Radio(
+                300, links(adjacency), alive, realised, radio.RadioState(), broadcast=broadcast
+            )
+            getattr(wireless, method)(ran, rounds, 70, 900, alive)
+            counts.append(wireless.bytes)
+        assert np.array_equal(*counts)
+        assert (counts[0][0, :6][~alive[0]] == 0).all()

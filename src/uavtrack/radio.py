@@ -123,6 +123,9 @@ class Limit:
     beacon: int = 0
     """A centralized method's avoidance beacon per copy (one to each UAV in range), sent
     with its upload as one first priority (0: none)."""
+    broadcast: int = 0
+    """With ``radio.frames = "broadcast"``: the bytes of a receiver's number at its largest
+    (a frame to R >= 2 receivers goes once, `copies`); 0: one frame per receiver."""
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -152,10 +155,19 @@ class Budget:
         else:
             contenders, copies = receivers + 1, receivers
         share = np.floor(limit.bytes_per_cycle / contenders).astype(np.int64)
-        cost = limit.first * copies + limit.beacon * receivers
+        if limit.broadcast and not limit.central:
+
+            def sent(frame: Any) -> Any:
+                return copies_largest(frame, receivers, limit.broadcast)
+        else:
+
+            def sent(frame: Any) -> Any:
+                return frame * copies
+
+        cost = sent(limit.first) + copies_largest(limit.beacon, receivers, limit.broadcast)
         first = cost <= share
         left = share - np.where(first, cost, 0)
-        per_round = np.maximum(limit.round * receivers, 1)
+        per_round = np.maximum(copies_largest(limit.round, receivers, limit.broadcast), 1)
         rounds = np.where(receivers > 0, left // per_round, UNLIMITED)
         served = np.ones((B, n), dtype=bool)
         if limit.central and limit.download:
@@ -176,8 +188,10 @@ class Radio:
         faults: Faults,
         state: RadioState,
         limit: Limit | None = None,
+        broadcast: bool = False,
     ) -> None:
         self.k, self.faults, self.delay = k, faults, faults.model.delay
+        self.broadcast = broadcast  # ``radio.frames``: one frame to all receivers (`copies`)
         self.now = Sent(k=k, links=links, bad=faults.link_states(k, state.bad), alive=alive)
         self.history = state.history
         B, n = alive.shape
@@ -339,9 +353,20 @@ class Radio:
         if node:
             sent = frame + int_bytes(n)
         else:
-            receivers, named = self.reach()
-            sent = receivers * frame + named
+            sent = self.copies(frame, 1)
         self.bytes[:, :n] += np.where(senders, frames * sent, 0)
+
+    def copies(self, frames: Any, count: Any) -> Any:
+        """The bytes (B, N) each UAV puts on the air for `count` frames (B, N, or a number)
+        of `frames` bytes in all, each one copy less its receiver's number, to every UAV
+        in range now: one copy per receiver; with ``radio.frames = "broadcast"``, to R >= 2
+        receivers one copy naming them all, a tag for each (`broadcast_bytes`)."""
+        receivers, named = self.reach()
+        unicast = receivers * frames + named * count
+        if not self.broadcast:
+            return unicast
+        once = frames + count * (broadcast_bytes(receivers) + named)
+        return np.where(receivers >= 2, once, unicast)
 
     def from_node(self, parts: Any, count: int, receivers: np.ndarray) -> None:
         """Count the central node's frames: one of `count` parts of `parts` bytes (B, N)
@@ -388,8 +413,7 @@ class Radio:
             + alone * frame_bytes(k, who, tuple_part, 1)
             + late * frame_bytes(k, who, set_part + empty_part, 2)
         )
-        receivers, named = self.reach()
-        sent = receivers * per_receiver + named * (both + alone + late)
+        sent = self.copies(per_receiver, both + alone + late)
         self.bytes[:, : alive.shape[1]] += np.where(alive, sent, 0)
 
     def _rounds_one_by_one(
@@ -774,6 +798,30 @@ def wire_cov(cov: np.ndarray) -> np.ndarray:
     """Covariances (..., 4, 4) as the compact encoding delivers them: the upper triangle
     rounded to float32, mirrored below the diagonal."""
     return mirrored(upper(cov).astype(np.float32))
+
+
+FRAMES = ("unicast", "broadcast")
+"""The values of ``radio.frames``: one frame per receiver, or one to all receivers."""
+
+
+def broadcast_bytes(receivers: Any) -> Any:
+    """What a frame to R >= 2 receivers (vectorised) takes beyond one copy less its
+    receiver's number and the receivers' numbers: the envelope names a list of
+    receivers and holds a list of tags, one per receiver (`agents.security.Gate.seal`),
+    so two list headers and R - 1 more tags."""
+    return 2 * head_bytes(receivers) + (receivers - 1) * bin_bytes(TAG_BYTES)
+
+
+def copies_largest(frame: Any, receivers: np.ndarray, number: int) -> Any:
+    """The bytes of a frame of `frame` bytes a copy (its receiver's number included, at
+    `number` bytes) to `receivers` (B, N) receivers each: one copy per receiver, or with
+    `number` > 0 (``radio.frames = "broadcast"``) one to R >= 2 receivers naming all.
+    A capacity's budget (`Budget`), at each number's largest."""
+    unicast = frame * receivers
+    if not number:
+        return unicast
+    once = frame + broadcast_bytes(receivers) + (receivers - 1) * number
+    return np.where((receivers >= 2) & (np.asarray(frame) > 0), once, unicast)
 
 
 def frame_bytes(k: int, sender: Any, parts: Any, count: Any) -> Any:

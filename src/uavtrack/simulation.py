@@ -276,7 +276,10 @@ def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
 def _radio(state: State, ctx: Context, alive: np.ndarray, rows: np.ndarray | None = None) -> Radio:
     """The cycle's radio (`limit`: `rows`, the measurements each UAV's scan holds)."""
     links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
-    return Radio(state.k, links, alive, ctx.faults, state.radio, limit(ctx, state.k, rows))
+    broadcast = ctx.scenario.radio.frames == "broadcast"
+    return Radio(
+        state.k, links, alive, ctx.faults, state.radio, limit(ctx, state.k, rows), broadcast
+    )
 
 
 def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
@@ -299,6 +302,7 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
 
     listed = shape.slots or shape.m if shape.tuples != "full" else None
     rounds = int(largest(part("flood") + part("consensus", listed), 2))
+    number = int(int_bytes(n)) if scenario.radio.frames == "broadcast" else 0
     beacon = int(largest(part("beacon"), 1)) if shape.avoid else 0  # sent alone
     if method.central:
         upload = largest(part("upload", rows), 1)
@@ -306,12 +310,12 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
         download = int(largest(part("download"), 1))
         return Limit(
             bytes_per_cycle=bps * scenario.dt / 8, first=upload, round=rounds,
-            download=download, central=True, beacon=beacon,
+            download=download, central=True, beacon=beacon, broadcast=number,
         )  # fmt: skip
     first = beacon  # the greedy method's first priority: its beacon alone
     if isinstance(method, Distributed):
         first = int(largest(part("beacon") + part("bids"), 2))
-    return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds)
+    return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds, broadcast=number)
 
 
 def arriving_labels(radio: Radio) -> np.ndarray | None:

@@ -71,9 +71,17 @@ class AgentRadio:
     receiver."""
 
     def __init__(
-        self, me: int, n: int, faults: Faults, link: Link, mailbox: Mailbox, deadline: float
+        self,
+        me: int,
+        n: int,
+        faults: Faults,
+        link: Link,
+        mailbox: Mailbox,
+        deadline: float,
+        broadcast: bool = False,
     ) -> None:
         self.me, self.n, self.faults = me, n, faults
+        self.broadcast = broadcast  # ``radio.frames``: one frame to several receivers
         self.link, self.mailbox, self.run = link, mailbox, link.run
         self.deadline, self.delay = deadline, faults.model.delay
         self.links: dict[int, np.ndarray] = {}  # cycle -> (N,) senders heard
@@ -125,10 +133,13 @@ class AgentRadio:
         if not self.affords(k, to_check, first.protocol, first.round):
             return
         receivers = np.flatnonzero(self.links[k]) if to is None else np.atleast_1d(to)
+        receivers = [int(q) for q in receivers if q != self.me]
         body = encode(Radio(version=VERSION, run=self.run, k=k, sender=self.me, parts=parts))
+        if self.broadcast and len(receivers) >= 2:
+            self.bytes += self.link.broadcast(receivers, body)
+            return
         for q in receivers:
-            if q != self.me:
-                self.bytes += self.link.send_body(int(q), body)
+            self.bytes += self.link.send_body(q, body)
 
     def lost(self, k: int, protocol: str, round_: int, sender: np.ndarray, receiver) -> np.ndarray:
         bad = self.bad.get(k)
@@ -300,7 +311,8 @@ class UavAgent:
         self.me, self.scenario, self.method = me, scenario, get(method)
         self.n, self.m = scenario.n_uavs, scenario.n_targets
         self.link, self.mailbox, self.run = link, mailbox, link.run
-        self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline)
+        broadcast = scenario.radio.frames == "broadcast"
+        self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline, broadcast)
         self.ctx = simulation.Context.of(scenario, self.method, [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
         self.spec = Spec.of(scenario, isinstance(self.method, Centralized))
@@ -772,7 +784,8 @@ class CentralAgent:
     ) -> None:
         self.scenario, self.n, self.m = scenario, scenario.n_uavs, scenario.n_targets
         self.link, self.mailbox, self.run = link, mailbox, link.run
-        self.radio = AgentRadio(self.n, self.n, faults, link, mailbox, deadline)
+        broadcast = scenario.radio.frames == "broadcast"
+        self.radio = AgentRadio(self.n, self.n, faults, link, mailbox, deadline, broadcast)
         self.ctx = simulation.Context.of(scenario, get("centralized"), [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
         self.spec = Spec.of(scenario, True)

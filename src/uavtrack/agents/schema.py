@@ -50,7 +50,11 @@ def document() -> str:
         f"authentication: a keyed BLAKE2b ({security.TAG_BYTES} bytes) from the pair's X25519 "
         "agreement, an Ed25519 signature for the world's broadcast; when the swarm does not "
         "authenticate (`--no-sign`), an unkeyed BLAKE2b checksum of the same bytes. A radio "
-        "frame's size thus depends on neither (`uavtrack.radio.frame_bytes` counts it). See "
+        "frame's size thus depends on neither (`uavtrack.radio.frame_bytes` counts it). With "
+        '`radio.frames = "broadcast"` a radio frame to two or more UAVs is one envelope whose '
+        "`receiver` is the list of their numbers and whose `tag` is the list of their tags, "
+        "each the one that receiver would check alone (`uavtrack.radio.broadcast_bytes` "
+        "counts the difference); a receiver reads its own and no other. See "
         "`uavtrack.agents.security`.",
         "",
         "## Messages",

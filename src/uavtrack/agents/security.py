@@ -68,14 +68,16 @@ _SIGNED = b"uavtrack-hello-v1|"
 
 class Envelope(msgspec.Struct, array_like=True, frozen=True, kw_only=True):
     """A message on the wire: who sent it to whom, its sequence number, the encoded
-    message (`messages`), and its tag (keyed hash, Ed25519 signature for a broadcast,
-    empty when the swarm does not authenticate)."""
+    message (`messages`), and its tag (keyed hash, Ed25519 signature for the world's
+    Hello to all). A radio frame to several receivers (``radio.frames = "broadcast"``)
+    names a list of receivers and holds a list of tags, one per receiver, each the tag
+    that receiver would check alone (`Gate.seal_for`)."""
 
     sender: int
-    receiver: int
+    receiver: int | list[int]
     seq: int
     body: bytes
-    tag: bytes
+    tag: bytes | list[bytes]
 
 
 _encode = msgspec.msgpack.Encoder().encode
@@ -350,6 +352,25 @@ class Gate:
                 tag = self._mac(self._key(self.me, receiver), self.me, receiver, seq, body)
         return _encode(Envelope(sender=self.me, receiver=receiver, seq=seq, body=body, tag=tag))
 
+    def seal_for(self, receivers: list[int], body: bytes) -> bytes:
+        """One envelope of `body` from this program to every program of `receivers`
+        (two or more, distinct): one sequence number, a tag for each receiver under the
+        key of that pair (a checksum without keys), so each receiver checks its own as
+        it would a frame to it alone."""
+        if len(receivers) < 2 or len(set(receivers)) != len(receivers):
+            raise ValueError("a frame to several receivers names two or more, each once")
+        self._seq += 1
+        seq = self._seq
+        tags = [
+            tag_of(b"", self.run, self.me, r, seq, body)
+            if self.credential is None
+            else self._mac(self._key(self.me, r), self.me, r, seq, body)
+            for r in receivers
+        ]
+        return _encode(
+            Envelope(sender=self.me, receiver=list(receivers), seq=seq, body=body, tag=tags)
+        )
+
     def open(self, payload: bytes) -> tuple[int, bytes] | str:
         """(sender, body) of an envelope meant for this program and authentic, or the
         reason it is not (also counted in `drops`)."""
@@ -363,7 +384,15 @@ class Gate:
             envelope = _decode(payload)
         except (msgspec.DecodeError, msgspec.ValidationError, TypeError, ValueError):
             return "malformed"
-        sender, receiver = envelope.sender, envelope.receiver
+        sender, receiver, tag = envelope.sender, envelope.receiver, envelope.tag
+        if isinstance(receiver, list) or isinstance(tag, list):  # a frame to several
+            mine = self._mine(receiver, tag)
+            if isinstance(mine, str):
+                return mine
+            receiver, tag = self.me, mine
+            envelope = Envelope(
+                sender=sender, receiver=receiver, seq=envelope.seq, body=envelope.body, tag=tag
+            )
         if receiver not in (self.me, EVERYONE):
             return "not for this program"
         if not (sender == WORLD or 0 <= sender < self.programs) or sender == self.me:
@@ -382,6 +411,20 @@ class Gate:
         if not window.fresh(envelope.seq):
             return "replayed"
         return sender, envelope.body
+
+    def _mine(self, receivers: int | list[int], tags: bytes | list[bytes]) -> bytes | str:
+        """This program's tag in a frame to several receivers, or why there is none: the
+        two lists of one length, two or more programs each named once (a list longer
+        than the run has programs is malformed before it is read)."""
+        if not isinstance(receivers, list) or not isinstance(tags, list):
+            return "malformed"
+        if not 2 <= len(receivers) <= self.programs + 1 or len(tags) != len(receivers):
+            return "malformed"
+        if len(set(receivers)) != len(receivers):
+            return "malformed"
+        if self.me not in receivers:
+            return "not for this program"
+        return tags[receivers.index(self.me)]
 
     def _authentic(self, e: Envelope) -> bool:
         if e.receiver == EVERYONE:  # the world's Hello: its Ed25519 signature

@@ -372,6 +372,15 @@ class Link:
         self.transport.publish(inbox_key(self.run, receiver), payload)
         return len(payload)
 
+    def broadcast(self, receivers: list[int], body: bytes) -> int:
+        """An encoded message to several programs as one frame (`Gate.seal_for`),
+        published to each receiver's key; returns its bytes on the wire, counted once
+        (the radio sends it once)."""
+        payload = self.gate.seal_for(receivers, body)
+        for receiver in receivers:
+            self.transport.publish(inbox_key(self.run, receiver), payload)
+        return len(payload)
+
     def hello(self, message: Hello) -> None:
         self.transport.publish(keys(self.run)["hello"], self.gate.seal(EVERYONE, encode(message)))
 

@@ -706,6 +706,17 @@ class RadioModel(Part):
             "the targets whose tuple changed since the sender's previous round"
         ),
     )
+    frames: Literal["unicast", "broadcast"] = Field(
+        default="unicast",
+        description=(
+            "how a message reaches the UAVs in range [-], (unicast, broadcast); unicast: "
+            "one frame per receiver, each with its own envelope and tag (the agent form as "
+            "it was, beyond the paper, which does not say); broadcast, beyond the paper: "
+            "one frame per round to all receivers, its envelope naming them with a tag for "
+            "each under that pair's key (docs: Security), as a radio broadcasts; a frame to "
+            "one receiver stays a plain one"
+        ),
+    )
     bandwidth_bps: Float | None = Field(
         default=None,
         gt=0,
