@@ -17,9 +17,11 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import uavtrack
+from uavtrack import radio
 from uavtrack.agents.messages import Spec
 from uavtrack.agents.tracked import listed_slots
 from uavtrack.methods.base import scanned_tracks
+from uavtrack.numerics.codec import CODECS
 from uavtrack.tracks import manage, team
 
 from .test_hostile import consensus_message
@@ -94,23 +96,27 @@ def track_content(draw, spec: Spec, k: int, serial: int, points: np.ndarray):
     }  # fmt: skip
 
 
-def on_the_wire(content: dict, compact: bool) -> dict:
-    """A full consensus content as a run with the compact encoding sends it: its
-    confirmed slots listed (`agents.tracked.listed_slots`); None: as it is."""
-    if not compact:
+def on_the_wire(content: dict, encoding: str, spec: Spec) -> dict:
+    """A full consensus content as a run with `encoding` sends it: with an encoding, its
+    confirmed slots listed (`agents.tracked.listed_slots`), packed where the encoding
+    packs its rows (`radio.packs`); with the full encoding, as it is."""
+    if encoding == "full":
         return content
     tracks = team.TrackSet(
         **{name: value[None, None] for name, value in content.items() if name != "tombs"},
         tombs=content["tombs"][None, None],
     )
-    return listed_slots(tracks, content["status"] == team.CONFIRMED, compact=True)
+    out = listed_slots(tracks, content["status"] == team.CONFIRMED, CODECS[encoding])
+    if radio.packs("consensus", encoding):
+        out = radio.pack_rows(out, spec.contents("consensus") or {})
+    return out
 
 
-@pytest.mark.parametrize("compact", [False, True], ids=["full", "compact"])
+@pytest.mark.parametrize("encoding", ["full", "compact", "quantized"])
 @settings(max_examples=60, deadline=None, suppress_health_check=[HealthCheck.too_slow])
 @given(data=st.data())
-def test_whatever_a_receiver_adopts_its_own_tracks_and_report_pass_its_own_checks(data, compact):
-    scenario = SCENARIO.with_overrides({"radio.encoding": "compact"}) if compact else SCENARIO
+def test_whatever_a_receiver_adopts_its_own_tracks_and_report_pass_its_own_checks(data, encoding):
+    scenario = SCENARIO.with_overrides({"radio.encoding": encoding})
     spec = Spec.of(scenario, False)
     agent = tracked_receiver(scenario, ME)
     k = data.draw(st.integers(2, 30), label="k")
@@ -120,7 +126,8 @@ def test_whatever_a_receiver_adopts_its_own_tracks_and_report_pass_its_own_check
     own = data.draw(track_content(spec, k, serial, points), label="own")
     mine = manage.unissued(own["label"], serial, spec.m, (ME, spec.n))
     own["status"], own["label"] = np.where(mine, 0, own["status"]), np.where(mine, -1, own["label"])
-    assert not isinstance(spec.radio(consensus_message(on_the_wire(own, compact), k, ME), k), str)
+    sent = on_the_wire(own, encoding, spec)
+    assert not isinstance(spec.radio(consensus_message(sent, k, ME), k), str)
     agent.serial = serial
     state = (
         team.TrackSet(**{name: value[None, None] for name, value in own.items() if name != "tombs"},
@@ -132,10 +139,10 @@ def test_whatever_a_receiver_adopts_its_own_tracks_and_report_pass_its_own_check
         contents = {}
         for q in SENDERS:
             offer = data.draw(track_content(spec, k, serial, points), label=f"from {q}")
-            offer = on_the_wire(offer, compact)
-            if isinstance(spec.radio(consensus_message(offer, k, q), k), str):
-                continue  # only what the rule admits reaches a receiver
-            contents[q] = offer
+            admitted = spec.radio(consensus_message(on_the_wire(offer, encoding, spec), k, q), k)
+            if isinstance(admitted, str):
+                continue  # only what the rule admits reaches a receiver, as it reads it
+            contents[q] = admitted[0][3]
         state = agent._agree(state, contents)
     agreed, changed = state
     label = agreed.label[0, 0]
@@ -162,7 +169,7 @@ def test_whatever_a_receiver_adopts_its_own_tracks_and_report_pass_its_own_check
         "status": offered.status[0, 0].astype(np.int64), "stamp": offered.stamp[0, 0],
         "tombs": offered.tombs[0, 0],
     }  # fmt: skip
-    admitted = spec.radio(consensus_message(on_the_wire(content, compact), k + 1, ME), k + 1)
+    admitted = spec.radio(consensus_message(on_the_wire(content, encoding, spec), k + 1, ME), k + 1)
     assert not isinstance(admitted, str), admitted
     agent.believed = believed
     slot_bids, best, _ = agent._plan(scanned.book, scanned.mean)

@@ -28,6 +28,7 @@ FEATURES = {
     "gps": {"faults.position_std": 5.0},
     "robust": {"robust.gate": 0.9999, "robust.stale": True, "robust.extra_rounds": 1},
     "compact": {"radio.encoding": "compact"},
+    "quantized": {"radio.encoding": "quantized"},
     "trigger": {"fusion.trigger": 0.1},
     "capacity": {"radio.bandwidth_bps": 1e5},
     "broadcast": {"radio.frames": "broadcast"},

@@ -12,6 +12,7 @@ from hypothesis import strategies as st
 import uavtrack
 from uavtrack import fusion
 from uavtrack.agents.messages import VERSION, Part, Radio, Spec, packed
+from uavtrack.numerics.codec import COMPACT
 from uavtrack.radio import upper, wire_cov, wire_mean
 from uavtrack.tracks import team
 
@@ -108,7 +109,7 @@ def test_the_compact_encoding_delivers_float32_values_and_a_symmetric_covariance
         tracks,
         np.ones((1, 2), dtype=int),
         GATE,
-        listing=team.Listing(compact=True),
+        listing=team.Listing(codec=COMPACT),
     )
     adopted = int(np.flatnonzero(out.tracks.label[0, 1] == 7)[0])
     sent_mean, sent_cov = tracks.mean[0, 0, 1], tracks.cov[0, 0, 1]
@@ -303,6 +304,14 @@ SWARMS = {
         {
             "faults.delay": 1, "radio.encoding": "compact", "fusion.trigger": 0.1,
             "radio.bandwidth_bps": 1e5,
+        },
+        12,
+        3,
+    ),
+    "smallest-loss-capacity": (
+        {
+            "faults.loss": 0.2, "radio.encoding": "quantized", "fusion.trigger": 0.1,
+            "radio.frames": "broadcast", "radio.bandwidth_bps": 1e5,
         },
         12,
         3,

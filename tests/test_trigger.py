@@ -145,8 +145,30 @@ def test_the_centralized_method_refuses_what_it_does_not_encode():
         {"fusion.trigger": 0.05, "faults.delay": 1, "robust.stale": True},
         {"radio.encoding": "compact", "fusion.rule": "covariance_intersection"},
         {"fusion.trigger": 0.1, "radio.encoding": "compact", "robust.gate": 0.9999},
+        {
+            "fusion.trigger": 0.1,
+            "radio.encoding": "quantized",
+            "radio.frames": "broadcast",
+            "faults.loss": 0.3,
+            "faults.delay": 1,
+            "robust.stale": True,
+        },
+        {
+            "radio.encoding": "quantized",
+            "fusion.rule": "covariance_intersection",
+            "robust.gate": 0.9999,
+        },
     ],
-    ids=["compact", "trigger", "both-lossy", "trigger-delay", "compact-ci", "both-gate"],
+    ids=[
+        "compact",
+        "trigger",
+        "both-lossy",
+        "trigger-delay",
+        "compact-ci",
+        "both-gate",
+        "smallest-lossy-delay",
+        "quantized-ci-gate",
+    ],
 )
 @pytest.mark.parametrize("method", ["distributed", "greedy"])
 def test_a_swarm_sends_and_decides_as_the_batch(method, overrides):

@@ -32,6 +32,7 @@ import numpy as np
 
 from .faults import Faults
 from .network import Links
+from .numerics.codec import CODECS, Codec, mirrored, upper
 
 
 @dataclass(kw_only=True)
@@ -520,20 +521,20 @@ def described(
     is a scan's Z measurements, or the targets a consensus message carries.
 
     tuples: how the consensus carries its tuples: "full", every target's in float64;
-    "listed" (``fusion.trigger``), the same for the targets it lists; "compact"
-    (``radio.encoding``), the targets it lists in float32, the covariance's upper
-    triangle (`wire_cov`), without the confidence (its receiver computes it).
+    "listed" (``fusion.trigger``), the same for the targets it lists; "compact" or
+    "quantized" (``radio.encoding``), the targets it lists, each estimate as that codec
+    packs it (`numerics.codec.CODECS`), without the confidence (its receiver computes it).
 
     book: the track book's fields beyond M-of-N's that the download carries
     (`tracks.manage.sent_fields`)."""
+    codec = CODECS.get(tuples)
     if protocol == "consensus" and tuples != "full" and slots:
-        return _listed_tracks(slots, tuples == "compact")
+        return _listed_tracks(slots, codec)
     if protocol == "consensus" and tuples != "full":
-        if tuples == "compact":
+        if codec is not None:
             return {
                 "targets": ("<u2", (-1,), "targets"),
-                "mean": ("<f4", (-1, 4), "estimate"),
-                "cov": ("<f4", (-1, 10), "covariance triangle"),
+                **codec.fields("estimate"),
                 "stamp": ("<i4", (-1,), "stamp"),
                 "origin": ("<u2", (-1,), "uav index"),
             }
@@ -605,16 +606,15 @@ def described(
     return contents[protocol]
 
 
-def _listed_tracks(slots: int, compact: bool) -> dict[str, Field]:
-    """A track consensus that lists its slots (``fusion.trigger``, ``radio.encoding``
-    compact): the confirmed slots it carries, each under its team label (the others are
-    not offered: a receiver reads only confirmed tracks), and the sender's tombstones.
-    Compact: float32 estimates, the covariance's upper triangle, 32-bit integers."""
-    if compact:
+def _listed_tracks(slots: int, codec: Codec | None) -> dict[str, Field]:
+    """A track consensus that lists its slots (``fusion.trigger``, ``radio.encoding``):
+    the confirmed slots it carries, each under its team label (the others are not
+    offered: a receiver reads only confirmed tracks), and the sender's tombstones. With
+    an encoding (`codec`): its estimates, 32-bit integers."""
+    if codec is not None:
         return {
             "slots": ("<u2", (-1,), "slots"),
-            "mean": ("<f4", (-1, 4), "track estimate"),
-            "cov": ("<f4", (-1, 10), "covariance triangle"),
+            **codec.fields("track estimate"),
             "label": ("<u4", (-1,), "team label"),
             "stamp": ("<i4", (-1,), "track stamp"),
             "tombs": ("<i4", (slots, 2), "tombstones"),
@@ -672,9 +672,60 @@ def layout(
     book: tuple[str, ...] = (),
 ) -> Layout:
     """The arrays of a protocol's content, (dtype, shape) by name: `described` without
-    the domains, what the batch counts the bytes of."""
+    the domains, what the batch counts the bytes of; its rows packed in one byte array
+    where they travel so (`packs`)."""
     fields = described(protocol, n, m, slots, avoid, tuples, book)
+    if packs(protocol, tuples):
+        return packed_layout(fields)
     return {name: (dtype, shape) for name, (dtype, shape, _) in fields.items()}
+
+
+ROWS = "rows"
+"""The byte array that carries a packed content's rows (`packs`)."""
+
+
+def packs(protocol: str, tuples: str) -> bool:
+    """Whether a content's row fields (first axis -1) travel packed, one record per row
+    in one byte array `ROWS` (`rows_dtype`): the quantized consensus, whose rows are a
+    few bytes each, where every array of its own would cost a dozen bytes of header."""
+    return protocol == "consensus" and tuples == "quantized"
+
+
+def rows_dtype(fields: dict[str, Field]) -> np.dtype:
+    """The record of one row: a content's row fields (first axis -1), in their order,
+    without padding."""
+    rows = [
+        (name, dtype, shape[1:]) for name, (dtype, shape, _) in fields.items() if shape[:1] == (-1,)
+    ]
+    return np.dtype(rows)
+
+
+def packed_layout(fields: dict[str, Field]) -> Layout:
+    """The layout of a content whose row fields travel packed (`packs`): `ROWS`, then
+    its other fields as they are."""
+    out: Layout = {ROWS: ("|u1", (-1, rows_dtype(fields).itemsize))}
+    out |= {n: (d, s) for n, (d, s, _) in fields.items() if s[:1] != (-1,)}
+    return out
+
+
+def pack_rows(content: dict[str, np.ndarray], fields: dict[str, Field]) -> dict[str, np.ndarray]:
+    """A content (`fields`) with its row fields packed into `ROWS` (`packs`)."""
+    record = rows_dtype(fields)
+    names = record.names or ()
+    count = len(content[names[0]]) if names else 0
+    rows = np.zeros(count, dtype=record)
+    for name in names:
+        rows[name] = content[name]
+    out = {ROWS: rows.view(np.uint8).reshape(count, record.itemsize)}
+    return out | {n: v for n, v in content.items() if n not in names}
+
+
+def unpack_rows(rows: np.ndarray, fields: dict[str, Field]) -> dict[str, np.ndarray]:
+    """The row fields of a packed `ROWS` array (count, itemsize) uint8 (`pack_rows`
+    undone), each a contiguous array of its own dtype."""
+    record = rows_dtype(fields)
+    values = np.frombuffer(np.ascontiguousarray(rows).tobytes(), dtype=record)
+    return {name: np.ascontiguousarray(values[name]) for name in record.names or ()}
 
 
 _POSITIVE = (np.array([128, 256, 65536, 2**32]), np.array([1, 2, 3, 5, 9]))
@@ -776,22 +827,6 @@ def layout_bytes(
 def wire_mean(mean: np.ndarray) -> np.ndarray:
     """Estimates as the compact encoding delivers them: rounded to float32."""
     return mean.astype(np.float32).astype(np.float64)
-
-
-_UPPER = np.triu_indices(4)
-
-
-def upper(cov: np.ndarray) -> np.ndarray:
-    """The upper triangle (..., 10) of covariances (..., 4, 4), row by row."""
-    return cov[..., _UPPER[0], _UPPER[1]]
-
-
-def mirrored(triangle: np.ndarray) -> np.ndarray:
-    """Covariances (..., 4, 4), float64, from their upper triangle (..., 10) (`upper`)."""
-    full = np.zeros((*triangle.shape[:-1], 4, 4))
-    full[..., _UPPER[0], _UPPER[1]] = triangle
-    full[..., _UPPER[1], _UPPER[0]] = triangle
-    return full
 
 
 def wire_cov(cov: np.ndarray) -> np.ndarray:

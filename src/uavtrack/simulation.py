@@ -177,7 +177,7 @@ class Context:
             scenario=scenario,
             trigger=scenario.fusion.trigger,
             refresh=scenario.fusion.refresh,
-            compact=scenario.radio.encoding == "compact",
+            encoding=scenario.radio.encoding,
             wire=wire_of(scenario),
         )
         detection = None

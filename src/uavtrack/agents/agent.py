@@ -47,7 +47,8 @@ from ..methods import (
     nothing_heard,
     take_download,
 )
-from ..radio import counted, mirrored, upper
+from ..numerics.codec import Codec
+from ..radio import counted, pack_rows, packs
 from ..robust import gate
 from .messages import VERSION, Part, Radio, Report, Spec, encode, packed
 from .transport import Link, Mailbox
@@ -248,18 +249,17 @@ def closed(ids: list[int], me: int) -> tuple[int, network.Links]:
     return where, network.Links(batch=1, n=len(ids), dense=dense)
 
 
-def listing(t: fusion.Estimates, mask: np.ndarray, compact: bool) -> dict[str, np.ndarray]:
+def listing(t: fusion.Estimates, mask: np.ndarray, codec: Codec | None) -> dict[str, np.ndarray]:
     """A consensus round's content with only the tuples of `mask` (M,), listed by target
-    (`radio.layout`, "listed"; with `compact`, "compact": float32, the covariance's upper
-    triangle, no confidence)."""
+    (`radio.layout`, "listed"; with a `codec`, that encoding's: its estimates, no
+    confidence)."""
     targets = np.flatnonzero(mask)
     mean, cov = fusion.required(t.mean, "mean")[targets], fusion.required(t.cov, "cov")[targets]
     stamp, origin = fusion.required(t.stamp, "stamp"), fusion.required(t.origin, "origin")
-    if compact:
+    if codec is not None:
         return {
-            "targets": targets.astype("<u2"), "mean": mean.astype("<f4"),
-            "cov": upper(cov).astype("<f4"), "stamp": stamp[targets].astype("<i4"),
-            "origin": origin[targets].astype("<u2"),
+            "targets": targets.astype("<u2"), **codec.pack(mean, cov),
+            "stamp": stamp[targets].astype("<i4"), "origin": origin[targets].astype("<u2"),
         }  # fmt: skip
     gamma = fusion.required(t.gamma, "gamma")[targets]
     return {
@@ -268,24 +268,25 @@ def listing(t: fusion.Estimates, mask: np.ndarray, compact: bool) -> dict[str, n
     }  # fmt: skip
 
 
-def listed(content: dict[str, np.ndarray], m: int, k: int, sender: int) -> dict[str, np.ndarray]:
+def listed(
+    content: dict[str, np.ndarray], m: int, k: int, sender: int, codec: Codec | None
+) -> dict[str, np.ndarray]:
     """A consensus content as every target's tuples (`listing` undone): a target not
-    listed has no estimate (confidence -inf, mean 0, covariance I, stamp k); a compact
-    content's covariances are mirrored from their upper triangle and its confidences
-    computed from them, as `radio.wire_cov` and the batch do. A full content is as it is."""
+    listed has no estimate (confidence -inf, mean 0, covariance I, stamp k); an encoded
+    content's estimates are unpacked by the run's `codec` and their confidences computed
+    from them, as the batch does. A full content is as it is."""
     if "targets" not in content:
         return content
     targets = content["targets"].astype(np.int64)
     gamma = np.full(m, -np.inf)
     mean, cov = np.zeros((m, 4)), np.broadcast_to(np.eye(4), (m, 4, 4)).copy()
     stamp, origin = np.full(m, k, dtype=np.int64), np.full(m, sender, dtype=np.int64)
-    mean[targets] = content["mean"].astype(np.float64)
-    if "gamma" in content:
+    if codec is None:
+        mean[targets] = content["mean"]
         cov[targets], gamma[targets] = content["cov"], content["gamma"]
     else:
-        full = mirrored(content["cov"])
-        cov[targets] = full
-        gamma[targets] = estimation.confidence(full)
+        mean[targets], cov[targets] = codec.unpack(content)
+        gamma[targets] = estimation.confidence(cov[targets])
     stamp[targets], origin[targets] = content["stamp"], content["origin"]
     return {"gamma": gamma, "mean": mean, "cov": cov, "stamp": stamp, "origin": origin}
 
@@ -423,7 +424,7 @@ class UavAgent:
 
         def adopt(state: fusion.Estimates, contents: dict[int, dict]) -> fusion.Estimates:
             offered = {
-                q: fusion.Estimates.of(self._plausible(listed(t, self.m, k, q)))
+                q: fusion.Estimates.of(self._plausible(listed(t, self.m, k, q, s.codec)))
                 for q, t in contents.items()
             }
             if s.stale:
@@ -459,7 +460,10 @@ class UavAgent:
             sent.append(t)
             if self.radio.affords(k, self.me, "consensus", r):  # what the share sends
                 told[mask] = fusion.required(t.gamma, "gamma")[mask]
-            return listing(t, mask, s.compact)
+            out = listing(t, mask, s.codec)
+            if packs("consensus", s.tuples):  # its rows in one byte array
+                out = pack_rows(out, self.spec.contents("consensus") or {})
+            return out
 
         return content
 

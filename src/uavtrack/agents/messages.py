@@ -38,7 +38,8 @@ import numpy as np
 from .. import estimation
 from ..faults import PROTOCOLS
 from ..methods.base import wire_of
-from ..radio import WIRE_VERSION, described, mirrored
+from ..numerics.codec import SCALE, decoded_cov, mirrored
+from ..radio import ROWS, WIRE_VERSION, described, packed_layout, packs, unpack_rows
 from ..robust.plausibility import CONSISTENT, Bounds
 
 VERSION = WIRE_VERSION
@@ -219,6 +220,26 @@ def packed(content: dict[str, Any]) -> dict[str, Array]:
     return {name: Array.of(value) for name, value in content.items()}
 
 
+def unpacked(content: dict[str, Array], kinds: dict, most: int) -> dict[str, Array] | str:
+    """A packed content (`radio.packs`) as its fields (`kinds`), each an array of its
+    own, or why it cannot be: the byte array `radio.ROWS` of (rows, a record's bytes),
+    at most `most` rows, beside the fields that travel as they are."""
+    layout = packed_layout(kinds)
+    if content.keys() != layout.keys():
+        return "unexpected fields"
+    wire = content[ROWS]
+    width = layout[ROWS][1][1]
+    if wire.dtype != "|u1" or len(wire.shape) != 2 or wire.shape[1] != width:
+        return "wrong shape or type"
+    if not 0 <= wire.shape[0] <= most:
+        return "wrong shape or type"
+    try:
+        rows = unpack_rows(wire.array(), kinds)
+    except ValueError:
+        return "wrong shape or type"
+    return {name: Array.of(rows[name]) if name in rows else content[name] for name in kinds}
+
+
 # ---------------------------------------------------------------- what a run admits
 
 F, I, B = "<f8", "<i8", "|b1"
@@ -263,6 +284,11 @@ DOMAINS = {
     "them); the other fields' rows are theirs",
     "covariance triangle": "each row the upper triangle (row by row) of a covariance, "
     "which must be as covariance once mirrored",
+    "log variances": "each row a covariance's four variances, 2^(code / 256) each "
+    "(`numerics.codec.QUANTIZED`); with the row's correlations, as covariance once decoded",
+    "correlations": "each row a covariance's six correlations above the diagonal, row by "
+    "row, code / 127 each, every code in [-127, 127]; with the row's log variances, as "
+    "covariance once decoded",
     "slots": "the track slots a listed consensus carries, each once, 0 to K - 1 (up to K "
     "of them); the other fields' rows are theirs, each a confirmed track",
     "team label": "a team label (below the run's largest), each once",
@@ -432,6 +458,12 @@ class Spec:
             return _covariance(value[live], b)
         if domain == "covariance triangle":  # (rows, 10): the upper triangle of each
             return _covariance(mirrored(value), b)
+        if domain == "log variances":  # decoded with the correlations
+            return None
+        if domain == "correlations":  # (rows, 6), with the log variances (rows, 4)
+            if not ((value >= -SCALE) & (value <= SCALE)).all():
+                return "correlation out of range"
+            return _covariance(decoded_cov(arrays["var"], value), b)
         if domain == "afford":
             flags = np.isin(value[:, [0, 2]], (0, 1)).all()
             return None if flags and (value[:, 1] >= 0).all() else "count out of range"
@@ -567,7 +599,12 @@ class Spec:
             if part.content is not None:
                 # the targets, or the track slots, a consensus lists
                 most = (self.slots or self.m) if part.protocol == "consensus" else -1
-                content = self.arrays(part.content, kinds, message.k, message.sender, most)
+                wire = part.content
+                if packs(part.protocol, self.tuples):  # its rows in one byte array
+                    wire = unpacked(wire, kinds, most)
+                    if isinstance(wire, str):
+                        return wire
+                content = self.arrays(wire, kinds, message.k, message.sender, most)
                 if isinstance(content, str):
                     return content
             elif part.final < 0:

@@ -10,6 +10,7 @@ import json
 import msgspec
 import numpy as np
 
+from .. import radio
 from . import messages, security, transport
 
 
@@ -130,15 +131,20 @@ def _admits() -> list[str]:
     lines += _rows(tracked, ("consensus", "bids", "upload", "download"), size)
     lines += [
         "",
-        "With ``fusion.trigger`` (listed) or ``radio.encoding`` compact the consensus part "
-        "lists what it carries: the targets' tuples, or with tracks the confirmed slots "
-        "(the others are not offered); compact sends float32 values, the covariance's upper "
-        "triangle (row by row) and no confidence (the receiver computes it):",
+        "With ``fusion.trigger`` (listed) or ``radio.encoding`` compact or quantized the "
+        "consensus part lists what it carries: the targets' tuples, or with tracks the "
+        "confirmed slots (the others are not offered); compact sends float32 values, the "
+        "covariance's upper triangle (row by row) and no confidence (the receiver computes "
+        "it); quantized sends the mean in float16 and the covariance as codes "
+        "(`uavtrack.numerics.codec`), and its fields with a first axis of rows travel "
+        f"packed, one record per row in one uint8 array `{radio.ROWS}` (rows, the record's "
+        "bytes), the fields in the order below, little-endian, without padding "
+        "(`uavtrack.radio.pack_rows`):",
         "",
         "| encoding | association | field | dtype | shape | domain |",
         "|---|---|---|---|---|---|",
     ]
-    for tuples in ("listed", "compact"):
+    for tuples in ("listed", "compact", "quantized"):
         for kind, base in (("known", spec), ("tracks", tracked)):
             listing = dataclasses.replace(base, tuples=tuples)
             lines += [

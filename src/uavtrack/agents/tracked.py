@@ -24,7 +24,8 @@ from .. import assignment, estimation, simulation, timing
 from ..methods import Greedy, bid_view
 from ..methods.base import NEVER, Held, forwarded, gated_tracks, scanned_tracks
 from ..methods.centralized import download_admitted, node_targets
-from ..radio import counted, mirrored, upper
+from ..numerics.codec import Codec
+from ..radio import counted, pack_rows, packs
 from ..tracks import association, manage, team
 from .agent import CentralAgent, UavAgent, closed, dropped, part
 from .messages import VERSION, Report, packed
@@ -232,7 +233,7 @@ class TrackedUav(UavAgent):
         first = None
         if s.trigger is not None:
             first = team.triggered(own, self.told, self.told_labels, k, s.trigger, s.refresh)
-        how = team.Listing(first=first, compact=s.compact)
+        how = team.Listing(first=first, codec=s.codec)
         K = own.status.shape[-1]
         told = np.full((1, 1, K), np.nan) if self.told is None else self.told.copy()
         told_labels = np.full((1, 1, K), -1) if self.told_labels is None else self.told_labels
@@ -249,7 +250,10 @@ class TrackedUav(UavAgent):
             if self.radio.affords(k, self.me, "consensus", r):  # what the share sends
                 told[mask] = estimation.confidence(tracks.cov)[mask]
                 told_labels[mask] = tracks.label[mask]
-            return listed_slots(tracks, mask[0, 0], s.compact)
+            out = listed_slots(tracks, mask[0, 0], s.codec)
+            if packs("consensus", s.tuples):  # its rows in one byte array
+                out = pack_rows(out, self.spec.contents("consensus") or {})
+            return out
 
         return content
 
@@ -264,7 +268,9 @@ class TrackedUav(UavAgent):
         own, changed = state
         offered = {}
         for q, content in contents.items():
-            content, reasons = self.spec.tracks(unlisted_slots(content, self.scenario.track_slots))
+            content, reasons = self.spec.tracks(
+                unlisted_slots(content, self.scenario.track_slots, self.setting.codec)
+            )
             if self.setting.delay > 0:  # sent cycles ago: predicted to this scan
                 mean, cov = forwarded(
                     self.setting, content["mean"], content["cov"], k - self.setting.delay, k
@@ -399,20 +405,22 @@ def _content(tracks: team.TrackSet) -> dict[str, np.ndarray]:
     }
 
 
-def listed_slots(tracks: team.TrackSet, mask: np.ndarray, compact: bool) -> dict[str, np.ndarray]:
+def listed_slots(
+    tracks: team.TrackSet, mask: np.ndarray, codec: Codec | None
+) -> dict[str, np.ndarray]:
     """A round's listed consensus content (`radio.described`): the slots of `mask` (K,)
-    with their estimates, labels and stamps, and the tombstones; compact: float32, the
-    covariance's upper triangle and 32-bit integers."""
+    with their estimates, labels and stamps, and the tombstones; with a `codec`, its
+    estimates and 32-bit integers."""
     assert tracks.stamp is not None and tracks.tombs is not None
     slots = np.flatnonzero(mask)
     mean, cov = tracks.mean[0, 0, slots], tracks.cov[0, 0, slots]
     label, stamp = tracks.label[0, 0, slots], tracks.stamp[0, 0, slots]
     tombs = tracks.tombs[0, 0]
-    if compact:
+    if codec is not None:
         return {
-            "slots": slots.astype("<u2"), "mean": mean.astype("<f4"),
-            "cov": upper(cov).astype("<f4"), "label": label.astype("<u4"),
-            "stamp": stamp.astype("<i4"), "tombs": tombs.astype("<i4"),
+            "slots": slots.astype("<u2"), **codec.pack(mean, cov),
+            "label": label.astype("<u4"), "stamp": stamp.astype("<i4"),
+            "tombs": tombs.astype("<i4"),
         }  # fmt: skip
     return {
         "slots": slots.astype(np.int64), "mean": mean, "cov": cov,
@@ -420,20 +428,23 @@ def listed_slots(tracks: team.TrackSet, mask: np.ndarray, compact: bool) -> dict
     }  # fmt: skip
 
 
-def unlisted_slots(content: dict[str, np.ndarray], K: int) -> dict[str, np.ndarray]:
+def unlisted_slots(
+    content: dict[str, np.ndarray], K: int, codec: Codec | None
+) -> dict[str, np.ndarray]:
     """A consensus content as every slot's (`listed_slots` undone): a slot not listed is
-    empty (mean 0, covariance I, label -1, stamp 0), a listed one confirmed; a compact
-    content's values in float64, its covariances mirrored from their upper triangle as
-    `radio.wire_cov` delivers them. A full content is as it is."""
+    empty (mean 0, covariance I, label -1, stamp 0), a listed one confirmed; an encoded
+    content's estimates unpacked by the run's `codec`, as the batch's `team.Listing`
+    delivers them. A full content is as it is."""
     if "slots" not in content:
         return content
     slots = content["slots"].astype(np.int64)
     mean, cov = np.zeros((K, 4)), np.broadcast_to(np.eye(4), (K, 4, 4)).copy()
     label, status = np.full(K, -1, dtype=np.int64), np.zeros(K, dtype=np.int64)
     stamp = np.zeros(K, dtype=np.int64)
-    mean[slots] = content["mean"].astype(np.float64)
-    given = content["cov"]
-    cov[slots] = mirrored(given) if given.ndim == 2 else given
+    if codec is None:
+        mean[slots], cov[slots] = content["mean"], content["cov"]
+    else:
+        mean[slots], cov[slots] = codec.unpack(content)
     label[slots], status[slots] = content["label"], team.CONFIRMED
     stamp[slots] = content["stamp"]
     return {

@@ -695,15 +695,18 @@ class FusionModel(Part):
 class RadioModel(Part):
     """What the radio carries and how (not in the paper, which assumes an ideal radio)."""
 
-    encoding: Literal["full", "compact"] = Field(
+    encoding: Literal["full", "compact", "quantized"] = Field(
         default="full",
         description=(
-            "how estimates travel [-], (full, compact); full: float64 states, the whole "
-            "covariance, every target in every round (the agent form as it was, beyond the "
-            "paper, which does not say); compact, beyond the paper: float32 states, the "
+            "how estimates travel [-], (full, compact, quantized); full: float64 states, the "
+            "whole covariance, every target in every round (the agent form as it was, beyond "
+            "the paper, which does not say); compact, beyond the paper: float32 states, the "
             "covariance's upper triangle (10 of 16 numbers), the confidence recomputed by the "
             "receiver from the covariance it got, and in a cycle's later consensus rounds only "
-            "the targets whose tuple changed since the sender's previous round"
+            "the targets whose tuple changed since the sender's previous round; quantized: as "
+            "compact with float16 states and the covariance in 14 bytes (log variances, "
+            "correlations), coded conservatively: what arrives has a covariance at least the "
+            "sender's, its float16 rounding included (docs: The radio's load)"
         ),
     )
     frames: Literal["unicast", "broadcast"] = Field(

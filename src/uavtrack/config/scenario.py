@@ -41,6 +41,10 @@ from .parts import (
 )
 from .toml import describe_errors, dump_toml, read_toml, set_dotted
 
+QUANTIZED_FIELD = 30_000.0
+"""Largest field the quantized encoding takes [m]: float16 reaches 65504, and estimates
+may lie beyond the field by up to its side (targets near a wall, UAVs' guesses)."""
+
 PRESETS = Path(__file__).with_name("presets")
 """The shipped scenario presets, one TOML file each (`Scenario.from_toml` by name)."""
 
@@ -206,13 +210,25 @@ class Scenario(Part):
         return self
 
     @model_validator(mode="after")
+    def _quantized(self) -> Scenario:
+        """Float16 positions reach 65504 m: a field that runs past it cannot be quantized."""
+        if self.radio.encoding == "quantized" and self.field_size > QUANTIZED_FIELD:
+            raise ValueError(
+                f"radio.encoding = quantized sends positions as float16, which reach "
+                f"{QUANTIZED_FIELD:,.0f} m with room for the field's margin; field_size "
+                f"{self.field_size:,.0f} m is larger: use the compact encoding"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _tracks(self) -> Scenario:
         """What tracks of unknown association cannot do yet, said before a run starts."""
         if not self.tracker.unlabelled:
             return self
-        if self.radio.encoding == "compact" and self.labels >= 2**31:
+        if self.radio.encoding != "full" and self.labels >= 2**31:
             raise ValueError(
-                f"radio.encoding = compact sends team labels in 32 bits, and a run of "
+                f"radio.encoding = {self.radio.encoding} sends team labels in 32 bits, and a "
+                f"run of "
                 f"{self.steps} steps of {self.n_uavs} UAVs may issue {self.labels:,}: "
                 "shorten the run or send the full encoding"
             )

@@ -16,7 +16,8 @@ import numpy as np
 from .. import estimation, fusion, network
 from ..config import Scenario
 from ..numerics.buffers import Buffers, take
-from ..radio import Radio, Wire, counted, wire_cov, wire_mean
+from ..numerics.codec import CODECS, Codec
+from ..radio import Radio, Wire, counted
 from ..robust import gate
 from ..tracks import association, manage, team
 from ..tracks.columns import Columns
@@ -37,7 +38,8 @@ class Setting:
     measurement gate's threshold on a squared Mahalanobis distance (``robust.gate``,
     `gate.threshold`; None: off). scenario: the run's (the trackers of unknown
     association read their settings there). trigger and refresh: ``fusion.trigger`` and
-    ``fusion.refresh``; compact: ``radio.encoding`` compact.
+    ``fusion.refresh``; encoding: ``radio.encoding`` (`compact`: any but full, whose
+    `codec` says how an estimate travels).
     """
 
     faulty: bool
@@ -53,14 +55,24 @@ class Setting:
     scenario: Scenario | None = None
     trigger: float | None = None
     refresh: int = 10
-    compact: bool = False
+    encoding: str = "full"
     wire: Wire | None = None
     """The run's message shapes (`wire_of`), read once per run; None: read on use."""
 
     @property
+    def compact(self) -> bool:
+        """Whether estimates travel listed and encoded (`codec`): any encoding but full."""
+        return self.encoding != "full"
+
+    @property
+    def codec(self) -> Codec | None:
+        """How an estimate travels (`numerics.codec.Codec`), None: float64 as it is."""
+        return CODECS.get(self.encoding)
+
+    @property
     def tuples(self) -> str:
         """How the consensus messages carry their tuples (`radio.layout`)."""
-        return "compact" if self.compact else "listed" if self.trigger is not None else "full"
+        return self.encoding if self.compact else "listed" if self.trigger is not None else "full"
 
 
 @dataclass(frozen=True)
@@ -253,8 +265,8 @@ def wire_of(scenario: Scenario) -> Wire:
         m=scenario.n_targets,
         slots=scenario.track_slots if tracked else 0,
         avoid=scenario.planner.avoidance != "none",
-        tuples="compact"
-        if scenario.radio.encoding == "compact"
+        tuples=scenario.radio.encoding
+        if scenario.radio.encoding != "full"
         else "listed"
         if scenario.fusion.trigger is not None
         else "full",
@@ -357,7 +369,7 @@ def consensus(inputs: Inputs) -> Fused:
         )
 
         def arrive(t: fusion.Estimates) -> fusion.Estimates:  # as it arrives, to now
-            t = delivered(t) if s.compact else t
+            t = delivered(t, s.codec) if s.codec is not None else t
             return s.forward(t, inputs.k) if s.stale else t
 
         on = s.stale or s.compact
@@ -385,16 +397,13 @@ def consensus(inputs: Inputs) -> Fused:
     )
 
 
-def delivered(t: fusion.Estimates) -> fusion.Estimates:
-    """Tuples by value as the compact encoding delivers them: float32 values, the
-    covariance's upper triangle, the confidence computed from what arrived (-inf, no
-    estimate, stays)."""
-    cov = wire_cov(fusion.required(t.cov, "cov"))
+def delivered(t: fusion.Estimates, codec: Codec) -> fusion.Estimates:
+    """Tuples by value as an encoding delivers them (`numerics.codec.Codec.delivered`), the
+    confidence computed from what arrived (-inf, no estimate, stays)."""
+    mean, cov = codec.delivered(fusion.required(t.mean, "mean"), fusion.required(t.cov, "cov"))
     gamma = fusion.required(t.gamma, "gamma")
     gamma = np.where(np.isneginf(gamma), gamma, estimation.confidence(cov))
-    return dataclasses.replace(
-        t, mean=wire_mean(fusion.required(t.mean, "mean")), cov=cov, gamma=gamma
-    )
+    return dataclasses.replace(t, mean=mean, cov=cov, gamma=gamma)
 
 
 class Arrived:
@@ -411,12 +420,10 @@ class Arrived:
     def wired(self, name: str) -> np.ndarray:
         """The local estimates' `name` (mean, cov, gamma) as they arrive."""
         if name not in self._wired:
-            if name == "mean":
-                self._wired[name] = wire_mean(self.inputs.mean)
-            elif name == "cov":
-                self._wired[name] = wire_cov(self.inputs.cov)
-            else:
-                self._wired[name] = estimation.confidence(self.wired("cov"))
+            codec = self.inputs.setting.codec
+            assert codec is not None, "estimates arrive as they are without an encoding"
+            mean, cov = codec.delivered(self.inputs.mean, self.inputs.cov)
+            self._wired |= {"mean": mean, "cov": cov, "gamma": estimation.confidence(cov)}
         return self._wired[name]
 
     def arrived(self, t: fusion.Estimates) -> fusion.Estimates:
@@ -620,4 +627,4 @@ def track_listing(inputs: Inputs, tracks: team.TrackSet) -> team.Listing | None:
         )
     budget = inputs.radio.now.budget
     until = None if budget is None else budget.rounds
-    return team.Listing(first=first, compact=s.compact, until=until)
+    return team.Listing(first=first, codec=s.codec, until=until)

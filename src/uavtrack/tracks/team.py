@@ -31,7 +31,8 @@ import numpy as np
 from .. import fusion, network
 from ..estimation import confidence
 from ..numerics import lsap
-from ..radio import Radio, wire_cov, wire_mean
+from ..numerics.codec import Codec
+from ..radio import Radio
 from .association import components
 
 EMPTY, TENTATIVE, CONFIRMED = 0, 1, 2
@@ -305,12 +306,12 @@ class Listing:
     slot); a later round the confirmed slots that changed since the UAV's previous round
     (estimate, label, stamp or status); past its rounds a UAV repeats its last round's
     message. A slot not listed is not offered: receivers read confirmed tracks only
-    (`team_round`), so listing every confirmed slot loses nothing. compact: estimates
-    arrive as float32 with the covariance's upper triangle (`radio.wire_mean`,
-    `radio.wire_cov`). until: the rounds (B, N) each UAV's share affords (None: all)."""
+    (`team_round`), so listing every confirmed slot loses nothing. codec: how estimates
+    travel (``radio.encoding``, `numerics.codec.Codec`; None: float64 as they are). until: the
+    rounds (B, N) each UAV's share affords (None: all)."""
 
     first: np.ndarray | None = None
-    compact: bool = False
+    codec: Codec | None = None
     until: np.ndarray | None = None
 
     def mask(self, r: int, tracks: TrackSet, previous: TrackSet | None) -> np.ndarray:
@@ -332,8 +333,8 @@ class Listing:
         """The tracks as a message carries them: the slots not in `mask` empty, the
         others as they arrive."""
         mean, cov = tracks.mean, tracks.cov
-        if self.compact:
-            mean, cov = wire_mean(mean), wire_cov(cov)
+        if self.codec is not None:
+            mean, cov = self.codec.delivered(mean, cov)
         return TrackSet(
             mean=mean,
             cov=cov,
