@@ -167,3 +167,17 @@ def test_codes_that_decode_to_no_covariance_are_refused(tracked):
 def test_a_field_beyond_float16_is_refused_with_the_way_out():
     with pytest.raises(uavtrack.errors.ScenarioError, match="compact"):
         uavtrack.Scenario().with_overrides({"radio.encoding": "quantized", "field_size": 50_000})
+
+
+def test_a_mean_beyond_float16_arrives_at_its_edge_with_the_difference_in_its_covariance():
+    # a plausible estimate may lie past 65504 m (a large field, a long run): it is sent
+    # finite, and what arrives still dominates what was sent
+    mean, P = np.array([[66000.0, -70000.0, 1.0, 2.0]]), 100.0 * np.eye(4)[None]
+    got_mean, got_cov = QUANTIZED.delivered(mean, P)
+    assert np.isfinite(got_mean).all() and abs(got_mean[0, 0]) == codec.LARGEST
+    error = got_mean - mean
+    assert dominance(P + error[:, :, None] * error[:, None, :], got_cov)[0] <= 1 + 1e-8
+    # variances past int16's codes: a tiny one is sent larger (conservative), a huge one
+    # at the largest code, which no run's bounds admit
+    _, got = QUANTIZED.delivered(np.zeros((2, 4)), np.stack([1e-40 * np.eye(4), 1e39 * np.eye(4)]))
+    assert got[0, 0, 0] >= 1e-40 and got[1, 0, 0] > 1e38

@@ -199,7 +199,7 @@ def refusal(scenario: Scenario, method: Method) -> str | None:
     listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
     if method.central and listed:
         return (
-            "radio.encoding = compact and fusion.trigger act on the consensus of the "
+            "radio.encoding (compact, quantized) and fusion.trigger act on the consensus of the "
             f"distributed and greedy methods; method {method.name} uploads and downloads "
             "whole tables, which they do not encode yet: leave both unset"
         )

@@ -335,7 +335,8 @@ class Spec:
     altitude, speed, heading), which the avoidance filter reads."""
     tuples: str = "full"
     """How the consensus carries its tuples (`radio.layout`): "full", "listed"
-    (``fusion.trigger``: the targets it lists) or "compact" (``radio.encoding``)."""
+    (``fusion.trigger``: the targets it lists), "compact" or "quantized"
+    (``radio.encoding``)."""
     limited: bool = False
     """With ``radio.bandwidth_bps``: Sense and Tick carry what the shares afford."""
     book: tuple[str, ...] = ()

@@ -51,6 +51,8 @@ least 0.036. A decoded matrix rounds to itself, so a receiver that passes it on 
 the same codes."""
 FLOOR = 0.05
 """The smallest eigenvalue a near-singular correlation matrix is shrunk to."""
+LARGEST = float(np.finfo(np.float16).max)
+"""The largest float16 (65504): a mean beyond it is sent at it."""
 TOLERANCE = 1e-6
 """Codes a variance or the dominance factor may exceed a whole code by and still round
 to it: a decoded estimate coded again gives the same codes (a relay changes nothing),
@@ -136,7 +138,8 @@ def _rounded(C: np.ndarray) -> np.ndarray:
 
 
 def _quantized_pack(mean: np.ndarray, cov: np.ndarray) -> dict[str, np.ndarray]:
-    small = mean.astype("<f2")
+    # beyond float16's range a mean is sent at its edge, the difference in e e^T below
+    small = np.clip(mean, -LARGEST, LARGEST).astype("<f2")
     error = small.astype(np.float64) - mean
     P = cov + error[..., :, None] * error[..., None, :]  # the error of the mean that arrives
     P = 0.5 * (P + np.swapaxes(P, -1, -2))
@@ -163,6 +166,9 @@ def _quantized_pack(mean: np.ndarray, cov: np.ndarray) -> dict[str, np.ndarray]:
     factor = np.linalg.eigvalsh(inverse @ P @ np.swapaxes(inverse, -1, -2))[..., -1]
     raise_by = np.ceil(np.log2(np.maximum(factor, 1.0)) * STEPS - TOLERANCE)
     var = var + np.maximum(raise_by, 0.0)[..., None]
+    # int16 holds variances in [2^-128, 2^128): below, the code of 2^-128 (larger: still
+    # conservative); above, that of 2^128, which every run's plausibility bound refuses
+    var = np.clip(var, np.iinfo(np.int16).min, np.iinfo(np.int16).max)
     return {"mean": small, "var": var.astype("<i2"), "corr": corr}
 
 
