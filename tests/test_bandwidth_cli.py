@@ -3,6 +3,7 @@ compact encoding and the event trigger, from the command line."""
 
 import json
 
+import numpy as np
 import pandas as pd
 import pytest
 
@@ -48,7 +49,8 @@ def test_uavtrack_bandwidth_writes_its_tables_and_figure_and_resumes(tmp_path, c
             if c != "keeps"
         ]
     )  # fmt: skip
-    assert len(rows) == (4 + 1 + 4) * len(bandwidth.BANDWIDTHS)
+    cells = sum(len(bandwidth.variants(m)) for m in bandwidth.METHODS)
+    assert cells == 6 + 1 + 6 and len(rows) == cells * len(bandwidth.BANDWIDTHS)
     # paired against the method's unlimited paper run: its own cost is 0
     unlimited = rows[(rows.capacity == "unlimited") & (rows.variant == "paper")]
     assert (unlimited.cost == 0).all()
@@ -61,7 +63,16 @@ def test_uavtrack_bandwidth_writes_its_tables_and_figure_and_resumes(tmp_path, c
     # the compact encoding sends fewer bytes than the paper's exchange, unlimited
     free = rows[rows.capacity == "unlimited"].set_index(["method", "variant"]).bytes
     assert free["distributed", "compact"] < 0.6 * free["distributed", "paper"]
-    assert len(summary["goals"]) == 5 and all(isinstance(g["met"], bool) for g in summary["goals"])
+    # one frame to all sends less than a frame per receiver; the smallest, less than both
+    for method in ("distributed", "greedy"):
+        assert free[method, "broadcast"] < free[method, "paper"]
+        assert free[method, "smallest"] < min(free[method, "both"], free[method, "broadcast"])
+    assert len(summary["goals"]) == 8 and all(isinstance(g["met"], bool) for g in summary["goals"])
+    assert all(
+        np.isfinite(e["nees_inside"]["mean"])
+        for e in summary["methods"]["distributed"]["smallest"].values()
+        if isinstance(e, dict) and e["bytes"]["mean"] > 0
+    )
     report = (out / "report.md").read_text()
     assert "## Goals" in report and "| both | 1 Mbit/s |" in report
     with Image.open(out / "bandwidth.png") as im:

@@ -384,33 +384,32 @@ class Gate:
             envelope = _decode(payload)
         except (msgspec.DecodeError, msgspec.ValidationError, TypeError, ValueError):
             return "malformed"
-        sender, receiver, tag = envelope.sender, envelope.receiver, envelope.tag
-        if isinstance(receiver, list) or isinstance(tag, list):  # a frame to several
-            mine = self._mine(receiver, tag)
+        sender, seq, body = envelope.sender, envelope.seq, envelope.body
+        if isinstance(envelope.receiver, int) and isinstance(envelope.tag, bytes):
+            receiver, tag = envelope.receiver, envelope.tag
+        else:  # a frame to several: this program's tag, read as a frame to it alone
+            mine = self._mine(envelope.receiver, envelope.tag)
             if isinstance(mine, str):
                 return mine
             receiver, tag = self.me, mine
-            envelope = Envelope(
-                sender=sender, receiver=receiver, seq=envelope.seq, body=envelope.body, tag=tag
-            )
         if receiver not in (self.me, EVERYONE):
             return "not for this program"
         if not (sender == WORLD or 0 <= sender < self.programs) or sender == self.me:
             return "unknown sender"
         if receiver == EVERYONE and sender != WORLD:
             return "unknown sender"
-        if not 0 < envelope.seq < 2**62:
+        if not 0 < seq < 2**62:
             return "malformed"
         if self.credential is None:
-            checksum = tag_of(b"", self.run, sender, receiver, envelope.seq, envelope.body)
-            if not hmac.compare_digest(envelope.tag, checksum):
+            checksum = tag_of(b"", self.run, sender, receiver, seq, body)
+            if not hmac.compare_digest(tag, checksum):
                 return "malformed"  # corrupted on the way
-        elif not self._authentic(envelope):
+        elif not self._authentic(sender, receiver, seq, body, tag):
             return "not authentic"
         window = self._windows.setdefault(sender, Window())
-        if not window.fresh(envelope.seq):
+        if not window.fresh(seq):
             return "replayed"
-        return sender, envelope.body
+        return sender, body
 
     def _mine(self, receivers: int | list[int], tags: bytes | list[bytes]) -> bytes | str:
         """This program's tag in a frame to several receivers, or why there is none: the
@@ -426,19 +425,19 @@ class Gate:
             return "not for this program"
         return tags[receivers.index(self.me)]
 
-    def _authentic(self, e: Envelope) -> bool:
-        if e.receiver == EVERYONE:  # the world's Hello: its Ed25519 signature
+    def _authentic(self, sender: int, receiver: int, seq: int, body: bytes, tag: bytes) -> bool:
+        if receiver == EVERYONE:  # the world's Hello: its Ed25519 signature
             _, ed25519, _, _ = _crypto()
             from cryptography.exceptions import InvalidSignature
 
             assert self.credential is not None  # only an authenticated run checks envelopes
             world = ed25519.Ed25519PublicKey.from_public_bytes(self.credential.world)
             try:
-                world.verify(e.tag, _SIGNED + f"{self.run}|{e.seq}|".encode() + e.body)
+                world.verify(tag, _SIGNED + f"{self.run}|{seq}|".encode() + body)
             except InvalidSignature:
                 return False
             return True
         if self._publics is None:
             return False
-        expected = self._mac(self._key(e.sender, e.receiver), e.sender, e.receiver, e.seq, e.body)
-        return hmac.compare_digest(e.tag, expected)
+        expected = self._mac(self._key(sender, receiver), sender, receiver, seq, body)
+        return hmac.compare_digest(tag, expected)

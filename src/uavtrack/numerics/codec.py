@@ -145,8 +145,11 @@ def _quantized_pack(mean: np.ndarray, cov: np.ndarray) -> dict[str, np.ndarray]:
     P = 0.5 * (P + np.swapaxes(P, -1, -2))
     # a slot without an estimate (an empty track, no covariance) is coded as the identity:
     # no receiver reads it, and every array of a batch is coded at once
-    usable = np.isfinite(P).all(axis=(-2, -1)) & np.isfinite(small.astype(np.float64)).all(-1)
-    usable &= (np.diagonal(P, axis1=-2, axis2=-1) > 0).all(axis=-1)
+    usable = np.asarray(
+        np.isfinite(P).all(axis=(-2, -1))
+        & np.isfinite(small.astype(np.float64)).all(axis=-1)
+        & (np.diagonal(P, axis1=-2, axis2=-1) > 0).all(axis=-1)
+    )
     if not usable.all():
         P = np.where(usable[..., None, None], P, np.eye(4))
     variance = np.diagonal(P, axis1=-2, axis2=-1)
