@@ -347,6 +347,8 @@ AGENT_CASES = [
     ("centralized", {"faults.loss": 0.3, "faults.delay": 1}),
     ("distributed", {"tracker.association": "gnn"}),
     ("centralized", {"tracker.association": "gnn"}),
+    ("distributed", {"uav.min_speed": 10.0, "comm_range": 94.0}),
+    ("greedy", {"uav.min_speed": 10.0, "faults.loss": 0.3, "faults.delay": 1}),
 ]
 
 
@@ -367,7 +369,9 @@ def test_the_swarm_filters_as_the_simulator_does(method, overrides):
     assert_same_trace(swarm.result.trace, reference.trace)
     assert swarm.traffic.dropped == 0
     unfiltered = uavtrack.simulate(
-        scenario.with_overrides({"planner.avoidance": "none"}), method, seed=2
+        scenario.with_overrides({"planner.avoidance": "none", "uav.min_speed": None}),
+        method,
+        seed=2,
     )
     assert not np.array_equal(unfiltered.trace.action, reference.trace.action)
 
@@ -395,3 +399,175 @@ def test_every_bad_beacon_from_a_member_stops_no_honest_program(monkeypatch):
     i, q = np.array(honest)[i], np.array(honest)[q]
     gaps = np.hypot(uavs[:, i, 0] - uavs[:, q, 0], uavs[:, i, 1] - uavs[:, q, 1])
     assert gaps.min() >= 10.0
+
+
+# ------------------------------------------------- airspeed as a second control
+
+SLOWS = st.floats(0.45, 0.85)
+"""uav.min_speed as a fraction of the cruise speed."""
+
+
+def fly_chosen(team, chosen, bank, dt, slow, cruise):
+    """The team after each UAV's action of the six (`avoidance.speeds`)."""
+    commanded = team.copy()
+    commanded[:, 3] = av.speeds(slow, cruise)[chosen]
+    return fly(commanded, actions(bank)[chosen % 3], dt)
+
+
+@settings(max_examples=50, deadline=None)
+@given(seed=st.integers(0, 2**32 - 1), bank=BANKS, speed=SPEEDS, dt=DTS, fraction=SLOWS)
+def test_the_slow_loiter_keeps_its_centre_and_every_action_moves_it_by_at_most_delta(
+    seed, bank, speed, dt, fraction
+):
+    slow = fraction * speed
+    uav = states(np.random.default_rng(seed), 1, speed)[0]
+    turn = av.Turn.slowed(slow, speed, bank, dt)
+    moves = av.speeds(slow, speed)
+    after = av.successors(uav, bank, dt, speed=moves)  # (6, 5)
+    flown = np.stack(
+        [fly_chosen(uav[None], np.array([a]), bank, dt, slow, speed)[0] for a in range(6)]
+    )
+    assert np.allclose(after[:, :4], flown[:, :4])  # eq. (1) at each action's speed
+    assert np.allclose(np.angle(np.exp(1j * (after[:, 4] - flown[:, 4]))), 0.0)  # headings
+    c, u = av.loiter(after, bank, dt, speed=slow)
+    here = av.loiter(uav, bank, dt, speed=slow)
+    backup = av.LOITER + 3
+    assert np.allclose(c[backup], here[0], atol=1e-9 * (1 + turn.radius))  # it keeps its centre
+    moved, turned = np.hypot(*(c - c[backup]).T), np.hypot(*(u - u[backup]).T)
+    assert (moved <= turn.delta + 1e-9 * (1 + turn.radius)).all()
+    assert (turned <= turn.delta + 1e-9 * (1 + turn.radius)).all()
+    assert np.allclose(np.maximum(moved, turned), turn.delta, atol=1e-9 * (1 + turn.radius))
+    assert turn.radius < av.Turn.of(np.asarray(speed), bank, dt).radius  # a tighter backup
+
+
+@settings(max_examples=40, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1), bank=BANKS, speed=SPEEDS, dt=DTS, fraction=SLOWS,
+    age=st.integers(0, 4),
+)  # fmt: skip
+def test_the_allowance_covers_a_stale_beacon_of_a_uav_that_changes_its_speed(
+    seed, bank, speed, dt, fraction, age
+):
+    slow = fraction * speed
+    rng = np.random.default_rng(seed)
+    me, them = states(rng, 2, speed)
+    heard = them.copy()
+    for _ in range(age):  # the neighbour flies on, unheard, at either speed
+        them = fly_chosen(them[None], rng.integers(0, 6, 1), bank, dt, slow, speed)[0]
+    guess = av.predicted(heard, np.asarray(age), bank, dt, speed=slow)
+    move, now = av.allowance(np.asarray(age), av.Turn.slowed(slow, speed, bank, dt))
+    moves = av.speeds(slow, speed)
+    mine = av.loiter(av.successors(me, bank, dt, speed=moves), bank, dt, speed=slow)
+    for b in range(6):
+        true = av.loiter(av.successors(them, bank, dt, speed=moves)[b], bank, dt, speed=slow)
+        pred = av.loiter(av.successors(guess, bank, dt, speed=moves)[b], bank, dt, speed=slow)
+        gap = np.abs(av.clearance(mine[0], mine[1], *true) - av.clearance(mine[0], mine[1], *pred))
+        assert (gap <= move + 1e-9 * (1 + move)).all()
+    here = av.loiter(me, bank, dt, speed=slow)
+    gap = abs(
+        av.clearance(*here, *av.loiter(them, bank, dt, speed=slow))
+        - av.clearance(*here, *av.loiter(guess, bank, dt, speed=slow))
+    )
+    assert gap <= now + 1e-9 * (1 + now)
+
+
+def slow_start(rng, n, speed, bank, dt, separation, slow):
+    while True:
+        team = states(rng, n, speed, spread=(15.0 + separation) * n)
+        c, u = av.loiter(team, bank, dt, speed=slow)
+        i, q = np.triu_indices(n, 1)
+        if (av.clearance(c[i], u[i], c[q], u[q]) >= separation).all():
+            return team
+
+
+@settings(max_examples=30, deadline=None)
+@given(
+    seed=st.integers(0, 2**32 - 1), n=st.integers(2, 6), bank=BANKS, speed=SPEEDS, dt=DTS,
+    separation=st.floats(2.0, 30.0), delay=st.integers(0, 2), fraction=SLOWS,
+)  # fmt: skip
+def test_with_a_slow_backup_the_filter_keeps_every_pair_separated_whatever_the_planner_asks(
+    seed, n, bank, speed, dt, separation, delay, fraction
+):
+    """The invariant of the module's docstring with the backup loiter at uav.min_speed:
+    the planner asks any bank at cruise speed, the filter answers with one of six
+    actions, and every pair keeps its clearance, hence its distance."""
+    slow = fraction * speed
+    rng = np.random.default_rng(seed)
+    team = slow_start(rng, n, speed, bank, dt, separation, slow)
+    history = [team]
+    i, q = np.triu_indices(n, 1)
+    slack = 1e-7 * (1 + separation)
+    flown_slow = 0
+    for k in range(60):
+        sent = max(k - delay, 0)
+        heard = av.Heard(
+            np.broadcast_to(history[sent][None, None], (1, n, n, 5)).copy(),
+            np.full((1, n, n), sent),
+        )
+        desired = rng.integers(0, 3, (1, n))
+        chosen, _ = av.choose(
+            desired, team[None], np.ones((1, n), bool), heard, k, separation, 5.0, bank, dt,
+            slow=slow, cruise=speed,
+        )  # fmt: skip
+        flown_slow += int((chosen >= 3).sum())
+        team = fly_chosen(team, chosen[0], bank, dt, slow, speed)
+        history.append(team)
+        c, u = av.loiter(team, bank, dt, speed=slow)
+        assert av.clearance(c[i], u[i], c[q], u[q]).min() >= separation - slack
+        assert np.hypot(*(team[i, :2] - team[q, :2]).T).min() >= separation - slack
+    assert flown_slow >= 0
+
+
+def test_the_slow_backup_is_not_vacuous_and_flies_slowly_where_it_must():
+    """The same teams with the filter's speeds but without its rule (any of the six
+    actions at random) lose separation; with the rule, some UAVs fly slowly."""
+    bank, dt, separation, speed, slow = np.radians(45), 0.5, 10.0, 15.0, 10.0
+    lost = slowed = 0
+    for seed in range(20):
+        rng = np.random.default_rng(seed)
+        team = slow_start(rng, 5, speed, bank, dt, separation, slow)
+        free, ruled = team.copy(), team.copy()
+        i, q = np.triu_indices(5, 1)
+        closest = np.inf
+        for k in range(60):
+            free = fly_chosen(free, rng.integers(0, 6, 5), bank, dt, slow, speed)
+            closest = min(closest, np.hypot(*(free[i, :2] - free[q, :2]).T).min())
+            heard = av.Heard(
+                np.broadcast_to(ruled[None, None], (1, 5, 5, 5)).copy(), np.full((1, 5, 5), k)
+            )
+            chosen, _ = av.choose(
+                rng.integers(0, 3, (1, 5)), ruled[None], np.ones((1, 5), bool), heard, k,
+                separation, 5.0, bank, dt, slow=slow, cruise=speed,
+            )  # fmt: skip
+            slowed += int((chosen >= 3).sum())
+            ruled = fly_chosen(ruled, chosen[0], bank, dt, slow, speed)
+        lost += closest < separation
+    assert lost >= 3 and slowed > 0
+
+
+def test_a_run_with_a_slow_backup_within_its_sound_range_loses_no_separation():
+    slow = 10.0
+    need = av.sound_range(10.0, 15.0, np.radians(45), 0.5, slow=slow)
+    assert need < av.sound_range(10.0, 15.0, np.radians(45), 0.5)  # a smaller loiter
+    scenario = uavtrack.Scenario().with_overrides(
+        {**ONE_ALTITUDE, "comm_range": float(np.ceil(need)), "planner.avoidance": "loiter",
+         "uav.min_speed": slow}
+    )  # fmt: skip
+    for method in ("distributed", "centralized", "greedy"):
+        result = uavtrack.run(scenario, method, seeds=list(range(3)), trace=True)
+        assert result.metrics["separation_losses"].sum() == 0, method
+        speeds = np.concatenate([t.uavs[..., 3].ravel() for t in result.traces])
+        assert set(np.unique(speeds).tolist()) <= {slow, 15.0}
+        assert (speeds == slow).any(), method  # the filter slowed some UAV
+
+
+def test_min_speed_is_refused_where_it_means_nothing_in_one_line():
+    base = uavtrack.Scenario().with_overrides({"planner.avoidance": "loiter"})
+    for change, named in (
+        ({"uav.min_speed": 15.0}, "below uav.speed"),
+        ({"uav.min_speed": 10.0, "planner.avoidance": "none"}, "needs planner.avoidance"),
+        ({"uav.min_speed": 10.0, "uav.dynamics": "jsbsim"}, "JSBSim"),
+    ):
+        with pytest.raises(uavtrack.ScenarioError, match=named) as info:
+            base.with_overrides(change)
+        assert "\n" not in str(info.value)

@@ -33,6 +33,12 @@ FEATURES = {
     "capacity": {"radio.bandwidth_bps": 1e5},
     "broadcast": {"radio.frames": "broadcast"},
     "avoidance": {"planner.avoidance": "loiter", "uav.altitude_spacing": 0, "uav.separation": 10},
+    "airspeed": {
+        "uav.min_speed": 10.0,
+        "planner.avoidance": "loiter",
+        "uav.altitude_spacing": 0,
+        "uav.separation": 10,
+    },
     "births": {"target.stay": 30.0, "tracker.association": "jpda"},
     "jsbsim": {"uav.dynamics": "jsbsim"},
 }

@@ -222,7 +222,11 @@ def first_values(uavs: np.ndarray, mean: np.ndarray, scenario: Scenario) -> np.n
 
 
 def _air(uavs: np.ndarray, scenario: Scenario) -> tuple[np.ndarray, np.ndarray | None]:
-    """The UAVs as the planner flies them: in the moving air mass with ``planner.wind``."""
+    """The UAVs as the planner flies them: in the moving air mass with ``planner.wind``;
+    at the cruise speed with ``uav.min_speed`` (a UAV the filter slowed flies on at it)."""
+    if scenario.uav.min_speed is not None:
+        uavs = uavs.copy()
+        uavs[..., world.V] = scenario.uav.speed
     if scenario.planner.wind and scenario.wind.speed > 0:
         drift = np.array(scenario.wind.velocity())
         return planning.air_relative(uavs, drift), drift
@@ -756,8 +760,9 @@ def finish(
     if scenario.planner.avoidance != "none":
         actions, beacons, beaconed = avoid(state, pending, ctx, actions)
     pilot = state.flight if state.flight is not None else Unicycle(scenario.dt)
+    commanded, bank = command(uavs, actions, scenario, const)
     if fly:
-        new_uavs = pilot.fly(uavs, const.actions[actions], alive)  # a failed UAV is down
+        new_uavs = pilot.fly(commanded, bank, alive)  # a failed UAV is down
     else:
         new_uavs = uavs
     B, Nu = alive.shape
@@ -776,7 +781,7 @@ def finish(
         cov=recorded[1],
         bids=recorded[2],
         assignment=target,
-        action=const.actions[actions],
+        action=bank,
         rounds=fused.rounds,
         messages=fused.sent + assigned.sent + beaconed[0],
         delivered=fused.delivered + assigned.delivered + beaconed[1],
@@ -822,6 +827,21 @@ def finish(
         told_labels=predicted.told_labels,
     )
     return new, cycle
+
+
+def command(
+    uavs: np.ndarray, actions: np.ndarray, scenario: Scenario, const: Constants
+) -> tuple[np.ndarray, np.ndarray]:
+    """What the UAVs (B, Nu, 5) are told to fly for actions (B, Nu): the UAVs with the
+    speed each flies at (``uav.min_speed``: actions 3 to 5 are the banks at it,
+    `avoidance.speeds`), and the bank angles (B, Nu). Without it, the UAVs as they are.
+    The one reading of an action, for the batch and the agents' world."""
+    slow = scenario.uav.min_speed
+    if slow is None:
+        return uavs, const.actions[actions]
+    out = uavs.copy()
+    out[..., world.V] = np.where(actions >= 3, slow, scenario.uav.speed)
+    return out, const.actions[actions % 3]
 
 
 def avoid(

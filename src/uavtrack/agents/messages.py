@@ -351,7 +351,7 @@ class Spec:
             n=n,
             m=wire.m,
             programs=n + int(central),
-            actions=3,
+            actions=3 if scenario.uav.min_speed is None else 6,
             rounds=n + scenario.robust.extra_rounds + budget + 3,
             behind=scenario.faults.delay + 1,
             bounds=Bounds.of(scenario),

@@ -251,7 +251,7 @@ class WorldProgram:
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
-            uavs = pilot.fly(uavs, ctx.const.actions[actions], alive)
+            uavs = pilot.fly(*simulation.command(uavs, actions, s, ctx.const), alive)
             took = time.monotonic() - begin
             self.traffic.cycle_seconds.append(took)
             if realtime:
@@ -449,7 +449,7 @@ class WorldProgram:
             cov=cov,
             bids=bids,
             assignment=target,
-            action=self.ctx.const.actions[actions],
+            action=simulation.command(uavs, actions, self.scenario, self.ctx.const)[1],
             rounds=rounds,
             messages=np.array([sent]),
             delivered=np.array([delivered]),

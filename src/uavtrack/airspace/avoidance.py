@@ -55,6 +55,15 @@ guarantee, also beside a member whose beacons lie.
 
 Between steps the aircraft fly the chords of the polygon; the separation is measured
 at the steps, as every metric of a run is.
+
+**Airspeed as a second control** (``uav.min_speed`` = v): every UAV's backup is the loiter
+at v, the same speed for all, so two backups keep their clearance as above; its radius
+shrinks with v^2 (10.3 m at 10 m/s against 23.0 m at 15 m/s), and so does the room a
+pair needs. The actions are the three banks at the cruise speed and at v (`speeds`);
+the rule is the same over six, each action of a neighbour bounded by its move of the
+backup's centre and offset (`Turn.slowed`), and the proof is unchanged: it needs equal
+speeds only of the backups. A desired action that is not allowed is first flown at v,
+at the same bank, if that is allowed: the filter slows a UAV before it bends its path.
 """
 
 # Strict typing (pyproject.toml), less rules the strict list cannot turn off: the unknown
@@ -112,7 +121,8 @@ def choose_in(
     uav = scenario.uav
     chosen, _ = choose(
         desired, believed, alive, heard, k, minimum(scenario), uav.vertical_separation,
-        np.radians(uav.bank_angle_deg), scenario.dt, values=values,
+        np.radians(uav.bank_angle_deg), scenario.dt, values=values, slow=uav.min_speed,
+        cruise=uav.speed,
     )  # fmt: skip
     return chosen
 
@@ -171,11 +181,32 @@ class Turn:
         delta = 2.0 * radius[..., None] * np.abs(np.sin((turns - turn[..., None]) / 2.0))
         return cls(speed * dt, turn, radius, delta)
 
+    @classmethod
+    def slowed(cls, slow: float, cruise: float, bank: float, dt: float, g: float = G) -> Turn:
+        """The loiter at the backup speed `slow` of UAVs that may fly each bank at
+        `cruise` or `slow` (``uav.min_speed``): delta (6,) bounds how far each action
+        (`speeds`) moves the backup loiter's centre, and turns its offset, against the
+        loiter's next state. A state's centre after action a is its centre plus a fixed
+        vector D_a turned by its heading, and its offset turns by the action's turn, so
+        both bounds hold at every state; they are measured at heading 0."""
+        loitering = cls.of(np.asarray(slow), bank, dt, g)
+        start = np.array([0.0, 0.0, 1.0, slow, 0.0])
+        moves = successors(start, bank, dt, g, speeds(slow, cruise))  # (6, 5)
+        c, u = loiter(moves, bank, dt, g, slow)
+        backup = LOITER + 3
+        delta = np.maximum(
+            np.hypot(*(c - c[backup]).T), np.hypot(*(u - u[backup]).T)
+        )  # the loiter's own is 0
+        return cls(loitering.step, loitering.turn, loitering.radius, delta)
 
-def loiter(uavs: np.ndarray, bank: float, dt: float, g: float = G) -> tuple[np.ndarray, np.ndarray]:
+
+def loiter(
+    uavs: np.ndarray, bank: float, dt: float, g: float = G, speed: float | None = None
+) -> tuple[np.ndarray, np.ndarray]:
     """The centre c and offset u = p - c (each (..., 2)) of the polygon that UAVs
-    (..., 5) fly when they hold +phi from now on (eq. 1)."""
-    t = Turn.of(uavs[..., V], bank, dt, g)
+    (..., 5) fly when they hold +phi from now on (eq. 1), at their own speed or at
+    `speed` (the backup loiter of ``uav.min_speed``)."""
+    t = Turn.of(uavs[..., V] if speed is None else np.full(uavs.shape[:-1], speed), bank, dt, g)
     psi = uavs[..., HEADING]
     along, across = t.step / 2.0, t.step / (2.0 * np.tan(t.turn / 2.0))
     u = np.empty(uavs.shape[:-1] + (2,))
@@ -213,41 +244,80 @@ def allowance(age: np.ndarray, turn: Turn) -> tuple[np.ndarray, np.ndarray]:
     return centre + m * offset + offset, centre + offset
 
 
-def sound_range(separation: float, speed: float, bank: float, dt: float, delay: int = 0) -> float:
+def sound_range(
+    separation: float,
+    speed: float,
+    bank: float,
+    dt: float,
+    delay: int = 0,
+    slow: float | None = None,
+) -> float:
     """The radio range [m] above which a UAV never heard cannot break the invariant, for
     a separation [m], a speed [m/s], a bank angle [rad], a step dT [s] and a delay
     [steps]
     within the next step: out of range at the step its beacon would have been sent, it
     has Lambda > r_C - 4R, and each side may take d + 1 steps unknown to the other
-    (`allowance`)."""
-    turn = Turn.of(np.asarray(speed), bank, dt)
+    (`allowance`). With `slow` (``uav.min_speed``), R is the backup loiter's at it."""
+    if slow is None:
+        turn = Turn.of(np.asarray(speed), bank, dt)
+    else:
+        turn = Turn.slowed(slow, speed, bank, dt)
     unknown = allowance(np.asarray(delay + 1), turn)[1]
     return float(4.0 * turn.radius + separation + 2.0 * unknown)
 
 
 def predicted(
-    state: np.ndarray, age: np.ndarray, bank: float, dt: float, g: float = G
+    state: np.ndarray,
+    age: np.ndarray,
+    bank: float,
+    dt: float,
+    g: float = G,
+    speed: float | None = None,
 ) -> np.ndarray:
-    """States (..., 5) flown on the loiter for age (...,) steps, in closed form: the
-    centre stays, u and the heading turn by age Delta."""
-    c, u = loiter(state, bank, dt, g)
-    turn = Turn.of(state[..., V], bank, dt, g).turn * age
+    """States (..., 5) flown on the loiter (at their own speed, or `speed`) for age
+    (...,) steps, in closed form: the centre stays, u and the heading turn by age
+    Delta."""
+    c, u = loiter(state, bank, dt, g, speed)
+    own = state[..., V] if speed is None else np.full(state.shape[:-1], speed)
+    turn = Turn.of(own, bank, dt, g).turn * age
     cos, sin = np.cos(turn), np.sin(turn)
     out = state.copy()
     out[..., X] = c[..., 0] + cos * u[..., 0] - sin * u[..., 1]
     out[..., Y] = c[..., 1] + sin * u[..., 0] + cos * u[..., 1]
     out[..., HEADING] = state[..., HEADING] + turn
+    if speed is not None:
+        out[..., V] = speed
     return out
 
 
-def successors(uavs: np.ndarray, bank: float, dt: float, g: float = G) -> np.ndarray:
-    """The states (..., 3, 5) after each action (-phi, 0, +phi) of eq. (1)."""
-    step = uavs[..., V] * dt
-    out = np.repeat(uavs[..., None, :], 3, axis=-2)
-    out[..., X] += (step * np.cos(uavs[..., HEADING]))[..., None]
-    out[..., Y] += (step * np.sin(uavs[..., HEADING]))[..., None]
-    banks = np.tan(np.array([-bank, 0.0, bank]))
-    out[..., HEADING] += g * dt * banks / uavs[..., V, None]
+def speeds(slow: float, cruise: float) -> np.ndarray:
+    """The speed of each action (6,) with ``uav.min_speed``: the three banks at the
+    cruise speed, then at the slowest; the last, +phi at the slowest, is the backup."""
+    return np.repeat([cruise, slow], 3)
+
+
+def successors(
+    uavs: np.ndarray, bank: float, dt: float, g: float = G, speed: np.ndarray | None = None
+) -> np.ndarray:
+    """The states (..., 3, 5) after each action (-phi, 0, +phi) of eq. (1); with
+    `speed` (A,) (`speeds`), (..., A, 5) after each bank of the action set at its
+    speed, which the state then holds."""
+    if speed is None:
+        step = uavs[..., V] * dt
+        out = np.repeat(uavs[..., None, :], 3, axis=-2)
+        out[..., X] += (step * np.cos(uavs[..., HEADING]))[..., None]
+        out[..., Y] += (step * np.sin(uavs[..., HEADING]))[..., None]
+        banks = np.tan(np.array([-bank, 0.0, bank]))
+        out[..., HEADING] += g * dt * banks / uavs[..., V, None]
+        return out
+    count = speed.shape[0]
+    out = np.repeat(uavs[..., None, :], count, axis=-2)
+    step = speed * dt  # (A,)
+    out[..., X] += np.cos(uavs[..., HEADING])[..., None] * step
+    out[..., Y] += np.sin(uavs[..., HEADING])[..., None] * step
+    banks = np.tile(np.tan(np.array([-bank, 0.0, bank])), count // 3)
+    out[..., HEADING] += g * dt * banks / speed
+    out[..., V] = speed
     return out
 
 
@@ -263,6 +333,8 @@ def choose(
     dt: float,
     g: float = G,
     values: np.ndarray | None = None,
+    slow: float | None = None,
+    cruise: float | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The actions (B, N) each living UAV flies under the rule of this module, from the
     actions it would fly (desired, indices into (-phi, 0, +phi)), its own believed state
@@ -281,9 +353,18 @@ def choose(
     every other neighbour, and among the actions that allows takes the one of the
     largest worst clearance to those in conflict (recovery; ties: the desired action,
     then the loiter). So the invariant of every other pair holds whatever the pairs in
-    conflict do."""
+    conflict do.
+
+    slow, cruise: with ``uav.min_speed`` (`slow`) the actions are the three banks at
+    `cruise`, then at `slow` (indices 3 to 5, `speeds`), and the backup is the loiter at
+    `slow`, every UAV's the same (`Turn.slowed`): the rule is the same, over six
+    actions. A desired action that is not allowed is first flown slowly, at the same
+    bank, if that is allowed; the values, if given, rank the slow actions as their bank."""
     B, n = alive.shape
     out = np.array(desired, dtype=np.int64, copy=True)
+    moves = None if slow is None else speeds(slow, cruise if cruise is not None else slow)
+    count = 3 if moves is None else 6
+    backup = LOITER if moves is None else LOITER + 3
     trial, me, other = np.nonzero(heard.stamp >= 0)
     mine = believed[trial, me]
     theirs = heard.state[trial, me, other]
@@ -292,36 +373,46 @@ def choose(
     if not trial.size:
         return out, np.zeros((B, n), dtype=bool)
     age = k - heard.stamp[trial, me, other]
-    now = predicted(theirs, age, bank, dt, g)  # (P, 5) the neighbour if it loitered since
-    move, held = allowance(age, Turn.of(theirs[:, V], bank, dt, g))
-    ci, ui = loiter(successors(mine, bank, dt, g), bank, dt, g)  # (P, 3, 2)
-    cq, uq = loiter(successors(now, bank, dt, g), bank, dt, g)  # (P, 3, 2)
+    now = predicted(theirs, age, bank, dt, g, slow)  # (P, 5) the neighbour if it loitered since
+    if moves is None:
+        turn = Turn.of(theirs[:, V], bank, dt, g)
+    else:
+        assert slow is not None
+        turn = Turn.slowed(slow, float(moves[0]), bank, dt, g)
+    move, held = allowance(age, turn)
+    ci, ui = loiter(successors(mine, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
+    cq, uq = loiter(successors(now, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
     lam = clearance(ci[:, :, None], ui[:, :, None], cq[:, None], uq[:, None])  # (P, a, b)
     higher = other < me  # a lower index has priority
     every = lam.min(axis=2) - move[:, None]  # against each action of the neighbour
-    loitering = lam[:, :, LOITER] - held[:, None]  # against its loiter
-    worst = np.where(higher[:, None], every, loitering)  # (P, 3)
+    loitering = lam[:, :, backup] - held[:, None]  # against its loiter
+    worst = np.where(higher[:, None], every, loitering)  # (P, A)
     # a pair certainly in conflict already (its clearance less the record's allowance
     # below s) is out of the rule's reach: the UAV keeps the rule with every other
     # neighbour and, among what that allows, takes the action that most increases its
     # worst clearance to those (recovery)
-    c_now, u_now = loiter(mine, bank, dt, g)
-    cq_now, uq_now = loiter(now, bank, dt, g)
+    c_now, u_now = loiter(mine, bank, dt, g, slow)
+    cq_now, uq_now = loiter(now, bank, dt, g, slow)
     now_clear = clearance(c_now, u_now, cq_now, uq_now) + held
     conflict = now_clear < separation - ROUND_OFF * (1.0 + separation)
     flat = trial * n + me
-    kept = np.full((B * n, 3), np.inf)  # the worst over the pairs the rule holds for
+    kept = np.full((B * n, count), np.inf)  # the worst over the pairs the rule holds for
     np.minimum.at(kept, flat[~conflict], worst[~conflict])
-    broken = np.full((B * n, 3), np.inf)  # and over the pairs in conflict
+    broken = np.full((B * n, count), np.inf)  # and over the pairs in conflict
     np.minimum.at(broken, flat[conflict], worst[conflict])
-    kept, broken = kept.reshape(B, n, 3), broken.reshape(B, n, 3)
+    kept, broken = kept.reshape(B, n, count), broken.reshape(B, n, count)
     allowed = kept >= separation
-    allowed[..., LOITER] = True
+    allowed[..., backup] = True
     pick = np.take_along_axis(allowed, out[..., None], axis=-1)[..., 0]
     if values is None:  # -phi falls back to straight, straight to the loiter
-        fallback = np.where((out == 0) & allowed[..., STRAIGHT], STRAIGHT, LOITER)
+        fallback = np.where((out == 0) & allowed[..., STRAIGHT], STRAIGHT, backup)
     else:
-        fallback = np.argmax(np.where(allowed, np.nan_to_num(values, nan=-np.inf), -np.inf), -1)
+        ranked = values if moves is None else np.concatenate([values, values], axis=-1)
+        fallback = np.argmax(np.where(allowed, np.nan_to_num(ranked, nan=-np.inf), -np.inf), -1)
+    if moves is not None:  # slower at the same bank first
+        slower = np.minimum(out + 3, count - 1)
+        fine = np.take_along_axis(allowed, slower[..., None], axis=-1)[..., 0] & (out < 3)
+        fallback = np.where(fine, slower, fallback)
     out = np.where(pick, out, fallback)
     # recovery: the largest worst clearance; the desired action, then the loiter, on ties
     score = np.where(allowed, broken, -np.inf)
@@ -329,7 +420,7 @@ def choose(
     rescue = np.where(
         np.take_along_axis(top, desired[..., None], axis=-1)[..., 0],
         desired,
-        np.where(top[..., LOITER], LOITER, np.argmax(top, axis=-1)),
+        np.where(top[..., backup], backup, np.argmax(top, axis=-1)),
     )
     out = np.where(np.isfinite(broken).any(axis=-1), rescue, out)
     out = np.where(alive, out, desired)

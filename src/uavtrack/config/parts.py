@@ -136,6 +136,19 @@ class UAVModel(Part):
     speed: Float = Field(
         default=15.0, gt=0, le=300, description="airspeed V [m/s], (0, 300]; paper Sec. 7"
     )
+    min_speed: Float | None = Field(
+        default=None,
+        gt=0,
+        le=300,
+        description=(
+            "slowest airspeed the avoidance filter may fly a UAV at [m/s], (0, speed); beyond "
+            "the paper, whose UAVs fly at one speed: a second control, with "
+            "planner.avoidance = loiter; every UAV's backup manoeuvre is then the loiter at "
+            "this speed, whose radius shrinks with its square, and the filter slows a UAV "
+            "before it bends its path (docs: Collision avoidance); the planner plans at "
+            "speed; not set: the paper's constant speed"
+        ),
+    )
     bank_angle_deg: Float = Field(
         default=45.0,
         gt=0,

@@ -301,6 +301,29 @@ class Scenario(Part):
         return self
 
     @model_validator(mode="after")
+    def _airspeed(self) -> Scenario:
+        """``uav.min_speed``: a second control of the avoidance filter, for the unicycle."""
+        slow = self.uav.min_speed
+        if slow is None:
+            return self
+        if slow >= self.uav.speed:
+            raise ValueError(
+                f"uav.min_speed {slow:g} must be below uav.speed {self.uav.speed:g}; lower it "
+                "or leave it unset"
+            )
+        if self.planner.avoidance == "none":
+            raise ValueError(
+                "uav.min_speed needs planner.avoidance = loiter (it does nothing otherwise); "
+                "set planner.avoidance=loiter or leave uav.min_speed unset"
+            )
+        if self.uav.dynamics == "jsbsim":
+            raise ValueError(
+                "uav.min_speed flies the unicycle: JSBSim's autopilot holds the trimmed "
+                "airspeed, and a commanded airspeed for it is not built; leave it unset"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _flight(self) -> Scenario:
         calm = self.wind.speed == 0 and self.wind.turbulence == "none"
         if self.uav.dynamics == "unicycle" and not calm:

@@ -32,6 +32,8 @@ TEAMS = ((5, 4), (20, 16))
 CELLS = (
     ("unicycle", "paper"),
     ("unicycle", "sound"),
+    ("unicycle", "paper, slow"),
+    ("unicycle", "sound, slow"),
     ("jsbsim", "sound"),
 )
 """(dynamics, radio) of each cell, run with and without the filter for every team."""
@@ -44,6 +46,13 @@ SCORED = (
 
 COST = 0.03
 """The goal's largest cost of the filter in observation rate (paired), on the unicycle."""
+SLOW = 10.0
+"""``uav.min_speed`` of the cells "slow" [m/s]: the filter may slow a UAV to it, and its
+backup loiter flies at it (radius 10.3 m against 23.0 m at 15 m/s). Assumed: two thirds
+of the paper's 15 m/s, above the stall speed of a small fixed-wing UAV that cruises at
+15 m/s (8 to 10 m/s for a 2 m wingspan)."""
+FEWER = 0.95
+"""The goal at the paper's radio: the filter removes at least this share of the losses."""
 
 
 @dataclass(frozen=True)
@@ -60,6 +69,7 @@ def sound(base: Scenario) -> float:
         math.radians(uav.bank_angle_deg),
         base.dt,
         base.faults.delay,
+        uav.min_speed,
     )
     return float(math.ceil(need))
 
@@ -78,8 +88,14 @@ def overrides(
     scenario = team_of(base, team)
     out = difference(base, scenario)
     out["uav.dynamics"] = dynamics
-    out["comm_range"] = base.comm_range if radio == "paper" else sound(base)
+    slow = radio.endswith("slow")
+    if radio.startswith("paper"):
+        out["comm_range"] = base.comm_range
+    else:  # the filter's sound range, with the slow backup where it is flown
+        out["comm_range"] = sound(base.with_overrides({"uav.min_speed": SLOW}) if slow else base)
     out["planner.avoidance"] = "loiter" if avoid else "none"
+    if slow and avoid:  # the unfiltered twin flies at one speed (min_speed needs the filter)
+        out["uav.min_speed"] = SLOW
     return out
 
 
@@ -167,16 +183,22 @@ def goals(summary: dict[str, Any]) -> list[dict[str, Any]]:
     rows = summary["methods"]["distributed"]
     out = []
     for team in TEAMS:
-        e = rows[key(team, "unicycle", "sound")]
         name = f"{team[0]}x{team[1]}"
-        out.append(
-            (f"{name}: losses with the filter (all trials)", e["loiter"]["losses_total"], "==", 0.0)
-        )
-        out.append((f"{name}: cost in observation rate (paired)", e["cost"]["mean"], "<=", COST))
+        for radio, how in (("sound", ""), ("sound, slow", f", slow backup ({SLOW:g} m/s)")):
+            e = rows[key(team, "unicycle", radio)]
+            out.append((f"{name}{how}: losses with the filter (all trials)",
+                        e["loiter"]["losses_total"], "==", 0.0))  # fmt: skip
+            out.append((f"{name}{how}: cost in observation rate (paired)",
+                        e["cost"]["mean"], "<=", COST))  # fmt: skip
+        e = rows[key(team, "unicycle", "paper, slow")]
+        before = e["none"]["losses_total"]
+        fewer = 1.0 - e["loiter"]["losses_total"] / before if before else 1.0
+        out.append((f"{name}, slow backup, the paper's radio: share of losses removed",
+                    fewer, ">=", FEWER))  # fmt: skip
+    holds = {"==": np.equal, "<=": np.less_equal, ">=": np.greater_equal}
     return [
         {"goal": goal, "value": value, "op": op, "bound": bound,
-         "met": bool(value == bound if op == "==" else value <= bound)
-         if np.isfinite(value) else False}
+         "met": bool(np.isfinite(value) and holds[op](value, bound))}
         for goal, value, op, bound in out
     ]  # fmt: skip
 
@@ -245,10 +267,13 @@ def report(summary: dict[str, Any], scenario: Scenario, info: dict[str, Any]) ->
         f"{scenario.uav.vertical_separation:g} m in altitude. Radio: the scenario's r_C "
         f"= {scenario.comm_range:g} m (paper) and the sound range "
         f"{summary['sound_range']:g} m, above which the filter's guarantee holds "
-        "(`airspace.avoidance`). Each filtered run is paired trial by trial with the "
-        "same trials unfiltered; cost = unfiltered minus filtered observation rate.",
+        "(`airspace.avoidance`). Slow: the filter may slow a UAV to "
+        f"`uav.min_speed` = {SLOW:g} m/s and its backup loiter flies at it, at the paper's "
+        "radio and at that backup's own sound range. Each filtered run is paired trial by "
+        "trial with the same trials unfiltered; cost = unfiltered minus filtered "
+        "observation rate.",
         "",
-        "## Goals (distributed, unicycle, sound range)",
+        "## Goals (distributed, unicycle)",
         "",
         "| goal | measured | bound | met |",
         "|---|---|---|---|",
