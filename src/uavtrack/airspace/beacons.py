@@ -75,6 +75,8 @@ class Limits:
         speed = 2.0 * (u.speed + scenario.wind.speed)  # as `plausibility.Bounds.uav_speed`
         bank = math.radians(u.bank_angle_deg)
         slowest = max(u.speed - scenario.wind.speed, 0.5 * u.speed)
+        if u.min_speed is not None:  # the filter may slow a UAV, which then turns faster
+            slowest = min(slowest, u.min_speed)
         turn = TURN_MARGIN * G * math.tan(bank) / slowest
         certain = f.loss == 0 and f.delay == 0 and scenario.radio.bandwidth_bps is None
         start = None

@@ -145,8 +145,9 @@ class UAVModel(Part):
             "the paper, whose UAVs fly at one speed: a second control, with "
             "planner.avoidance = loiter; every UAV's backup manoeuvre is then the loiter at "
             "this speed, whose radius shrinks with its square, and the filter slows a UAV "
-            "before it bends its path (docs: Collision avoidance); the planner plans at "
-            "speed; not set: the paper's constant speed"
+            "before it bends its path (docs: One altitude); the planner plans at speed; the "
+            "backup turns at most a quarter turn a step; the unicycle only (the MAVLink and "
+            "ROS 2 outputs carry the bank alone); not set: the paper's constant speed"
         ),
     )
     bank_angle_deg: Float = Field(

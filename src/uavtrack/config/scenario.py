@@ -28,6 +28,7 @@ from .parts import (
     FaultModel,
     Float,
     FusionModel,
+    G,
     Int,
     Part,
     PlannerModel,
@@ -310,6 +311,13 @@ class Scenario(Part):
             raise ValueError(
                 f"uav.min_speed {slow:g} must be below uav.speed {self.uav.speed:g}; lower it "
                 "or leave it unset"
+            )
+        least = 2.0 * G * self.dt * math.tan(math.radians(self.uav.bank_angle_deg)) / math.pi
+        if slow < least:
+            raise ValueError(
+                f"uav.min_speed {slow:g} turns the backup loiter more than a quarter turn a "
+                f"step (dt {self.dt:g} s, bank {self.uav.bank_angle_deg:g} deg): give at "
+                f"least {math.ceil(least * 100) / 100:g} m/s"
             )
         if self.planner.avoidance == "none":
             raise ValueError(
