@@ -151,6 +151,7 @@ def test_a_stranger_making_or_dropping_tokens_neither_stops_nor_changes_a_run(mo
     assert swarm.traffic.drops.get("not authentic", 0) >= 1  # its Ready, at least
 
 
+@pytest.mark.slow  # 34 s of TLS sessions and deadlines: kept out of CI's 15 minutes
 def test_an_impostor_holding_a_members_key_file_with_another_secret_takes_no_place(tmp_path):
     # over TLS, with --no-spawn: a program started with a copy of program 0's key file
     # whose secret is not 0's is told that its key is not 0's (exit 2); a stranger
