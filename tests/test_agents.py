@@ -498,3 +498,33 @@ def test_the_world_names_the_programs_that_did_not_start_by_what_it_heard_from_t
         "program 4 did not start within 3 s; 0, 1, 2, 3 started and waited for them"
     )
     assert ended == ["world gone"] * 4
+
+
+NEW_OPTIONS = [
+    {"uav.min_speed": 10.0, "comm_range": 94.0, "radio.frames": "broadcast",
+     "radio.encoding": "quantized", "fusion.trigger": 0.1},
+    {"uav.dynamics": "jsbsim", "planner.avoidance_model": "measured", "comm_range": 177.0,
+     "radio.frames": "broadcast", "radio.encoding": "quantized", "wind.speed": 5.0},
+]  # fmt: skip
+NEW_OPTIONS[1] = pytest.param(NEW_OPTIONS[1], marks=pytest.mark.slow)  # 21 s: 5 measurements
+"""The airspeed control, the measured model of flight, broadcast frames and quantized
+tuples, together, at one altitude."""
+
+
+@pytest.mark.parametrize("options", NEW_OPTIONS, ids=["airspeed", "measured"])
+def test_zenoh_swarm_with_the_new_options_equals_run(options):
+    """Over Zenoh, between processes, the swarm flies each new option as the batch does,
+    step by step, and the filter changed what the UAVs flew."""
+    zenoh_or_skip()
+    if options.get("uav.dynamics") == "jsbsim":
+        pytest.importorskip("jsbsim")
+    scenario = uavtrack.Scenario.from_toml("one-altitude").with_overrides({"steps": 15, **options})
+    swarm = run_swarm(scenario, "distributed", seed=4, transport="zenoh")
+    reference = uavtrack.simulate(scenario, "distributed", seed=4)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.traffic.dropped == 0
+    unfiltered = {"planner.avoidance": "none", "uav.min_speed": None}
+    if "planner.avoidance_model" in options:
+        unfiltered["planner.avoidance_model"] = "unicycle"
+    free = uavtrack.simulate(scenario.with_overrides(unfiltered), "distributed", seed=4)
+    assert not np.array_equal(free.trace.action, reference.trace.action)

@@ -45,12 +45,15 @@ WORLDS = ("sense", "tick", "hello", "ready", "lost")
 
 def bad_array(wire: Array, how: str) -> Array:
     """`wire`'s array at a bad value: its shape filled with the value (a float array
-    whatever the field's type), zero, negated, one element too many, another dtype."""
+    whatever the field's type), zero, negated (an unsigned one: its largest value), one
+    element too many, another dtype."""
     value = wire.array()
     if how in FLOATS:
         return Array.of(np.full(value.shape, FLOATS[how]))
     if how == "zero":
         return Array.of(np.zeros_like(value))
+    if how == "negative" and value.dtype.kind == "u":  # no sign: the largest it holds
+        return Array.of(np.full_like(value, np.iinfo(value.dtype).max))
     if how == "negative":
         return Array.of(~value if value.dtype.kind == "b" else -np.abs(value) - 1)
     if how == "wrong shape":

@@ -512,6 +512,7 @@ def described(
     avoid: bool = False,
     tuples: str = "full",
     book: tuple[str, ...] = (),
+    recent: bool = False,
 ) -> dict[str, Field]:
     """The arrays of a protocol's content in the agent form, with their domains: `n`
     UAVs, `m` targets, K = `slots` track slots per UAV with unknown association (0:
@@ -549,6 +550,8 @@ def described(
     beacon: dict[str, Field] = (
         {"uav": (F8, (5,), "uav state")} if avoid else {"position": (F8, (3,), "position")}
     )
+    if recent:  # ``planner.avoidance_model = "measured"``: the sender's last two actions
+        beacon["recent"] = ("|u1", (), "recent commands")
     if slots:
         K = slots
         tracks: dict[str, Field] = {
@@ -642,23 +645,30 @@ class Wire:
     avoid: bool = False
     tuples: str = "full"
     book: tuple[str, ...] = ()
+    recent: bool = False
 
     def described(self, protocol: str, tuples: str | None = None) -> dict[str, Field]:
         """`described` of a protocol in this run (tuples: another listing than the run's)."""
         listing = self.tuples if tuples is None else tuples
-        return described(protocol, self.n, self.m, self.slots, self.avoid, listing, self.book)
+        return described(
+            protocol, self.n, self.m, self.slots, self.avoid, listing, self.book, self.recent
+        )
 
     def layout(self, protocol: str, tuples: str | None = None) -> Layout:
         """`layout` of a protocol in this run (tuples: another listing than the run's)."""
         listing = self.tuples if tuples is None else tuples
-        return layout(protocol, self.n, self.m, self.slots, self.avoid, listing, self.book)
+        return layout(
+            protocol, self.n, self.m, self.slots, self.avoid, listing, self.book, self.recent
+        )
 
     def bytes(self, protocol: str, rows: Any = None, tuples: str | None = None) -> Any:
         """`content_bytes` of a protocol's content in this run (`rows`: of its variable
         arrays, (B, N) or a number; a fixed layout's are cached)."""
         listing = self.tuples if tuples is None else tuples
         if rows is None and (protocol != "consensus" or listing == "full"):
-            return layout_bytes(protocol, self.n, self.m, self.slots, self.avoid, self.book)
+            return layout_bytes(
+                protocol, self.n, self.m, self.slots, self.avoid, self.book, self.recent
+            )
         return content_bytes(self.layout(protocol, tuples), rows)
 
 
@@ -670,11 +680,12 @@ def layout(
     avoid: bool = False,
     tuples: str = "full",
     book: tuple[str, ...] = (),
+    recent: bool = False,
 ) -> Layout:
     """The arrays of a protocol's content, (dtype, shape) by name: `described` without
     the domains, what the batch counts the bytes of; its rows packed in one byte array
     where they travel so (`packs`)."""
-    fields = described(protocol, n, m, slots, avoid, tuples, book)
+    fields = described(protocol, n, m, slots, avoid, tuples, book, recent)
     if packs(protocol, tuples):
         return packed_layout(fields)
     return {name: (dtype, shape) for name, (dtype, shape, _) in fields.items()}
@@ -818,10 +829,16 @@ the parts."""
 
 @functools.cache
 def layout_bytes(
-    protocol: str, n: int, m: int, slots: int = 0, avoid: bool = False, book: tuple[str, ...] = ()
+    protocol: str,
+    n: int,
+    m: int,
+    slots: int = 0,
+    avoid: bool = False,
+    book: tuple[str, ...] = (),
+    recent: bool = False,
 ) -> int:
     """`content_bytes` of a fixed `layout` (no scan in it)."""
-    return int(content_bytes(layout(protocol, n, m, slots, avoid, book=book)))
+    return int(content_bytes(layout(protocol, n, m, slots, avoid, book=book, recent=recent)))
 
 
 def wire_mean(mean: np.ndarray) -> np.ndarray:

@@ -77,6 +77,7 @@ class State:
     labels: np.ndarray | None = None  # (B, L) the labels of the held bids' columns
     tombs: np.ndarray | None = None  # (B, Nu, T, 2) the tombstones each UAV knows
     beacons: avoidance.Heard | None = None  # with planner.avoidance: the states heard
+    recent: np.ndarray | None = None  # (B, Nu) and the measured model: the recent commands
     told: np.ndarray | None = None  # with fusion.trigger: the confidence each UAV last sent
     told_labels: np.ndarray | None = None  # and with tracks the label of each slot it sent
 

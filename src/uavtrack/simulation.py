@@ -29,12 +29,12 @@ from typing import Any, Protocol
 import numpy as np
 
 from . import _process, estimation, flight, fusion, network, planning, sensing, timing, world
-from .airspace import avoidance
+from .airspace import avoidance, response
 from .config import G, Scenario, ScenarioError, SensorModel
 from .faults import PROTOCOLS, Faults, trial_key
 from .flight.unicycle import Unicycle
 from .methods import Assigned, Distributed, Fused, Held, Inputs, Method, Setting, get
-from .methods.base import FusedTracks, Local, wire_of
+from .methods.base import FusedTracks, Local, beacon_of, wire_of
 from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, PER_UAV_SETS
 from .numerics import lsap
 from .numerics.buffers import Buffers
@@ -45,7 +45,6 @@ from .radio import (
     counted,
     frame_bytes,
     int_bytes,
-    layout_bytes,
     part_bytes,
 )
 from .records import (
@@ -572,6 +571,7 @@ class Oracle:
             measured=measured(state, detected, z, R, ctx),
             buffers=ctx.buffers,
             told=state.told,
+            recent=own_recent(state, ctx.scenario),
         )
         return Fusion(inputs=inputs, fused=ctx.method.fuse(inputs), belief=belief)
 
@@ -639,6 +639,7 @@ class Tracking:
             setting=ctx.setting,
             told=state.told,
             told_labels=state.told_labels,
+            recent=own_recent(state, ctx.scenario),
         )
         tracks = ctx.method.fuse_tracks(inputs, local)
         B, Nu = alive.shape
@@ -759,6 +760,9 @@ def finish(
     beacons, beaconed = state.beacons, (0, 0)
     if scenario.planner.avoidance != "none":
         actions, beacons, beaconed = avoid(state, pending, ctx, actions)
+    recent = own_recent(state, scenario)
+    if recent is not None:
+        recent = response.recent(recent, actions)
     pilot = state.flight if state.flight is not None else Unicycle(scenario.dt)
     commanded, bank = command(uavs, actions, scenario, const)
     if fly:
@@ -823,6 +827,7 @@ def finish(
         labels=predicted.labels,
         tombs=predicted.tombs,
         beacons=beacons,
+        recent=recent,
         told=fused.told,
         told_labels=predicted.told_labels,
     )
@@ -844,6 +849,16 @@ def command(
     return out, const.actions[actions % 3]
 
 
+def own_recent(state: State, scenario: Scenario) -> np.ndarray | None:
+    """With ``planner.avoidance_model = "measured"``, each UAV's recent commands (B, Nu)
+    at this step (`airspace.response.recent`; straight flight at the start); else None."""
+    if scenario.planner.avoidance_model != "measured":
+        return None
+    if state.recent is not None:
+        return state.recent
+    return np.full(state.alive.shape, response.START, dtype=np.int64)
+
+
 def avoid(
     state: State, pending: Pending, ctx: Context, actions: np.ndarray
 ) -> tuple[np.ndarray, avoidance.Heard, tuple[Any, Any]]:
@@ -855,9 +870,9 @@ def avoid(
     B, Nu = alive.shape
     own = not radio.sending("beacon")
     if own:
-        radio.send("beacon", {"uavs": pending.believed, "stamp": np.full((B, Nu), k)})
-        beacon = layout_bytes("beacon", Nu, 0, avoid=True)  # what the shares afford
-        radio.on_air(part_bytes("beacon", 0, -1, beacon), 1, radio.afforded(alive))
+        radio.send("beacon", beacon_of(pending.believed, k, own_recent(state, scenario)))
+        size = int((ctx.setting.wire or wire_of(scenario)).bytes("beacon"))  # shares afford
+        radio.on_air(part_bytes("beacon", 0, -1, size), 1, radio.afforded(alive))
     inbox = radio.receive("beacon")
     heard = state.beacons if state.beacons is not None else avoidance.Heard.nothing(B, Nu)
     memory = avoidance.memory_of(ctx.setting.delay, scenario.faults.loss)
@@ -867,13 +882,17 @@ def avoid(
     else:
         content = inbox.content
         got = inbox.delivered.adjacency()
-        heard = heard.update(got, content["uavs"], content["stamp"], k, memory)
+        heard = heard.update(
+            got, content["uavs"], content["stamp"], k, memory, content.get("recent")
+        )
     values = None
     if pending.columns is None:  # each UAV's scores of its target, by first action
         target = np.maximum(pending.assigned.target, 0)[..., None, None]
         mean = np.take_along_axis(pending.fused.mean, target, axis=2)  # (B, Nu, 1, 4)
         values = first_values(pending.believed, mean, scenario)[:, :, 0]
-    chosen = avoidance.choose_in(scenario, actions, pending.believed, alive, heard, k, values)
+    chosen = avoidance.choose_in(
+        scenario, actions, pending.believed, alive, heard, k, values, own_recent(state, scenario)
+    )
     counts: tuple[Any, Any] = (0, 0)
     if own:
         zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, Nu), dtype=bool)

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .. import assignment, estimation, fusion, network, simulation, timing
-from ..airspace import avoidance, beacons
+from ..airspace import avoidance, beacons, response
 from ..config import Scenario
 from ..faults import Faults
 from ..methods import (
@@ -329,6 +329,9 @@ class UavAgent:
         check_method(self.method)
         self.central = isinstance(self.method, Centralized)
         self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
+        self.recent = response.START  # and the measured model: its last two actions
+        if self.spec.recent:  # measured now, before the run's deadlines start
+            response.measure(scenario)
         self.limits = beacons.Limits.of(scenario)  # what an honest beacon can do
         self.told: np.ndarray | None = None  # with fusion.trigger: the confidences last sent
         self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
@@ -631,6 +634,8 @@ class UavAgent:
 
     def beacon_content(self) -> dict[str, np.ndarray]:
         """Who, where, when (`messages.Spec`): the position, or with avoidance the state."""
+        if self.spec.recent:
+            return {"uav": self.believed, "recent": np.array(self.recent, dtype=np.uint8)}
         if self.spec.avoid:
             return {"uav": self.believed}
         return {"position": self.believed[:3]}
@@ -657,6 +662,7 @@ class UavAgent:
             )
         got = np.zeros((1, n, n), dtype=bool)
         states, stamps = np.zeros((1, n, 5)), np.full((1, n), -1)
+        recent = np.full((1, n), response.START) if self.spec.recent else None
         sent = k - self.setting.delay
         for q, content in ({} if beacon is None else beacon.contents).items():
             reason = self._believable(q, content["uav"], sent)
@@ -664,8 +670,10 @@ class UavAgent:
                 dropped(self.mailbox, {reason: 1})
                 continue
             got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], sent
+            if recent is not None:
+                recent[0, q] = content["recent"]
         memory = avoidance.memory_of(self.setting.delay, s.faults.loss)
-        self.beacons = self.beacons.update(got, states, stamps, k, memory)
+        self.beacons = self.beacons.update(got, states, stamps, k, memory, recent)
         desired = np.full((1, n), simulation.STRAIGHT)
         believed, alive = np.zeros((1, n, 5)), np.zeros((1, n), dtype=bool)
         desired[0, me], believed[0, me], alive[0, me] = action, self.believed, True
@@ -673,8 +681,12 @@ class UavAgent:
         if values is not None:
             scores = np.zeros((1, n, 3))
             scores[0, me] = values
-        chosen = avoidance.choose_in(s, desired, believed, alive, self.beacons, k, scores)
-        return int(chosen[0, me]), (int(counts[0]), int(counts[1]))
+        own = np.full((1, n), self.recent) if self.spec.recent else None
+        chosen = avoidance.choose_in(s, desired, believed, alive, self.beacons, k, scores, own)
+        action = int(chosen[0, me])
+        if self.spec.recent:
+            self.recent = int(response.recent(np.asarray(self.recent), np.asarray(action)))
+        return action, (int(counts[0]), int(counts[1]))
 
     def _believable(self, q: int, state: np.ndarray, sent: int) -> str | None:
         """Why q's beacon sent at step `sent` is one no honest UAV sends, against the last

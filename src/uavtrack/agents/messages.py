@@ -261,6 +261,7 @@ DOMAINS = {
     "stamp": "a cycle in [k - (rounds + 1) behind, k], k the message's cycle",
     "cycle": "the message's cycle k",
     "uav index": "a UAV, 0 to N - 1",
+    "recent commands": "the last two actions, 3 p2 + p1, 0 to 8 (airspace.response)",
     "target or none": "a target, 0 to M - 1, or -1: none",
     "bids": "each in [0, the run's largest bid], or NaN (not scored) where the run prunes "
     "bids (planner.prune without losses or delays), at least one scored",
@@ -333,6 +334,9 @@ class Spec:
     avoid: bool = False
     """With ``planner.avoidance``: the beacon carries the sender's whole state (x, y,
     altitude, speed, heading), which the avoidance filter reads."""
+    recent: bool = False
+    """With ``planner.avoidance_model = "measured"``: the beacon carries the sender's
+    recent commands (`airspace.response.recent`)."""
     tuples: str = "full"
     """How the consensus carries its tuples (`radio.layout`): "full", "listed"
     (``fusion.trigger``: the targets it lists), "compact" or "quantized"
@@ -363,6 +367,7 @@ class Spec:
             if tracked
             else 0,
             avoid=wire.avoid,
+            recent=wire.recent,
             tuples=wire.tuples,
             limited=scenario.radio.bandwidth_bps is not None,
             book=wire.book,
@@ -376,7 +381,9 @@ class Spec:
             return {"heard": (B, (self.programs,), "flags")}
         if protocol not in ("flood", "consensus", "beacon", "bids", "upload", "download"):
             return None
-        return described(protocol, self.n, self.m, self.slots, self.avoid, self.tuples, self.book)
+        return described(
+            protocol, self.n, self.m, self.slots, self.avoid, self.tuples, self.book, self.recent
+        )
 
     def arrays(
         self, content: dict[str, Array], kinds: dict, k: int = 0, sender: int = 0, most: int = -1
@@ -443,6 +450,8 @@ class Spec:
             return self._track_domain(domain, value, arrays, k, live)
         if domain == "known":
             return None if sender < value.size and value[sender] else "sender not in its own set"
+        if domain == "recent commands":
+            return None if ((value >= 0) & (value < 9)).all() else "recent commands out of range"
         if domain == "uav index":
             return None if ((value >= 0) & (value < self.n)).all() else "index out of range"
         if domain == "target or none":

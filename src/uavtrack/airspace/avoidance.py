@@ -80,6 +80,7 @@ import numpy as np
 
 from ..config import G, Scenario
 from ..world import HEADING, H, V, X, Y
+from .response import START, STEADY, Response, measure
 
 MODES = ("none", "loiter")
 """The values of ``planner.avoidance``."""
@@ -114,15 +115,18 @@ def choose_in(
     heard: Heard,
     k: int,
     values: np.ndarray | None = None,
+    recent: np.ndarray | None = None,
 ) -> np.ndarray:
     """`choose` with the scenario's settings (the separation kept, `minimum`; the vertical
-    separation; the bank angle; the step): the actions (B, N) the batch and each agent
-    fly, one place that reads them from the scenario."""
+    separation; the bank angle; the step; the model of flight and, with the measured
+    one, each UAV's `recent` commands (B, N)): the actions (B, N) the batch and each
+    agent fly, one place that reads them from the scenario."""
     uav = scenario.uav
+    model = measure(scenario) if scenario.planner.avoidance_model == "measured" else None
     chosen, _ = choose(
         desired, believed, alive, heard, k, minimum(scenario), uav.vertical_separation,
         np.radians(uav.bank_angle_deg), scenario.dt, values=values, slow=uav.min_speed,
-        cruise=uav.speed,
+        cruise=uav.speed, response=model, recent=recent,
     )  # fmt: skip
     return chosen
 
@@ -138,26 +142,40 @@ def memory_of(delay: int, loss: float) -> int:
 class Heard:
     """The last broadcast state each UAV heard of each other: state (B, N, N, 5)
     [trial, receiver, sender] as the sender believed it, and the step it was sent,
-    stamp (B, N, N) (-1: never heard, or forgotten after `MEMORY` steps)."""
+    stamp (B, N, N) (-1: never heard, or forgotten after `MEMORY` steps); with the
+    measured model, the sender's recent commands then, recent (B, N, N)
+    (`response.recent`)."""
 
     state: np.ndarray
     stamp: np.ndarray
+    recent: np.ndarray | None = None
 
     @classmethod
     def nothing(cls, batch: int, n: int) -> Heard:
         return cls(np.zeros((batch, n, n, 5)), np.full((batch, n, n), -1, dtype=np.int64))
 
     def update(
-        self, got: np.ndarray, state: np.ndarray, stamp: np.ndarray, k: int, memory: int
+        self,
+        got: np.ndarray,
+        state: np.ndarray,
+        stamp: np.ndarray,
+        k: int,
+        memory: int,
+        recent: np.ndarray | None = None,
     ) -> Heard:
         """After this cycle's beacons: got (B, N, N) [receiver, sender] those that
-        arrived, carrying the senders' states (B, N, 5) sent at stamp (B, N). Records
-        older than `memory` steps at k are forgotten (`memory_of`)."""
+        arrived, carrying the senders' states (B, N, 5) sent at stamp (B, N), and their
+        recent commands (B, N) if the beacons carry them. Records older than `memory`
+        steps at k are forgotten (`memory_of`)."""
         newer = got & (stamp[:, None, :] > self.stamp)
         held = np.where(newer[..., None], state[:, None], self.state)
         stamps = np.where(newer, stamp[:, None, :], self.stamp)
         stamps = np.where(k - stamps > memory, -1, stamps)
-        return Heard(held, stamps)
+        kept = None
+        if recent is not None:
+            before = self.recent if self.recent is not None else np.full(stamps.shape, START)
+            kept = np.where(newer, np.asarray(recent, dtype=np.int64)[:, None, :], before)
+        return Heard(held, stamps, kept)
 
 
 @dataclass(frozen=True)
@@ -266,6 +284,26 @@ def sound_range(
     return float(4.0 * turn.radius + separation + 2.0 * unknown)
 
 
+def sound_range_in(scenario: Scenario) -> float:
+    """`sound_range` of the scenario's filter [m]: its separation kept (`minimum`), speed,
+    bank angle, step, delay and slowest speed; with the measured model of flight, the
+    backup's radius and moves and the margin of its tables (`response.Response`)."""
+    uav = scenario.uav
+    bank = np.radians(uav.bank_angle_deg)
+    if scenario.planner.avoidance_model != "measured":
+        return sound_range(
+            minimum(scenario), uav.speed, bank, scenario.dt, scenario.faults.delay, uav.min_speed
+        )
+    model = measure(scenario)
+    steady = model.move[STEADY, LOITER]
+    turn = Turn(
+        np.asarray(float(np.hypot(*steady))), np.asarray(model.step_turn),
+        np.asarray(model.radius), model.delta,
+    )  # fmt: skip
+    unknown = allowance(np.asarray(scenario.faults.delay + 1), turn)[1]
+    return float(4.0 * model.radius + minimum(scenario) + model.margin + 2.0 * unknown)
+
+
 def predicted(
     state: np.ndarray,
     age: np.ndarray,
@@ -335,6 +373,8 @@ def choose(
     values: np.ndarray | None = None,
     slow: float | None = None,
     cruise: float | None = None,
+    response: Response | None = None,
+    recent: np.ndarray | None = None,
 ) -> tuple[np.ndarray, np.ndarray]:
     """The actions (B, N) each living UAV flies under the rule of this module, from the
     actions it would fly (desired, indices into (-phi, 0, +phi)), its own believed state
@@ -359,7 +399,13 @@ def choose(
     `cruise`, then at `slow` (indices 3 to 5, `speeds`), and the backup is the loiter at
     `slow`, every UAV's the same (`Turn.slowed`): the rule is the same, over six
     actions. A desired action that is not allowed is first flown slowly, at the same
-    bank, if that is allowed; the values, if given, rank the slow actions as their bank."""
+    bank, if that is allowed; the values, if given, rank the slow actions as their bank.
+
+    response: the measured model of flight (`response.Response`) in place of eq. (1):
+    the backups and their moves are its tables', keyed on each UAV's recent commands
+    (recent (B, N) its own, ``heard.recent`` its neighbours'; straight flight when not
+    given); an action is allowed `Response.margin` above `separation`, and a pair is in
+    conflict `Response.slack` below it. Every beacon must be of this step (age 0)."""
     B, n = alive.shape
     out = np.array(desired, dtype=np.int64, copy=True)
     moves = None if slow is None else speeds(slow, cruise if cruise is not None else slow)
@@ -373,15 +419,31 @@ def choose(
     if not trial.size:
         return out, np.zeros((B, n), dtype=bool)
     age = k - heard.stamp[trial, me, other]
-    now = predicted(theirs, age, bank, dt, g, slow)  # (P, 5) the neighbour if it loitered since
-    if moves is None:
-        turn = Turn.of(theirs[:, V], bank, dt, g)
+    floor = separation
+    if response is not None:  # the measured model: fresh beacons only
+        if age.max() > 0:
+            raise ValueError("the measured model of flight needs every beacon of this step")
+        own = np.full((B, n), START) if recent is None else recent
+        kq = np.full(age.shape, START) if heard.recent is None else heard.recent[trial, me, other]
+        ki = own[trial, me]
+        move = held = np.zeros(age.shape)
+        ci, ui = response.after(mine, ki)  # (P, 3, 2)
+        cq, uq = response.after(theirs, kq)
+        c_now, u_now = response.backup(mine, ki)
+        cq_now, uq_now = response.backup(theirs, kq)
+        separation, floor = separation + response.margin, separation - response.slack
     else:
-        assert slow is not None
-        turn = Turn.slowed(slow, float(moves[0]), bank, dt, g)
-    move, held = allowance(age, turn)
-    ci, ui = loiter(successors(mine, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
-    cq, uq = loiter(successors(now, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
+        now = predicted(theirs, age, bank, dt, g, slow)  # (P, 5) the neighbour if it loitered
+        if moves is None:
+            turn = Turn.of(theirs[:, V], bank, dt, g)
+        else:
+            assert slow is not None
+            turn = Turn.slowed(slow, float(moves[0]), bank, dt, g)
+        move, held = allowance(age, turn)
+        ci, ui = loiter(successors(mine, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
+        cq, uq = loiter(successors(now, bank, dt, g, moves), bank, dt, g, slow)  # (P, A, 2)
+        c_now, u_now = loiter(mine, bank, dt, g, slow)
+        cq_now, uq_now = loiter(now, bank, dt, g, slow)
     lam = clearance(ci[:, :, None], ui[:, :, None], cq[:, None], uq[:, None])  # (P, a, b)
     higher = other < me  # a lower index has priority
     every = lam.min(axis=2) - move[:, None]  # against each action of the neighbour
@@ -391,10 +453,8 @@ def choose(
     # below s) is out of the rule's reach: the UAV keeps the rule with every other
     # neighbour and, among what that allows, takes the action that most increases its
     # worst clearance to those (recovery)
-    c_now, u_now = loiter(mine, bank, dt, g, slow)
-    cq_now, uq_now = loiter(now, bank, dt, g, slow)
     now_clear = clearance(c_now, u_now, cq_now, uq_now) + held
-    conflict = now_clear < separation - ROUND_OFF * (1.0 + separation)
+    conflict = now_clear < floor - ROUND_OFF * (1.0 + floor)
     flat = trial * n + me
     kept = np.full((B * n, count), np.inf)  # the worst over the pairs the rule holds for
     np.minimum.at(kept, flat[~conflict], worst[~conflict])

@@ -865,6 +865,17 @@ class PlannerModel(Part):
         ),
     )
 
+    avoidance_model: Literal["unicycle", "measured"] = Field(
+        default="unicycle",
+        description=(
+            "how the avoidance filter predicts a UAV's flight [-], (unicycle, measured); "
+            "unicycle: eq. (1), exact for uav.dynamics = unicycle; measured: tables of how "
+            "the scenario's aircraft answers each action after its last two, measured by "
+            "flying its flight model, with the margin their largest errors need "
+            "(airspace.response); beyond the paper"
+        ),
+    )
+
     avoidance_margin: Float = Field(
         default=0.0,
         ge=0,
@@ -873,8 +884,8 @@ class PlannerModel(Part):
             "distance the avoidance filter adds to uav.separation [m], [0, 1000]; 0: the "
             "unicycle of eq. (1), for which the filter's guarantee is proven; an aircraft "
             'that banks over time (uav.dynamics = "jsbsim") leaves the planner\'s '
-            "polygon and needs a margin, measured in the docs (One altitude); beyond the "
-            "paper"
+            "polygon: planner.avoidance_model = measured predicts it, with the margin its "
+            "errors need added to this one (docs: One altitude); beyond the paper"
         ),
     )
 

@@ -332,6 +332,30 @@ class Scenario(Part):
         return self
 
     @model_validator(mode="after")
+    def _measured(self) -> Scenario:
+        """``planner.avoidance_model = "measured"``: its tables predict one step from a
+        beacon of this step, at one speed."""
+        if self.planner.avoidance_model == "unicycle":
+            return self
+        if self.planner.avoidance == "none":
+            raise ValueError(
+                "planner.avoidance_model = measured needs planner.avoidance = loiter (it does "
+                "nothing otherwise); set planner.avoidance=loiter or leave it unset"
+            )
+        if self.faults.delay > 0 or self.faults.loss > 0:
+            raise ValueError(
+                "planner.avoidance_model = measured needs every beacon fresh (its tables "
+                "predict one step, not a stale beacon's many); leave faults.delay and "
+                "faults.loss 0 or use planner.avoidance_model=unicycle"
+            )
+        if self.uav.min_speed is not None:
+            raise ValueError(
+                "planner.avoidance_model = measured flies one speed: leave uav.min_speed "
+                "unset or use planner.avoidance_model=unicycle"
+            )
+        return self
+
+    @model_validator(mode="after")
     def _flight(self) -> Scenario:
         calm = self.wind.speed == 0 and self.wind.turbulence == "none"
         if self.uav.dynamics == "unicycle" and not calm:

@@ -127,6 +127,18 @@ class Inputs:
     columns: Columns | None = None
     """With tracks: the team labels of the bids' columns and the column of each track
     slot (`tracks.columns.Columns`); None with known association (column j: target j)."""
+    recent: np.ndarray | None = None
+    """With ``planner.avoidance_model = "measured"``: each UAV's recent commands (B, N),
+    which its beacon carries (`airspace.response.recent`)."""
+
+
+def beacon_of(believed: np.ndarray, k: int, recent: np.ndarray | None) -> dict[str, np.ndarray]:
+    """The avoidance beacons' content: each UAV's state as it believes it (B, N, 5), the
+    step, and with the measured model its recent commands (B, N)."""
+    content = {"uavs": believed, "stamp": np.full(believed.shape[:2], k)}
+    if recent is not None:
+        content["recent"] = recent
+    return content
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -271,6 +283,7 @@ def wire_of(scenario: Scenario) -> Wire:
         if scenario.fusion.trigger is not None
         else "full",
         book=manage.sent_fields(scenario.tracker) if tracked else (),
+        recent=scenario.planner.avoidance_model == "measured",
     )
 
 

@@ -19,7 +19,7 @@ import numpy as np
 from .. import assignment, fusion, timing
 from ..radio import counted, part_bytes
 from ..tracks import columns
-from .base import Assigned, Fused, Held, Inputs, Method, Setting, wire
+from .base import Assigned, Fused, Held, Inputs, Method, Setting, beacon_of, wire
 
 
 class Distributed(Method):
@@ -50,7 +50,7 @@ class Distributed(Method):
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         s, radio, k = inputs.setting, inputs.radio, inputs.k
         B, n, m = bids.shape
-        radio.send("beacon", {"uavs": inputs.believed, "stamp": np.full((B, n), k)})
+        radio.send("beacon", beacon_of(inputs.believed, k, inputs.recent))
         sent_bids = {"bids": bids, "stamp": np.full((B, n), k)}
         if inputs.columns is not None and inputs.holds is not None:  # the labels they are for
             sent_bids |= {"labels": inputs.columns.labels, "holds": inputs.holds}
