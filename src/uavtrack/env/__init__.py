@@ -8,11 +8,13 @@ assignment are exactly those of `simulate`; only the flown actions come from the
 * `env()`: the same as a PettingZoo AEC env (agents act in turn, the cycle runs when
   the last has acted);
 * `vector_env(num_envs)`: that many trials as one batch, arrays (trials, agents, ...);
-  `uavtrack.env.learn` makes it a Stable-Baselines3 VecEnv or a TorchRL EnvBase.
+  `uavtrack.env.learn` makes it a Stable-Baselines3 VecEnv or a TorchRL EnvBase;
+* `SingleUAVEnv`: one UAV learns, the others fly the method or a given policy, a
+  Gymnasium Env registered as ``uavtrack/SingleUAV-v0``.
 
-Modules: `parallel` (the ParallelEnv and the AEC env), `vector` (the batch), `episodes`
-(the loop), `spaces` (observations, state, rewards), `learn` (Stable-Baselines3 and
-TorchRL), `benchmarl` (a BenchMARL task).
+Modules: `parallel` (the ParallelEnv and the AEC env), `vector` (the batch), `single`
+(one learner), `episodes` (the loop), `spaces` (observations, state, rewards), `learn`
+(Stable-Baselines3 and TorchRL), `benchmarl` (a BenchMARL task).
 
 Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
 
@@ -76,12 +78,17 @@ except ImportError as exc:  # an optional extra
         f"uavtrack.env needs pettingzoo and gymnasium: {install_hint('env')} ({exc})"
     ) from None
 
+import gymnasium
+
 from .parallel import UAVTrackingEnv, parallel_env
+from .single import ID, SingleUAVEnv
 from .spaces import REWARDS, Spaces, View
 from .vector import VectorEnv, vector_env
 
 __all__ = [
+    "ID",
     "REWARDS",
+    "SingleUAVEnv",
     "Spaces",
     "UAVTrackingEnv",
     "VectorEnv",
@@ -90,6 +97,9 @@ __all__ = [
     "parallel_env",
     "vector_env",
 ]
+
+if ID not in gymnasium.registry:  # gymnasium.make("uavtrack/SingleUAV-v0")
+    gymnasium.register(id=ID, entry_point="uavtrack.env.single:SingleUAVEnv")
 
 
 def env(**kwargs: Any):
