@@ -391,8 +391,9 @@ def test_the_swarm_filters_as_the_simulator_does(method, overrides):
 def test_every_bad_beacon_from_a_member_stops_no_honest_program(monkeypatch, model):
     """A member with valid keys sends its beacon (the state the filter reads, and with
     the measured model its recent commands) with every field at every bad value: each
-    is refused by reason and every honest program ends the run; the honest UAVs keep
-    their separation from each other."""
+    that is bad is refused by reason (a zero is a valid recent command, adopted) and
+    every honest program ends the run; the honest UAVs keep their separation from each
+    other."""
     from .test_hostile import BAD, assert_honest_programs_finished, attacked, fields_of
 
     scenario = uavtrack.Scenario.from_toml("one-altitude").with_overrides(
@@ -697,6 +698,8 @@ def test_the_measured_model_is_refused_where_it_cannot_predict_in_one_line():
         ({"faults.delay": 1}, "every beacon fresh"),
         ({"faults.loss": 0.1}, "every beacon fresh"),
         ({"uav.min_speed": 10.0}, "one speed"),
+        ({"radio.bandwidth_bps": 1e6}, "every beacon heard"),
+        ({"uav.dynamics": "jsbsim", "wind.turbulence": "light"}, "still or steady air"),
         ({"planner.avoidance_model": "learned"}, "'unicycle' or 'measured'"),
     ):
         with pytest.raises(uavtrack.ScenarioError, match=named) as info:

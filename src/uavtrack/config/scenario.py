@@ -348,10 +348,22 @@ class Scenario(Part):
                 "predict one step, not a stale beacon's many); leave faults.delay and "
                 "faults.loss 0 or use planner.avoidance_model=unicycle"
             )
+        if self.radio.bandwidth_bps is not None:
+            raise ValueError(
+                "planner.avoidance_model = measured needs every beacon heard (a shared radio "
+                "may leave one unsent); leave radio.bandwidth_bps unset or use "
+                "planner.avoidance_model=unicycle"
+            )
         if self.uav.min_speed is not None:
             raise ValueError(
                 "planner.avoidance_model = measured flies one speed: leave uav.min_speed "
                 "unset or use planner.avoidance_model=unicycle"
+            )
+        if self.wind.turbulence != "none":
+            raise ValueError(
+                "planner.avoidance_model = measured needs still or steady air: in turbulence "
+                "its tables' errors reach tens of metres (a margin of 140 m for light "
+                "turbulence); leave wind.turbulence none or use planner.avoidance_model=unicycle"
             )
         return self
 
