@@ -154,3 +154,226 @@ def test_run_and_swarm_write_bags_and_refuse_a_taken_folder(tmp_path, capsys):
     swarm = tmp_path / "swarm"
     code = cli.main(["swarm", "--steps", "6", "--transport", "memory", "--bag", str(swarm)])
     assert code == 0 and len(messages(swarm, "/uav_0/pose")) == 6
+
+
+# ------------------------------------------------------------ tracks and UAVs as data
+
+GPS = SCENARIO.with_overrides({"faults.position_std": 3.0})
+TRACKED = uavtrack.Scenario(steps=24).with_overrides(
+    {"tracker.association": "gnn", "sensor.clutter_rate": 1.0,
+     "sensor.detection_probability": 0.9, "faults.position_std": 2.0}
+)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def data_runs(tmp_path_factory):
+    out = {}
+    for name, scenario in (("gps", GPS), ("tracked", TRACKED)):
+        result = uavtrack.simulate(scenario, seed=5, trace=True)
+        path = tmp_path_factory.mktemp("bags") / name
+        write_bag(path, result.trace, scenario, seed=result.seed)
+        out[name] = (scenario, result, path)
+    return out
+
+
+def uuid_of(label: int) -> bytes:
+    import uuid
+
+    from uavtrack.io.ros2 import TRACKS_NAMESPACE
+
+    return uuid.uuid5(TRACKS_NAMESPACE, str(label)).bytes
+
+
+def upper(P):
+    return np.array([P[0, 0], P[0, 1], 0, P[1, 1], 0, 0], dtype=np.float32)
+
+
+def test_each_uavs_radar_tracks_are_its_estimates_under_stable_uuids(data_runs):
+    scenario, result, path = data_runs["gps"]
+    trace = result.trace
+    for t, msg in messages(path, "/uav_2/radar_tracks"):
+        k = t // 500_000_000
+        assert [bytes(tr.uuid.uuid) for tr in msg.tracks] == [uuid_of(j) for j in range(4)]
+        for j, track in enumerate(msg.tracks):
+            m, P = trace.mean[k, 2, j], trace.cov[k, 2, j]
+            assert (track.position.x, track.position.y, track.position.z) == (m[0], m[1], 0.0)
+            assert (track.velocity.x, track.velocity.y) == (m[2], m[3])
+            np.testing.assert_array_equal(track.position_covariance, upper(P[:2, :2]))
+            np.testing.assert_array_equal(track.velocity_covariance, upper(P[2:, 2:]))
+            assert track.classification == 2  # DYNAMIC
+    team = messages(path, "/team/radar_tracks")
+    _, best_mean, _ = uavtrack.metrics.team_best(trace.mean, trace.cov, trace.alive)
+    t, msg = team[9]
+    assert [(tr.position.x, tr.position.y) for tr in msg.tracks] == [
+        tuple(best_mean[9, j, :2]) for j in range(4)
+    ]
+
+
+def test_the_tracked_teams_picture_is_the_most_confident_confirmed_track_per_label(data_runs):
+    from uavtrack.estimation import confidence
+
+    scenario, result, path = data_runs["tracked"]
+    trace = result.trace
+    team = dict(messages(path, "/team/radar_tracks"))
+    own = dict(messages(path, "/uav_0/radar_tracks"))
+    seen = 0
+    for k in range(trace.alive.shape[0]):
+        confirmed = (trace.status[k] == 2) & trace.alive[k][:, None]
+        labels = trace.label[k][confirmed]
+        gamma = confidence(trace.cov[k])[confirmed]
+        means = trace.mean[k][confirmed]
+        expected = {}
+        for label in sorted(set(labels.tolist())):
+            pick = np.flatnonzero(labels == label)
+            expected[uuid_of(label)] = means[pick[np.argmax(gamma[pick])], :2]
+        got = {
+            bytes(tr.uuid.uuid): (tr.position.x, tr.position.y)
+            for tr in team[k * 500_000_000].tracks
+        }
+        assert got.keys() == expected.keys()
+        for key, xy in got.items():
+            assert xy == tuple(expected[key])
+        mine = trace.label[k, 0][confirmed[0]]
+        assert [bytes(tr.uuid.uuid) for tr in own[k * 500_000_000].tracks] == [
+            uuid_of(int(x)) for x in mine
+        ]
+        seen += len(got)
+    assert seen > 0
+
+
+def test_the_scan_in_each_uavs_frame_gives_back_its_measurements(data_runs):
+    from uavtrack.faults import navigation
+
+    scenario, result, path = data_runs["tracked"]
+    trace = result.trace
+    nav = navigation(scenario.faults, result.seed, trace.uavs)
+    scans = messages(path, "/uav_1/radar_scan")
+    assert len(scans) == trace.alive[:, 1].sum()
+    for t, msg in scans:
+        k = t // 500_000_000
+        assert msg.header.frame_id == "uav_1"
+        x, y, h, _, heading = nav[k, 1]
+        back = []
+        for r in msg.returns:
+            ground = h / math.tan(-r.elevation)  # well conditioned, looking down
+            assert r.range == pytest.approx(math.hypot(ground, h), rel=1e-6)
+            back.append(
+                (
+                    x + ground * math.cos(heading + r.azimuth),
+                    y + ground * math.sin(heading + r.azimuth),
+                )
+            )
+        expected = trace.scan_z[k, 1][trace.scan_valid[k, 1]]
+        np.testing.assert_allclose(np.reshape(back, (-1, 2)), expected, atol=1e-3)  # float32
+
+
+def test_odometry_and_fix_are_what_the_uavs_navigation_said(data_runs):
+    from uavtrack.faults import navigation
+
+    scenario, result, path = data_runs["gps"]
+    trace = result.trace
+    nav = navigation(scenario.faults, result.seed, trace.uavs)
+    assert np.abs(nav[..., :2] - trace.uavs[..., :2]).max() > 1.0  # the GPS error is there
+    for t, msg in messages(path, "/uav_3/odom"):
+        k = t // 500_000_000
+        p = msg.pose.pose.position
+        assert (p.x, p.y, p.z) == tuple(nav[k, 3, :3])
+        assert msg.child_frame_id == "uav_3" and msg.header.frame_id == "map"
+        assert msg.pose.covariance[0] == msg.pose.covariance[7] == msg.pose.covariance[14] == 9.0
+        V, bank = trace.uavs[k, 3, 3], trace.action[k, 3]
+        assert msg.twist.twist.linear.x == V
+        assert msg.twist.twist.angular.z == pytest.approx(9.81 * math.tan(bank) / V)
+    _, fix = messages(path, "/uav_3/fix")[4]
+    assert fix.position_covariance_type == 2 and fix.position_covariance[0] == 9.0
+    assert fix.altitude == nav[4, 3, 2]
+
+
+def test_a_bag_with_gps_error_needs_the_runs_seed_in_one_line(tmp_path):
+    result = uavtrack.simulate(GPS, seed=1)
+    with pytest.raises(ValueError, match="needs the run's seed") as info:
+        write_bag(tmp_path / "bag", result.trace, GPS)
+    assert "\n" not in str(info.value) and not (tmp_path / "bag").exists()
+
+
+FIELD_TYPES = {
+    "int8": 2, "uint8": 3, "int16": 4, "uint16": 5, "int32": 6, "uint32": 7, "int64": 8,
+    "uint64": 9, "float32": 10, "float64": 11, "char": 13, "bool": 15, "byte": 16,
+    "string": 17,
+}  # fmt: skip
+"""REP 2011's field type ids (type_description_interfaces/msg/FieldType)."""
+
+
+def rihs01(store, name: str) -> str:
+    """ROS 2's type hash written here from REP 2011, apart from rosbags' own: the SHA-256
+    of the JSON of the type's fields and of every type it refers to, sorted by name."""
+    import hashlib
+    import json
+
+    def field_type(desc):
+        kind, detail = desc
+        capacity, offset = 0, 0
+        if kind.name in ("ARRAY", "SEQUENCE"):
+            (kind, detail), size = detail
+            offset = 48 if desc[0].name == "ARRAY" else (96 if size else 144)
+            capacity = size
+        if kind.name == "NAME":
+            return {"type_id": 1 + offset, "capacity": capacity, "string_capacity": 0,
+                    "nested_type_name": detail}, detail  # fmt: skip
+        base, bound = detail
+        type_id = FIELD_TYPES[base] if not bound else 21  # bounded string
+        return {"type_id": type_id + offset, "capacity": capacity,
+                "string_capacity": bound, "nested_type_name": ""}, None  # fmt: skip
+
+    def described(name):
+        fields, nested = [], []
+        for fname, desc in store.fielddefs[name][1]:
+            kind, inner = field_type(desc)
+            fields.append({"name": fname, "type": kind})
+            if inner:
+                nested.append(inner)
+        if not fields:
+            fields = [
+                {
+                    "name": "structure_needs_at_least_one_member",
+                    "type": {
+                        "type_id": 3,
+                        "capacity": 0,
+                        "string_capacity": 0,
+                        "nested_type_name": "",
+                    },
+                }
+            ]
+        return {"type_name": name, "fields": fields}, nested
+
+    top, todo = described(name)
+    referenced, seen = {}, set()
+    while todo:
+        inner = todo.pop()
+        if inner in seen:
+            continue
+        seen.add(inner)
+        referenced[inner], more = described(inner)
+        todo += more
+    text = json.dumps(
+        {"type_description": top,
+         "referenced_type_descriptions": [referenced[k] for k in sorted(referenced)]},
+        separators=(", ", ": "),
+    )  # fmt: skip
+    return "RIHS01_" + hashlib.sha256(text.encode()).hexdigest()
+
+
+def test_the_radar_types_hash_as_ros2_hashes_them():
+    """An implementation of REP 2011 written here gives the hashes ROS 2 publishes for
+    std_msgs/String and geometry_msgs/Twist (rmw_zenoh's examples), and rosbags' for
+    every type the bags and topics use, radar_msgs' included."""
+    from uavtrack.io.ros2 import ODOMETRY, RADAR_SCAN, RADAR_TRACKS, store
+
+    typestore = store()
+    assert rihs01(typestore, "std_msgs/msg/String") == (
+        "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18"
+    )
+    assert rihs01(typestore, "geometry_msgs/msg/Twist") == (
+        "RIHS01_9c45bf16fe0983d80e3cfe750d6835843d265a9a6c46bd2e609fcddde6fb8d2a"
+    )
+    for msgtype in (RADAR_TRACKS, RADAR_SCAN, ODOMETRY, "sensor_msgs/msg/NavSatFix"):
+        assert rihs01(typestore, msgtype) == typestore.hash_rihs01(msgtype), msgtype

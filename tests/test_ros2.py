@@ -154,7 +154,8 @@ def test_a_zenoh_subscriber_reads_the_swarms_ros2_topics(live):
     tokens = {e[1] for e in events if e[0] == "put"}
     nodes = {t for t in tokens if "/NN/" in t}
     publishers = {t for t in tokens if "/MP/" in t}
-    assert len(nodes) == 5 + 1 and len(publishers) == 5 * (1 + 1 + 4) + 1
+    # per UAV: pose, tf, odometry, fix, radar tracks and 4 estimates; the world's clock
+    assert len(nodes) == 5 + 1 and len(publishers) == 5 * (5 + 4) + 1
     pose_hash = STORE.hash_rihs01("geometry_msgs/msg/PoseStamped")
     assert any(t.endswith(f"/%uav_2%pose/{POSE_TYPE}/{pose_hash}/::,:,:,:,,") for t in publishers)
     clock_hash = STORE.hash_rihs01("rosgraph_msgs/msg/Clock")
@@ -251,10 +252,10 @@ def test_a_failed_uavs_node_leaves_the_ros2_graph_when_it_fails(live):
     put, dropped = tokens(FAILED)
     assert put and set(dropped) == put
     assert max(dropped.values()) < poses[-1]
-    assert len(put) == 1 + 1 + 1 + 4  # node, pose, tf, estimates
+    assert len(put) == 1 + 5 + 4  # node, pose, tf, odometry, fix, radar tracks, estimates
     for uav in (0, 2, 3, 4):
         put, dropped = tokens(uav)
-        assert len(put) == 7 and all(n > poses[-2] for n in dropped.values())
+        assert len(put) == 10 and all(n > poses[-2] for n in dropped.values())
 
 
 def test_ros2_needs_zenoh_and_a_domain():
@@ -337,3 +338,50 @@ def test_a_failed_uavs_tracks_leave_the_view_live():
     assert [m.action for m in last] == [3] and stamp_of(last[0]) == 4 * DT_NS
     for markers in published:
         assert {(m.lifetime.sec, m.lifetime.nanosec) for m in markers[1:]} == {(1, 0)}
+
+
+@pytest.mark.integration
+def test_a_swarms_tracks_odometry_and_scan_are_data_on_their_topics():
+    """Each UAV program publishes, as the bag holds them: its confirmed tracks as
+    radar_msgs/RadarTracks under the UUIDs of their team labels, its navigation's state
+    as nav_msgs/Odometry with the GPS error's variance, its fix, and its scan as
+    radar_msgs/RadarScan in its own frame; values as the trace's."""
+    import uuid
+
+    from uavtrack.faults import navigation
+
+    steps = 6
+    scenario = uavtrack.Scenario(steps=steps).with_overrides(
+        {"tracker.association": "jpda", "sensor.detection_probability": 0.9,
+         "sensor.clutter_rate": 2.0, "faults.position_std": 2.0}
+    )  # fmt: skip
+    swarm, events = swarm_heard_on_domain_8(scenario)
+    trace = swarm.result.trace
+    nav = navigation(scenario.faults, 3, trace.uavs)
+    typestore = ros2.store()
+
+    def samples(topic, msgtype):
+        key = f"8/{topic}/{ros2.dds_type(msgtype)}/{typestore.hash_rihs01(msgtype)}"
+        got = [typestore.deserialize_cdr(p, msgtype) for k, p in events if k == key]
+        assert steps - 1 <= len(got) <= steps, topic  # the first may precede the subscription
+        return got
+
+    for msg in samples("uav_0/radar_tracks", ros2.RADAR_TRACKS):
+        k = (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) // DT_NS
+        held = np.flatnonzero(trace.status[k, 0] == 2)
+        labels = trace.label[k, 0, held]
+        names = [uuid.uuid5(ros2.TRACKS_NAMESPACE, str(int(x))).bytes for x in labels]
+        assert [bytes(t.uuid.uuid) for t in msg.tracks] == names
+        for t, s in zip(msg.tracks, held, strict=True):
+            assert (t.position.x, t.position.y) == tuple(trace.mean[k, 0, s, :2])
+    for msg in samples("uav_1/odom", ros2.ODOMETRY):
+        k = (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) // DT_NS
+        p = msg.pose.pose.position
+        assert (p.x, p.y, p.z) == tuple(nav[k, 1, :3])
+        assert msg.pose.covariance[0] == 4.0 and msg.child_frame_id == "uav_1"
+    fixes = samples("uav_1/fix", ros2.FIX)
+    assert all(f.position_covariance_type == 2 for f in fixes)
+    for msg in samples("uav_2/radar_scan", ros2.RADAR_SCAN):
+        k = (msg.header.stamp.sec * 10**9 + msg.header.stamp.nanosec) // DT_NS
+        assert msg.header.frame_id == "uav_2"
+        assert len(msg.returns) == trace.scan_valid[k, 2].sum()

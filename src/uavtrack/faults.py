@@ -42,6 +42,7 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from .config import FaultModel
+from .world import believed, children
 
 PROTOCOLS = {"beacon": 1, "flood": 2, "consensus": 3, "bids": 4, "upload": 5, "download": 6}
 """Message kinds; each draws its own losses."""
@@ -197,3 +198,16 @@ class Faults:
         u2 = (w1 >> np.uint32(8)).astype(np.float64) / 16777216.0
         radius = std * np.sqrt(-2.0 * np.log(u1))
         return np.stack([radius * np.cos(2 * np.pi * u2), radius * np.sin(2 * np.pi * u2)], -1)
+
+
+def navigation(
+    model: FaultModel, seed: int | np.random.SeedSequence, uavs: np.ndarray
+) -> np.ndarray:
+    """The states (T, N, 5) a trial's UAVs believed at each step, their true states `uavs`
+    (T, N, 5) plus the GPS error its fault stream draws (``faults.position_std``; the
+    same as the run's: `Faults.position_error` of the trial's key)."""
+    if model.position_std <= 0:
+        return uavs
+    key = trial_key(children(seed)[2])[None]
+    faults = Faults(model, key, uavs.shape[1])
+    return np.stack([believed(uavs[k], faults.position_error(k)[0]) for k in range(len(uavs))])

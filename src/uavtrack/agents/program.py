@@ -16,7 +16,7 @@ from dataclasses import dataclass
 import numpy as np
 from msgspec import structs
 
-from ..config import Scenario
+from ..config import G, Scenario
 from ..faults import Faults
 from ..methods import get
 from .agent import CentralAgent, UavAgent, part
@@ -141,7 +141,10 @@ def serve(
         if not isinstance(transport, ZenohTransport):
             raise ValueError("ROS 2 topics need the Zenoh transport")
         tracks = scenario.tracker.unlabelled
-        node = UavNode(transport.session, ros2, me, scenario.n_targets, scenario.dt, tracks)
+        variance = scenario.faults.position_std**2
+        node = UavNode(
+            transport.session, ros2, me, scenario.n_targets, scenario.dt, tracks, variance, G
+        )
     try:
         return _cycles(transport, link, mailbox, program, node, run, me, n, programs,
                        central, scenario, wait)  # fmt: skip
@@ -207,7 +210,10 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
         if node is not None:
             bank = program.ctx.const.actions[report.action % 3]  # (uav.min_speed: 3 to 5 slow)
             slots = [None if a is None else a.array() for a in (report.label, report.status)]
-            node.publish(k, program.believed, bank, report.mean.array(), report.cov.array(), *slots)
+            scan = getattr(program, "scan", None)  # with tracks: this cycle's, on the ground
+            node.publish(
+                k, program.believed, bank, report.mean.array(), report.cov.array(), *slots, scan
+            )
         ran += 1
     if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
         if end != "done":  # its tracks go from the view before its run's end

@@ -62,6 +62,7 @@ class TrackedUav(UavAgent):
         self.radio.begin(k, sense["links"], alive, central, sense.get("afford"))
         raw = sense["z"]
         z, R = simulation.convert(np.repeat(believed[None], len(raw), axis=0), raw, s)
+        self.scan = z  # its scan on the ground, for the ROS 2 topics
         if self.central:
             return self._central_cycle(k, z, R)
         one = np.ones((1, 1), dtype=bool)

@@ -465,7 +465,7 @@ def show(
     if bag is not None:
         from ..io.bag import write_bag
 
-        write_bag(bag, result.trace, scenario)
+        write_bag(bag, result.trace, scenario, seed=result.seed)
     summary = result.summary()
     if as_json:
         summary["scenario"] = scenario.to_dict()

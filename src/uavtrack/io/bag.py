@@ -10,9 +10,10 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
 * ``/clock`` rosgraph_msgs/msg/Clock, each step;
 * ``/tf`` tf2_msgs/msg/TFMessage: ``map`` -> ``uav_i`` (its pose) and ``map`` ->
   ``target_j`` (true position, course as yaw);
-* ``/uav_i/pose`` geometry_msgs/msg/PoseStamped and ``/uav_i/fix``
-  sensor_msgs/msg/NavSatFix, each UAV's true state, while it is alive: heading as yaw,
-  the flown bank angle as REP-103's roll (positive: right wing down; `ros2.uav_pose`);
+* ``/uav_i/pose`` geometry_msgs/msg/PoseStamped, each UAV's true state, while it is
+  alive: heading as yaw, the flown bank angle as REP-103's roll (positive: right wing
+  down; `ros2.uav_pose`); ``/uav_i/fix`` sensor_msgs/msg/NavSatFix, its navigation's
+  position (the truth without GPS error);
 * ``/targets/truth`` visualization_msgs/msg/MarkerArray: a sphere per target (with
   targets that come and go, ``target.stay``, a DELETEALL first, then the targets
   present: one that left leaves the view);
@@ -21,7 +22,12 @@ GPS fixes convert it to WGS84 around (`origin` lat, lon) [deg], flat (as
   its x-y covariance in the 6 x 6 (z known: 0; rotations unknown: 1e9);
 * ``/team/estimates`` MarkerArray: those estimates as 2-sigma ellipses (flat cylinders);
 * ``/team/assignments`` MarkerArray: a line from each UAV to its target's estimate;
-* ``/team/links`` MarkerArray: the radio links (3-D distance within r_C).
+* ``/team/links`` MarkerArray: the radio links (3-D distance within r_C);
+* ``/uav_i/odom`` nav_msgs/msg/Odometry: what the UAV's navigation says (with GPS error,
+  ``faults.position_std``, the run's seed gives it), with that error's variance;
+* ``/uav_i/radar_tracks`` and ``/team/radar_tracks`` radar_msgs/msg/RadarTracks: each
+  UAV's estimates and the team's best as data (`ros2.radar_tracks_of`), each under the
+  UUID of its label or target (`ros2.track_uuid`).
 
 A run of tracks (``tracker.association`` gnn or jpda) has no estimate per target: the
 ``/team/target_j/estimate`` and ``/team/estimates`` topics give way to
@@ -30,6 +36,8 @@ A run of tracks (``tracker.association`` gnn or jpda) has no estimate per target
   forgets the last step's), then per track a 2-sigma ellipse (flat cylinder, id = its team
   label, ns ``confirmed`` or ``tentative``, blue or grey) and a text marker (ns
   ``label``, id = the label, text ``L<label>``) above it;
+* ``/uav_i/radar_scan`` radar_msgs/msg/RadarScan, the same as data in the UAV's frame
+  (`ros2.radar_scan_of`), and ``/uav_i/radar_tracks`` its confirmed tracks;
 * ``/uav_i/scan`` MarkerArray, each living UAV's measurements of the step at their
   ground positions: two sphere lists, ns ``detections`` (red) and ``clutter`` (grey),
   split by the origin the simulator knows (for evaluation: a UAV does not);
@@ -57,9 +65,13 @@ except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.bag needs rosbags: {install_hint('io')} ({exc})") from None
 
 from .._files import check_new_folder, new_folder
+from ..config import G
+from ..estimation import confidence
+from ..faults import navigation
 from ..metrics import team_best
 from ..network import radio_links
 from ..tracks.manage import CONFIRMED
+from ..tracks.scoring import team_picture
 from ..world import present
 from .mavlink import LocalFrame
 from .ros2 import (
@@ -67,7 +79,12 @@ from .ros2 import (
     delete_all,
     ellipse_marker,
     estimate_of,
+    fix_of,
+    header_of,
     lifetime_of,
+    odometry_of,
+    radar_scan_of,
+    radar_tracks_of,
     track_markers,
     transform_of,
     uav_pose,
@@ -79,23 +96,33 @@ def write_bag(
     trace,
     scenario,
     origin: tuple[float, float] = (0.0, 0.0),
+    seed: int | None = None,
 ) -> dict[str, int]:
     """Write `trace` (of `scenario`) as a ROS 2 bag folder at `path`, which must not
-    exist; it appears only once complete. Returns the messages written per topic."""
+    exist; it appears only once complete. Returns the messages written per topic. With
+    GPS error (``faults.position_std``) the run's `seed` gives what each UAV's
+    navigation told it (`faults.navigation`), for its fix and odometry."""
+    if scenario.faults.position_std > 0 and seed is None:
+        raise ValueError(
+            "with faults.position_std the bag needs the run's seed (its GPS errors): "
+            "give write_bag(..., seed=result.seed)"
+        )
     path = check_new_folder(path, "--bag", "the bag")
     try:
         with new_folder(path) as folder:  # rosbags makes it: path.name.mcap inside
-            return _write(folder, trace, scenario, origin)
+            return _write(folder, trace, scenario, origin, seed)
     except OSError as exc:
         raise RunError(f"cannot write the bag {path}: {exc.strerror or exc}") from None
 
 
-def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
+def _write(folder: Path, trace, scenario, origin, seed) -> dict[str, int]:
     m = Markers()
     T, Nu = trace.uavs.shape[:2]
     dt_ns = int(round(scenario.dt * 1e9))
     frame = LocalFrame(*origin)
     east, north = frame.radii
+    variance = scenario.faults.position_std**2
+    nav = trace.uavs if seed is None else navigation(scenario.faults, seed, trace.uavs)
     best = best_mean = best_cov = None
     if trace.label is None:
         best, best_mean, best_cov = team_best(trace.mean, trace.cov, trace.alive)
@@ -121,22 +148,17 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
             uavs, targets, alive = trace.uavs[k], trace.targets[k], trace.alive[k]
             transforms = []
             for i in np.flatnonzero(alive):
-                x, y, h = (float(v) for v in uavs[i, :3])
                 pose = uav_pose(uavs[i], trace.action[k, i])
                 write(f"/uav_{i}/pose", T_["geometry_msgs/msg/PoseStamped"](
                     header=m.header(ns), pose=pose), ns)  # fmt: skip
+                x, y, h = (float(v) for v in nav[k, i, :3])  # what its navigation says
                 lat = origin[0] + math.degrees(y / north)
                 lon = origin[1] + math.degrees(x / east)
-                fix = T_["sensor_msgs/msg/NavSatFix"](
-                    header=m.header(ns, f"uav_{i}"),
-                    status=T_["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
-                    latitude=lat,
-                    longitude=lon,
-                    altitude=h,
-                    position_covariance=np.zeros(9),
-                    position_covariance_type=0,
+                write(f"/uav_{i}/fix", fix_of(m.header(ns, f"uav_{i}"), lat, lon, h, variance), ns)
+                odometry = odometry_of(
+                    m.header(ns), f"uav_{i}", nav[k, i], trace.action[k, i], variance, G
                 )
-                write(f"/uav_{i}/fix", fix, ns)
+                write(f"/uav_{i}/odom", odometry, ns)
                 transforms.append(transform_of(m.header(ns), f"uav_{i}", pose))
             # with targets that come and go (NaN while away) RViz forgets the last step's
             truth = [] if everyone else delete_all(m, ns)
@@ -155,6 +177,7 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                     markers=ellipses), ns)  # fmt: skip
             else:
                 lines = _tracks(m, ns, write, trace, k, scenario.dt)
+            _radar(ns, write, trace, k, nav, best, best_mean, best_cov)
             write("/team/assignments", T_["visualization_msgs/msg/MarkerArray"](markers=[
                 m.marker(ns, "assignment", 0, 5, m.pose(0, 0, 0, 0), (0.5, 0, 0),
                          (0.2, 0.9, 0.2, 0.8), lines)]), ns)  # fmt: skip
@@ -166,6 +189,43 @@ def _write(folder: Path, trace, scenario, origin) -> dict[str, int]:
                 m.marker(ns, "link", 0, 5, m.pose(0, 0, 0, 0), (0.3, 0, 0),
                          (0.9, 0.9, 0.9, 0.6), ends)]), ns)  # fmt: skip
     return counts
+
+
+def _radar(ns: int, write, trace, k: int, nav, best, best_mean, best_cov) -> None:
+    """The tracks of step k as data: each living UAV's (`/uav_<i>/radar_tracks`: with
+    tracks its confirmed ones, under their team labels; with known association its
+    estimate of every target, under the target's index), the team's picture
+    (`/team/radar_tracks`: per label the most confident living UAV's, `team_picture`;
+    per target the team's best, `team_best`) and with tracks each UAV's scan
+    (`/uav_<i>/radar_scan`, in its frame from where its navigation places it)."""
+    alive = trace.alive[k]
+    mean, cov = trace.mean[k], trace.cov[k]
+    header = header_of(ns)
+    if trace.label is None:
+        every = np.arange(mean.shape[1])
+        for i in np.flatnonzero(alive):
+            write(f"/uav_{i}/radar_tracks", radar_tracks_of(header, every, mean[i], cov[i]), ns)
+        held = np.flatnonzero(best[k] >= 0)
+        team = radar_tracks_of(header, held, best_mean[k, held], best_cov[k, held])
+        write("/team/radar_tracks", team, ns)
+        return
+    label, status = trace.label[k], trace.status[k]
+    confirmed = (status == CONFIRMED) & alive[:, None]
+    for i in np.flatnonzero(alive):
+        own = np.flatnonzero(confirmed[i])
+        tracks = radar_tracks_of(header, label[i, own], mean[i, own], cov[i, own])
+        write(f"/uav_{i}/radar_tracks", tracks, ns)
+        valid = trace.scan_valid[k, i]
+        scan = radar_scan_of(header_of(ns, f"uav_{i}"), nav[k, i], trace.scan_z[k, i][valid])
+        write(f"/uav_{i}/radar_scan", scan, ns)
+    N, K = label.shape
+    where = np.stack(np.meshgrid(np.arange(N), np.arange(K), indexing="ij"), -1)  # (N, K, 2)
+    picked, at, held = team_picture(
+        label[None], confirmed[None], where[None].astype(float), confidence(cov)[None]
+    )
+    uav, slot = at[0, held[0]].astype(int).T
+    team = radar_tracks_of(header, picked[0, held[0]], mean[uav, slot], cov[uav, slot])
+    write("/team/radar_tracks", team, ns)
 
 
 def _estimates(m: Markers, ns: int, write, trace, k: int, best, best_mean, best_cov):

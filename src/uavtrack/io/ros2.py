@@ -42,16 +42,18 @@ import hashlib
 import math
 import struct
 import time
+import uuid
 from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from ..errors import install_hint
+from ..flight.jsbsim import EAST, NORTH
 from ..tracks.manage import CONFIRMED, STATUS_NAMES, TENTATIVE
 
 try:
-    from rosbags.typesys import Stores, get_typestore
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.ros2 needs rosbags: {install_hint('io')} ({exc})") from None
 
@@ -64,17 +66,63 @@ ESTIMATE = "geometry_msgs/msg/PoseWithCovarianceStamped"
 CLOCK = "rosgraph_msgs/msg/Clock"
 TF = "tf2_msgs/msg/TFMessage"
 MARKERS = "visualization_msgs/msg/MarkerArray"
+RADAR_TRACKS = "radar_msgs/msg/RadarTracks"
+RADAR_SCAN = "radar_msgs/msg/RadarScan"
+ODOMETRY = "nav_msgs/msg/Odometry"
+FIX = "sensor_msgs/msg/NavSatFix"
 FRAME = "map"
 UNKNOWN = 1e9  # [rad^2] the variance of a rotation nobody estimates
+
+RADAR_MSGS = {
+    "radar_msgs/msg/RadarTrack": """
+uint16 NO_CLASSIFICATION=0
+uint16 STATIC=1
+uint16 DYNAMIC=2
+unique_identifier_msgs/UUID uuid
+geometry_msgs/Point position
+geometry_msgs/Vector3 velocity
+geometry_msgs/Vector3 acceleration
+geometry_msgs/Vector3 size
+uint16 classification
+float32[6] position_covariance
+float32[6] velocity_covariance
+float32[6] acceleration_covariance
+float32[6] size_covariance
+""",
+    RADAR_TRACKS: "std_msgs/Header header\nradar_msgs/RadarTrack[] tracks\n",
+    "radar_msgs/msg/RadarReturn": """
+float32 range
+float32 azimuth
+float32 elevation
+float32 doppler_velocity
+float32 amplitude
+""",
+    RADAR_SCAN: "std_msgs/Header header\nradar_msgs/RadarReturn[] returns\n",
+}
+"""The message types of ROS 2's radar_msgs package (0.2.2; Jazzy's rosbags store lacks
+them), as its .msg files declare their fields: rosbags registers them from this text and
+computes their RIHS01 hashes as ROS 2 does, from the fields."""
+
+DYNAMIC = 2
+"""radar_msgs/RadarTrack's classification of a moving object."""
+
+TRACKS_NAMESPACE = uuid.UUID("6f0d5a3e-3c1b-5b8e-9a57-0d2c7e4b1a90")
+"""The namespace of the tracks' UUIDs (`track_uuid`)."""
 
 _STORE = None
 
 
 def store():
-    """rosbags' ROS 2 Jazzy type store (its message definitions and hashes)."""
+    """rosbags' ROS 2 Jazzy type store (its message definitions and hashes), with
+    radar_msgs registered (`RADAR_MSGS`)."""
     global _STORE
     if _STORE is None:
-        _STORE = get_typestore(Stores.ROS2_JAZZY)
+        typestore = get_typestore(Stores.ROS2_JAZZY)
+        types: dict[str, Any] = {}
+        for name, text in RADAR_MSGS.items():
+            types.update(get_types_from_msg(text, name))
+        typestore.register(types)
+        _STORE = typestore
     return _STORE
 
 
@@ -226,18 +274,25 @@ class UavNode(Node):
     (PoseWithCovarianceStamped, `estimate_of`), stamped with the simulated clock (step k
     at k dt), in frame ``map``. With tracks (``tracks=True``: tracker.association gnn or
     jpda) the estimates are ``/uav_<i>/tracks`` instead (MarkerArray, `track_markers`:
-    each track's ellipse with its team label as id, as in the bag)."""
+    each track's ellipse with its team label as id, as in the bag). As data, as in the
+    bag: ``/uav_<i>/odom`` (Odometry, `odometry_of`, with the GPS error's `variance`),
+    ``/uav_<i>/fix`` (NavSatFix around latitude and longitude 0), ``/uav_<i>/radar_tracks``
+    (RadarTracks, `radar_tracks_of`) and with tracks ``/uav_<i>/radar_scan`` (RadarScan,
+    `radar_scan_of`). Everything from what the UAV believes: its navigation's state."""
 
     def __init__(
-        self, session, domain: int, uav: int, n_targets: int, dt: float, tracks: bool = False
-    ) -> None:
-        topics = {f"/uav_{uav}/pose": POSE, "/tf": TF}
+        self, session, domain: int, uav: int, n_targets: int, dt: float, tracks: bool = False,
+        variance: float = 0.0, g: float = 9.81,
+    ) -> None:  # fmt: skip
+        me = f"/uav_{uav}"
+        topics = {f"{me}/pose": POSE, "/tf": TF, f"{me}/odom": ODOMETRY, f"{me}/fix": FIX}
+        topics[f"{me}/radar_tracks"] = RADAR_TRACKS
         if tracks:
-            topics[f"/uav_{uav}/tracks"] = MARKERS
+            topics.update({f"{me}/tracks": MARKERS, f"{me}/radar_scan": RADAR_SCAN})
         else:
-            topics.update({f"/uav_{uav}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
+            topics.update({f"{me}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
         super().__init__(session, domain, uav, "/uavtrack", f"uav_{uav}", topics)
-        self.uav, self.dt = uav, dt
+        self.uav, self.dt, self.variance, self.g = uav, dt, variance, g
         self.markers = Markers() if tracks else None
         self.last = -1  # the last step published
 
@@ -249,25 +304,38 @@ class UavNode(Node):
             self.put(f"/uav_{self.uav}/tracks", store().types[MARKERS](markers=markers))
 
     def publish(
-        self, k: int, uav: np.ndarray, bank: float, mean, cov, label=None, status=None
-    ) -> None:
+        self, k: int, uav: np.ndarray, bank: float, mean, cov, label=None, status=None,
+        scan: np.ndarray | None = None,
+    ) -> None:  # fmt: skip
         """Step k: the UAV's state (x, y, h, V, heading), the bank angle it flies
         (eq. 1, positive left) and its estimates (Nt, 4), covariances (Nt, 4, 4); with
-        tracks, its slots' (K, ...) with their labels and status (K,)."""
+        tracks, its slots' (K, ...) with their labels and status (K,) and its scan's
+        ground positions (Z, 2)."""
         T = store().types
         ns = sim_ns(k, self.dt)
         header = header_of(ns)
+        me = f"/uav_{self.uav}"
         pose = uav_pose(uav, bank)
-        self.put(f"/uav_{self.uav}/pose", T[POSE](header=header, pose=pose))
+        self.put(f"{me}/pose", T[POSE](header=header, pose=pose))
         self.put("/tf", T[TF](transforms=[transform_of(header, f"uav_{self.uav}", pose)]))
+        child = f"uav_{self.uav}"
+        self.put(f"{me}/odom", odometry_of(header, child, uav, bank, self.variance, self.g))
+        lat, lon = math.degrees(float(uav[1]) / NORTH), math.degrees(float(uav[0]) / EAST)
+        self.put(f"{me}/fix", fix_of(header_of(ns, child), lat, lon, float(uav[2]), self.variance))
         if self.markers is not None:
             lifetime = lifetime_of(self.dt)
             markers = track_markers(self.markers, ns, label, status, mean, cov, lifetime)
-            self.put(f"/uav_{self.uav}/tracks", T[MARKERS](markers=markers))
+            self.put(f"{me}/tracks", T[MARKERS](markers=markers))
+            own = np.flatnonzero(np.asarray(status) == CONFIRMED)
+            tracks = radar_tracks_of(header, np.asarray(label)[own], mean[own], cov[own])
+            self.put(f"{me}/radar_tracks", tracks)
+            ground = np.zeros((0, 2)) if scan is None else scan
+            self.put(f"{me}/radar_scan", radar_scan_of(header_of(ns, child), uav, ground))
             self.last = k
             return
+        self.put(f"{me}/radar_tracks", radar_tracks_of(header, np.arange(len(mean)), mean, cov))
         for j in range(len(mean)):
-            self.put(f"/uav_{self.uav}/target_{j}/estimate", estimate_of(header, mean[j], cov[j]))
+            self.put(f"{me}/target_{j}/estimate", estimate_of(header, mean[j], cov[j]))
 
 
 class ClockNode(Node):
@@ -344,6 +412,109 @@ def estimate_of(header, mean: np.ndarray, P: np.ndarray):
         pose=T["geometry_msgs/msg/PoseWithCovariance"](
             pose=pose_of(float(mean[0]), float(mean[1]), 0.0, 0.0), covariance=covariance
         ),
+    )
+
+
+def track_uuid(label: int) -> np.ndarray:
+    """The UUID (16 bytes) of the track under team label `label` (with known association,
+    of target `label`): a UUID 5 of the label's number in `TRACKS_NAMESPACE`, the same
+    for every UAV, every step and every run."""
+    return np.frombuffer(uuid.uuid5(TRACKS_NAMESPACE, str(int(label))).bytes, np.uint8).copy()
+
+
+def _upper(P: np.ndarray) -> np.ndarray:
+    """A ground block P (2, 2) as radar_msgs' upper triangle of x, y, z (z known: 0)."""
+    return np.array([P[0, 0], P[0, 1], 0.0, P[1, 1], 0.0, 0.0], dtype=np.float32)
+
+
+def radar_tracks_of(header, labels, mean: np.ndarray, cov: np.ndarray):
+    """A radar_msgs/RadarTracks of tracks under team `labels` (n,), each estimate (x, y,
+    vx, vy) with covariance (4, 4): on the ground (z 0, known), the position and velocity
+    blocks as float32 upper triangles (their cross-covariance is not in the message),
+    classification DYNAMIC, acceleration and size 0."""
+    T = store().types
+    Point, Vector3 = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Vector3"]
+    zero, none = Vector3(x=0.0, y=0.0, z=0.0), np.zeros(6, dtype=np.float32)
+    tracks = [
+        T["radar_msgs/msg/RadarTrack"](
+            uuid=T["unique_identifier_msgs/msg/UUID"](uuid=track_uuid(label)),
+            position=Point(x=float(m[0]), y=float(m[1]), z=0.0),
+            velocity=Vector3(x=float(m[2]), y=float(m[3]), z=0.0),
+            acceleration=zero,
+            size=zero,
+            classification=DYNAMIC,
+            position_covariance=_upper(P[:2, :2]),
+            velocity_covariance=_upper(P[2:, 2:]),
+            acceleration_covariance=none,
+            size_covariance=none,
+        )
+        for label, m, P in zip(labels, mean, cov, strict=True)
+    ]
+    return T[RADAR_TRACKS](header=header, tracks=tracks)
+
+
+def radar_scan_of(header, uav: np.ndarray, z: np.ndarray):
+    """A radar_msgs/RadarScan of one UAV's measurements, in its sensor frame (header's
+    frame ``uav_<i>``: x along its heading, z up): each ground position z (n, 2) as the
+    range, azimuth (counter-clockwise, REP-103) and elevation (below the sensor:
+    negative) from the UAV (x, y, h, V, heading); no Doppler or amplitude (0)."""
+    T = store().types
+    dx, dy = z[:, 0] - uav[0], z[:, 1] - uav[1]
+    ground, height = np.hypot(dx, dy), float(uav[2])
+    azimuth = (np.arctan2(dy, dx) - uav[4] + np.pi) % (2 * np.pi) - np.pi
+    returns = [
+        T["radar_msgs/msg/RadarReturn"](
+            range=float(math.hypot(g, height)),
+            azimuth=float(a),
+            elevation=float(-math.atan2(height, g)),
+            doppler_velocity=0.0,
+            amplitude=0.0,
+        )  # fmt: skip
+        for g, a in zip(ground, azimuth, strict=True)
+    ]
+    return T[RADAR_SCAN](header=header, returns=returns)
+
+
+FIX_KNOWN = 2
+"""sensor_msgs/NavSatFix's COVARIANCE_TYPE_DIAGONAL_KNOWN."""
+
+
+def fix_of(header, lat: float, lon: float, altitude: float, variance: float):
+    """A sensor_msgs/NavSatFix at (lat, lon) [deg] and `altitude` [m], with the variance
+    [m^2] of its east and north errors (the GPS error's; 0: no error, type unknown)."""
+    T = store().types
+    return T["sensor_msgs/msg/NavSatFix"](
+        header=header,
+        status=T["sensor_msgs/msg/NavSatStatus"](status=0, service=1),
+        latitude=lat,
+        longitude=lon,
+        altitude=altitude,
+        position_covariance=np.diag([variance, variance, 0.0]).ravel(),
+        position_covariance_type=FIX_KNOWN if variance > 0 else 0,
+    )
+
+
+def odometry_of(header, child: str, uav: np.ndarray, bank: float, variance: float, g: float):
+    """A nav_msgs/Odometry of a UAV (x, y, h, V, heading) flying `bank` (eq. 1): its pose
+    (`uav_pose`) in the header's frame with position variance `variance` [m^2] on x, y
+    and z (its GPS error's) and the rotations known (0); its twist in its body frame
+    `child`: V forward, the turn rate g tan(bank) / V about z (eq. 1), known (0)."""
+    T = store().types
+    covariance = np.zeros(36)
+    covariance[[0, 7, 14]] = variance
+    V = float(uav[3])
+    Vector3 = T["geometry_msgs/msg/Vector3"]
+    twist = T["geometry_msgs/msg/Twist"](
+        linear=Vector3(x=V, y=0.0, z=0.0),
+        angular=Vector3(x=0.0, y=0.0, z=g * math.tan(float(bank)) / V),
+    )
+    return T[ODOMETRY](
+        header=header,
+        child_frame_id=child,
+        pose=T["geometry_msgs/msg/PoseWithCovariance"](
+            pose=uav_pose(uav, bank), covariance=covariance
+        ),
+        twist=T["geometry_msgs/msg/TwistWithCovariance"](twist=twist, covariance=np.zeros(36)),
     )
 
 
