@@ -351,9 +351,11 @@ AGENT_CASES = [
     ("greedy", {"uav.min_speed": 10.0, "faults.loss": 0.3, "faults.delay": 1}),
     # a slow backup turns fast: its beacons stay believable (`beacons.Limits`)
     ("greedy", {"uav.min_speed": 5.0, "comm_range": 60.0, "faults.loss": 0.3}),
-    # the measured model of flight: the beacon carries the recent commands
-    ("distributed", {"uav.dynamics": "jsbsim", "planner.avoidance_model": "measured",
-                     "comm_range": 177.0}),
+    # the measured model of flight (of eq. 1 here: measured at once; JSBSim's in the slow
+    # Zenoh test of tests/test_agents.py): the beacon carries the recent commands
+    ("distributed", {"planner.avoidance_model": "measured", "comm_range": 170.0}),
+    ("greedy", {"planner.avoidance_model": "measured", "comm_range": 170.0,
+                "faults.failures": [[2, 12]]}),
 ]  # fmt: skip
 
 
@@ -725,7 +727,7 @@ def test_a_beacon_with_recent_commands_out_of_range_is_refused():
 
 
 @pytest.mark.integration  # JSBSim aircraft
-@pytest.mark.parametrize("wind", [0.0, 5.0])
+@pytest.mark.parametrize("wind", [0.0, pytest.param(5.0, marks=pytest.mark.slow)])
 def test_the_measured_model_keeps_jsbsim_aircraft_apart(wind):
     """JSBSim aircraft at one altitude, at the measured model's sound range: with the
     filter on eq. (1) pairs come closer than the separation; on the measured model,
@@ -733,12 +735,12 @@ def test_the_measured_model_keeps_jsbsim_aircraft_apart(wind):
     pytest.importorskip("jsbsim")
     scenario = uavtrack.Scenario.from_toml("one-altitude").with_overrides(
         {"uav.dynamics": "jsbsim", "wind.speed": wind, "planner.avoidance": "loiter",
-         "steps": 200}
+         "steps": 150}
     )  # fmt: skip
     measured = scenario.with_overrides({"planner.avoidance_model": "measured"})
     scenario = scenario.with_overrides({"comm_range": float(np.ceil(av.sound_range_in(measured)))})
     measured = measured.with_overrides({"comm_range": scenario.comm_range})
-    seeds = list(range(3))
+    seeds = [0, 1]
     assert uavtrack.run(scenario, "distributed", seeds=seeds).metrics["separation_losses"].sum() > 0
     kept = uavtrack.run(measured, "distributed", seeds=seeds).metrics
     assert kept["separation_losses"].sum() == 0

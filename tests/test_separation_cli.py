@@ -58,8 +58,8 @@ def test_uavtrack_separation_writes_its_tables_and_figure_and_resumes(tmp_path, 
     assert (sound["losses_filter"] == 0).all()
     assert summary["sound_range"] >= 161.0
     goals = summary["goals"]
-    assert len(goals) == 10 and all(isinstance(g["met"], bool) for g in goals)
-    assert [g["met"] for g in goals if "losses with" in g["goal"]] == [True] * 4
+    assert len(goals) == 18 and all(isinstance(g["met"], bool) for g in goals)
+    assert [g["met"] for g in goals if "losses with" in g["goal"]] == [True] * 8
     report = (out / "report.md").read_text()
     assert "## Goals" in report and "| 20x16 | jsbsim | sound |" in report
     with Image.open(out / "separation.png") as im:

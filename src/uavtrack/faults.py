@@ -210,4 +210,9 @@ def navigation(
         return uavs
     key = trial_key(children(seed)[2])[None]
     faults = Faults(model, key, uavs.shape[1])
-    return np.stack([believed(uavs[k], faults.position_error(k)[0]) for k in range(len(uavs))])
+    out = np.empty_like(uavs)
+    for k in range(len(uavs)):
+        error = faults.position_error(k)
+        assert error is not None  # position_std > 0
+        out[k] = believed(uavs[k], error[0])
+    return out

@@ -435,7 +435,7 @@ def radar_tracks_of(header, labels, mean: np.ndarray, cov: np.ndarray):
     T = store().types
     Point, Vector3 = T["geometry_msgs/msg/Point"], T["geometry_msgs/msg/Vector3"]
     zero, none = Vector3(x=0.0, y=0.0, z=0.0), np.zeros(6, dtype=np.float32)
-    tracks = [
+    tracks: list[Any] = [
         T["radar_msgs/msg/RadarTrack"](
             uuid=T["unique_identifier_msgs/msg/UUID"](uuid=track_uuid(label)),
             position=Point(x=float(m[0]), y=float(m[1]), z=0.0),
@@ -462,7 +462,7 @@ def radar_scan_of(header, uav: np.ndarray, z: np.ndarray):
     dx, dy = z[:, 0] - uav[0], z[:, 1] - uav[1]
     ground, height = np.hypot(dx, dy), float(uav[2])
     azimuth = (np.arctan2(dy, dx) - uav[4] + np.pi) % (2 * np.pi) - np.pi
-    returns = [
+    returns: list[Any] = [
         T["radar_msgs/msg/RadarReturn"](
             range=float(math.hypot(g, height)),
             azimuth=float(a),
