@@ -188,25 +188,26 @@ def upper(P):
     return np.array([P[0, 0], P[0, 1], 0, P[1, 1], 0, 0], dtype=np.float32)
 
 
-def test_each_uavs_radar_tracks_are_its_estimates_under_stable_uuids(data_runs):
+def test_the_teams_radar_tracks_are_its_best_estimates_under_stable_uuids(data_runs):
+    """With known association the bag holds the team's best estimate of each target as a
+    RadarTrack (not each UAV's: those are the live topics'), under its target's UUID."""
     scenario, result, path = data_runs["gps"]
     trace = result.trace
-    for t, msg in messages(path, "/uav_2/radar_tracks"):
+    _, best_mean, best_cov = uavtrack.metrics.team_best(trace.mean, trace.cov, trace.alive)
+    team = messages(path, "/team/radar_tracks")
+    assert len(team) == 24
+    with AnyReader([path]) as reader:
+        assert "/uav_2/radar_tracks" not in {c.topic for c in reader.connections}
+    for t, msg in team:
         k = t // 500_000_000
         assert [bytes(tr.uuid.uuid) for tr in msg.tracks] == [uuid_of(j) for j in range(4)]
         for j, track in enumerate(msg.tracks):
-            m, P = trace.mean[k, 2, j], trace.cov[k, 2, j]
+            m, P = best_mean[k, j], best_cov[k, j]
             assert (track.position.x, track.position.y, track.position.z) == (m[0], m[1], 0.0)
             assert (track.velocity.x, track.velocity.y) == (m[2], m[3])
             np.testing.assert_array_equal(track.position_covariance, upper(P[:2, :2]))
             np.testing.assert_array_equal(track.velocity_covariance, upper(P[2:, 2:]))
             assert track.classification == 2  # DYNAMIC
-    team = messages(path, "/team/radar_tracks")
-    _, best_mean, _ = uavtrack.metrics.team_best(trace.mean, trace.cov, trace.alive)
-    t, msg = team[9]
-    assert [(tr.position.x, tr.position.y) for tr in msg.tracks] == [
-        tuple(best_mean[9, j, :2]) for j in range(4)
-    ]
 
 
 def test_the_tracked_teams_picture_is_the_most_confident_confirmed_track_per_label(data_runs):
@@ -241,30 +242,54 @@ def test_the_tracked_teams_picture_is_the_most_confident_confirmed_track_per_lab
     assert seen > 0
 
 
+def rotation(q) -> np.ndarray:
+    """The rotation matrix of a unit quaternion (body to map)."""
+    w, x, y, z = q.w, q.x, q.y, q.z
+    return np.array([
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+    ])  # fmt: skip
+
+
 def test_the_scan_in_each_uavs_frame_gives_back_its_measurements(data_runs):
+    """Each return, turned from the UAV's body frame (as its pose orients it, roll
+    included) to the map and placed where its navigation says it is, lands on the
+    measurement's ground position."""
     from uavtrack.faults import navigation
 
     scenario, result, path = data_runs["tracked"]
     trace = result.trace
     nav = navigation(scenario.faults, result.seed, trace.uavs)
     scans = messages(path, "/uav_1/radar_scan")
+    poses = dict(messages(path, "/uav_1/pose"))
     assert len(scans) == trace.alive[:, 1].sum()
+    rolled = 0
     for t, msg in scans:
         k = t // 500_000_000
         assert msg.header.frame_id == "uav_1"
-        x, y, h, _, heading = nav[k, 1]
-        back = []
-        for r in msg.returns:
-            ground = h / math.tan(-r.elevation)  # well conditioned, looking down
-            assert r.range == pytest.approx(math.hypot(ground, h), rel=1e-6)
-            back.append(
-                (
-                    x + ground * math.cos(heading + r.azimuth),
-                    y + ground * math.sin(heading + r.azimuth),
+        R = rotation(poses[t].pose.orientation)
+        rolled += abs(trace.action[k, 1]) > 0
+        back = [
+            nav[k, 1, :3]
+            + R
+            @ (
+                r.range
+                * np.array(
+                    [
+                        math.cos(r.elevation) * math.cos(r.azimuth),
+                        math.cos(r.elevation) * math.sin(r.azimuth),
+                        math.sin(r.elevation),
+                    ]
                 )
-            )
+            )  # fmt: skip
+            for r in msg.returns
+        ]
         expected = trace.scan_z[k, 1][trace.scan_valid[k, 1]]
-        np.testing.assert_allclose(np.reshape(back, (-1, 2)), expected, atol=1e-3)  # float32
+        got = np.reshape(back, (-1, 3))
+        np.testing.assert_allclose(got[:, :2], expected, atol=2e-3)  # float32 of 430 m
+        np.testing.assert_allclose(got[:, 2], 0.0, atol=2e-3)
+    assert rolled > 0  # some steps bank the sensor
 
 
 def test_odometry_and_fix_are_what_the_uavs_navigation_said(data_runs):
@@ -279,10 +304,13 @@ def test_odometry_and_fix_are_what_the_uavs_navigation_said(data_runs):
         p = msg.pose.pose.position
         assert (p.x, p.y, p.z) == tuple(nav[k, 3, :3])
         assert msg.child_frame_id == "uav_3" and msg.header.frame_id == "map"
-        assert msg.pose.covariance[0] == msg.pose.covariance[7] == msg.pose.covariance[14] == 9.0
+        assert msg.pose.covariance[0] == msg.pose.covariance[7] == 9.0
+        assert msg.pose.covariance[14] == 0.0  # the altitude carries no GPS error
         V, bank = trace.uavs[k, 3, 3], trace.action[k, 3]
         assert msg.twist.twist.linear.x == V
-        assert msg.twist.twist.angular.z == pytest.approx(9.81 * math.tan(bank) / V)
+        spin = msg.twist.twist.angular
+        in_map = rotation(msg.pose.pose.orientation) @ np.array([spin.x, spin.y, spin.z])
+        np.testing.assert_allclose(in_map, [0, 0, 9.81 * math.tan(bank) / V], atol=1e-12)
     _, fix = messages(path, "/uav_3/fix")[4]
     assert fix.position_covariance_type == 2 and fix.position_covariance[0] == 9.0
     assert fix.altitude == nav[4, 3, 2]

@@ -72,6 +72,20 @@ def test_the_learners_failure_ends_its_episode():
         env.step(1)
 
 
+def test_a_learner_failed_at_the_start_is_refused_by_seed_and_redrawn_without():
+    env = SingleUAVEnv(max_cycles=8, learner=1, faults={"failure_rate": 0.3})
+    dead = [s for s in range(30) if "uav_1" not in env.team.reset(seed=s)[0]]
+    assert dead  # some trials fail the learner before the first cycle
+    with pytest.raises(ValueError, match="has failed at step 0 of trial") as info:
+        env.reset(seed=dead[0])
+    assert "\n" not in str(info.value)
+    env.reset(seed=min(set(range(30)) - set(dead)))  # seeds the Env's own stream
+    for _ in range(10):  # each draws a trial in which the learner flies
+        observation, info_ = env.reset()
+        assert env.observation_space.contains(observation) and "paper_action" in info_
+        env.step(1)
+
+
 def test_a_seedless_reset_draws_from_the_envs_own_stream():
     one, two = SingleUAVEnv(max_cycles=5), SingleUAVEnv(max_cycles=5)
     one.reset(seed=7)

@@ -11,7 +11,8 @@ them. Registered as ``uavtrack/SingleUAV-v0`` when `uavtrack.env` is imported::
 
 Episodes: ``reset(seed=s)`` draws the trial as ``simulate(scenario, method, seed=s)``
 does, so flying the info's ``paper_action`` reproduces that trial exactly
-(``result()``); ``reset()`` without a seed draws one from the Env's generator. The
+(``result()``); ``reset()`` without a seed draws one from the Env's generator, a trial
+in which the learner flies at step 0 (a given seed whose trial fails it is refused). The
 mission's end terminates and truncates the episode (as in the multi-agent form: the
 time left is in the observation); the learner's failure (faults) terminates it.
 """
@@ -33,6 +34,10 @@ __all__ = ["ID", "SingleUAVEnv"]
 
 ID = "uavtrack/SingleUAV-v0"
 """The Env's Gymnasium id."""
+
+DRAWS = 100
+"""Trials a seedless reset draws, at most, for one in which the learner is alive at
+step 0 (under ``faults.failure_rate`` a UAV may fail before the first cycle)."""
 
 Policy = Callable[[Any], int]
 """A policy of the other UAVs: an action in {0, 1, 2} from a UAV's observation."""
@@ -71,11 +76,21 @@ class SingleUAVEnv(gymnasium.Env):
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
         super().reset(seed=seed)
-        if seed is None:  # a trial of the Env's own stream
-            seed = int(self.np_random.integers(0, 2**31 - 1))
-        observations, infos = self.team.reset(seed=seed, options=options)
-        self._observations = observations
-        return observations[self.name], infos[self.name]
+        for _ in range(DRAWS):
+            trial = seed if seed is not None else int(self.np_random.integers(0, 2**31 - 1))
+            observations, infos = self.team.reset(seed=trial, options=options)
+            if self.name in observations:
+                self._observations = observations
+                return observations[self.name], infos[self.name]
+            if seed is not None:
+                raise ValueError(
+                    f"the learner {self.name} has failed at step 0 of trial {seed} (faults): "
+                    "give another seed, or reset() to draw a trial where it flies"
+                )
+        raise RuntimeError(
+            f"the learner {self.name} failed at step 0 of {DRAWS} trials drawn in a row: "
+            "lower the scenario's failure rate"
+        )
 
     def step(self, action: Any):
         if self.name not in self.team.agents:

@@ -38,6 +38,7 @@ io extra).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import struct
@@ -330,7 +331,7 @@ class UavNode(Node):
             tracks = radar_tracks_of(header, np.asarray(label)[own], mean[own], cov[own])
             self.put(f"{me}/radar_tracks", tracks)
             ground = np.zeros((0, 2)) if scan is None else scan
-            self.put(f"{me}/radar_scan", radar_scan_of(header_of(ns, child), uav, ground))
+            self.put(f"{me}/radar_scan", radar_scan_of(header_of(ns, child), uav, bank, ground))
             self.last = k
             return
         self.put(f"{me}/radar_tracks", radar_tracks_of(header, np.arange(len(mean)), mean, cov))
@@ -419,7 +420,22 @@ def track_uuid(label: int) -> np.ndarray:
     """The UUID (16 bytes) of the track under team label `label` (with known association,
     of target `label`): a UUID 5 of the label's number in `TRACKS_NAMESPACE`, the same
     for every UAV, every step and every run."""
-    return np.frombuffer(uuid.uuid5(TRACKS_NAMESPACE, str(int(label))).bytes, np.uint8).copy()
+    return np.frombuffer(_uuid_bytes(int(label)), np.uint8).copy()
+
+
+@functools.lru_cache(maxsize=65536)
+def _uuid_bytes(label: int) -> bytes:
+    return uuid.uuid5(TRACKS_NAMESPACE, str(label)).bytes
+
+
+def _body(uav: np.ndarray, bank: float) -> np.ndarray:
+    """The rotation (3, 3) from a UAV's body frame (REP-103: x forward, y left, z up, as
+    `uav_pose` orients it: yaw the heading, roll -bank) to the map's."""
+    yaw, roll = float(uav[4]), -float(bank)
+    cy, sy, cr, sr = math.cos(yaw), math.sin(yaw), math.cos(roll), math.sin(roll)
+    return np.array([[cy, -sy, 0.0], [sy, cy, 0.0], [0.0, 0.0, 1.0]]) @ np.array(
+        [[1.0, 0.0, 0.0], [0.0, cr, -sr], [0.0, sr, cr]]
+    )
 
 
 def _upper(P: np.ndarray) -> np.ndarray:
@@ -453,24 +469,24 @@ def radar_tracks_of(header, labels, mean: np.ndarray, cov: np.ndarray):
     return T[RADAR_TRACKS](header=header, tracks=tracks)
 
 
-def radar_scan_of(header, uav: np.ndarray, z: np.ndarray):
-    """A radar_msgs/RadarScan of one UAV's measurements, in its sensor frame (header's
-    frame ``uav_<i>``: x along its heading, z up): each ground position z (n, 2) as the
-    range, azimuth (counter-clockwise, REP-103) and elevation (below the sensor:
-    negative) from the UAV (x, y, h, V, heading); no Doppler or amplitude (0)."""
+def radar_scan_of(header, uav: np.ndarray, bank: float, z: np.ndarray):
+    """A radar_msgs/RadarScan of one UAV's measurements in its body frame (the header's,
+    ``uav_<i>``, as ``/tf`` places it: heading and roll, `uav_pose`): each ground
+    position z (n, 2), less the UAV's position (x, y, h, V, heading; what its sensor
+    measured), as range, azimuth (counter-clockwise from the nose, REP-103) and elevation
+    (below: negative); no Doppler or amplitude (0)."""
     T = store().types
-    dx, dy = z[:, 0] - uav[0], z[:, 1] - uav[1]
-    ground, height = np.hypot(dx, dy), float(uav[2])
-    azimuth = (np.arctan2(dy, dx) - uav[4] + np.pi) % (2 * np.pi) - np.pi
+    offset = np.column_stack([z[:, 0] - uav[0], z[:, 1] - uav[1], np.full(len(z), -uav[2])])
+    body = offset @ _body(uav, bank)  # each row turned into the body frame
     returns: list[Any] = [
         T["radar_msgs/msg/RadarReturn"](
-            range=float(math.hypot(g, height)),
-            azimuth=float(a),
-            elevation=float(-math.atan2(height, g)),
+            range=float(np.linalg.norm(b)),
+            azimuth=float(math.atan2(b[1], b[0])),
+            elevation=float(math.atan2(b[2], math.hypot(b[0], b[1]))),
             doppler_velocity=0.0,
             amplitude=0.0,
-        )  # fmt: skip
-        for g, a in zip(ground, azimuth, strict=True)
+        )
+        for b in body
     ]
     return T[RADAR_SCAN](header=header, returns=returns)
 
@@ -496,17 +512,19 @@ def fix_of(header, lat: float, lon: float, altitude: float, variance: float):
 
 def odometry_of(header, child: str, uav: np.ndarray, bank: float, variance: float, g: float):
     """A nav_msgs/Odometry of a UAV (x, y, h, V, heading) flying `bank` (eq. 1): its pose
-    (`uav_pose`) in the header's frame with position variance `variance` [m^2] on x, y
-    and z (its GPS error's) and the rotations known (0); its twist in its body frame
-    `child`: V forward, the turn rate g tan(bank) / V about z (eq. 1), known (0)."""
+    (`uav_pose`) in the header's frame with position variance `variance` [m^2] on x and y
+    (its GPS error's; the altitude and the rotations known: 0); its twist in its body
+    frame `child`: V forward, and the turn rate g tan(bank) / V about the map's z turned
+    into that frame (the body is rolled), known (0)."""
     T = store().types
     covariance = np.zeros(36)
-    covariance[[0, 7, 14]] = variance
+    covariance[[0, 7]] = variance  # the GPS error is east and north; the altitude exact
     V = float(uav[3])
     Vector3 = T["geometry_msgs/msg/Vector3"]
+    spin = _body(uav, bank).T @ np.array([0.0, 0.0, g * math.tan(float(bank)) / V])
     twist = T["geometry_msgs/msg/Twist"](
         linear=Vector3(x=V, y=0.0, z=0.0),
-        angular=Vector3(x=0.0, y=0.0, z=g * math.tan(float(bank)) / V),
+        angular=Vector3(x=float(spin[0]), y=float(spin[1]), z=float(spin[2])),
     )
     return T[ODOMETRY](
         header=header,
