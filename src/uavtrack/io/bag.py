@@ -119,7 +119,6 @@ def _write(folder: Path, trace, scenario, origin, seed) -> dict[str, int]:
     T, Nu = trace.uavs.shape[:2]
     dt_ns = int(round(scenario.dt * 1e9))
     frame = LocalFrame(*origin)
-    east, north = frame.radii
     variance = scenario.faults.position_std**2
     nav = trace.uavs if seed is None else navigation(scenario.faults, seed, trace.uavs)
     best = best_mean = best_cov = None
@@ -151,8 +150,7 @@ def _write(folder: Path, trace, scenario, origin, seed) -> dict[str, int]:
                 write(f"/uav_{i}/pose", T_["geometry_msgs/msg/PoseStamped"](
                     header=m.header(ns), pose=pose), ns)  # fmt: skip
                 x, y, h = (float(v) for v in nav[k, i, :3])  # what its navigation says
-                lat = origin[0] + math.degrees(y / north)
-                lon = origin[1] + math.degrees(x / east)
+                lat, lon = frame.to_latlon(x, y)
                 write(f"/uav_{i}/fix", fix_of(m.header(ns, f"uav_{i}"), lat, lon, h, variance), ns)
                 odometry = odometry_of(
                     m.header(ns), f"uav_{i}", nav[k, i], trace.action[k, i], variance, G

@@ -50,8 +50,8 @@ from typing import Any
 import numpy as np
 
 from ..errors import install_hint
-from ..flight.jsbsim import EAST, NORTH
 from ..tracks.manage import CONFIRMED, STATUS_NAMES, TENTATIVE
+from .mavlink import LocalFrame
 
 try:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
@@ -321,7 +321,7 @@ class UavNode(Node):
         self.put("/tf", T[TF](transforms=[transform_of(header, f"uav_{self.uav}", pose)]))
         child = f"uav_{self.uav}"
         self.put(f"{me}/odom", odometry_of(header, child, uav, bank, self.variance, self.g))
-        lat, lon = math.degrees(float(uav[1]) / NORTH), math.degrees(float(uav[0]) / EAST)
+        lat, lon = LocalFrame().to_latlon(float(uav[0]), float(uav[1]))  # around (0, 0)
         self.put(f"{me}/fix", fix_of(header_of(ns, child), lat, lon, float(uav[2]), self.variance))
         if self.markers is not None:
             lifetime = lifetime_of(self.dt)
