@@ -276,9 +276,17 @@ def _world(state: State, ctx: Context) -> tuple[np.ndarray, np.ndarray]:
     return alive, world.believed(state.uavs, faults.position_error(k))
 
 
-def _radio(state: State, ctx: Context, alive: np.ndarray, rows: np.ndarray | None = None) -> Radio:
-    """The cycle's radio (`limit`: `rows`, the measurements each UAV's scan holds)."""
-    links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
+def _radio(
+    state: State,
+    ctx: Context,
+    alive: np.ndarray,
+    rows: np.ndarray | None = None,
+    links: network.Links | None = None,
+) -> Radio:
+    """The cycle's radio (`limit`: `rows`, the measurements each UAV's scan holds) over
+    `links`, or the UAVs within r_C when None."""
+    if links is None:
+        links = network.radio_links(state.uavs, alive, ctx.scenario.comm_range)
     broadcast = ctx.scenario.radio.frames == "broadcast"
     return Radio(
         state.k, links, alive, ctx.faults, state.radio, limit(ctx, state.k, rows), broadcast
@@ -359,12 +367,29 @@ def decide(
     known association (the paper) or the trackers of unlabelled scans. Every other
     stage is the same call for both.
     """
-    scenario, method, associator = ctx.scenario, ctx.method, ctx.associator
     alive, believed = _world(state, ctx)
-    observed, polar = observe(state.uavs, targets, noise, alive, scenario)
+    observed, polar = observe(state.uavs, targets, noise, alive, ctx.scenario)
     sensed = detect(state.uavs, believed, observed, polar, alive, ctx)
+    return decided(state, sensed, alive, believed, observed, ctx, plan)
+
+
+def decided(
+    state: State,
+    sensed: Sensed,
+    alive: np.ndarray,
+    believed: np.ndarray,
+    observed: np.ndarray,
+    ctx: Context,
+    plan: bool = True,
+    links: network.Links | None = None,
+) -> Pending:
+    """`decide` from what the sensors gave (`Sensed`): the local filters, fusion,
+    planning and assignment. A replay of recorded scans (`uavtrack.replay`) enters
+    here with its own scans and, if it has one, its radio graph `links` (None: UAVs
+    within r_C of each other's true positions, `state.uavs`)."""
+    scenario, method, associator = ctx.scenario, ctx.method, ctx.associator
     rows = sensed.scan.valid.sum(axis=-1) if method.central and sensed.scan is not None else None
-    radio = _radio(state, ctx, alive, rows)
+    radio = _radio(state, ctx, alive, rows, links)
     fusion = associator.fuse(state, ctx, sensed, believed, alive, radio)
     fused, owned = fusion.fused, fusion.owned
     if plan:
@@ -1002,19 +1027,31 @@ def initial_stream(
     """`initial_state` with the targets drawn as the run reaches them (`world.Targets`,
     `Targets.at(k)`), keeping the steps passed only if `keep` (as a trace needs): the
     memory of a run without a trace does not grow with its steps."""
-    B, Nu, Nt = len(seeds), scenario.n_uavs, scenario.n_targets
     truth_rngs, sensor_rngs = zip(*(streams(s) for s in seeds), strict=True)
     drawn = [draw_start(scenario, rng) for rng in truth_rngs]
     targets = Targets(
         np.stack([d[0] for d in drawn]), list(truth_rngs), scenario, keep, seeds=list(seeds)
     )
     uavs = np.stack([d[1] for d in drawn])
-    mean = np.broadcast_to(np.stack([d[2] for d in drawn])[:, None], (B, Nu, Nt, 4)).copy()
-    cov = np.broadcast_to(drawn[0][3], (B, Nu, Nt, 4, 4)).copy()
+    prior = np.stack([d[2] for d in drawn])
+    pilot, uavs = flight.start(scenario, seeds, uavs)
+    state = start_state(scenario, uavs, prior, drawn[0][3], pilot)
+    return state, targets, list(sensor_rngs)
+
+
+def start_state(
+    scenario: Scenario, uavs: np.ndarray, prior: np.ndarray, P0: np.ndarray, pilot: Any
+) -> State:
+    """The state at step 0 of B trials: the UAVs (B, Nu, 5) flown by `pilot` (None: the
+    paper's unicycle), each UAV's belief of target j N(prior[b, j], P0) with prior
+    (B, Nt, 4) and P0 (4, 4) or per target (Nt, 4, 4); with unknown association these
+    are confirmed tracks of every UAV when ``tracker.briefing``, else it has none."""
+    B, Nu, Nt = uavs.shape[0], uavs.shape[1], prior.shape[1]
+    mean = np.broadcast_to(prior[:, None], (B, Nu, Nt, 4)).copy()
+    cov = np.broadcast_to(P0, (B, Nu, Nt, 4, 4)).copy()
     held = None
     if scenario.faults.loss > 0:
         held = Held(np.zeros((B, Nu, Nu, Nt)), np.full((B, Nu, Nu), -1, dtype=np.int64))
-    pilot, uavs = flight.start(scenario, seeds, uavs)
     tracker = estimation.Tracker.of(scenario.dt, scenario.acceleration_std(), scenario.tracker)
     book = central = labels = tombs = None
     if scenario.tracker.unlabelled:  # the briefed targets as confirmed tracks
@@ -1028,7 +1065,7 @@ def initial_stream(
         labels = labels.copy()
         tombs = np.full((B, Nu, scenario.track_slots, 2), -1, dtype=np.int64)
     mean, cov, modes = tracker.start(mean, cov)
-    state = State(
+    return State(
         k=0,
         uavs=uavs,
         mean=mean,
@@ -1044,7 +1081,6 @@ def initial_stream(
         labels=labels,
         tombs=tombs,
     )
-    return state, targets, list(sensor_rngs)
 
 
 # ---------------------------------------------------------------- runs
@@ -1288,9 +1324,12 @@ def simulate(
     return result_of(batch, seed if isinstance(seed, int) else None)
 
 
-def result_of(batch: BatchResult, seed: int | None) -> Result:
-    """The `Result` of the one trial of a batch."""
+def result_of(batch: BatchResult, seed: int | None, only: Sequence[str] | None = None) -> Result:
+    """The `Result` of the one trial of a batch; with `only`, every other metric NaN (a
+    replay of scans without truth, which those read)."""
     m = {name: values[0] for name, values in batch.metrics.items()}
+    if only is not None:
+        m = {k: v if k in only else np.full(np.shape(v), np.nan) for k, v in m.items()}
     return Result(
         method=batch.method,
         seed=seed,

@@ -30,11 +30,15 @@ from dataclasses import asdict, dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..config import Scenario
+import numpy as np
+
+from ..config import Scenario, ScenarioError
 from ..errors import RunError, UsageError, install_hint
 from ..methods import get
 from ..radio import RUN_CHARS
 from ..records import Result
+from ..replay import Recording, scenario_for
+from ..replay import result_of as replay_result
 from ..simulation import result_of
 from .agent import check_method
 from .launcher import Forked, Launcher
@@ -99,6 +103,21 @@ class Options:
     keys: Path | None = None
     zenoh: ZenohOptions = field(default_factory=ZenohOptions)
     ros2: int | None = None
+    recording: Recording | None = None
+    pilot: Any = None
+
+    def result(self, batch, seed: int) -> Result:
+        """The run's `Result`: a replay's (`replay.result_of`) with a recording."""
+        if self.recording is not None:
+            return replay_result(batch, self.recording)
+        return result_of(batch, seed)
+
+    def world(self, scenario, method, seed, link, run, keyring) -> WorldProgram:
+        """The run's world program on `link`."""
+        return WorldProgram(
+            scenario, method, seed, link, run, self.deadline, self.startup, keyring,
+            recording=self.recording, pilot=self.pilot,
+        )  # fmt: skip
 
 
 def run_swarm(
@@ -120,6 +139,8 @@ def run_swarm(
     zenoh: ZenohOptions | None = None,
     ros2: int | None = None,
     patience: float | None = None,
+    recording: Recording | None = None,
+    pilot: Any = None,
 ) -> SwarmResult:
     """Run one trial as a swarm of programs; its result equals `simulate`'s for the same
     scenario, method and seed (the same faults included).
@@ -134,7 +155,10 @@ def run_swarm(
     `program.STARTUP` over Zenoh); sign: authenticate every message (`security`); zenoh: a Zenoh
     configuration file and TLS files; ros2: a ROS 2 domain id (0-232): every UAV program
     also publishes its pose, transform and estimates as ROS 2 topics, the world the
-    simulated clock on /clock (`io.ros2`, zenoh only).
+    simulated clock on /clock (`io.ros2`, zenoh only); recording: recorded scans and
+    poses the world tells the programs in place of its truth (`replay.Recording`; the
+    result then equals `replay.replay`'s); pilot: what flies the decisions (a
+    `io.mavlink.MavlinkPilot`; None: the scenario's aircraft, or with a recording nothing).
     """
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
@@ -156,6 +180,16 @@ def run_swarm(
             from ..io import ros2 as _  # noqa: F401
         except ImportError as exc:
             raise UsageError(f"--ros2: {exc}") from None
+    if recording is not None:
+        try:
+            scenario = scenario_for(recording, scenario)
+        except ScenarioError as exc:
+            raise UsageError(str(exc)) from None
+        if not np.isfinite(recording.polar[recording.valid]).all():
+            raise UsageError(
+                "the UAV programs are told range and bearing: this recording has "
+                "measurements given only on the ground (x, y, R)"
+            )
     run = secrets.token_hex(RUN_CHARS // 2)
     n = scenario.n_uavs
     programs = list(range(n)) + ([n] if get(method).central else [])
@@ -174,6 +208,8 @@ def run_swarm(
         keys=keys,
         zenoh=zenoh or ZenohOptions(),
         ros2=ros2,
+        recording=recording,
+        pilot=pilot,
     )
     keyring = Keyring(run, len(programs)) if sign else None
     go = _in_memory if transport == "memory" else _over_zenoh
@@ -184,7 +220,7 @@ def _in_memory(scenario, method, seed, run, programs, o: Options, keyring) -> Sw
     bus = Bus()
     world_link = MemoryTransport(bus)
     world_link.announce(f"uavtrack/{run}/alive/world")
-    world = WorldProgram(scenario, method, seed, world_link, run, o.deadline, o.startup, keyring)
+    world = o.world(scenario, method, seed, world_link, run, keyring)
     errors: list[BaseException] = []
 
     def program(me: int) -> None:
@@ -208,7 +244,7 @@ def _in_memory(scenario, method, seed, run, programs, o: Options, keyring) -> Sw
             thread.join(timeout=o.deadline + 5.0)
     if errors:
         raise RunError(f"a program failed: {type(errors[0]).__name__}: {errors[0]}") from errors[0]
-    return SwarmResult(result_of(batch, seed), world.traffic, run, "memory")
+    return SwarmResult(o.result(batch, seed), world.traffic, run, "memory")
 
 
 def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> SwarmResult:
@@ -241,7 +277,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         if o.spawn:  # loads the programs' modules while the world sets up
             launcher = Launcher()
         link.announce(f"uavtrack/{run}/alive/world")
-        world = WorldProgram(scenario, method, seed, link, run, o.deadline, o.startup, keyring)
+        world = o.world(scenario, method, seed, link, run, keyring)
         if o.ros2 is not None:
             from ..io.ros2 import ClockNode
 
@@ -306,7 +342,7 @@ def _over_zenoh(scenario, method, seed, run, programs, o: Options, keyring) -> S
         _forward([c for c in children if c.me not in quoted])
         for child in children:
             child.close()
-    return SwarmResult(result_of(batch, seed), world.traffic, run, "zenoh")
+    return SwarmResult(o.result(batch, seed), world.traffic, run, "zenoh")
 
 
 def write_keys(keyring: Keyring, programs: list[int], folder: Path) -> list[Path]:

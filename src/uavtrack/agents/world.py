@@ -31,15 +31,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
-from .. import records, simulation, world
+from .. import records, replay, simulation, world
 from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
 from ..methods import get
 from ..radio import Budget
+from ..replay import Recording
 from ..tracks import columns
 from ..tracks.team import CONFIRMED
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
@@ -94,6 +96,11 @@ class WorldProgram:
     """The truth of one trial of `scenario` (seeded like `simulate(scenario, seed=seed)`).
 
     keyring: the run's keys (`security.Keyring`; None: messages are not authenticated).
+    recording: recorded scans and poses in place of the truth (`replay.Recording`, its
+    scenario `replay.scenario_for`'s): each UAV program is told its own and the world's
+    trace equals `replay.replay`'s. pilot: what flies the UAVs' decisions (a
+    `io.mavlink.MavlinkPilot`; None: the scenario's aircraft), whose flight a recording's
+    poses then replace.
     """
 
     def __init__(
@@ -106,8 +113,11 @@ class WorldProgram:
         deadline: float = 2.0,
         startup: float = 60.0,
         keyring: Keyring | None = None,
+        recording: Recording | None = None,
+        pilot: Any = None,
     ) -> None:
         self.scenario, self.method = scenario, get(method)
+        self.recording, self.pilot = recording, pilot
         self.transport, self.run, self.deadline, self.startup = transport, run, deadline, startup
         self.keyring = keyring
         self.keys = keys(run)
@@ -208,18 +218,29 @@ class WorldProgram:
         self, trace: bool = True, realtime: bool = False, progress: Callable | None = None
     ) -> records.BatchResult:
         """Run every cycle; returns the trial's metrics and trace as `simulation.run` does."""
-        s, ctx = self.scenario, self.ctx
-        state, trajectory, sensor_rngs = simulation.initial_stream(s, self.seeds, keep=trace)
-        uavs, alive = state.uavs, state.alive
-        self.prior = (state.mean[0, 0, : s.n_targets], state.cov[0, 0, 0])  # the briefed
-        pilot = state.flight if state.flight is not None else Unicycle(s.dt)
-        self.wait_ready()
+        s, ctx, rec = self.scenario, self.ctx, self.recording
         T, Nu, Nt = s.steps, s.n_uavs, s.n_targets
+        if rec is None:
+            state, trajectory, sensor_rngs = simulation.initial_stream(s, self.seeds, keep=trace)
+            uavs, alive = state.uavs, state.alive
+            self.prior = (state.mean[0, 0, :Nt], state.cov[0, 0, 0])  # the briefed
+            pilot = state.flight if state.flight is not None else Unicycle(s.dt)
+            noises = simulation.sensor_noise(sensor_rngs, Nu, Nt, T)
+            truth = None
+        else:
+            trajectory = None
+            uavs, alive = rec.poses[:1], np.ones((1, Nu), dtype=bool)
+            self.prior = replay.briefing(rec, s)
+            pilot = None
+            noises = (None for _ in range(T))
+            truth = rec.targets if rec.targets is not None else np.full((T, Nt, 4), np.nan)
+        if self.pilot is not None:
+            pilot = self.pilot
+        self.wait_ready()
         tally = simulation.scores(s, 1, timed=True)
         recorder = simulation.Recorder(T, timed=True) if trace else None
         told = np.ones(Nu, dtype=bool)  # the UAVs sent a Sense last cycle
         due = time.monotonic()  # when the next cycle is due (with realtime)
-        noises = simulation.sensor_noise(sensor_rngs, Nu, Nt, T)
         for k, noise in enumerate(noises):
             begin = self.began = time.monotonic()
             self.step = k
@@ -231,16 +252,27 @@ class WorldProgram:
             self._answer_joins()
             self._tell_lost()
             was = alive
-            alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
+            if rec is not None:  # a sensor that stops recording has failed
+                alive = alive & rec.alive[k][None]
+            else:
+                alive = ctx.faults.alive(k, alive) if ctx.setting.faulty else alive.copy()
             for i in np.flatnonzero(was[0] & ~alive[0]):
                 self.traffic.failed.setdefault(int(i), k)
                 self.members.discard(int(i))  # its program ends with its UAV
             self._lose(k, alive, dict.fromkeys(self._gone(), self._gone_why()))
-            believed = world.believed(uavs, ctx.faults.position_error(k))
-            graph = simulation.graph(uavs, alive, s)
-            targets = trajectory.at(k)
-            observed, z = simulation.observe(uavs, targets, noise, alive, s)
-            sensed = simulation.detect(uavs, believed, observed, z, alive, ctx)  # as `decide`
+            if rec is None:
+                assert trajectory is not None and noise is not None
+                believed = world.believed(uavs, ctx.faults.position_error(k))
+                graph = simulation.graph(uavs, alive, s)
+                targets = trajectory.at(k)
+                observed, z = simulation.observe(uavs, targets, noise, alive, s)
+                sensed = simulation.detect(uavs, believed, observed, z, alive, ctx)  # as `decide`
+            else:
+                assert truth is not None
+                step = replay.at(rec, k, alive, truth[k], s)
+                uavs = believed = step.uavs
+                graph, targets = step.graph(s), truth[k][None]
+                observed, sensed = step.observed, step.sensed
             scan = sensed.scan
             self.send(
                 k, believed[0], sensed.detected[0], sensed.polar, graph[0], alive[0], told, scan
@@ -251,7 +283,8 @@ class WorldProgram:
             if recorder is not None:
                 recorder.record(k, cycle)
             tally.add(cycle, targets)
-            uavs = pilot.fly(*simulation.command(uavs, actions, s, ctx.const), alive)
+            if pilot is not None:  # a recording's next poses replace where it flew
+                uavs = pilot.fly(*simulation.command(uavs, actions, s, ctx.const), alive)
             took = time.monotonic() - begin
             self.traffic.cycle_seconds.append(took)
             if realtime:
@@ -268,7 +301,13 @@ class WorldProgram:
         for drops in (self.mailbox.reasons(), *self.traffic.program_drops.values()):
             for reason, count in drops.items():
                 self.traffic.drops[reason] = self.traffic.drops.get(reason, 0) + count
-        traces = recorder.traces(trajectory.whole()) if recorder is not None else None
+        traces = None
+        if recorder is not None:
+            if truth is not None:  # a recording's
+                traces = recorder.traces(truth[None])
+            else:
+                assert trajectory is not None
+                traces = recorder.traces(trajectory.whole())
         return records.BatchResult(self.method.name, s, tally.summary(), traces)
 
     def _answer_joins(self) -> None:
@@ -344,9 +383,10 @@ class WorldProgram:
         afford = self.afford(k, graph, alive, scan)
         self.asked = {}
         for i in np.flatnonzero(told):
-            seen, mine = observed[i], z[rows == i]
             if scan is not None:
                 seen, mine = np.zeros(0, dtype=bool), scan.polar[0, i][scan.valid[0, i]]
+            else:
+                seen, mine = observed[i], z[rows == i]
             message = Sense(
                 version=VERSION,
                 run=self.run,

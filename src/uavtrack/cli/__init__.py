@@ -1,5 +1,5 @@
 """Command line: ``uavtrack run | compare | params | reproduce | sweep | animate |
-bandwidth | bench | export | flight | realistic | robustness | sensing | separation |
+bandwidth | bench | export | flight | realistic | replay | robustness | sensing | separation |
 swarm | agent | trackers``, each in a module of its name (`app`: run, compare, params
 and the shared options;
 `experiments`: reproduce, sweep, animate; `benchmark`: bench; `swarm`: swarm, agent).
@@ -17,6 +17,7 @@ from . import (  # noqa: F401
     export,
     flight,
     realistic,
+    replay,
     robustness,
     sensing,
     separation,

@@ -455,9 +455,11 @@ def show(
     rows: list[tuple[str, str]] | None = None,
     source: str = "",
     bag: Path | None = None,
+    truth: bool = True,
 ) -> None:
     """Write the trace and the bag if asked, then print a run's metrics as a table (with
-    more `rows`) or one JSON object (with `extra`, such as a swarm's traffic)."""
+    more `rows`) or one JSON object (with `extra`, such as a swarm's traffic). Without
+    `truth` (a replay of scans alone) the table leaves out what compares with it."""
     if trace is not None:
         from ..io import trace as trace_file
 
@@ -484,12 +486,13 @@ def show(
         show_header=False,
     )
     team = f"{scenario.n_uavs} UAVs x {scenario.n_targets} targets, {scenario.steps} steps"
-    table.add_row("team", team)
+    table.add_row("team", team if truth else f"{scenario.n_uavs} UAVs, {scenario.steps} steps")
     if source:
         table.add_row("scenario from", escape(source))
-    table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
-    for label, (value,) in target_rows([summary["per_target"]]):
-        table.add_row(label, value)
+    if truth:
+        table.add_row("observation rate", f"{summary['observation_rate']:.4f}")
+        for label, (value,) in target_rows([summary["per_target"]]):
+            table.add_row(label, value)
     from ..methods import get
 
     central = get(summary["method"]).central
@@ -498,6 +501,9 @@ def show(
         keep = ("rounds", "messages", "bytes", "decision_time_ms", "decision_wall_ms")
         rows_shown = TRACK_ROWS + tuple(r for r in RUN_ROWS if r[0] in keep)
         table.caption = TRACK_CAPTION
+    if not truth:
+        rows_shown = tuple(r for r in rows_shown if r[0] in ("rounds", "messages", "bytes"))
+        table.caption = None
     for key, label, fmt in rows_shown:
         if key == "decision_time_ms" and central:
             label = "decision time per cycle, the central node's for the whole team [ms of CPU]"

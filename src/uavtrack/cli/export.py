@@ -104,10 +104,14 @@ def export(
             folder.mkdir()
             for name, frame in frames.items():
                 tables.write_table(frame, folder / f"{name}.{format_.value}", format_.value)
+            (folder / "scenario.toml").write_text(saved.scenario.to_toml(), encoding="utf-8")
     except OSError as exc:
         raise RunError(f"cannot write the tables {out}: {exc.strerror or exc}") from None
     rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
     typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
+    if "measurements" in frames:  # a recording of scans
+        seed = "" if saved.seed is None else f" --seed {saved.seed}"
+        typer.echo(f"its scans replay with: uavtrack replay {out} --method {saved.method}{seed}")
 
 
 def _read(source: Path):

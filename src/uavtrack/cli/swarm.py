@@ -205,12 +205,31 @@ def swarm(
         float,
         typer.Option(min=0.05, max=60, metavar="S", help="seconds a round waits for messages"),
     ] = 2.0,
+    recording: Annotated[
+        Path | None,
+        typer.Option(
+            "--recording",
+            metavar="FOLDER",
+            help="tell each UAV program its scans and pose from a recording (as uavtrack "
+            "replay reads it) in place of the world's truth; the trace equals the replay's",
+        ),
+    ] = None,
 ) -> None:
     """Run one trial as a swarm: a world program and one program per UAV exchanging
     messages; prints and writes what `uavtrack run` does."""
     from ..methods import get
 
-    scenario = with_steps(load_scenario(config, set_, team), steps, set_)
+    record = None
+    source = source_of(config, set_, team)
+    if recording is not None:
+        if team is not None or steps is not None:
+            raise UsageError("--team and --steps: the recording sets them; leave them out")
+        from .replay import recorded
+
+        record, scenario, given = recorded(recording, config, set_, "--recording")
+        source = source_of(given, set_, None)
+    else:
+        scenario = with_steps(load_scenario(config, set_, team), steps, set_)
     if trace is not None:
         check_output(trace, "--trace", force)
     check_distinct({"--trace": trace, "--bag": bag})
@@ -270,6 +289,7 @@ def swarm(
             keys=keys,
             zenoh=options,
             ros2=ros2,
+            recording=record,
         )
     import numpy as np  # not at import: `uavtrack bench` pins BLAS threads first
 
@@ -343,8 +363,9 @@ def swarm(
         extra={"swarm": swarm_info},
         title="uavtrack swarm",
         rows=rows,
-        source=source_of(config, set_, team),
+        source=source,
         bag=bag,
+        truth=record is None or record.targets is not None,
     )
     for line in swarm_notes(traffic, lost):
         typer.echo(f"uavtrack: note: {line}", err=True)

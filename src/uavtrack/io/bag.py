@@ -210,8 +210,9 @@ def _radar(ns: int, write, trace, k: int, nav, best, best_mean, best_cov) -> Non
         write(f"/uav_{i}/radar_tracks", tracks, ns)
         valid = trace.scan_valid[k, i]
         scan = radar_scan_of(
-            header_of(ns, f"uav_{i}"), nav[k, i], trace.action[k, i], trace.scan_z[k, i][valid]
-        )
+            header_of(ns, f"uav_{i}"), nav[k, i], trace.action[k, i], trace.scan_z[k, i][valid],
+            trace.scan_polar[k, i][valid, 1],
+        )  # fmt: skip
         write(f"/uav_{i}/radar_scan", scan, ns)
     N, K = label.shape
     where = np.stack(np.meshgrid(np.arange(N), np.arange(K), indexing="ij"), -1)  # (N, K, 2)

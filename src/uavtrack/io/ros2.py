@@ -469,14 +469,30 @@ def radar_tracks_of(header, labels, mean: np.ndarray, cov: np.ndarray):
     return T[RADAR_TRACKS](header=header, tracks=tracks)
 
 
-def radar_scan_of(header, uav: np.ndarray, bank: float, z: np.ndarray):
+NADIR = 1e-3
+"""How far off the nadir [m] a return's ground point is placed when the conversion put
+it at the nadir (a range shorter than the altitude): toward its measured bearing, which
+the float32 direction then keeps to about 0.05 rad (`radar_scan_of`)."""
+
+
+def radar_scan_of(
+    header, uav: np.ndarray, bank: float, z: np.ndarray, bearing: np.ndarray | None = None
+):
     """A radar_msgs/RadarScan of one UAV's measurements in its body frame (the header's,
     ``uav_<i>``, as ``/tf`` places it: heading and roll, `uav_pose`): each ground
     position z (n, 2), less the UAV's position (x, y, h, V, heading; what its sensor
     measured), as range, azimuth (counter-clockwise from the nose, REP-103) and elevation
-    (below: negative); no Doppler or amplitude (0)."""
+    (below: negative); no Doppler or amplitude (0). With the measured `bearing` (n,)
+    [rad], a point within `NADIR` of the nadir moves to `NADIR` off it toward that
+    bearing, so that a reader gets the bearing back (`io.recording.from_bag`)."""
     T = store().types
     offset = np.column_stack([z[:, 0] - uav[0], z[:, 1] - uav[1], np.full(len(z), -uav[2])])
+    if bearing is not None:
+        near = np.hypot(offset[:, 0], offset[:, 1]) < NADIR
+        offset[near, 0], offset[near, 1] = (
+            NADIR * np.cos(bearing[near]),
+            NADIR * np.sin(bearing[near]),
+        )
     body = offset @ _body(uav, bank)  # each row turned into the body frame
     returns: list[Any] = [
         T["radar_msgs/msg/RadarReturn"](

@@ -29,7 +29,12 @@ come instead (`TRACK_TABLES`):
   estimate (est_x ... est_vy) and its covariance's 10 entries, as in ``pairs``;
 * ``measurements``: one row per measurement of a scan: step, UAV, index (its place in the
   UAV's scan), range [m], bearing [rad], x, y (its conversion to the ground [m]), origin
-  (for evaluation only: the target measured, -1 for clutter) and clutter (origin -1).
+  (for evaluation only: the target measured, -1 for clutter) and clutter (origin -1);
+* ``briefing`` (with ``tracker.briefing`` and the trial's seed): a row per target, the
+  prior every UAV started with as a confirmed track: x ... vy and P_x_x ... P_vy_vy.
+
+These tables are a recording that ``uavtrack replay`` reads (`io.recording`): the scans
+replay to the run's tracks.
 
 A failed UAV's estimate, covariance and bid are NaN from the step it fails (its state
 stays where it fell). Units travel with the data: a frame's ``attrs["units"]``, a
@@ -61,7 +66,7 @@ from ..metrics import METRICS, team_best
 from ..records import TRACKED, Cycle, Trace
 from ..tracks.manage import STATUS_NAMES
 from ..tracks.scoring import series
-from ..world import present
+from ..world import draw_start, present, streams
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -247,14 +252,14 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
     [s]: `TABLES`, or with tracks of unknown association `TRACK_TABLES`. Each frame's
     ``attrs["units"]`` maps its columns to their units (Parquet keeps them, see
     `write_table`)."""
-    scenario = None
+    scenario = seed = None
     if isinstance(source, Trace):
         if dt is None:
             raise UsageError("a bare Trace needs its step dt: to_frames(trace, dt)")
         trace = source
     else:
         saved = trace_file.load(source)
-        trace, dt, scenario = saved.trace, saved.dt, saved.scenario
+        trace, dt, scenario, seed = saved.trace, saved.dt, saved.scenario, saved.seed
     tracked = trace.label is not None
     T, Nu = trace.uavs.shape[:2]
     Nt = trace.targets.shape[1]
@@ -301,6 +306,8 @@ def to_frames(source, dt: float | None = None) -> dict[str, pd.DataFrame]:
         frames["targets"] = pd.DataFrame(targets)
         frames["tracks"] = _tracks(trace, time)
         frames["measurements"] = _measurements(trace, time)
+        if scenario is not None and scenario.tracker.briefing and seed is not None:
+            frames["briefing"] = _briefing(scenario, seed)
     else:
         best, best_mean, _ = team_best(trace.mean, trace.cov, trace.alive)
         targets["best_uav"] = best.ravel()
@@ -341,6 +348,16 @@ def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
     rows["status"] = names[trace.status[held]]
     rows["bid"] = trace.bids[held]
     rows.update(_estimates(trace.mean[held], trace.cov[held]))
+    return pd.DataFrame(rows)
+
+
+def _briefing(scenario: Scenario, seed: int) -> pd.DataFrame:
+    """The ``briefing`` table: a row per target, the prior every UAV started with as a
+    confirmed track (drawn from the trial's seed, `world.draw_start`)."""
+    _, _, mean, P0 = draw_start(scenario, streams(np.random.SeedSequence(seed))[0])
+    rows = {"target": np.arange(mean.shape[0])}
+    estimates = _estimates(mean, np.broadcast_to(P0, mean.shape + (4,)))
+    rows.update({name.removeprefix("est_"): value for name, value in estimates.items()})
     return pd.DataFrame(rows)
 
 
