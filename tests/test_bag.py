@@ -242,6 +242,25 @@ def test_the_tracked_teams_picture_is_the_most_confident_confirmed_track_per_lab
     assert seen > 0
 
 
+def test_each_tracks_existence_travels_in_its_companion_message(data_runs):
+    """radar_msgs has no field for a track's existence: /uav_i/radar_tracks/existence
+    carries it, a float32 per track in the order of the tracks, at the same stamp."""
+    scenario, result, path = data_runs["tracked"]
+    trace = result.trace
+    assert scenario.tracker.confirmation == "existence"
+    tracks = dict(messages(path, "/uav_0/radar_tracks"))
+    companion = messages(path, "/uav_0/radar_tracks/existence")
+    assert len(companion) == len(tracks) == trace.alive[:, 0].sum()
+    for t, msg in companion:
+        k = t // 500_000_000
+        confirmed = trace.status[k, 0] == 2
+        assert msg.layout.dim[0].label == "tracks" and msg.layout.dim[0].size == confirmed.sum()
+        assert len(msg.data) == len(tracks[t].tracks)
+        np.testing.assert_array_equal(msg.data, trace.existence[k, 0][confirmed].astype(np.float32))
+        assert (msg.data > scenario.tracker.existence[1]).all()  # confirmed: not yet deleted
+    assert len(messages(path, "/team/radar_tracks/existence")) == trace.alive.shape[0]
+
+
 def rotation(q) -> np.ndarray:
     """The rotation matrix of a unit quaternion (body to map)."""
     w, x, y, z = q.w, q.x, q.y, q.z

@@ -8,9 +8,9 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import replay
 from uavtrack.agents import run_swarm
 from uavtrack.errors import UsageError
+from uavtrack.io import replay
 
 from .test_replay import DECIDED, REALISTIC, same
 

@@ -1,4 +1,4 @@
-"""Recorded scans in (`uavtrack.replay`, `uavtrack replay`): a replay of a run's own scans
+"""Recorded scans in (`uavtrack.io.replay`, `uavtrack replay`): a replay of a run's own scans
 is that run, a hand-made recording with clutter and misses is tracked, bad input is one
 line."""
 
@@ -6,7 +6,8 @@ import numpy as np
 import pytest
 
 import uavtrack
-from uavtrack import cli, replay, sensing
+from uavtrack import cli, sensing
+from uavtrack.io import replay
 from uavtrack.io import trace as trace_file
 
 pd = pytest.importorskip("pandas")
@@ -14,7 +15,7 @@ pytest.importorskip("pyarrow")
 from uavtrack.io import recording  # noqa: E402
 
 REALISTIC = uavtrack.Scenario.from_toml("realistic")
-DECIDED = ("label", "status", "mean", "cov", "assignment", "bids", "action", "rounds",
+DECIDED = ("label", "status", "existence", "mean", "cov", "assignment", "bids", "action", "rounds",
            "messages", "delivered", "bytes", "node_bytes", "conflicts")  # fmt: skip
 
 

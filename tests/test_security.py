@@ -320,6 +320,49 @@ def test_a_report_the_run_cannot_fly_is_refused(change, reason):
     assert spec().report(report(**change)) == reason
 
 
+def test_a_tracked_report_carries_existence_in_zero_to_one():
+    s = Spec(n=3, m=2, programs=3, actions=3, rounds=6, behind=1, slots=3, labels=50)
+    tracked = dict(
+        mean=Array.of(np.zeros((3, 4))),
+        cov=Array.of(np.broadcast_to(np.eye(4), (3, 4, 4))),
+        bids=Array.of(np.array([0.5, np.nan, np.nan])),
+        target=7,
+        label=Array.of(np.array([7, 9, -1])),
+        status=Array.of(np.array([2, 1, 0])),
+        existence=Array.of(np.array([0.97, 0.4, 0.0])),
+    )
+    assert isinstance(s.report(report(**tracked)), dict)
+    for bad, reason in [
+        (np.array([1.5, 0.4, 0.0]), "probability out of range"),
+        (np.array([0.9, -0.1, 0.0]), "probability out of range"),
+        (np.array([np.nan, 0.4, 0.0]), "not finite"),
+        (np.array([0.9, 0.4]), "wrong shape or type"),
+    ]:
+        assert s.report(report(**{**tracked, "existence": Array.of(bad)})) == reason
+    assert s.report(report(**{**tracked, "existence": None})) == "unexpected fields"
+
+
+def test_a_download_whose_existence_is_no_probability_is_refused():
+    """The central node's tracks carry each slot's existence (tracker.confirmation
+    existence): a UAV adopts them whole, so one outside [0, 1] is refused at the door."""
+    s = Spec(n=3, m=2, programs=4, actions=3, rounds=6, behind=1, slots=3, labels=50,
+             book=("existence",))  # fmt: skip
+    counts = {name: np.array([3, 1, 0]) for name in ("hits", "scans", "misses")}
+    content = dict(
+        mean=np.zeros((3, 4)), cov=np.broadcast_to(np.eye(4), (3, 4, 4)),
+        label=np.array([7, 9, -1]), status=np.array([2, 1, 0]), stamp=np.array([0, 0, 0]),
+        **counts, serial=np.array(4), target=np.array(7), existence=np.array([0.97, 0.4, 0.0]),
+    )  # fmt: skip
+
+    def download(**change):
+        wire = {k: Array.of(v) for k, v in {**content, **change}.items()}
+        return s.radio(radio([Part("download", 0, -1, wire)], sender=3), 0)
+
+    assert isinstance(download(), list)
+    assert download(existence=np.array([2.0, 0.4, 0.0])) == "probability out of range"
+    assert download(existence=np.array([0.9, -1.0, 0.0])) == "probability out of range"
+
+
 def test_a_sense_of_another_uav_or_of_the_wrong_shape_is_refused():
     s = spec()
 

@@ -50,9 +50,8 @@ def test_the_tables_of_a_tracked_run_hold_its_tracks_and_measurements(tmp_path, 
     assert cli.main(["export", str(path), "--out", str(out)]) == 0
     assert "tracks" in capsys.readouterr().out
     names = sorted(p.name for p in out.iterdir())
-    assert names == sorted(
-        f"{n}.parquet" for n in ("steps", "uavs", "targets", "tracks", "measurements")
-    )  # no pairs: a slot is no target
+    tables = ("steps", "uavs", "targets", "tracks", "measurements", "briefing")
+    assert names == sorted([f"{n}.parquet" for n in tables] + ["scenario.toml"])  # no pairs
     tracks = pd.read_parquet(out / "tracks.parquet")
     held = (trace.status > 0) & trace.alive[..., None]
     assert len(tracks) == int(held.sum()) > 0

@@ -460,7 +460,7 @@ class Radio:
 # the encoder, another a swarm's bytes against `uavtrack run`'s). The transport's own
 # framing (Zenoh's headers and key) is not counted.
 
-WIRE_VERSION = 8
+WIRE_VERSION = 9
 """Schema version of the agent form's messages (`agents.messages.VERSION`)."""
 RUN_CHARS = 12
 """Characters of a run's identifier (a random hex token, `agents.swarm`)."""

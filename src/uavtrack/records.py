@@ -160,6 +160,8 @@ class Cycle:
     """With unknown association: each slot's team label (Nu, K) (-1: empty)."""
     status: np.ndarray | None = field(default=None, repr=False, compare=False)
     """With unknown association: each slot's status (Nu, K) (`tracks.manage`)."""
+    existence: np.ndarray | None = field(default=None, repr=False, compare=False)
+    """With unknown association: each slot's probability of existence (Nu, K)."""
     scan: scans.Scan | None = field(default=None, repr=False, compare=False)
     """With unknown association: each UAV's scan."""
     confidence: np.ndarray | None = field(default=None, repr=False, compare=False)
@@ -173,6 +175,12 @@ RECORDED = tuple(f for f in fields(Cycle) if "shape" in f.metadata)
 TRACKED: dict[str, tuple[str, str, type]] = {
     "label": ("(Nu, K)", "team label of each track slot (-1: empty)", np.int64),
     "status": ("(Nu, K)", "its status: 0 empty, 1 tentative, 2 confirmed", np.int8),
+    "existence": (
+        "(Nu, K)",
+        "its probability of existence (0: an empty slot; with tracker.confirmation = m_of_n "
+        "carried but not what confirms it)",
+        np.float64,
+    ),
     "scan_polar": (
         "(Nu, Z, 2)",
         "each UAV's measurements of the scan, range [m] and bearing [rad], in the order the "

@@ -384,7 +384,7 @@ def decided(
     links: network.Links | None = None,
 ) -> Pending:
     """`decide` from what the sensors gave (`Sensed`): the local filters, fusion,
-    planning and assignment. A replay of recorded scans (`uavtrack.replay`) enters
+    planning and assignment. A replay of recorded scans (`uavtrack.io.replay`) enters
     here with its own scans and, if it has one, its radio graph `links` (None: UAVs
     within r_C of each other's true positions, `state.uavs`)."""
     scenario, method, associator = ctx.scenario, ctx.method, ctx.associator
@@ -832,6 +832,9 @@ def finish(
         status=None
         if tracks is None
         else np.where(alive[..., None], tracks.book.status, 0).astype(np.int8),
+        existence=None
+        if tracks is None
+        else np.where(alive[..., None] & tracks.book.present, tracks.book.existence, 0.0),
         scan=pending.scan,
     )
     predicted = ctx.associator.close(state, pending, ctx)
@@ -1164,10 +1167,12 @@ class Recorder:
             array[:, k] = getattr(cycle, name)
         if cycle.label is not None and cycle.status is not None and cycle.scan is not None:
             scan = cycle.scan
+            assert cycle.existence is not None, "a cycle of tracks records their existence"
             self.tracked.append(
                 {
                     "label": cycle.label,
                     "status": cycle.status,
+                    "existence": cycle.existence,
                     "scan_polar": scan.polar,
                     "scan_z": scan.z,
                     "scan_valid": scan.valid,

@@ -162,6 +162,7 @@ class Report(msgspec.Struct, tag="report", frozen=True, kw_only=True):
     radio_bytes: int = 0  # the frames it sent to other programs this cycle, on the wire
     label: Array | None = None  # with unknown association: each slot's team label
     status: Array | None = None  # and its status (0 empty, 1 tentative, 2 confirmed)
+    existence: Array | None = None  # and its probability of existence (0: empty)
 
 
 class Lost(msgspec.Struct, tag="lost", frozen=True, kw_only=True):
@@ -691,6 +692,7 @@ class Spec:
                 "bids": (F, (K,), "slot bids"),
                 "label": (I, (K,), "label or none"),
                 "status": (I, (K,), "track status"),
+                "existence": (F, (K,), "existence"),
             }
         wire = {name: getattr(message, name) for name in kinds}
         if any(value is None for value in wire.values()):
@@ -726,7 +728,7 @@ def _implausible(
 TRACK_DOMAINS = frozenset(
     ("track status", "label or none", "bid labels", "track covariance", "track stamp")
     + ("tombstones", "slot bids", "track estimate", "measurement covariance", "counts")
-    + ("ground positions", "slots", "team label")
+    + ("ground positions", "slots", "team label", "existence")
 )
 
 

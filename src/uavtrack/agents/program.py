@@ -211,9 +211,11 @@ def _cycles(transport, link, mailbox, program, node, run, me, n, programs, centr
             bank = program.ctx.const.actions[report.action % 3]  # (uav.min_speed: 3 to 5 slow)
             slots = [None if a is None else a.array() for a in (report.label, report.status)]
             scan = getattr(program, "scan", None)  # with tracks: this cycle's, on the ground
+            existence = None if report.existence is None else report.existence.array()
             node.publish(
-                k, program.believed, bank, report.mean.array(), report.cov.array(), *slots, scan
-            )
+                k, program.believed, bank, report.mean.array(), report.cov.array(), *slots, scan,
+                existence,
+            )  # fmt: skip
         ran += 1
     if node is not None:  # no more topics (failed, world gone, done): leave the ROS 2 graph
         if end != "done":  # its tracks go from the view before its run's end

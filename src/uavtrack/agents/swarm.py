@@ -34,11 +34,11 @@ import numpy as np
 
 from ..config import Scenario, ScenarioError
 from ..errors import RunError, UsageError, install_hint
+from ..io.replay import Recording, scenario_for
+from ..io.replay import result_of as replay_result
 from ..methods import get
 from ..radio import RUN_CHARS
 from ..records import Result
-from ..replay import Recording, scenario_for
-from ..replay import result_of as replay_result
 from ..simulation import result_of
 from .agent import check_method
 from .launcher import Forked, Launcher

@@ -128,6 +128,7 @@ class TrackedUav(UavAgent):
             radio_bytes=self.radio.bytes,
             label=packed({"x": labels})["x"],
             status=packed({"x": book.status[0, 0].astype(np.int64)})["x"],
+            existence=packed({"x": np.where(book.present, book.existence, 0.0)[0, 0]})["x"],
         )  # fmt: skip
 
     def _central_cycle(self, k: int, z: np.ndarray, R: np.ndarray) -> Report:

@@ -35,13 +35,14 @@ from typing import Any
 
 import numpy as np
 
-from .. import records, replay, simulation, world
+from .. import records, simulation, world
 from ..config import Scenario
 from ..faults import PROTOCOLS
 from ..flight.unicycle import Unicycle
+from ..io import replay
+from ..io.replay import Recording
 from ..methods import get
 from ..radio import Budget
-from ..replay import Recording
 from ..tracks import columns
 from ..tracks.team import CONFIRMED
 from .messages import VERSION, Array, Hello, Lost, Sense, Spec, Tick
@@ -457,6 +458,7 @@ class WorldProgram:
         bids = np.full((1, Nu, K), np.nan)
         label = np.full((1, Nu, K), -1, dtype=np.int64)
         status = np.zeros((1, Nu, K), dtype=np.int8)
+        existence = np.zeros((1, Nu, K))
         target = np.full((1, Nu), -1, dtype=np.int64)
         actions = np.full((1, Nu), simulation.STRAIGHT, dtype=np.int64)
         rounds = np.zeros((1, Nu), dtype=np.int64)
@@ -479,6 +481,7 @@ class WorldProgram:
             mean[0, i], cov[0, i], bids[0, i] = arrays["mean"], arrays["cov"], arrays["bids"]
             if scan is not None:
                 label[0, i], status[0, i] = arrays["label"], arrays["status"]
+                existence[0, i] = arrays["existence"]
             target[0, i], actions[0, i] = report.target, report.action
             rounds[0, i], decision[0, i] = report.rounds, report.decision_ms
             wall[0, i] = report.decision_wall_ms
@@ -502,6 +505,7 @@ class WorldProgram:
             decision_wall_ms=wall,
             label=label if scan is not None else None,
             status=status if scan is not None else None,
+            existence=existence if scan is not None else None,
             scan=scan,
         )
         return cycle, actions

@@ -5,7 +5,6 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Annotated
 
-import numpy as np
 import typer
 
 from .._files import check_distinct, check_new_folder, check_output, new_folder
@@ -70,7 +69,7 @@ def replay(
     The scenario is --config, else the folder's scenario.toml, else the defaults; the
     recording sets the team, the steps and the briefing. --seed draws the radio's faults.
     """
-    from ..replay import replay as run_replay
+    from ..io.replay import replay as run_replay
 
     source = source.expanduser()
     check_distinct({"--trace": trace, "--tables": tables, "--bag": bag})
@@ -84,6 +83,8 @@ def replay(
         result = run_replay(record, scenario, method.value, seed, progress=lambda _: advance(1))
     if tables is not None:
         _write_tables(result, tables)
+    import numpy as np  # not at import: a command's help loads no numpy
+
     assert result.trace is not None
     label, status = result.trace.label, result.trace.status
     confirmed = (status == 2).sum(axis=-1).mean()
@@ -111,7 +112,7 @@ def recorded(source: Path, config: Path | None, set_: list[str] | None, option: 
         from ..io import recording
     except ImportError as exc:
         raise UsageError(f"{option}: {exc}") from None
-    from ..replay import scenario_for
+    from ..io.replay import scenario_for
 
     source = source.expanduser()
     if not source.is_dir():

@@ -1,6 +1,8 @@
 """Outside formats: the trace file (`trace`), tidy tables and xarray (`tables`, the io
 extra), a results folder's job files (`results`), Stone Soup's types (`stonesoup`), ROS 2
-bags and topics (`bag`, `ros2`), and the decision as MAVLink setpoints (`mavlink`).
+bags and topics (`bag`, `ros2`), and the decision as MAVLink setpoints (`mavlink`); and
+recorded scans in: a recording's tables or bag (`recording`, the io extra) and the cycle
+run on it (`replay`).
 
 Each conversion takes a trial in one call, as ``xarray.open_dataset`` takes a file: the
 path of a trace file (``uavtrack run --trace run.npz``), a `Result` with a trace
@@ -12,6 +14,7 @@ path of a trace file (``uavtrack run --trace run.npz``), a `Result` with a trace
     truths, tracks = uavtrack.io.to_stonesoup("run.npz")   # Stone Soup's types
     scans = uavtrack.io.to_detections("run.npz")       # a run of tracks' detections
     saved = uavtrack.io.read("run.npz")                # the arrays, scenario, method, seed
+    rec = uavtrack.io.read_recording("rec", scenario)   # recorded scans (uavtrack replay)
 
 They are imported when first used, so ``import uavtrack.io`` needs no optional extra.
 """
@@ -28,6 +31,7 @@ _WHERE = {
     "results_frame": "tables",
     "to_stonesoup": "stonesoup",
     "to_detections": "stonesoup",
+    "read_recording": "recording",
 }
 
 __all__ = sorted(_WHERE)

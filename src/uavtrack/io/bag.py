@@ -36,7 +36,9 @@ A run of tracks (``tracker.association`` gnn or jpda) has no estimate per target
   label, ns ``confirmed`` or ``tentative``, blue or grey) and a text marker (ns
   ``label``, id = the label, text ``L<label>``) above it;
 * ``/uav_i/radar_scan`` radar_msgs/msg/RadarScan, the same as data in the UAV's frame
-  (`ros2.radar_scan_of`), and ``/uav_i/radar_tracks`` its confirmed tracks;
+  (`ros2.radar_scan_of`), and ``/uav_i/radar_tracks`` its confirmed tracks, with
+  ``/uav_i/radar_tracks/existence`` (std_msgs/msg/Float32MultiArray, `ros2.EXISTENCE`)
+  each one's probability of existence, as ``/team/radar_tracks/existence`` the team's;
 * ``/uav_i/scan`` MarkerArray, each living UAV's measurements of the step at their
   ground positions: two sphere lists, ns ``detections`` (red) and ``clutter`` (grey),
   split by the origin the simulator knows (for evaluation: a UAV does not);
@@ -78,6 +80,7 @@ from .ros2 import (
     delete_all,
     ellipse_marker,
     estimate_of,
+    existence_of,
     fix_of,
     header_of,
     lifetime_of,
@@ -208,6 +211,8 @@ def _radar(ns: int, write, trace, k: int, nav, best, best_mean, best_cov) -> Non
         own = np.flatnonzero(confirmed[i])
         tracks = radar_tracks_of(header, label[i, own], mean[i, own], cov[i, own])
         write(f"/uav_{i}/radar_tracks", tracks, ns)
+        if trace.existence is not None:  # its companion: a trace of format 4 has it
+            write(f"/uav_{i}/radar_tracks/existence", existence_of(trace.existence[k, i, own]), ns)
         valid = trace.scan_valid[k, i]
         scan = radar_scan_of(
             header_of(ns, f"uav_{i}"), nav[k, i], trace.action[k, i], trace.scan_z[k, i][valid],
@@ -222,6 +227,8 @@ def _radar(ns: int, write, trace, k: int, nav, best, best_mean, best_cov) -> Non
     uav, slot = at[0, held[0]].astype(int).T
     team = radar_tracks_of(header, picked[0, held[0]], mean[uav, slot], cov[uav, slot])
     write("/team/radar_tracks", team, ns)
+    if trace.existence is not None:
+        write("/team/radar_tracks/existence", existence_of(trace.existence[k, uav, slot]), ns)
 
 
 def _estimates(m: Markers, ns: int, write, trace, k: int, best, best_mean, best_cov):

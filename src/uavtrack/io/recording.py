@@ -52,11 +52,13 @@ except ImportError as exc:  # an optional extra
     raise ImportError(f"uavtrack.io.recording needs pandas: {install_hint('io')} ({exc})") from None
 
 from ..config import Scenario
-from ..replay import Recording
 from ..simulation import convert
 from ..tracks import scan as scans
+from .replay import Recording
 
-__all__ = ["STATE", "TABLES", "from_bag", "is_bag", "read", "scenario_in", "table_path"]
+__all__ = [
+    "STATE", "TABLES", "from_bag", "is_bag", "read", "read_recording", "scenario_in", "table_path",
+]  # fmt: skip
 
 TABLES = ("uavs", "measurements", "links", "briefing", "targets")
 """The tables of a recording, the first two required."""
@@ -99,6 +101,10 @@ def read(folder: str | Path, scenario: Scenario) -> Recording:
     assert uavs is not None and measured is not None
     return _recording(uavs, measured, frames["links"], frames["briefing"], frames["targets"],
                       scenario, str(folder))  # fmt: skip
+
+
+read_recording = read
+"""`read`, as `uavtrack.io` names it beside the trace's `read`."""
 
 
 def _recording(

@@ -69,6 +69,10 @@ TF = "tf2_msgs/msg/TFMessage"
 MARKERS = "visualization_msgs/msg/MarkerArray"
 RADAR_TRACKS = "radar_msgs/msg/RadarTracks"
 RADAR_SCAN = "radar_msgs/msg/RadarScan"
+EXISTENCE = "std_msgs/msg/Float32MultiArray"
+"""The companion of a RadarTracks message, which has no field for it: on the topic
+``<tracks topic>/existence`` at the same stamp, each track's probability of existence in
+the order of its ``tracks`` (`existence_of`)."""
 ODOMETRY = "nav_msgs/msg/Odometry"
 FIX = "sensor_msgs/msg/NavSatFix"
 FRAME = "map"
@@ -279,7 +283,8 @@ class UavNode(Node):
     bag: ``/uav_<i>/odom`` (Odometry, `odometry_of`, with the GPS error's `variance`),
     ``/uav_<i>/fix`` (NavSatFix around latitude and longitude 0), ``/uav_<i>/radar_tracks``
     (RadarTracks, `radar_tracks_of`) and with tracks ``/uav_<i>/radar_scan`` (RadarScan,
-    `radar_scan_of`). Everything from what the UAV believes: its navigation's state."""
+    `radar_scan_of`) and ``/uav_<i>/radar_tracks/existence`` (`EXISTENCE`). Everything
+    from what the UAV believes: its navigation's state."""
 
     def __init__(
         self, session, domain: int, uav: int, n_targets: int, dt: float, tracks: bool = False,
@@ -290,6 +295,7 @@ class UavNode(Node):
         topics[f"{me}/radar_tracks"] = RADAR_TRACKS
         if tracks:
             topics.update({f"{me}/tracks": MARKERS, f"{me}/radar_scan": RADAR_SCAN})
+            topics[f"{me}/radar_tracks/existence"] = EXISTENCE
         else:
             topics.update({f"{me}/target_{j}/estimate": ESTIMATE for j in range(n_targets)})
         super().__init__(session, domain, uav, "/uavtrack", f"uav_{uav}", topics)
@@ -306,12 +312,12 @@ class UavNode(Node):
 
     def publish(
         self, k: int, uav: np.ndarray, bank: float, mean, cov, label=None, status=None,
-        scan: np.ndarray | None = None,
+        scan: np.ndarray | None = None, existence: np.ndarray | None = None,
     ) -> None:  # fmt: skip
         """Step k: the UAV's state (x, y, h, V, heading), the bank angle it flies
         (eq. 1, positive left) and its estimates (Nt, 4), covariances (Nt, 4, 4); with
-        tracks, its slots' (K, ...) with their labels and status (K,) and its scan's
-        ground positions (Z, 2)."""
+        tracks, its slots' (K, ...) with their labels, status and existence (K,) and its
+        scan's ground positions (Z, 2)."""
         T = store().types
         ns = sim_ns(k, self.dt)
         header = header_of(ns)
@@ -330,6 +336,8 @@ class UavNode(Node):
             own = np.flatnonzero(np.asarray(status) == CONFIRMED)
             tracks = radar_tracks_of(header, np.asarray(label)[own], mean[own], cov[own])
             self.put(f"{me}/radar_tracks", tracks)
+            if existence is not None:
+                self.put(f"{me}/radar_tracks/existence", existence_of(np.asarray(existence)[own]))
             ground = np.zeros((0, 2)) if scan is None else scan
             self.put(f"{me}/radar_scan", radar_scan_of(header_of(ns, child), uav, bank, ground))
             self.last = k
@@ -441,6 +449,16 @@ def _body(uav: np.ndarray, bank: float) -> np.ndarray:
 def _upper(P: np.ndarray) -> np.ndarray:
     """A ground block P (2, 2) as radar_msgs' upper triangle of x, y, z (z known: 0)."""
     return np.array([P[0, 0], P[0, 1], 0.0, P[1, 1], 0.0, 0.0], dtype=np.float32)
+
+
+def existence_of(values: np.ndarray):
+    """A std_msgs/Float32MultiArray of the tracks' existence probabilities (n,), one
+    dimension labelled ``tracks`` (`EXISTENCE`)."""
+    T = store().types
+    n = len(values)
+    dim = T["std_msgs/msg/MultiArrayDimension"](label="tracks", size=n, stride=n)
+    layout = T["std_msgs/msg/MultiArrayLayout"](dim=[dim], data_offset=0)
+    return T[EXISTENCE](layout=layout, data=np.asarray(values, dtype=np.float32))
 
 
 def radar_tracks_of(header, labels, mean: np.ndarray, cov: np.ndarray):

@@ -25,7 +25,8 @@ is no target), ``uavs``' assignment is the team label of the UAV's track, and tw
 come instead (`TRACK_TABLES`):
 
 * ``tracks``: step, UAV and slot holding a track (tentative or confirmed) of a living UAV:
-  its team label, status (``tentative``, ``confirmed``), bid (NaN unless confirmed), the
+  its team label, status (``tentative``, ``confirmed``), existence (its probability;
+  from trace format 4), bid (NaN unless confirmed), the
   estimate (est_x ... est_vy) and its covariance's 10 entries, as in ``pairs``;
 * ``measurements``: one row per measurement of a scan: step, UAV, index (its place in the
   UAV's scan), range [m], bearing [rad], x, y (its conversion to the ground [m]), origin
@@ -227,6 +228,8 @@ def _track_variables(variables: dict[str, Any], trace: Trace, sus: tuple[str, ..
     """The variables of `records.TRACKED`: labels and statuses per slot, the scans."""
     variables["label"] = (sus, trace.label, {"long_name": TRACKED["label"][1]})
     variables["status"] = (sus, trace.status, {"long_name": TRACKED["status"][1]})
+    if trace.existence is not None:  # from trace format 4
+        variables["existence"] = (sus, trace.existence, {"long_name": TRACKED["existence"][1]})
     sum_ = ("step", "uav", "measurement")
     for c, (name, units) in enumerate((("range", "m"), ("bearing", "rad"))):
         variables[f"scan_{name}"] = (
@@ -346,6 +349,8 @@ def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
     rows = {"step": k, "time": time[k], "uav": i, "slot": s, "label": trace.label[held]}
     names = np.array([STATUS_NAMES[code] for code in range(len(STATUS_NAMES))])
     rows["status"] = names[trace.status[held]]
+    if trace.existence is not None:  # from trace format 4
+        rows["existence"] = trace.existence[held]
     rows["bid"] = trace.bids[held]
     rows.update(_estimates(trace.mean[held], trace.cov[held]))
     return pd.DataFrame(rows)

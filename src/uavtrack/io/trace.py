@@ -13,6 +13,7 @@ was stamped, whose layout is format 1) is read whatever uavtrack version wrote i
 that version differs from the running one, `read` says so with a `TraceVersionWarning`
 (the command line prints it as a note). Format 1 has no ``late`` (messages that missed
 their cycle, counted from format 2): it is read as zeros, as those versions counted none.
+A trace of tracks older than format 4 has no ``existence``: it is read as None.
 A file of a newer format is refused, naming both versions.
 """
 
@@ -34,10 +35,11 @@ from ..config import Scenario, ScenarioError
 from ..errors import UsageError
 from ..records import RECORDED, TRACKED, Result, Trace
 
-FORMAT = 3
+FORMAT = 4
 """The trace format this uavtrack writes and reads. It changes only when an array is
 added, removed or changes meaning; uavtrack versions that write the same format read
-each other's traces. Format 2 added ``late``, format 3 ``bytes`` and ``node_bytes``."""
+each other's traces. Format 2 added ``late``, format 3 ``bytes`` and ``node_bytes``,
+format 4 ``existence`` (with tracks; an older trace of tracks has none)."""
 
 ADDED = {"late": 2, "bytes": 3, "node_bytes": 3}
 """Arrays added after format 1, with the format that added them: a file of an older
@@ -207,7 +209,7 @@ def _check_headers(
             raise UsageError(f"{path}: {name} holds {dtype}, not numbers")
         if name in TRACKED:  # (T, Nu, K) or (T, Nu, Z, ...) with Z at most a scan's
             lead, width = shape[:2], shape[2] if len(shape) > 2 else 0
-            most = sizes["K"] if name in ("label", "status") else scans
+            most = sizes["K"] if name in ("label", "status", "existence") else scans
             if lead != (steps, scenario.n_uavs) or width > most:
                 raise UsageError(
                     f"{path}: its arrays disagree: {name} is {shape}, beyond its scenario's "

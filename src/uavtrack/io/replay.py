@@ -9,7 +9,8 @@ graph (given, or from the sensors' positions and r_C), and the planner and assig
 on the tracks, as the team would decide. A replay of a simulated run's own scans gives
 that run's tracks, labels and assignments exactly (`of_trace`).
 
-The tables that hold a recording on disk are read by `uavtrack.io.recording`.
+The tables and bags that hold a recording on disk are read by `io.recording`; this
+module needs numpy alone.
 """
 
 # pyright: reportUnknownMemberType=false, reportUnknownArgumentType=false
@@ -22,11 +23,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from . import network, sensing, simulation, world
-from .config import Scenario, ScenarioError
-from .methods import Method, get
-from .records import BatchResult, Result, State, Trace
-from .tracks import scan as scans
+from .. import network, sensing, simulation, world
+from ..config import Scenario, ScenarioError
+from ..methods import Method, get
+from ..records import BatchResult, Result, State, Trace
+from ..tracks import scan as scans
 
 __all__ = ["REFUSED", "TRUTHLESS", "Recording", "of_trace", "replay", "scenario_for"]
 
