@@ -234,6 +234,7 @@ def test_the_world_cut_from_half_the_swarm_for_5_s_loses_nobody(network, tmp_pat
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # 14 s; the cuts of 5 s above run by default
 def test_a_link_flapping_every_second_loses_nobody_silently(network, tmp_path):
     # ten flaps (10 s) mid-run: on an idle machine nobody is lost; on a loaded one TCP's
     # backed-off retransmissions can keep the flapping host silent past the lease, and the

@@ -28,6 +28,7 @@ def test_separation_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, a
 
 
 @pytest.mark.integration  # JSBSim aircraft and worker processes
+@pytest.mark.slow  # 25 s, most of it JSBSim's 20 x 16 teams; its refusals run by default
 def test_uavtrack_separation_writes_its_tables_and_figure_and_resumes(tmp_path, capsys):
     from PIL import Image
 
