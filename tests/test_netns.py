@@ -226,6 +226,7 @@ def test_one_uav_cut_for_5_s_stays_a_member_and_the_run_ends(network, tmp_path):
 
 
 @pytest.mark.integration
+@pytest.mark.slow  # 20 s; one UAV cut for 5 s runs by default
 def test_the_world_cut_from_half_the_swarm_for_5_s_loses_nobody(network, tmp_path):
     steps = 20
     act = cut_for([host(1), host(2)], between=0)  # the world's host from UAVs 1 and 2
