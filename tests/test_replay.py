@@ -203,6 +203,11 @@ def test_bad_recordings_are_one_line_and_write_nothing(tmp_path, capsys):
         return path
 
     off_grid = good["uavs"].assign(time=good["uavs"]["time"] + 0.1 * (good["uavs"]["uav"] == 2))
+    far = good["uavs"].assign(x=good["uavs"]["x"] + 5000.0)  # other coordinates
+    both = good["measurements"].assign(range=400.0, bearing=0.1)
+    stalled = good["uavs"].assign(speed=np.where(good["uavs"]["uav"] == 1, 0.0, 15.0))
+    stepped = good["uavs"].assign(step=(good["uavs"]["time"] / 0.5).round().astype(int))
+    stepped.loc[4, "step"] += 1  # one row's step and time disagree
     ghost = pd.concat([good["measurements"], good["measurements"].iloc[:1].assign(uav=7)])
     bad_r = good["measurements"].assign(R_x_y=5.0)
     cases = [
@@ -213,6 +218,10 @@ def test_bad_recordings_are_one_line_and_write_nothing(tmp_path, capsys):
         ((folder("bad_r", measurements=bad_r),), "not symmetric positive definite"),
         ((folder("no_cols", measurements=good["measurements"].drop(columns="R_y_y")),),
          "give x, y with R_x_x"),
+        ((folder("far", uavs=far),), "outside the scenario's field (0 to 200 m"),
+        ((folder("both", measurements=both),), "not both"),
+        ((folder("stalled", uavs=stalled),), "speed must be above 0"),
+        ((folder("stepped", uavs=stepped),), "disagree"),
         ((tmp_path / "good", "--set", "tracker.association='known'"), "gnn or jpda"),
         ((tmp_path / "good", "--set", "faults.position_std=2"), "faults.position_std"),
     ]  # fmt: skip
@@ -252,3 +261,22 @@ def test_a_bag_of_odometry_and_radar_scans_replays_close_to_the_run(tmp_path, ca
     assert scored.label_purity == pytest.approx(run.label_purity, abs=0.005)
     code, out, err = run_cli(capsys, "replay", bag, "--config", "realistic", "--seed", 1)
     assert code == 0 and "5 sensors, 100 steps" in out, err
+
+
+def test_a_sensor_whose_rows_stop_has_failed_and_replays_as_the_run(tmp_path, capsys):
+    """A UAV that fails mid-run: the export's scenario leaves the failures to its alive
+    column, and with its rows cut after it failed (it stays at its last pose) its team
+    tracks as the run's did."""
+    run, tables = tmp_path / "run.npz", tmp_path / "rec"
+    code, _, err = run_cli(capsys, "run", "--config", "realistic", "--steps", 30, "--seed", 2,
+                           "--set", "faults.failures=[[2, 12]]", "--trace", run)  # fmt: skip
+    assert code == 0, err
+    code, out, err = run_cli(capsys, "export", run, "--out", tables)
+    assert code == 0 and "--seed 2\n" in out + "\n", err
+    uavs = pd.read_parquet(tables / "uavs.parquet")
+    uavs[(uavs["uav"] != 2) | (uavs["step"] < 12)].to_parquet(tables / "uavs.parquet")
+    played = tmp_path / "played.npz"
+    code, _, err = run_cli(capsys, "replay", tables, "--seed", 2, "--trace", played)
+    assert code == 0, err
+    fields = DECIDED + ("alive",)
+    assert same(trace_file.read(run).trace, trace_file.read(played).trace, fields) == []

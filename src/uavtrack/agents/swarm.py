@@ -35,6 +35,7 @@ import numpy as np
 from ..config import Scenario, ScenarioError
 from ..errors import RunError, UsageError, install_hint
 from ..io.replay import Recording, scenario_for
+from ..io.replay import briefing as replay_briefing
 from ..io.replay import result_of as replay_result
 from ..methods import get
 from ..radio import RUN_CHARS
@@ -184,6 +185,10 @@ def run_swarm(
         try:
             scenario = scenario_for(recording, scenario)
         except ScenarioError as exc:
+            raise UsageError(str(exc)) from None
+        try:  # the programs' Hello carries one briefing covariance
+            replay_briefing(recording, scenario)
+        except ValueError as exc:
             raise UsageError(str(exc)) from None
         if not np.isfinite(recording.polar[recording.valid]).all():
             raise UsageError(

@@ -104,14 +104,28 @@ def export(
             folder.mkdir()
             for name, frame in frames.items():
                 tables.write_table(frame, folder / f"{name}.{format_.value}", format_.value)
-            (folder / "scenario.toml").write_text(saved.scenario.to_toml(), encoding="utf-8")
+            (folder / "scenario.toml").write_text(_replayed(saved.scenario), encoding="utf-8")
     except OSError as exc:
         raise RunError(f"cannot write the tables {out}: {exc.strerror or exc}") from None
     rows = ", ".join(f"{name} {len(frame)}" for name, frame in frames.items())
     typer.echo(f"{source} written to {out}/ ({format_.value}; rows: {rows})")
     if "measurements" in frames:  # a recording of scans
         seed = "" if saved.seed is None else f" --seed {saved.seed}"
-        typer.echo(f"its scans replay with: uavtrack replay {out} --method {saved.method}{seed}")
+        command = f"uavtrack replay {out} --method {saved.method}{seed}"
+        if saved.scenario.faults.position_std > 0:
+            typer.echo("its scans do not replay: the tables hold the UAVs' true positions, and "
+                       "its UAVs converted their scans from where GPS error put them")  # fmt: skip
+        elif saved.scenario.tracker.briefing and "briefing" not in frames:
+            typer.echo(f"its scans replay with: {command} (no briefing: the trace lacks the "
+                       "seed it was drawn from, so the team starts with no track)")  # fmt: skip
+        else:
+            typer.echo(f"its scans replay with: {command}")
+
+
+def _replayed(scenario) -> str:
+    """The scenario of an export's replay as TOML: the failures of the fault model left
+    out, as the tables' alive column holds them."""
+    return scenario.with_overrides({"faults.failure_rate": 0.0, "faults.failures": []}).to_toml()
 
 
 def _read(source: Path):

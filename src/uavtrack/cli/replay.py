@@ -58,7 +58,7 @@ def replay(
             "--tables",
             metavar="FOLDER",
             help="write the tracks and the rest of the trace as Parquet tables to a new FOLDER "
-            "(as uavtrack export)",
+            "(as uavtrack export: a recording too, with its briefing and scenario.toml)",
         ),
     ] = None,
     bag: BagOpt = None,
@@ -82,7 +82,7 @@ def replay(
     with steps_bar(scenario) as advance:
         result = run_replay(record, scenario, method.value, seed, progress=lambda _: advance(1))
     if tables is not None:
-        _write_tables(result, tables)
+        _write_tables(result, tables, record)
     import numpy as np  # not at import: a command's help loads no numpy
 
     assert result.trace is not None
@@ -134,14 +134,19 @@ def _folder_config(folder: Path) -> Path | None:
     return path if path.is_file() else None
 
 
-def _write_tables(result, out: Path) -> None:
+def _write_tables(result, out: Path, record) -> None:
+    """The replay's tables as `uavtrack export` writes a run's (a recording too: its
+    briefing, the recording's, and its scenario)."""
     from ..io import tables
 
     frames = tables.to_frames(result)
+    if record.prior is not None:
+        frames["briefing"] = tables.briefing_frame(*record.prior)
     try:
         with new_folder(out) as folder:
             folder.mkdir()
             for name, frame in frames.items():
                 tables.write_table(frame, folder / f"{name}.parquet", "parquet")
+            (folder / "scenario.toml").write_text(result.scenario.to_toml(), encoding="utf-8")
     except OSError as exc:
         raise RunError(f"cannot write the tables {out}: {exc.strerror or exc}") from None

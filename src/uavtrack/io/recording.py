@@ -117,8 +117,8 @@ def _recording(
     where: str,
 ) -> Recording:
     """A `Recording` of the module's tables (`where` names their source in errors)."""
-    t0 = _start(uavs)
     dt = scenario.dt
+    t0 = _start(uavs, dt)
     _need(uavs, "uavs", ("uav", "x", "y", "altitude", "heading"))
     if uavs.empty:
         raise UsageError("uavs: no rows; a recording needs the sensors' poses")
@@ -145,15 +145,56 @@ def _recording(
     alive[k, i] = _flags(uavs, "uavs", "alive") if "alive" in uavs else True
     if (poses[k, i, 2] <= 0).any():
         raise UsageError("uavs: altitude must be above 0 m")
+    if (poses[k, i, 3] <= 0).any():
+        raise UsageError("uavs: speed must be above 0 m/s")
+    heading = poses[k, i, 4]
+    poses[k, i, 4] = np.where(
+        np.abs(heading) > np.pi, np.remainder(heading + np.pi, 2 * np.pi) - np.pi, heading
+    )
+    _inside(poses[k, i, :2], "uavs", scenario)
+    poses = _held(poses)
     z, R, valid, polar, origin = _measurements(measured, poses, alive, t0, scenario)
+    truth, prior = _targets(targets, T, t0, dt), _briefing(briefing)
+    if truth is not None:
+        _inside(truth[~np.isnan(truth[..., 0])][:, :2], "targets", scenario)
+    if prior is not None:
+        _inside(prior[0][:, :2], "briefing", scenario)
     try:
         return Recording(
             poses=poses, alive=alive, z=z, R=R, valid=valid, polar=polar, origin=origin,
-            links=_links(links, T, N, t0, dt), prior=_briefing(briefing),
-            targets=_targets(targets, T, t0, dt),
+            links=_links(links, T, N, t0, dt), prior=prior, targets=truth,
         )  # fmt: skip
     except ValueError as exc:
         raise UsageError(f"{where}: {exc}") from None
+
+
+def _held(poses: np.ndarray) -> np.ndarray:
+    """Poses (T, N, 5) with each sensor's last one carried over the steps it has none:
+    a sensor that stopped stays where it was, as a failed UAV stays where it fell."""
+    out = poses.copy()
+    for t in range(1, len(out)):
+        gone = np.isnan(out[t, :, 0])
+        out[t, gone] = out[t - 1, gone]
+    return out
+
+
+SPILL = {"uavs": 1.0, "targets": 0.25, "briefing": 0.25}
+"""How far outside the field a table's positions may lie, as a share of its side: a
+target's no further than the trackers keep a track (`tracks.manage` deletes one a
+quarter of the side out), a sensor's a whole side (it flies beyond the targets)."""
+
+
+def _inside(xy: np.ndarray, table: str, scenario: Scenario) -> None:
+    """Refuse positions (..., 2) beyond the scenario's field plus `SPILL` of its side: a
+    recording in other coordinates would track nothing, and say nothing."""
+    L, spill = scenario.field_size, SPILL[table]
+    out = (xy < -spill * L) | (xy > (1 + spill) * L)
+    if out.any():
+        bad = float(xy[out][0])
+        raise UsageError(
+            f"{table}: a position {bad:g} m lies outside the scenario's field (0 to {L:g} m, "
+            "x and y): set field_size, or shift the coordinates"
+        )
 
 
 def _load(folder: Path, name: str) -> pd.DataFrame | None:
@@ -176,27 +217,42 @@ def _need(frame: pd.DataFrame, table: str, columns: tuple[str, ...]) -> None:
         raise UsageError(f"{table}: no column {', '.join(missing)}")
 
 
-def _start(uavs: pd.DataFrame) -> float:
-    """The time of step 0: the first pose's (0 with step columns)."""
-    if "step" in uavs or "time" not in uavs or uavs.empty:
+def _start(uavs: pd.DataFrame, dt: float) -> float:
+    """The time of step 0: the first pose's, less its steps if it has a step column (0
+    when the poses have no time column)."""
+    if "time" not in uavs or uavs.empty:
         return 0.0
-    return float(_floats(uavs, "uavs", "time").min())
+    t = _floats(uavs, "uavs", "time")
+    if "step" not in uavs:
+        return float(t.min())
+    k = _ids(uavs, "uavs", "step")
+    first = int(np.argmin(k))
+    return float(t[first]) - float(k[first]) * dt
 
 
 def _steps(frame: pd.DataFrame, table: str, t0: float, dt: float) -> np.ndarray:
-    """Each row's step: its ``step``, else its ``time`` on the grid t0 + k dt."""
-    if "step" in frame:
-        return _ids(frame, table, "step")
-    if "time" not in frame:
+    """Each row's step: its ``step``, else its ``time`` on the grid t0 + k dt; with
+    both, they must agree."""
+    if "time" not in frame and "step" not in frame:
         raise UsageError(f"{table}: no column step or time")
-    t = _floats(frame, table, "time")
-    k = np.round((t - t0) / dt)
-    off = np.abs(t - t0 - k * dt) > 1e-6 * dt
-    if off.any() or (k < 0).any():
-        bad = float(t[off | (k < 0)][0])
-        raise UsageError(f"{table}: time {bad:g} s is not on the grid of dt = {dt:g} s from "
-                         f"{t0:g} s (the first pose's time)")  # fmt: skip
-    return k.astype(np.int64)
+    k = _ids(frame, table, "step") if "step" in frame else None
+    if "time" in frame:
+        t = _floats(frame, table, "time")
+        on = np.round((t - t0) / dt)
+        off = np.abs(t - t0 - on * dt) > 1e-6 * dt
+        if off.any() or (on < 0).any():
+            bad = float(t[off | (on < 0)][0])
+            raise UsageError(
+                f"{table}: time {bad:g} s is not on the grid of dt = {dt:g} s from {t0:g} s "
+                "(the first pose's time); set the scenario's dt"
+            )
+        if k is not None and (k != on).any():
+            bad = int(np.flatnonzero(k != on)[0])
+            raise UsageError(f"{table}: step {k[bad]} and time {t[bad]:g} s disagree (dt = "
+                             f"{dt:g} s from {t0:g} s); give one of the two")  # fmt: skip
+        k = on.astype(np.int64) if k is None else k
+    assert k is not None
+    return k
 
 
 def _floats(frame: pd.DataFrame, table: str, column: str, away: bool = False) -> np.ndarray:
@@ -245,14 +301,15 @@ def _measurements(
         raise UsageError(f"{table}: a measurement at step {k[j]} of uav {i[j]}, which does not "
                          "report then (no pose in uavs)")  # fmt: skip
     cartesian = all(c in frame for c in ("R_x_x", "R_x_y", "R_y_y"))
+    if cartesian and "range" in frame and "bearing" in frame:
+        raise UsageError(f"{table}: give x, y with R, or range and bearing, not both (each "
+                         "gives the measurement and its covariance)")  # fmt: skip
     polar = np.full((len(frame), 2), np.nan)
     if cartesian:
         _need(frame, table, ("x", "y"))
         z = np.stack([_floats(frame, table, "x"), _floats(frame, table, "y")], axis=-1)
         xx, xy, yy = (_floats(frame, table, c) for c in ("R_x_x", "R_x_y", "R_y_y"))
         R = np.stack([np.stack([xx, xy], -1), np.stack([xy, yy], -1)], -2)
-        if "range" in frame and "bearing" in frame:
-            polar = np.stack([_floats(frame, table, "range"), _floats(frame, table, "bearing")], -1)
     elif "range" in frame and "bearing" in frame:
         polar = np.stack([_floats(frame, table, "range"), _floats(frame, table, "bearing")], -1)
         if (polar[:, 0] <= 0).any():
@@ -330,12 +387,16 @@ def _targets(frame: pd.DataFrame | None, T: int, t0: float, dt: float) -> np.nda
     if frame is None:
         return None
     _need(frame, "targets", ("target",) + STATE)
+    if frame.empty:
+        raise UsageError("targets: no rows; leave the table out for a recording without truth")
     k, j = _steps(frame, "targets", t0, dt), _ids(frame, "targets", "target")
     if (k >= T).any():
         raise UsageError(f"targets: a state past the recording's {T} steps")
     M = int(j.max(initial=-1)) + 1
     out = np.full((T, max(M, 1), 4), np.nan)
     values = np.stack([_floats(frame, "targets", c, away=True) for c in STATE], axis=-1)
+    if (np.isnan(values).any(axis=-1) != np.isnan(values).all(axis=-1)).any():
+        raise UsageError("targets: a row's state is either all numbers or all empty (away)")
     if pd.Series(k * max(M, 1) + j).duplicated().any():
         raise UsageError("targets: two rows of one target at one step")
     out[k, j] = values
@@ -367,6 +428,9 @@ def from_bag(path: str | Path, scenario: Scenario) -> Recording:
             scans_ = [c for c in reader.connections if SCAN.match(c.topic)]
             if not odom:
                 raise UsageError(f"{path}: no /uav_<i>/odom topic (nav_msgs/msg/Odometry)")
+            if not scans_:
+                raise UsageError(f"{path}: no /uav_<i>/radar_scan topic (radar_msgs/msg/RadarScan;"
+                                 " uavtrack run --bag writes it with tracks)")  # fmt: skip
             stamps = [t for _, t, _ in reader.messages(odom)]
             t0, dt = min(stamps), round(scenario.dt * 1e9)
             for c, t, raw in reader.messages(odom + scans_):

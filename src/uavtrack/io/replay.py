@@ -93,7 +93,8 @@ class Recording:
         if (np.diff(self.alive.astype(np.int8), axis=0) > 0).any():
             i = int(np.nonzero((np.diff(self.alive.astype(np.int8), axis=0) > 0).any(axis=0))[0][0])
             raise ValueError(f"sensor {i} reports again after it stopped: a sensor that stops "
-                             "does not come back")  # fmt: skip
+                             "does not come back (or the recording's step is not the "
+                             "scenario's dt)")  # fmt: skip
         if (self.valid & ~self.alive[..., None]).any():
             raise ValueError("a sensor has measurements at a step it does not report")
         if not np.isfinite(self.poses[self.alive]).all():
@@ -121,6 +122,11 @@ class Recording:
             self.targets.ndim != 3 or self.targets.shape[0] != T or self.targets.shape[2] != 4
         ):
             raise ValueError(f"targets must be (T, M, 4) for {T} steps, not {self.targets.shape}")
+        if self.targets is not None and self.prior is not None:
+            m, truth = self.prior[0].shape[0], self.targets.shape[1]
+            if m != truth:
+                raise ValueError(f"the briefing has {m} targets and the truth {truth}: give both "
+                                 "for the same targets")  # fmt: skip
 
     @property
     def steps(self) -> int:

@@ -357,13 +357,21 @@ def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
 
 
 def _briefing(scenario: Scenario, seed: int) -> pd.DataFrame:
-    """The ``briefing`` table: a row per target, the prior every UAV started with as a
-    confirmed track (drawn from the trial's seed, `world.draw_start`)."""
+    """The ``briefing`` table of a trial: the prior every UAV started with as a confirmed
+    track (drawn from the trial's seed, `world.draw_start`)."""
     _, _, mean, P0 = draw_start(scenario, streams(np.random.SeedSequence(seed))[0])
+    return briefing_frame(mean, np.broadcast_to(P0, mean.shape + (4,)))
+
+
+def briefing_frame(mean: np.ndarray, cov: np.ndarray) -> pd.DataFrame:
+    """The ``briefing`` table of targets' means (M, 4) and covariances (M, 4, 4): a row
+    per target, x ... vy and P_x_x ... P_vy_vy."""
     rows = {"target": np.arange(mean.shape[0])}
-    estimates = _estimates(mean, np.broadcast_to(P0, mean.shape + (4,)))
+    estimates = _estimates(mean, cov)
     rows.update({name.removeprefix("est_"): value for name, value in estimates.items()})
-    return pd.DataFrame(rows)
+    frame = pd.DataFrame(rows)
+    frame.attrs["units"] = {c: unit(c) for c in frame.columns if unit(c)}
+    return frame
 
 
 def _measurements(trace: Trace, time: np.ndarray) -> pd.DataFrame:
