@@ -280,3 +280,27 @@ def test_a_sensor_whose_rows_stop_has_failed_and_replays_as_the_run(tmp_path, ca
     assert code == 0, err
     fields = DECIDED + ("alive",)
     assert same(trace_file.read(run).trace, trace_file.read(played).trace, fields) == []
+
+
+def test_recorded_clocks_jitter_and_flags_and_empty_scans_read_as_meant(tmp_path):
+    """A recorder's times a few ms off the grid land on their steps, alive written 1.0
+    and 0.0 reads as flags, and a measurements table of a header alone is no scan."""
+    handmade(tmp_path / "rec", np.random.default_rng(6), steps=10)
+    exact = recording.read(tmp_path / "rec", TRACKED)
+    uavs = pd.read_csv(tmp_path / "rec" / "uavs.csv")
+    shaken = np.random.default_rng(0).uniform(-0.004, 0.004, len(uavs))
+    shaken_uavs = uavs.assign(time=uavs["time"] + shaken, alive=1.0)
+    shaken_uavs.to_csv(tmp_path / "rec" / "uavs.csv", index=False)
+    jittered = recording.read(tmp_path / "rec", TRACKED)
+    assert np.array_equal(jittered.poses, exact.poses) and np.array_equal(jittered.z, exact.z)
+    (tmp_path / "rec" / "measurements.csv").write_text("time,uav,x,y,R_x_x,R_x_y,R_y_y\n")
+    (tmp_path / "rec" / "targets.csv").unlink()
+    empty = recording.read(tmp_path / "rec", TRACKED)
+    assert empty.valid.shape[:2] == (10, 3) and not empty.valid.any()
+    result = replay.replay(empty, TRACKED)
+    assert result.trace is not None and not (result.trace.status == 2).any()
+    twice = pd.DataFrame({"step": [0, 0], "uav": [0, 0], "index": [0, 0], "x": [50.0, 51.0],
+                          "y": [60.0, 61.0], "R_x_x": 1.0, "R_x_y": 0.0, "R_y_y": 1.0})  # fmt: skip
+    twice.to_csv(tmp_path / "rec" / "measurements.csv", index=False)
+    with pytest.raises(recording.UsageError, match="share an index"):
+        recording.read(tmp_path / "rec", TRACKED)

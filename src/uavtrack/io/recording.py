@@ -66,6 +66,9 @@ STATE = ("x", "y", "vx", "vy")
 COVARIANCE = tuple(f"P_{STATE[a]}_{STATE[b]}" for a in range(4) for b in range(a, 4))
 """The briefing's covariance columns, the upper triangle row by row."""
 SUFFIXES = (".parquet", ".csv")
+JITTER = 0.05
+"""How far off the grid of dt a time may be, as a share of dt: a recorder's clock
+jitters (a few ms at dt = 0.5 s); two rows of one sensor in one step are still refused."""
 OLD_PANDAS = int(pd.__version__.split(".")[0]) < 3
 """pandas before 3 reads a CSV's numbers as written only when asked."""
 
@@ -239,7 +242,7 @@ def _steps(frame: pd.DataFrame, table: str, t0: float, dt: float) -> np.ndarray:
     if "time" in frame:
         t = _floats(frame, table, "time")
         on = np.round((t - t0) / dt)
-        off = np.abs(t - t0 - on * dt) > 1e-6 * dt
+        off = np.abs(t - t0 - on * dt) > JITTER * dt
         if off.any() or (on < 0).any():
             bad = float(t[off | (on < 0)][0])
             raise UsageError(
@@ -278,10 +281,10 @@ def _flags(frame: pd.DataFrame, table: str, column: str) -> np.ndarray:
     if values.dtype == bool:
         return values.to_numpy()
     text = values.astype(str).str.strip().str.lower()
-    known = text.isin(("true", "false", "1", "0"))
+    known = text.isin(("true", "false", "1", "0", "1.0", "0.0"))
     if not known.all():
         raise UsageError(f"{table}: column {column} must hold true or false")
-    return text.isin(("true", "1")).to_numpy()
+    return text.isin(("true", "1", "1.0")).to_numpy()
 
 
 def _measurements(
@@ -290,6 +293,9 @@ def _measurements(
     """The scans, padded: z, R, valid, polar, origin as `Recording` holds them."""
     T, N = alive.shape
     table = "measurements"
+    if frame.empty:  # no sensor measured anything: every scan empty
+        frame = pd.DataFrame({"step": [], "uav": [], "x": [], "y": [], "R_x_x": [],
+                              "R_x_y": [], "R_y_y": []})  # fmt: skip
     _need(frame, table, ("uav",))
     k, i = _steps(frame, table, t0, scenario.dt), _ids(frame, table, "uav")
     late = (k >= T) | (i >= N)
@@ -321,6 +327,8 @@ def _measurements(
     order = np.arange(len(frame))
     if "index" in frame:
         order = _ids(frame, table, "index")
+        if pd.Series((k * N + i) * (len(frame) + 1) + order).duplicated().any():
+            raise UsageError(f"{table}: two measurements of one uav and step share an index")
     rows = np.lexsort((order, i, k))  # step, uav, then the scan's order
     k, i = k[rows], i[rows]
     row = k * N + i
@@ -436,11 +444,15 @@ def from_bag(path: str | Path, scenario: Scenario) -> Recording:
             for c, t, raw in reader.messages(odom + scans_):
                 k = _bag_step(t, t0, dt, c.topic)
                 msg: Any = reader.deserialize(raw, c.msgtype)
-                match = ODOM.match(c.topic)
-                if match:
-                    poses[k, int(match.group(1))] = _pose(msg)
+                match = ODOM.match(c.topic) or SCAN.match(c.topic)
+                assert match is not None  # the connections chosen
+                i, into = int(match.group(1)), poses if ODOM.match(c.topic) else returns
+                if (k, i) in into:
+                    raise UsageError(f"{c.topic}: two messages in step {k} (dt = {dt / 1e9:g} "
+                                     "s); set the scenario's dt")  # fmt: skip
+                if into is poses:
+                    poses[k, i] = _pose(msg)
                 else:
-                    i = int(SCAN.match(c.topic).group(1))  # pyright: ignore[reportOptionalMemberAccess]
                     returns[k, i] = np.array(
                         [(r.range, r.azimuth, r.elevation) for r in msg.returns], dtype=float
                     ).reshape(-1, 3)
@@ -469,10 +481,11 @@ def from_bag(path: str | Path, scenario: Scenario) -> Recording:
 
 
 def _bag_step(t: int, t0: int, dt: int, topic: str) -> int:
-    k, off = divmod(t - t0, dt)
-    if off:
+    """A bag message's step: its log time on the grid of dt from t0, within `JITTER`."""
+    k = round((t - t0) / dt)
+    if abs(t - t0 - k * dt) > JITTER * dt:
         raise UsageError(f"{topic}: a message at {t / 1e9:g} s is not on the grid of dt = "
-                         f"{dt / 1e9:g} s from {t0 / 1e9:g} s")  # fmt: skip
+                         f"{dt / 1e9:g} s from {t0 / 1e9:g} s; set the scenario's dt")  # fmt: skip
     return int(k)
 
 
