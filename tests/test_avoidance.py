@@ -627,6 +627,7 @@ def test_the_measured_model_of_the_unicycle_is_eq_1():
     model = response.measure(scenario)
     bank, dt = np.radians(45), 0.5
     assert max(model.centre_error, model.position_error, model.now_error) < 1e-9
+    assert model.transient_error < 1e-9 and model.reach == pytest.approx(model.radius)
     assert model.margin < 1e-8 and model.slack < 1e-8
     turn = av.Turn.of(np.asarray(15.0), bank, dt)
     np.testing.assert_allclose(model.delta, turn.delta, atol=1e-9)
@@ -788,3 +789,42 @@ def test_the_measured_tables_predict_flights_they_were_not_measured_on():
         eq1.append(np.hypot(*(c_eq1[j, plans[j, history]] - centre)))
     assert max(errors) <= 1.2 * model.centre_error
     assert max(eq1) > 3.0 * model.centre_error
+
+
+@pytest.mark.integration  # JSBSim aircraft
+def test_the_margin_covers_pairs_of_fresh_flights_while_they_settle():
+    """Fresh JSBSim flights, each after random commands takes a random action, then the
+    loiter; placed pairwise at random offsets, no pair ever comes closer than the
+    clearance of the backups the tables give them less the margin (7.5 m at most here,
+    of a 23 m margin), though pairs do come closer than the clearance."""
+    pytest.importorskip("jsbsim")
+    from uavtrack import flight
+    from uavtrack.airspace import response
+
+    scenario = uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"})
+    model = response.measure(scenario)
+    count, history = 40, 12
+    rng = np.random.default_rng(11)
+    plans = rng.integers(0, 3, (count, history + 1))
+    loiter = np.full((count, response.SETTLE + response.FIT), 2)
+    commands = np.concatenate([plans, loiter], axis=1)
+    banks = np.radians(45) * np.array([-1.0, 0.0, 1.0])
+    start = np.zeros((1, count, 5))
+    start[..., 2], start[..., 3] = scenario.uav.altitude, scenario.uav.speed
+    pilot, uavs = flight.start(scenario, [np.random.SeedSequence(3)], start)
+    track = [uavs[0]]
+    for t in range(commands.shape[1]):
+        uavs = pilot.fly(uavs, banks[commands[:, t]][None], np.ones((1, count), dtype=bool))
+        track.append(uavs[0])
+    flown = np.array(track)[history:, :, :2]  # (T', count, 2) from the state that acts
+    key = response.recent(plans[:, history - 2], plans[:, history - 1])
+    c, u = model.after(np.array(track)[history], key)  # (count, 3, 2)
+    act = plans[:, history]
+    c, u = c[np.arange(count), act], u[np.arange(count), act]
+    i, j = np.triu_indices(count, 1)
+    shift = rng.uniform(-60.0, 60.0, (len(i), 2))  # flight j moved by it
+    clearance = np.abs(np.hypot(*(c[i] - c[j] - shift).T) - np.hypot(*(u[i] - u[j]).T))
+    gap = flown[1:, i] - flown[1:, j] - shift  # (T' - 1, pairs, 2) from after the action
+    closest = np.hypot(*np.moveaxis(gap, -1, 0)).min(axis=0)
+    short = clearance - closest  # how far below its clearance a pair came
+    assert 1.0 < short.max() <= model.margin

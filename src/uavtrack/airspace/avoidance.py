@@ -301,7 +301,7 @@ def sound_range_in(scenario: Scenario) -> float:
         np.asarray(model.radius), model.delta,
     )  # fmt: skip
     unknown = allowance(np.asarray(scenario.faults.delay + 1), turn)[1]
-    return float(4.0 * model.radius + minimum(scenario) + model.margin + 2.0 * unknown)
+    return float(4.0 * model.reach + minimum(scenario) + model.margin + 2.0 * unknown)
 
 
 def predicted(

@@ -20,24 +20,21 @@ the air mass (the ground velocity less the wind):
 `measure` flies the scenario's aircraft through every history of four commands followed
 by each action and then the loiter, each after eight random commands of its own (243
 aircraft side by side, in the scenario's wind and turbulence, `REPEATS` times with
-turbulence), fits a circle to each loiter in the
-air mass, and takes the tables as means over the flights. What the means miss is
-measured on the same flights: `Response.centre_error`, the largest distance of a true
-backup centre after an action from the table's; `position_error`, the same of the
-position; `now_error`, of the backup centre of a state before it acts. The clearance is
-1-Lipschitz in each UAV's centre and offset (u = p - c), so the filter keeps
-`Response.margin` = 2 (2 centre_error + position_error) above the separation for a pair,
-and calls a pair in conflict only below the separation less `Response.slack` = 4
-now_error. These are the largest errors seen, not bounds (the filter refuses turbulence,
-where they reach tens of metres).
-
-What the margin's derivation leaves out (found in review, measured): for about two steps
-after a change of bank the aircraft is not yet on its backup's circle (up to 2.3 m off
-in radius and 0.2 rad in phase), so the clearance of two backups is not kept exactly
-then: on 300,000 random pairs of JSBSim flights the pair came up to 6.7 m closer than
-that clearance. The 12.6 m margin of JSBSim's trackwing covered it in every run
-measured, but not by its derivation; and `avoidance.sound_range_in` takes the steady
-radius (23.1 m) where the tables' offsets reach 24.0 m, about 4 m short.
+turbulence), fits a circle to each loiter in the air mass, and takes the tables as means
+over the flights. What the means miss is measured on the same flights:
+`Response.centre_error`, the largest distance of a true backup centre after an action
+from the table's; `position_error`, the same of the position; `transient_error`, how far
+the aircraft flies off the point its backup gives it (the offset after the action
+turned at the steady rate) in the steps after the action, while it rolls into the turn
+(5.2 m for JSBSim's trackwing at 15 m/s); `now_error`, of the backup centre of a state
+before it acts. The clearance is 1-Lipschitz in each UAV's centre and offset (u = p -
+c), and each UAV's distance from its ideal point on the circle adds to a pair's at
+most, so the filter keeps `Response.margin` = 2 (2 centre_error + position_error +
+transient_error) above the separation for a pair, and calls a pair in conflict only
+below the separation less `Response.slack` = 4 now_error. These are the largest errors
+seen, not bounds (the filter refuses turbulence, where they reach tens of metres). The
+sound range takes the longest offset (`Response.reach`, 24.0 m against the steady
+radius 23.1 m): a UAV not yet on its circle is that far from its centre.
 """
 
 # Strict typing, less the unknown-type rules (numpy resolves an overloaded call with an
@@ -117,7 +114,8 @@ class Response:
     of its heading, its backup's centre (9, 2) [m] in the same frame; the radius [m] and
     the turn per step [rad] of the backup's steady circle (fitted to the settled loiter);
     the steady wind (2,) [m/s] it was measured in; the largest errors of the tables on
-    the flights (centre_error, position_error, now_error [m]) and delta (3,) [m], how far
+    the flights (centre_error, position_error, now_error, and transient_error: how far
+    off its backup's circle it flies while it settles [m]) and delta (3,) [m], how far
     each action moves the backup's centre and turns its offset against the loiter, at
     most over the keys."""
 
@@ -131,12 +129,20 @@ class Response:
     position_error: float
     now_error: float
     delta: np.ndarray
+    transient_error: float = 0.0
 
     @property
     def margin(self) -> float:
         """What the filter keeps above the separation for a pair [m]: each UAV's
-        centre and offset may each be off by the table's errors after a step."""
-        return 2.0 * (2.0 * self.centre_error + self.position_error)
+        centre and offset may each be off by the table's errors after a step, and its
+        position off its backup's circle while it settles (`transient_error`)."""
+        return 2.0 * (2.0 * self.centre_error + self.position_error + self.transient_error)
+
+    @property
+    def reach(self) -> float:
+        """The farthest a UAV is from its backup's centre [m]: the steady radius, or an
+        offset of the tables (a UAV not yet on its circle) if longer."""
+        return max(self.radius, float(np.hypot(*self.centre.T).max()))
 
     @property
     def slack(self) -> float:
@@ -258,6 +264,12 @@ def _measure(
     offsets = move - moves  # the offsets after each action, in the frame before it
     u_move = offsets - offsets[:, 2:3]
     delta = np.maximum(np.hypot(*c_move.T).T, np.hypot(*u_move.T).T).max(axis=0)
+    # off the circle while it settles: each position after the action against the one
+    # its backup would give it, the offset after the action turned at the steady rate
+    flown = air_p[after:] - true_c  # (T', R, C, 2) from the true centre
+    turns = steady * np.arange(len(flown))
+    ideal = _rotate(np.broadcast_to(turns[:, None, None], flown.shape[:-1]), flown[0])
+    transient = float(np.hypot(*(flown - ideal).T).max())
     return Response(
         move=move,
         turn=turn,
@@ -269,4 +281,5 @@ def _measure(
         position_error=float(np.hypot(*(p1 - p_hat).T).max()),
         now_error=float(np.hypot(*(true_c - c_now)[loitered].T).max()),
         delta=delta,
+        transient_error=transient,
     )
