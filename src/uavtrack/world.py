@@ -290,6 +290,13 @@ def draw_start(
     return targets, uavs, prior, P0
 
 
+def prior_of(scenario: Scenario, seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """The prior every UAV of trial `seed` starts from (`draw_start`, on its truth
+    stream): the targets' means (Nt, 4) and covariances (Nt, 4, 4)."""
+    _, _, mean, P0 = draw_start(scenario, streams(np.random.SeedSequence(seed))[0])
+    return mean, np.broadcast_to(P0, mean.shape + (4,)).copy()
+
+
 class Targets:
     """The targets of a batch of trials over a run, (B, T, Nt, 4), drawn and moved a
     block of `BLOCK` steps at a time as the run reaches them, so that a run without a

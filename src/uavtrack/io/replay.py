@@ -304,7 +304,7 @@ def of_trace(trace: Trace, scenario: Scenario, seed: int | None) -> Recording:
     """A simulated run's own scans as a `Recording`: the UAVs' true states as their
     poses (a run without ``faults.position_std``), its scans converted as the run's
     UAVs converted them, its truth, and, with ``tracker.briefing`` and the run's `seed`,
-    the briefing its UAVs started with (`world.draw_start`)."""
+    the briefing its UAVs started with (`world.prior_of`)."""
     if trace.scan_valid is None:
         raise ValueError("this trace holds no scans: a run with tracker.association gnn or jpda")
     if scenario.faults.position_std > 0:
@@ -319,9 +319,7 @@ def of_trace(trace: Trace, scenario: Scenario, seed: int | None) -> Recording:
     if scenario.tracker.briefing:
         if seed is None:
             raise ValueError("the run's briefing is drawn from its seed, which this trace lacks")
-        truth_rng = world.streams(np.random.SeedSequence(seed))[0]
-        _, _, mean, P0 = world.draw_start(scenario, truth_rng)
-        prior = (mean, np.broadcast_to(P0, (mean.shape[0], 4, 4)).copy())
+        prior = world.prior_of(scenario, seed)
     return Recording(
         poses=trace.uavs,
         alive=trace.alive,

@@ -67,7 +67,7 @@ from ..metrics import METRICS, team_best
 from ..records import TRACKED, Cycle, Trace
 from ..tracks.manage import STATUS_NAMES
 from ..tracks.scoring import series
-from ..world import draw_start, present, streams
+from ..world import present, prior_of
 from . import trace as trace_file
 
 UAV_STATE = ("x", "y", "altitude", "speed", "heading")
@@ -358,9 +358,8 @@ def _tracks(trace: Trace, time: np.ndarray) -> pd.DataFrame:
 
 def _briefing(scenario: Scenario, seed: int) -> pd.DataFrame:
     """The ``briefing`` table of a trial: the prior every UAV started with as a confirmed
-    track (drawn from the trial's seed, `world.draw_start`)."""
-    _, _, mean, P0 = draw_start(scenario, streams(np.random.SeedSequence(seed))[0])
-    return briefing_frame(mean, np.broadcast_to(P0, mean.shape + (4,)))
+    track (drawn from the trial's seed, `world.prior_of`)."""
+    return briefing_frame(*prior_of(scenario, seed))
 
 
 def briefing_frame(mean: np.ndarray, cov: np.ndarray) -> pd.DataFrame:
