@@ -405,7 +405,10 @@ def choose(
     the backups and their moves are its tables', keyed on each UAV's recent commands
     (recent (B, N) its own, ``heard.recent`` its neighbours'; straight flight when not
     given); an action is allowed `Response.margin` above `separation`, and a pair is in
-    conflict `Response.slack` below it. Every beacon must be of this step (age 0)."""
+    conflict `Response.slack` below that distance: a pair inside the margin (a start
+    closer than it, or flight the tables did not foresee) is moved apart by the recovery,
+    not held on its backup, which keeps its clearance. Every beacon must be of this step
+    (age 0)."""
     B, n = alive.shape
     out = np.array(desired, dtype=np.int64, copy=True)
     moves = None if slow is None else speeds(slow, cruise if cruise is not None else slow)
@@ -431,7 +434,8 @@ def choose(
         cq, uq = response.after(theirs, kq)
         c_now, u_now = response.backup(mine, ki)
         cq_now, uq_now = response.backup(theirs, kq)
-        separation, floor = separation + response.margin, separation - response.slack
+        separation = separation + response.margin
+        floor = separation - response.slack  # below it, recovery: no lock inside the margin
     else:
         now = predicted(theirs, age, bank, dt, g, slow)  # (P, 5) the neighbour if it loitered
         if moves is None:

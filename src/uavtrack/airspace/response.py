@@ -30,8 +30,10 @@ turned at the steady rate) in the steps after the action, while it rolls into th
 before it acts. The clearance is 1-Lipschitz in each UAV's centre and offset (u = p -
 c), and each UAV's distance from its ideal point on the circle adds to a pair's at
 most, so the filter keeps `Response.margin` = 2 (2 centre_error + position_error +
-transient_error) above the separation for a pair, and calls a pair in conflict only
-below the separation less `Response.slack` = 4 now_error. These are the largest errors
+transient_error) above the separation for a pair, and calls a pair in conflict below
+that distance less `Response.slack` = 4 now_error (the clearance of a pair kept at it
+reads that much less at most); a pair in conflict is moved apart (the filter's recovery),
+where the rule alone would hold it on its backups for good. These are the largest errors
 seen, not bounds (the filter refuses turbulence, where they reach tens of metres). The
 sound range takes the longest offset (`Response.reach`, 24.0 m against the steady
 radius 23.1 m): a UAV not yet on its circle is that far from its centre.
