@@ -941,8 +941,15 @@ def step(
     actions: np.ndarray | None = None,
 ) -> tuple[State, Cycle]:
     """One decision cycle at step k = state.k for every trial: `decide`, then `finish`
-    with the method's actions or `actions` (B, Nu) indices into the action set."""
-    return finish(state, decide(state, targets, noise, ctx), ctx, actions)
+    with `actions` (B, Nu) indices into the action set, or else the method's: its
+    planned ones, or those it chooses itself (`Method.actions`, a learned policy)."""
+    method = ctx.method
+    pending = decide(state, targets, noise, ctx, plan=method.plans)
+    if actions is None and not method.plans:  # its choice is its decision time
+        start = timing.start()
+        actions = method.actions(state, pending, ctx)
+        pending = replace(pending, plan_seconds=pending.plan_seconds + timing.since(start))
+    return finish(state, pending, ctx, actions)
 
 
 def graph(uavs: np.ndarray, alive: np.ndarray, scenario: Scenario) -> np.ndarray:

@@ -231,6 +231,11 @@ def check_method(method: Method) -> None:
             f"method {method.name!r}: the agent form runs methods built on "
             "Distributed, Greedy or Centralized"
         )
+    if not method.plans:
+        raise ValueError(
+            f"method {method.name!r} chooses its actions without planning (a learned "
+            "policy); the UAV programs plan and bid: run it with uavtrack run, compare or sweep"
+        )
     if type(method).assign is not bases[0].assign:
         raise ValueError(
             f"method {method.name!r} replaces assign, which the agent form does not run "

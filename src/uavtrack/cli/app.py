@@ -8,7 +8,6 @@ from __future__ import annotations
 import os
 import re
 import sys
-from enum import StrEnum
 from pathlib import Path
 from typing import TYPE_CHECKING, Annotated, Any
 
@@ -72,14 +71,26 @@ def _root(
     """Distributed multi-UAV cooperative multi-target tracking (docs: the docs/ folder)."""
 
 
-if TYPE_CHECKING:  # what a checker knows of the enum made below from the registry
+class MethodName(str):
+    """A --method value: a method of the registry (built-in and plugins), or
+    ``policy:FILE``, a learned policy (`uavtrack.env.policy`)."""
 
-    class MethodName(StrEnum):
-        distributed = "distributed"
+    __slots__ = ()
 
-else:
-    MethodName = StrEnum("MethodName", {name: name for name in registry.names()})
-"""The choices of --method: every method of the registry (built-in and plugins)."""
+    @property
+    def value(self) -> str:
+        return str(self)
+
+
+def method_name(text: str) -> MethodName:
+    """The --method `text`, checked against the registry's names and ``policy:FILE``."""
+    if text in registry.names() or (text.startswith(registry.POLICY) and text != registry.POLICY):
+        return MethodName(text)
+    raise typer.BadParameter(f"{text!r} is not one of {', '.join(registry.names())}, policy:FILE")
+
+
+DISTRIBUTED = MethodName("distributed")
+"""The default --method: the paper's."""
 
 
 ConfigOpt = Annotated[
@@ -111,7 +122,11 @@ TeamOpt = Annotated[
 ]
 MethodOpt = Annotated[
     MethodName,
-    typer.Option(metavar="METHOD", help=", ".join(registry.names())),
+    typer.Option(
+        metavar="METHOD",
+        parser=method_name,
+        help=", ".join(registry.names()) + ", or policy:FILE (a learned policy)",
+    ),
 ]
 SeedOpt = Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")]
 ForceOpt = Annotated[
@@ -380,7 +395,7 @@ CAPTION = (
 @app.command()
 def run(
     config: ConfigOpt = None,
-    method: MethodOpt = MethodName.distributed,
+    method: MethodOpt = DISTRIBUTED,
     seed: SeedOpt = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,
@@ -545,6 +560,7 @@ def compare(
         typer.Option(
             "--method",
             metavar="METHOD",
+            parser=method_name,
             help="a method to compare (repeatable); the first is the reference of the paired "
             "differences [the paper's three: distributed, centralized, greedy]",
         ),

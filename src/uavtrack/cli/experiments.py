@@ -15,6 +15,7 @@ from .._files import check_output, check_outputs, write_json, write_text
 from ..errors import Interrupted, ScenarioError, UsageError
 from ..limits import MAX_TRIALS
 from .app import (
+    DISTRIBUTED,
     ConfigOpt,
     ForceOpt,
     MethodName,
@@ -26,6 +27,7 @@ from .app import (
     chosen_methods,
     console,
     load_scenario,
+    method_name,
     parse_overrides,
     steps_bar,
     with_steps,
@@ -370,7 +372,10 @@ def sweep(
     methods: Annotated[
         list[MethodName] | None,
         typer.Option(
-            "--method", metavar="METHOD", help="a method to run (repeatable) [the paper's three]"
+            "--method",
+            metavar="METHOD",
+            parser=method_name,
+            help="a method to run (repeatable), or policy:FILE [the paper's three]",
         ),
     ] = None,
     trials: Annotated[
@@ -512,7 +517,7 @@ def parse_sweep(scenario, tokens: list[str]) -> dict[str, list[str]]:
 def animate(
     out: Annotated[Path, typer.Option("--out", metavar="FILE", help="GIF file to write")],
     config: ConfigOpt = None,
-    method: MethodOpt = MethodName.distributed,
+    method: MethodOpt = DISTRIBUTED,
     seed: Annotated[int, typer.Option(min=0, metavar="N", help="random seed of the trial")] = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,

@@ -10,10 +10,10 @@ import typer
 from .._files import check_distinct, check_new_folder, check_output, new_folder
 from ..errors import RunError, UsageError
 from .app import (
+    DISTRIBUTED,
     BagOpt,
     ConfigOpt,
     ForceOpt,
-    MethodName,
     MethodOpt,
     SeedOpt,
     SetOpt,
@@ -44,7 +44,7 @@ def replay(
         ),
     ],
     config: ConfigOpt = None,
-    method: MethodOpt = MethodName.distributed,
+    method: MethodOpt = DISTRIBUTED,
     seed: SeedOpt = 0,
     set_: SetOpt = None,
     as_json: Annotated[bool, typer.Option("--json", help="print one JSON object")] = False,

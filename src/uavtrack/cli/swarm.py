@@ -15,10 +15,10 @@ import typer
 from .._files import check_distinct, check_output
 from ..errors import Interrupted, RunError, UsageError, install_hint
 from .app import (
+    DISTRIBUTED,
     BagOpt,
     ConfigOpt,
     ForceOpt,
-    MethodName,
     MethodOpt,
     Ros2Opt,
     SeedOpt,
@@ -141,7 +141,7 @@ def results_only_on_stdout():
 @app.command()
 def swarm(
     config: ConfigOpt = None,
-    method: MethodOpt = MethodName.distributed,
+    method: MethodOpt = DISTRIBUTED,
     seed: SeedOpt = 0,
     set_: SetOpt = None,
     team: TeamOpt = None,

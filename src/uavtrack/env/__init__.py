@@ -14,7 +14,8 @@ assignment are exactly those of `simulate`; only the flown actions come from the
 
 Modules: `parallel` (the ParallelEnv and the AEC env), `vector` (the batch), `single`
 (one learner), `episodes` (the loop), `spaces` (observations, state, rewards), `learn`
-(Stable-Baselines3 and TorchRL), `benchmarl` (a BenchMARL task).
+(Stable-Baselines3 and TorchRL), `benchmarl` (a BenchMARL task), `policy` (a learned
+policy flown as a method: ``--method policy:FILE``).
 
 Agents ``uav_0 ... uav_{N-1}``. Needs the env extra (pettingzoo, gymnasium).
 

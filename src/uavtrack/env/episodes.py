@@ -108,28 +108,8 @@ class Episodes:
         """What the pending cycle shows; once done, the state flown to with its
         predicted estimates (nothing in view). With tracks, each UAV's confirmed
         tracks after fusion and which of them its own scan met (`in_view_now`)."""
-        p = self.pending
-        if p is not None:
-            links = graph(p.uavs, p.alive, self.scenario)
-            label = met = None
-            if p.tracks is not None:
-                t = p.tracks
-                label = np.where(t.book.confirmed & p.alive[..., None], t.book.label, -1)
-                assert p.scan is not None  # a tracked cycle carries its scans
-                gate = self.scenario.tracker.gate_probability
-                met = in_view_now(t.mean, t.cov, label >= 0, p.scan, gate)
-            return View(
-                k=p.k,
-                believed=p.believed,
-                uavs=p.uavs,
-                mean=p.fused.mean,
-                cov=p.fused.cov,
-                links=links,
-                alive=p.alive,
-                observed=p.observed,
-                label=label,
-                met=met,
-            )
+        if self.pending is not None:
+            return view_of(self.pending, self.scenario)
         s = self.state
         links = graph(s.uavs, s.alive, self.scenario)
         observed = np.zeros(s.alive.shape + (self.scenario.n_targets,), dtype=bool)
@@ -170,6 +150,33 @@ class Episodes:
         if k >= self.scenario.steps:
             return None
         return decide(self.state, self.trajectory.at(k), next(self.noises), self.ctx, self.plan)
+
+
+def view_of(pending: Pending, scenario: Scenario) -> View:
+    """What a pending cycle shows the agents (`View`): the radio graph of the UAVs'
+    positions, each UAV's fused estimates, and with tracks each UAV's confirmed tracks
+    and which of them its own scan met (`in_view_now`). One reading for the
+    environments and a learned policy flown as a method (`env.policy`)."""
+    p = pending
+    links = graph(p.uavs, p.alive, scenario)
+    label = met = None
+    if p.tracks is not None:
+        t = p.tracks
+        label = np.where(t.book.confirmed & p.alive[..., None], t.book.label, -1)
+        assert p.scan is not None  # a tracked cycle carries its scans
+        met = in_view_now(t.mean, t.cov, label >= 0, p.scan, scenario.tracker.gate_probability)
+    return View(
+        k=p.k,
+        believed=p.believed,
+        uavs=p.uavs,
+        mean=p.fused.mean,
+        cov=p.fused.cov,
+        links=links,
+        alive=p.alive,
+        observed=p.observed,
+        label=label,
+        met=met,
+    )
 
 
 def in_view_now(

@@ -11,7 +11,8 @@
   figures and report);
 * `store`: the output folder that never loses work, and the local and Dask engines;
 * `report`, `figures`: report.md and the paper's figures from a summary;
-* `bench`: speed measurements beside their references.
+* `bench`: speed measurements beside their references;
+* `learned`: learned teams against the paper's planner (training and paired evaluation).
 
 Nothing in the model, the cycle or its forms imports this package.
 """

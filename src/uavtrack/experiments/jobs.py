@@ -17,6 +17,7 @@ from __future__ import annotations
 import hashlib
 import itertools
 import json
+import re
 from collections.abc import Callable, Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from typing import Any
@@ -50,7 +51,16 @@ class Job:
         if len(label) > LABEL_CHARS:
             digest = hashlib.sha256(label.encode()).hexdigest()[:16]
             label = f"{label[: LABEL_CHARS - 17]}~{digest}"
-        return f"{self.kind}__{label}__{self.method}__{span}"
+        return f"{self.kind}__{label}__{_file_safe(self.method)}__{span}"
+
+
+def _file_safe(name: str) -> str:
+    """A method's name as a file name's part: itself, or with a character a file name
+    cannot hold (a policy file's path) replaced and a digest of the whole added."""
+    safe = re.sub(r"[^A-Za-z0-9._=+-]", "_", name)
+    if safe == name:
+        return name
+    return f"{safe[-60:]}~{hashlib.sha256(name.encode()).hexdigest()[:12]}"
 
 
 LABEL_CHARS = 120

@@ -44,6 +44,7 @@ from .._progress import bar
 from ..config import flatten
 from ..errors import RunError, UsageError, install_hint
 from ..io.results import checksum, read_jobs  # noqa: F401 (read_jobs: public here too)
+from ..methods import registry
 from .jobs import Job, run_job
 
 LOCK = ".lock"
@@ -338,7 +339,9 @@ def _reason(exc: BaseException) -> str:
 
 
 def describe_job(job: Job) -> dict[str, Any]:
-    return {
+    """What a job file names of its job; a learned policy's by its file's digest too,
+    so that a result of another file of that name is not taken."""
+    out: dict[str, Any] = {
         "kind": job.kind,
         "label": job.label,
         "method": job.method,
@@ -346,6 +349,11 @@ def describe_job(job: Job) -> dict[str, Any]:
         "count": job.count,
         "seed": job.seed,
     }
+    if job.method.startswith(registry.POLICY):
+        from ..env.policy import digest
+
+        out["policy"] = digest(job.method)
+    return out
 
 
 def mismatch(old: dict[str, Any], new: dict[str, Any]) -> str:

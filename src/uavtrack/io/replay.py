@@ -210,8 +210,9 @@ def replay(
         state = replace(state, uavs=step.uavs, alive=alive)
         observed, sensed, links = step.observed, step.sensed, step.links
         uavs = step.uavs
-        pending = simulation.decided(state, sensed, alive, uavs, observed, ctx, links=links)
-        state, cycle = simulation.finish(state, pending, ctx, fly=False)
+        pending = simulation.decided(state, sensed, alive, uavs, observed, ctx, method.plans, links)
+        actions = method.actions(state, pending, ctx)
+        state, cycle = simulation.finish(state, pending, ctx, actions, fly=False)
         tally.add(cycle, truth[k][None])
         rec.record(k, cycle)
         if progress is not None:

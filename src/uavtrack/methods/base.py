@@ -227,6 +227,9 @@ class Method:
     name: ClassVar[str]
     central: ClassVar[bool] = False
     """Whether one node plans for everyone (its decision time is the whole team's)."""
+    plans: ClassVar[bool] = True
+    """Whether the cycle plans and assigns (`simulation.decide`); a method whose UAVs
+    choose their actions otherwise (`actions`, a learned policy) sets it False."""
 
     def fuse(self, inputs: Inputs) -> Fused:
         """Consensus over the radio: the D_i protocol, then max-consensus rounds."""
@@ -240,6 +243,12 @@ class Method:
     def assign(self, inputs: Inputs, fused: Fused, bids: np.ndarray) -> Assigned:
         """Targets from bids (B, N, M)."""
         raise NotImplementedError
+
+    def actions(self, state: Any, pending: Any, ctx: Any) -> np.ndarray | None:
+        """The actions (B, N) the UAVs fly this cycle (indices into the action set) from
+        the cycle's `records.State`, `records.Pending` and `simulation.Context` (the
+        records name this module: not named here), or None: the planned ones."""
+        return None
 
     def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """How many of its best bids each UAV's assignment can read (B, N), or None: all

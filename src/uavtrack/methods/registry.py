@@ -50,10 +50,23 @@ def register(method: Any) -> Any:
     return method
 
 
+POLICY = "policy:"
+"""A name that starts so is a learned policy's file, or a shipped one by name:
+``policy:FILE``."""
+POLICIES = "uavtrack.env.policy:PolicyMethod"
+"""Where the method of a ``policy:FILE`` name lives (made with that name)."""
+
+
 def load(name: str) -> Any:
-    """The method registered under `name` (an instance), loading its module if needed."""
+    """The method registered under `name` (an instance), loading its module if needed;
+    ``policy:FILE`` a learned policy (`uavtrack.env.policy.PolicyMethod`)."""
     if name in _REGISTERED:
         return _REGISTERED[name]
+    if name.startswith(POLICY):  # loaded as a plugin is: by where it lives
+        module, _, attribute = POLICIES.partition(":")
+        method = getattr(importlib.import_module(module), attribute)(name)
+        _REGISTERED[name] = method
+        return method
     where = BUILT_IN.get(name) or _plugins().get(name)
     if where is None:
         raise ValueError(f"unknown method {name!r}; choose one of: {', '.join(names())}")

@@ -1,0 +1,223 @@
+"""A learned policy as a decision method: ``--method policy:FILE`` in every command.
+
+A policy file is a NumPy archive (``.npz``) of a multilayer perceptron that maps one
+UAV's observation (`spaces.Spaces`, the Box form) to the logits of its three actions:
+
+* ``W0, b0, W1, b1, ...``: the layers, float32, each ``x @ W + b``; every layer but the
+  last is followed by the activation;
+* ``meta``: a JSON object: ``format`` (`FORMAT`), ``activation`` (`ACTIVATIONS`),
+  ``max_targets`` and ``max_neighbours`` (the observation's rows), and anything the
+  trainer records of itself (algorithm, frames, seed, the rate it reached).
+
+Each UAV flies the action of its largest logit (the lowest index on ties), so a policy
+is deterministic: the same seed gives the same trial. The team fuses as the paper's
+method does (max-consensus over the radio) and runs no planner and no auction: the
+policy is the whole decision. The cycle is the simulator's own (`simulation.decide`
+without planning, `simulation.finish` with the policy's actions), so every metric and
+fault of a run applies unchanged.
+
+Shipped policies live in this package's ``policies`` folder and are named without a
+path or suffix (``policy:NAME``); any other ``policy:PATH`` is a file.
+
+Needs the env extra (its observation builder uses gymnasium's spaces).
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, ClassVar
+
+import numpy as np
+
+from ..errors import UsageError
+from ..methods.distributed import Distributed
+from ..records import Pending, State
+from .episodes import view_of
+from .spaces import Spaces
+
+__all__ = [
+    "ACTIVATIONS", "FORMAT", "PREFIX", "SHIPPED", "Policy", "PolicyMethod", "digest", "shipped",
+]  # fmt: skip
+
+FORMAT = 1
+"""The version of the policy file's layout."""
+
+PREFIX = "policy:"
+"""What a method name starts with when it names a policy."""
+
+SHIPPED = Path(__file__).with_name("policies")
+"""The folder of the shipped policies (``policy:NAME``)."""
+
+ACTIVATIONS = {
+    "tanh": np.tanh,
+    "relu": lambda x: np.maximum(x, 0.0),
+}
+"""The hidden layers' activations, by name."""
+
+
+def digest(spec: str) -> str:
+    """The SHA-256 of the file a policy's method name (``policy:FILE``) names, for a
+    results folder to tell two files of one name apart."""
+    path = _path(spec.removeprefix(PREFIX))
+    if not path.is_file():
+        raise UsageError(
+            f"no policy file {path} (shipped policies: {', '.join(shipped()) or 'none'})"
+        )
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def shipped() -> list[str]:
+    """The names of the shipped policies."""
+    return sorted(p.stem for p in SHIPPED.glob("*.npz"))
+
+
+def _path(spec: str) -> Path:
+    """The file `spec` names: a shipped policy by bare name, or a path."""
+    path = Path(spec)
+    if path.name == spec and not path.suffix and (SHIPPED / f"{spec}.npz").is_file():
+        return SHIPPED / f"{spec}.npz"
+    return path
+
+
+@dataclass(frozen=True)
+class Policy:
+    """A multilayer perceptron over one UAV's observation: layers [(W, b)], the hidden
+    activation's name and the observation's rows; meta holds the trainer's record."""
+
+    layers: list[tuple[np.ndarray, np.ndarray]]
+    activation: str = "tanh"
+    max_targets: int = 4
+    max_neighbours: int = 4
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    def __post_init__(self) -> None:
+        if self.activation not in ACTIVATIONS:
+            raise ValueError(
+                f"activation must be one of {', '.join(ACTIVATIONS)}, not {self.activation!r}"
+            )
+        if not self.layers:
+            raise ValueError("a policy needs at least one layer")
+        width = self.layers[0][0].shape[0]
+        for i, (W, b) in enumerate(self.layers):
+            if W.ndim != 2 or b.shape != (W.shape[1],) or W.shape[0] != width:
+                raise ValueError(f"layer {i}: W {W.shape} and b {b.shape} do not chain")
+            if not (np.isfinite(W).all() and np.isfinite(b).all()):
+                raise ValueError(f"layer {i} holds a value that is not finite")
+            width = W.shape[1]
+        if width != 3:
+            raise ValueError(f"the last layer gives {width} logits; the actions are 3")
+
+    @property
+    def inputs(self) -> int:
+        """The size of the observation it reads."""
+        return int(self.layers[0][0].shape[0])
+
+    def logits(self, observation: np.ndarray) -> np.ndarray:
+        """The logits (..., 3) of observations (..., inputs)."""
+        x = np.asarray(observation, dtype=np.float32)
+        if x.shape[-1] != self.inputs:
+            raise ValueError(f"the policy reads {self.inputs} numbers, not {x.shape[-1]}")
+        act = ACTIVATIONS[self.activation]
+        for i, (W, b) in enumerate(self.layers):
+            x = x @ W + b
+            if i + 1 < len(self.layers):
+                x = act(x)
+        return x
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        """The action (...) of the largest logit of each observation (the lowest on ties)."""
+        return np.argmax(self.logits(observation), axis=-1)
+
+    def spaces(self, scenario: Any) -> Spaces:
+        """The observation builder of `scenario` with this policy's rows; a one-line
+        error when the scenario's team cannot fill them or the sizes differ."""
+        try:
+            built = Spaces(scenario, "box", self.max_targets, self.max_neighbours)
+        except (ValueError, UsageError) as exc:
+            raise UsageError(f"the policy does not fit this scenario: {exc}") from None
+        if built.size != self.inputs:
+            raise UsageError(
+                f"the policy reads {self.inputs} numbers; this scenario's observation has "
+                f"{built.size}"
+            )
+        return built
+
+    def save(self, path: str | Path) -> Path:
+        """Write the policy to `path` (``.npz``), whole or not at all."""
+        path = Path(path)
+        meta = {
+            **self.meta,
+            "format": FORMAT,
+            "activation": self.activation,
+            "max_targets": self.max_targets,
+            "max_neighbours": self.max_neighbours,
+        }
+        arrays: dict[str, np.ndarray] = {"meta": np.array(json.dumps(meta, sort_keys=True))}
+        for i, (W, b) in enumerate(self.layers):
+            arrays[f"W{i}"], arrays[f"b{i}"] = W.astype(np.float32), b.astype(np.float32)
+        part = path.with_name(path.name + ".part")
+        with open(part, "wb") as f:
+            np.savez_compressed(f, **arrays)  # pyright: ignore[reportArgumentType]
+        part.replace(path)
+        return path
+
+    @classmethod
+    def load(cls, spec: str | Path) -> Policy:
+        """The policy of a file, or a shipped one by name; a one-line `UsageError` that
+        names what is wrong otherwise."""
+        path = _path(str(spec))
+        if not path.is_file():
+            names = ", ".join(shipped()) or "none"
+            raise UsageError(f"no policy file {path} (shipped policies: {names})")
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                arrays = {k: data[k] for k in data.files}
+        except Exception as exc:  # a file that is no NumPy archive
+            raise UsageError(f"{path} is not a policy file (.npz): {exc}") from None
+        try:
+            meta = json.loads(str(arrays.pop("meta")))
+            if meta.get("format") != FORMAT:
+                raise ValueError(f"format {meta.get('format')!r}, this version reads {FORMAT}")
+            count = sum(1 for k in arrays if k.startswith("W"))
+            layers = [(arrays[f"W{i}"], arrays[f"b{i}"]) for i in range(count)]
+            return cls(
+                layers=layers,
+                activation=meta["activation"],
+                max_targets=int(meta["max_targets"]),
+                max_neighbours=int(meta["max_neighbours"]),
+                meta=meta,
+            )
+        except (KeyError, ValueError, TypeError, json.JSONDecodeError) as exc:
+            raise UsageError(f"{path} is not a policy file: {type(exc).__name__}: {exc}") from None
+
+
+class PolicyMethod(Distributed):
+    """A learned policy as a decision method: the paper's fusion, then each UAV flies
+    the action its policy gives its observation (no planner, no auction)."""
+
+    plans: ClassVar[bool] = False
+
+    def __init__(self, spec: str) -> None:
+        self.spec = spec.removeprefix(PREFIX)
+        self.policy = Policy.load(self.spec)
+        self.instance_name = PREFIX + self.spec
+        self._spaces: tuple[Any, Spaces] | None = None  # the last scenario's builder
+
+    @property
+    def name(self) -> str:  # pyright: ignore[reportIncompatibleVariableOverride]
+        return self.instance_name
+
+    def actions(self, state: State, pending: Pending, ctx: Any) -> np.ndarray:
+        """The policy's actions (B, N) for the pending cycle."""
+        if self._spaces is None or self._spaces[0] is not ctx.scenario:
+            self._spaces = (ctx.scenario, self.policy.spaces(ctx.scenario))
+        spaces = self._spaces[1]
+        observation = spaces.observe(view_of(pending, ctx.scenario))
+        assert isinstance(observation, np.ndarray)  # the Box form
+        return self.policy.act(observation)
+
+    def __repr__(self) -> str:
+        return f"PolicyMethod({self.spec!r})"

@@ -1,0 +1,233 @@
+"""Learned teams against the paper's planner: train a policy, evaluate it paired.
+
+Each row of the benchmark is one command with its seed (``python -m uavtrack.experiments.learned
+ROW --seed S --out FILE``), CPU only, on the scenario given (default: the paper's 5 x 4):
+
+* ``bc``: behaviour cloning of the paper's method with DAgger (Ross, Gordon and
+  Bagnell, 2011). Round 0 flies the planner's actions and records (observation, the
+  planner's action) for every living UAV; each later round flies the policy learned so
+  far and records what the planner would have flown in the states the policy reached.
+  One multilayer perceptron, shared by every UAV, is fitted to all the rounds' records
+  by cross-entropy. Written as a policy file (`policy`).
+* ``evaluate``: the policy and the paper's method on the same held-out trials (trial t
+  of seed 0, as ``uavtrack compare`` draws them; training draws trials from
+  `TRAIN_SEED` on, which these never are): the observation rate with a 95 % interval,
+  and the paired difference to the planner.
+
+The training's own random draws (initial weights, minibatch order) come from the seed,
+so a seed gives the same file on one CPU (another may round the sums differently).
+NumPy only: no learning library is needed to train, fly or evaluate this row.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import Scenario
+from ..env.policy import Policy
+from ..env.vector import vector_env
+
+__all__ = ["TRAIN_SEED", "Imitation", "evaluate", "imitate", "main"]
+
+TRAIN_SEED = 1_000_000
+"""The first trial seed of training (``vector_env``'s reset seeds, one per trial): far
+from the evaluation's trials, which are children of seed 0 (`world.trial_seed`)."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Imitation:
+    """The settings of ``bc``: DAgger rounds, the trials of each, the hidden layers'
+    width and count, the observation's rows, epochs and minibatch of each fit, the
+    learning rate."""
+
+    rounds: int = 6
+    trials: int = 16
+    hidden: int = 128
+    layers: int = 2
+    max_targets: int = 4
+    max_neighbours: int = 4
+    epochs: int = 8
+    batch: int = 1024
+    learning_rate: float = 1e-3
+
+
+def _collect(
+    scenario: Scenario, settings: Imitation, policy: Policy | None, seed: int
+) -> tuple[np.ndarray, np.ndarray, float]:
+    """One round: `settings.trials` trials from trial seed `seed`, flown by `policy`
+    (None: the planner). Returns every living UAV's observations (S, size), the planner's
+    actions (S,) and the trials' mean observation rate."""
+    env = vector_env(
+        settings.trials, scenario, max_targets=settings.max_targets,
+        max_neighbours=settings.max_neighbours,
+    )  # fmt: skip
+    observation, info = env.reset(seed=seed)
+    seen, labels = [], []
+    while True:
+        alive = info["alive"]
+        seen.append(observation[alive])
+        labels.append(info["paper_action"][alive])
+        flown = info["paper_action"] if policy is None else policy.act(observation)
+        observation, _, done, _, info = env.step(np.where(alive, flown, 1).astype(np.int64))
+        if done.all():
+            rate = float(np.mean(info["observation_rate"]))
+            return np.concatenate(seen), np.concatenate(labels), rate
+
+
+def _fit(x: np.ndarray, y: np.ndarray, settings: Imitation, seed: int, log: Any) -> Policy:
+    """A tanh perceptron (`Imitation`'s hidden layers) fitted to the actions y (S,) of
+    observations x (S, size) by softmax cross-entropy, Adam on minibatches (NumPy,
+    float32): initial weights and minibatch order drawn from `seed`."""
+    rng = np.random.default_rng(seed)
+    sizes = [x.shape[1]] + [settings.hidden] * settings.layers + [3]
+    params: list[np.ndarray] = []
+    for a, b in zip(sizes[:-1], sizes[1:], strict=True):  # as torch.nn.Linear draws them
+        bound = 1.0 / np.sqrt(a)
+        params += [rng.uniform(-bound, bound, (a, b)), rng.uniform(-bound, bound, b)]
+    params = [p.astype(np.float32) for p in params]
+    moments = [np.zeros_like(p) for p in params]
+    squares = [np.zeros_like(p) for p in params]
+    beta1, beta2, eps, t = 0.9, 0.999, 1e-8, 0
+    x, onehot = x.astype(np.float32), np.eye(3, dtype=np.float32)[y]
+    for epoch in range(settings.epochs):
+        total = 0.0
+        order = rng.permutation(len(x))
+        for start in range(0, len(x), settings.batch):
+            rows = order[start : start + settings.batch]
+            h, hs = x[rows], []
+            for i in range(0, len(params), 2):
+                hs.append(h)
+                h = h @ params[i] + params[i + 1]
+                if i + 2 < len(params):
+                    h = np.tanh(h)
+            h = h - h.max(axis=1, keepdims=True)
+            p = np.exp(h)
+            p /= p.sum(axis=1, keepdims=True)
+            total += float(-np.log(np.maximum((p * onehot[rows]).sum(1), 1e-30)).sum())
+            grad = (p - onehot[rows]) / len(rows)  # of the mean loss by the logits
+            grads: list[np.ndarray] = [np.empty(0)] * len(params)
+            for i in range(len(params) - 2, -1, -2):
+                grads[i], grads[i + 1] = hs[i // 2].T @ grad, grad.sum(0)
+                if i:
+                    grad = (grad @ params[i].T) * (1.0 - hs[i // 2] ** 2)  # tanh' = 1 - tanh^2
+            t += 1
+            step = settings.learning_rate * np.sqrt(1 - beta2**t) / (1 - beta1**t)
+            for p_, g, m, v in zip(params, grads, moments, squares, strict=True):
+                m *= beta1
+                m += (1 - beta1) * g
+                v *= beta2
+                v += (1 - beta2) * g * g
+                p_ -= step * m / (np.sqrt(v) + eps)
+        log(f"  epoch {epoch + 1}: cross-entropy {total / len(x):.4f}")
+    layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
+    return Policy(
+        layers=layers, activation="tanh", max_targets=settings.max_targets,
+        max_neighbours=settings.max_neighbours,
+    )  # fmt: skip
+
+
+def imitate(
+    scenario: Scenario, settings: Imitation = Imitation(), seed: int = 0, log: Any = print
+) -> Policy:
+    """``bc``: the policy DAgger fits to the paper's method (see the module), with its
+    record in ``meta`` (row, seed, settings, samples, CPU seconds, each round's rate)."""
+    start = time.process_time()
+    xs, ys, rates = [], [], []
+    policy: Policy | None = None
+    for r in range(settings.rounds):
+        first = TRAIN_SEED + r * settings.trials
+        x, y, rate = _collect(scenario, settings, policy, first)
+        xs.append(x)
+        ys.append(y)
+        rates.append(rate)
+        flown = "the planner" if policy is None else "the policy"
+        log(f"round {r}: {len(x)} samples, {flown} flew rate {rate:.3f}")
+        policy = _fit(np.concatenate(xs), np.concatenate(ys), settings, seed + r, log)
+    assert policy is not None
+    meta = {
+        "row": "bc",
+        "seed": seed,
+        "settings": vars(settings),
+        "samples": int(sum(len(x) for x in xs)),
+        "frames": int(sum(len(x) for x in xs)),
+        "round_rates": rates,
+        "cpu_seconds": time.process_time() - start,
+        "scenario": scenario.model_dump(mode="json", exclude_defaults=True),
+    }
+    return Policy(
+        layers=policy.layers, activation=policy.activation, max_targets=policy.max_targets,
+        max_neighbours=policy.max_neighbours, meta=meta,
+    )  # fmt: skip
+
+
+def evaluate(
+    scenario: Scenario, policy: str, trials: int = 50, seed: int = 0, against: str = "distributed"
+) -> dict[str, Any]:
+    """The policy (a method name, ``policy:FILE``) and `against` on the same `trials`
+    trials of `seed`: each one's observation rate (mean, 95 % half-width) and the paired
+    difference, policy minus `against`."""
+    from .. import simulation
+    from ..world import trial_seed
+    from .statistics import ci95, paired
+
+    seeds = [trial_seed(seed, t) for t in range(trials)]
+    rates = {
+        name: simulation.run(scenario, name, seeds).metrics["observation_rate"]
+        for name in (policy, against)
+    }
+    return {
+        "trials": trials,
+        "seed": seed,
+        "rate": {k: {"mean": float(v.mean()), "ci95": ci95(v)} for k, v in rates.items()},
+        "difference": paired(rates[policy], rates[against]),
+        "per_trial": {k: v.tolist() for k, v in rates.items()},
+    }
+
+
+def main(argv: Sequence[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(
+        prog="python -m uavtrack.experiments.learned", description=__doc__
+    )
+    parser.add_argument("row", choices=("bc", "evaluate"))
+    parser.add_argument("--seed", type=int, default=0)
+    parser.add_argument("--out", type=Path, help="bc: the policy file to write")
+    parser.add_argument("--policy", help="evaluate: policy:FILE or a method")
+    parser.add_argument("--trials", type=int, default=50, help="evaluate: held-out trials")
+    for name, kind in (("rounds", int), ("trials_per_round", int), ("hidden", int),
+                       ("layers", int), ("epochs", int), ("learning_rate", float)):  # fmt: skip
+        key = "trials" if name == "trials_per_round" else name
+        parser.add_argument(
+            f"--{name.replace('_', '-')}", type=kind, default=getattr(Imitation(), key),
+            help=f"bc: {key} of `Imitation`",
+        )  # fmt: skip
+    parser.add_argument("--config", help="a scenario TOML file (default: the paper's)")
+    args = parser.parse_args(argv)
+    scenario = Scenario() if args.config is None else Scenario.from_toml(args.config)
+    if args.row == "bc":
+        if args.out is None:
+            parser.error("bc needs --out FILE")
+        settings = Imitation(
+            rounds=args.rounds, trials=args.trials_per_round, hidden=args.hidden,
+            layers=args.layers, epochs=args.epochs, learning_rate=args.learning_rate,
+        )  # fmt: skip
+        policy = imitate(scenario, settings, args.seed)
+        policy.save(args.out)
+        print(f"wrote {args.out} ({policy.meta['cpu_seconds']:.0f} s of CPU)")
+        return 0
+    if args.policy is None:
+        parser.error("evaluate needs --policy policy:FILE")
+    print(json.dumps(evaluate(scenario, args.policy, args.trials, args.seed), indent=1))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,178 @@
+"""A learned policy as a decision method (`uavtrack.env.policy`) and the imitation of the
+paper's planner that makes one (`uavtrack.experiments.learned`): the file, the cycle it flies, the
+commands that take it, and what the imitation learns."""
+
+import json
+
+import numpy as np
+import pytest
+
+import uavtrack
+
+pytest.importorskip("gymnasium")
+from uavtrack import cli  # noqa: E402
+from uavtrack.env.episodes import Episodes  # noqa: E402
+from uavtrack.env.policy import Policy, PolicyMethod  # noqa: E402
+from uavtrack.env.spaces import OWN, TARGET, Spaces  # noqa: E402
+from uavtrack.errors import UsageError  # noqa: E402
+from uavtrack.experiments import learned  # noqa: E402
+from uavtrack.methods import get  # noqa: E402
+from uavtrack.testing import assert_same_trace  # noqa: E402
+
+SHORT = uavtrack.Scenario().with_overrides({"steps": 40})
+SIZE = Spaces(SHORT, "box", 4, 4).size
+
+
+def random_policy(seed=0, hidden=16, size=SIZE):
+    rng = np.random.default_rng(seed)
+    return Policy(
+        layers=[
+            (rng.normal(0, 0.5, (size, hidden)).astype(np.float32), rng.normal(0, 0.1, hidden)),
+            (rng.normal(0, 1.0, (hidden, 3)).astype(np.float32), rng.normal(0, 0.1, 3)),
+        ],
+        meta={"row": "test"},
+    )
+
+
+def pursuit():
+    """A one-layer policy that turns toward its nearest target's estimate (+phi turns
+    left, toward a positive sine of the bearing) and flies straight when it is ahead."""
+    W = np.zeros((SIZE, 3), dtype=np.float32)
+    sine = len(OWN) + TARGET.index("sin_bearing")  # the nearest target's row comes first
+    W[sine, 0], W[sine, 2] = -10.0, 10.0
+    return Policy(layers=[(W, np.array([0.0, 1.0, 0.0], dtype=np.float32))])
+
+
+def constant(action, size=SIZE):
+    bias = np.zeros(3, dtype=np.float32)
+    bias[action] = 1.0
+    return Policy(layers=[(np.zeros((size, 3), dtype=np.float32), bias)])
+
+
+def test_a_policy_file_round_trips_and_computes_its_perceptron(tmp_path):
+    policy = random_policy()
+    loaded = Policy.load(policy.save(tmp_path / "p.npz"))
+    assert loaded.meta["row"] == "test" and loaded.inputs == SIZE
+    x = np.random.default_rng(1).normal(size=(7, SIZE)).astype(np.float32)
+    (W0, b0), (W1, b1) = policy.layers
+    expected = np.tanh(x.astype(np.float64) @ W0 + b0) @ W1 + b1
+    np.testing.assert_allclose(loaded.logits(x), expected, rtol=1e-4, atol=1e-4)
+    np.testing.assert_array_equal(loaded.act(x), np.argmax(expected, axis=-1))
+    tie = Policy(layers=[(np.zeros((SIZE, 3), dtype=np.float32), np.zeros(3, dtype=np.float32))])
+    assert (tie.act(x) == 0).all()  # the lowest index on ties
+    assert not list(tmp_path.glob("*.part"))
+
+
+def test_flying_a_policy_is_the_environment_flying_its_actions(tmp_path):
+    """A policy that always flies straight gives the trace of the environment's own loop
+    (no planning) told to fly straight every step: the same cycle, step for step."""
+    path = constant(1).save(tmp_path / "straight.npz")
+    flown = uavtrack.run(SHORT, f"policy:{path}", seeds=[3], trace=True)
+    episodes = Episodes(
+        SHORT, get("distributed"), Spaces(SHORT), "team", [np.random.SeedSequence(3)],
+        record=True, plan=False,
+    )  # fmt: skip
+    while not episodes.done:
+        episodes.step(np.ones((1, SHORT.n_uavs), dtype=np.int64))
+    alone = episodes.batch_result()
+    assert flown.traces is not None and alone.traces is not None
+    assert_same_trace(flown.traces[0], alone.traces[0])
+    assert (np.asarray(flown.traces[0].action) == 0.0).all()  # straight: bank 0
+    assert flown.metrics["observation_rate"] == pytest.approx(alone.metrics["observation_rate"])
+    assert np.isnan(np.asarray(flown.traces[0].bids)).all()  # no planner, no bids
+
+
+def test_a_policy_flies_each_trial_of_a_batch_as_alone(tmp_path):
+    path = pursuit().save(tmp_path / "pursuit.npz")
+    batch = uavtrack.run(SHORT, f"policy:{path}", seeds=[0, 1, 2]).metrics["observation_rate"]
+    alone = [uavtrack.run(SHORT, f"policy:{path}", seeds=[s]).metrics["observation_rate"][0]
+             for s in (0, 1, 2)]  # fmt: skip
+    np.testing.assert_allclose(batch, alone)
+
+
+def test_a_policy_that_pursues_its_nearest_target_steers_and_sees_more_than_straight(
+    tmp_path,
+):
+    scenario = SHORT.with_overrides({"steps": 150})
+    seeds = list(range(6))
+    chased = uavtrack.run(scenario, f"policy:{pursuit().save(tmp_path / 'p.npz')}", seeds,
+                          trace=True)  # fmt: skip
+    straight = uavtrack.run(scenario, f"policy:{constant(1).save(tmp_path / 's.npz')}", seeds)
+    assert chased.traces is not None
+    assert len(np.unique(np.asarray(chased.traces[0].action))) == 3  # it steers every way
+    rate = chased.metrics["observation_rate"].mean()
+    assert rate > straight.metrics["observation_rate"].mean() + 0.1
+
+
+def test_a_policy_that_does_not_fit_is_refused_in_one_line(tmp_path):
+    (tmp_path / "text.npz").write_text("not an archive")
+    for spec, named in (
+        (tmp_path / "missing.npz", "no policy file"),
+        (tmp_path / "text.npz", "is not a policy file"),
+    ):
+        with pytest.raises(UsageError, match=named):
+            Policy.load(spec)
+    small = constant(1, size=SIZE - 1).save(tmp_path / "small.npz")
+    with pytest.raises(UsageError, match=f"reads {SIZE - 1} numbers"):
+        uavtrack.run(SHORT, f"policy:{small}")
+    with pytest.raises(ValueError, match="logits"):
+        Policy(layers=[(np.zeros((SIZE, 2), dtype=np.float32), np.zeros(2, dtype=np.float32))])
+    bad = np.zeros((SIZE, 3), dtype=np.float32)
+    bad[0, 0] = np.nan
+    with pytest.raises(ValueError, match="not finite"):
+        Policy(layers=[(bad, np.zeros(3, dtype=np.float32))])
+
+
+def test_the_commands_take_a_policy_beside_the_paper_and_refuse_a_bad_one(tmp_path, capsys):
+    path = random_policy().save(tmp_path / "p.npz")
+    code = cli.main(["compare", "--method", "distributed", "--method", f"policy:{path}",
+                     "--trials", "2", "--steps", "20", "--json"])  # fmt: skip
+    out, err = capsys.readouterr()
+    assert code == 0, err
+    assert f"policy:{path}" in json.loads(out)["methods"]
+    code = cli.main(["sweep", "sensor.half_fov_deg", "20", "30", "--method", f"policy:{path}",
+                     "--trials", "1", "--steps", "10", "--workers", "1",
+                     "--out", str(tmp_path / "sweep")])  # fmt: skip
+    assert code == 0, capsys.readouterr().err
+    capsys.readouterr()
+    for argv, named in (
+        (["run", "--method", f"policy:{tmp_path / 'none.npz'}"], "no policy file"),
+        (["run", "--method", "polcy"], "policy:FILE"),
+        (["swarm", "--method", f"policy:{path}", "--steps", "3"], "without planning"),
+    ):
+        code = cli.main(argv)
+        out, err = capsys.readouterr()
+        assert code == 2, (argv, out, err)
+        assert named in err and "Traceback" not in err
+
+
+def test_the_method_is_named_after_its_file(tmp_path):
+    path = constant(1).save(tmp_path / "straight.npz")
+    method = get(f"policy:{path}")
+    assert isinstance(method, PolicyMethod) and method.name == f"policy:{path}"
+    assert not method.plans and get("distributed").plans
+
+
+def test_the_perceptron_fit_separates_a_separable_labelling():
+    """The NumPy fit (softmax cross-entropy, Adam) labels three separable clusters
+    without error: its gradients point the right way."""
+    rng = np.random.default_rng(0)
+    centres = np.array([[-2.0, 0.0], [0.0, 2.0], [2.0, 0.0]])
+    y = rng.integers(0, 3, 600)
+    x = centres[y] + rng.normal(0, 0.3, (600, 2))
+    settings = learned.Imitation(hidden=8, layers=1, epochs=30, batch=64, learning_rate=0.01)
+    policy = learned._fit(x, y, settings, 0, lambda _: None)
+    assert (policy.act(x) == y).mean() == 1.0
+
+
+def test_dagger_learns_the_planners_choices_on_short_missions():
+    """Two rounds of DAgger on missions of 100 steps: the policy picks the planner's
+    action on states of trials it never saw far more often than the most common action's
+    share (measured: 0.82 against 0.51)."""
+    scenario = SHORT.with_overrides({"steps": 100})
+    settings = learned.Imitation(rounds=2, trials=8, hidden=64, epochs=10)
+    policy = learned.imitate(scenario, settings, seed=0, log=lambda _: None)
+    assert policy.meta["row"] == "bc" and policy.meta["samples"] == 2 * 8 * 100 * 5
+    x, y, _ = learned._collect(scenario, settings, policy, seed=5)  # other trials, it flies
+    majority = np.bincount(y, minlength=3).max() / len(y)
+    assert (policy.act(x) == y).mean() > majority + 0.15
