@@ -172,7 +172,57 @@ def test_dagger_learns_the_planners_choices_on_short_missions():
     scenario = SHORT.with_overrides({"steps": 100})
     settings = learned.Imitation(rounds=2, trials=8, hidden=64, epochs=10)
     policy = learned.imitate(scenario, settings, seed=0, log=lambda _: None)
-    assert policy.meta["row"] == "bc" and policy.meta["samples"] == 2 * 8 * 100 * 5
+    assert policy.meta["row"] == "bc" and policy.meta["frames"] == 2 * 8 * 100 * 5
+    assert len(policy.meta["round_rates"]) == len(policy.meta["round_losses"]) == 2
     x, y, _ = learned._collect(scenario, settings, policy, seed=5)  # other trials, it flies
     majority = np.bincount(y, minlength=3).max() / len(y)
     assert (policy.act(x) == y).mean() > majority + 0.15
+
+
+def test_the_shipped_policy_reproduces_its_published_rate_on_its_first_trials():
+    """The shipped policy (``policy:bc``) flies its first three evaluation trials to the
+    rates its file records (equal on the CPU that made it; within 0.05 a trial where
+    another CPU's float32 sums could turn one close choice the other way)."""
+    from uavtrack.env.policy import shipped
+    from uavtrack.world import trial_seed
+
+    assert "bc" in shipped()
+    policy = Policy.load("bc")
+    evaluation = policy.meta["evaluation"]
+    assert evaluation["trials"] == 50 and policy.meta["row"] == "bc"
+    seeds = [trial_seed(evaluation["seed"], t) for t in range(3)]
+    got = uavtrack.run(uavtrack.Scenario(), "policy:bc", seeds).metrics["observation_rate"]
+    np.testing.assert_allclose(got, evaluation["per_trial"]["policy"][:3], atol=0.05)
+
+
+def test_one_command_trains_evaluates_and_reports_a_row(tmp_path, capsys):
+    """``bc`` writes a policy file that carries its command and its evaluation (read back
+    with NumPy and json alone), ``report`` makes its results page and figure, and bad
+    input is one line with exit code 2 and no file."""
+    import matplotlib.image
+
+    out = tmp_path / "small.npz"
+    argv = ["bc", "--rounds", "1", "--trials-per-round", "2", "--hidden", "8", "--epochs", "1",
+            "--trials", "2", "--set", "steps=30", "--out", str(out)]  # fmt: skip
+    assert learned.main(argv) == 0
+    with np.load(out) as data:
+        meta = json.loads(str(data["meta"]))
+        assert data["W0"].shape == (SIZE, 8) and data["b2"].shape == (3,)
+    assert meta["command"].endswith(" ".join(argv))
+    evaluation = meta["evaluation"]
+    assert evaluation["trials"] == 2 and set(evaluation["rate"]) == {"policy", "distributed"}
+    mine, theirs = (np.array(evaluation["per_trial"][k]) for k in ("policy", "distributed"))
+    assert evaluation["difference"]["mean"] == pytest.approx((mine - theirs).mean())
+    page, figure = tmp_path / "page.md", tmp_path / "curves.png"
+    assert learned.main(["report", str(out), "--out", str(page), "--figure", str(figure)]) == 0
+    assert "| bc (small) | steps=30 | 300 |" in page.read_text()  # 2 trials, 30 steps, 5 UAVs
+    assert matplotlib.image.imread(figure).shape[2] in (3, 4)
+    capsys.readouterr()
+    for bad in (["bc", "--out", str(tmp_path / "no" / "x.npz")],
+                ["bc", "--out", str(tmp_path / "x.npz"), "--set", "sensor.detection_probability=2"],
+                ["bc", "--out", str(tmp_path / "x.npz"), "--epochs", "0"],
+                ["report", str(tmp_path / "missing.npz")]):  # fmt: skip
+        assert learned.main(bad) == 2
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err
+    assert not (tmp_path / "x.npz").exists() and not list(tmp_path.glob("*.part*"))

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import shlex
 import sys
 import time
 from collections.abc import Sequence
@@ -32,11 +33,12 @@ from typing import Any
 
 import numpy as np
 
-from ..config import Scenario
+from ..config import Scenario, ScenarioError, flatten, parse_value
 from ..env.policy import Policy
 from ..env.vector import vector_env
+from ..errors import UsageError
 
-__all__ = ["TRAIN_SEED", "Imitation", "evaluate", "imitate", "main"]
+__all__ = ["ROWS", "TRAIN_SEED", "Imitation", "evaluate", "imitate", "main", "record", "report"]
 
 TRAIN_SEED = 1_000_000
 """The first trial seed of training (``vector_env``'s reset seeds, one per trial): far
@@ -49,13 +51,13 @@ class Imitation:
     width and count, the observation's rows, epochs and minibatch of each fit, the
     learning rate."""
 
-    rounds: int = 6
-    trials: int = 16
-    hidden: int = 128
+    rounds: int = 12
+    trials: int = 32
+    hidden: int = 256
     layers: int = 2
     max_targets: int = 4
     max_neighbours: int = 4
-    epochs: int = 8
+    epochs: int = 10
     batch: int = 1024
     learning_rate: float = 1e-3
 
@@ -131,7 +133,7 @@ def _fit(x: np.ndarray, y: np.ndarray, settings: Imitation, seed: int, log: Any)
     layers = [(params[i], params[i + 1]) for i in range(0, len(params), 2)]
     return Policy(
         layers=layers, activation="tanh", max_targets=settings.max_targets,
-        max_neighbours=settings.max_neighbours,
+        max_neighbours=settings.max_neighbours, meta={"loss": total / len(x)},
     )  # fmt: skip
 
 
@@ -139,9 +141,11 @@ def imitate(
     scenario: Scenario, settings: Imitation = Imitation(), seed: int = 0, log: Any = print
 ) -> Policy:
     """``bc``: the policy DAgger fits to the paper's method (see the module), with its
-    record in ``meta`` (row, seed, settings, samples, CPU seconds, each round's rate)."""
+    record in ``meta``: row, seed, settings, frames (UAV-steps recorded), CPU seconds,
+    each round's rate on its training trials (round 0: the planner's) and each fit's
+    final cross-entropy."""
     start = time.process_time()
-    xs, ys, rates = [], [], []
+    xs, ys, rates, losses = [], [], [], []
     policy: Policy | None = None
     for r in range(settings.rounds):
         first = TRAIN_SEED + r * settings.trials
@@ -152,14 +156,15 @@ def imitate(
         flown = "the planner" if policy is None else "the policy"
         log(f"round {r}: {len(x)} samples, {flown} flew rate {rate:.3f}")
         policy = _fit(np.concatenate(xs), np.concatenate(ys), settings, seed + r, log)
+        losses.append(policy.meta["loss"])
     assert policy is not None
     meta = {
         "row": "bc",
         "seed": seed,
         "settings": vars(settings),
-        "samples": int(sum(len(x) for x in xs)),
         "frames": int(sum(len(x) for x in xs)),
         "round_rates": rates,
+        "round_losses": losses,
         "cpu_seconds": time.process_time() - start,
         "scenario": scenario.model_dump(mode="json", exclude_defaults=True),
     }
@@ -193,39 +198,186 @@ def evaluate(
     }
 
 
+def record(path: Path, scenario: Scenario, trials: int = 50, seed: int = 0) -> dict[str, Any]:
+    """Evaluate the policy file at `path` (`evaluate`) and write the result into its meta
+    as ``evaluation``, so that the file carries the rate it reached."""
+    policy = Policy.load(path)
+    result = evaluate(scenario, f"policy:{path}", trials, seed)
+    result["rate"] = {
+        ("policy" if k.startswith("policy:") else k): v for k, v in result["rate"].items()
+    }
+    result["per_trial"] = {
+        ("policy" if k.startswith("policy:") else k): v for k, v in result["per_trial"].items()
+    }
+    Policy(
+        layers=policy.layers, activation=policy.activation, max_targets=policy.max_targets,
+        max_neighbours=policy.max_neighbours, meta={**policy.meta, "evaluation": result},
+    ).save(path)  # fmt: skip
+    return result
+
+
+ROWS = {"bc": "behaviour cloning of the planner (DAgger), NumPy"}
+"""The rows this module trains, by name."""
+
+
+def report(paths: Sequence[Path], figure: Path | None = None) -> str:
+    """The results page (markdown) of evaluated policy files: per row its frames, CPU
+    hours, observation rate with its 95 % interval, the paired difference to the planner
+    and the command that made it; with `figure`, the learning curves drawn there."""
+    from .statistics import ci
+
+    lines = [
+        "# Learned teams against the paper's planner",
+        "",
+        "Each row: a policy file made by the command in its last column "
+        "(`uavtrack.experiments.learned`), flown as `--method policy:FILE` and paired "
+        "with the paper's method (distributed) on the same held-out trials (0 to N - 1 of "
+        "seed 0, which training never sees). Rates are means with a 95 % t interval; "
+        "CPU hours are the training's (one thread), frames the UAV-steps it recorded. "
+        "Goal: a policy within 0.02 of the planner; beyond it, above it with the paired "
+        "interval above 0.",
+        "",
+        "| row | scenario | frames | CPU hours | trials | observation rate | planner "
+        "| policy - planner (95% CI) | within 0.02 | command |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+    ]
+    curves = []
+    for path in paths:
+        meta = Policy.load(path).meta
+        ev = meta.get("evaluation")
+        if ev is None:
+            raise UsageError(f"{path} holds no evaluation: run evaluate --record on it first")
+        rate, planner, d = ev["rate"]["policy"], ev["rate"]["distributed"], ev["difference"]
+        changed = ", ".join(f"{k}={v}" for k, v in flatten(meta.get("scenario", {})).items())
+        lines.append(
+            f"| {meta['row']} ({path.stem}) | {changed or 'the paper'} | {meta['frames']:,} | "
+            f"{meta['cpu_seconds'] / 3600:.2f} | {ev['trials']} | "
+            f"{rate['mean']:.3f} ± {rate['ci95']:.3f} | {planner['mean']:.3f} ± "
+            f"{planner['ci95']:.3f} | {ci(d, digits=3)} | "
+            f"{'yes' if d['mean'] >= -0.02 else 'no'} | `{meta.get('command', '')}` |"
+        )
+        curves.append((path.stem, meta))
+    if figure is not None:
+        _curves(curves, figure)
+        lines += [
+            "",
+            f"![learning curves](figures/{figure.name})",
+            "",
+            "The curves: each DAgger round's rate on its own training trials against the "
+            "UAV-steps recorded so far (round 0, dashed, is the planner flying).",
+        ]
+    return "\n".join(lines) + "\n"
+
+
+def _curves(curves: list[tuple[str, dict[str, Any]]], figure: Path) -> None:
+    """Each row's rate on its training trials against the frames it had seen: round 0
+    is the planner flying, each later round the policy fitted so far."""
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    for name, meta in curves:
+        per_round = meta["frames"] / max(len(meta["round_rates"]), 1)
+        frames = per_round * np.arange(1, len(meta["round_rates"]))
+        (line,) = ax.plot(frames, meta["round_rates"][1:], marker="o", label=name)
+        ax.axhline(meta["round_rates"][0], ls="--", color=line.get_color(), lw=1)
+    ax.set_xlabel("frames seen (UAV-steps)")
+    ax.set_ylabel("observation rate, training trials")
+    ax.set_title("DAgger: the policy's rate by round (dashed: the planner, round 0)")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3)
+    fig.tight_layout()
+    part = figure.with_name(figure.name + ".part.png")
+    fig.savefig(part, dpi=120)
+    plt.close(fig)
+    part.replace(figure)
+
+
 def main(argv: Sequence[str] | None = None) -> int:
+    """The command line (see the module); a bad input is one line and exit code 2."""
+    try:
+        return _main(argv)
+    except (UsageError, ScenarioError) as exc:
+        print(f"learned: error: {exc}", file=sys.stderr)
+        return 2
+
+
+def _main(argv: Sequence[str] | None) -> int:
     parser = argparse.ArgumentParser(
-        prog="python -m uavtrack.experiments.learned", description=__doc__
-    )
-    parser.add_argument("row", choices=("bc", "evaluate"))
-    parser.add_argument("--seed", type=int, default=0)
-    parser.add_argument("--out", type=Path, help="bc: the policy file to write")
-    parser.add_argument("--policy", help="evaluate: policy:FILE or a method")
-    parser.add_argument("--trials", type=int, default=50, help="evaluate: held-out trials")
+        prog="python -m uavtrack.experiments.learned", description=__doc__,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )  # fmt: skip
+    parser.add_argument("row", choices=(*ROWS, "evaluate", "report"))
+    parser.add_argument("paths", nargs="*", type=Path, help="evaluate, report: policy files")
+    parser.add_argument("--seed", type=int, default=0, help="the training's seed")
+    parser.add_argument("--out", type=Path, help="bc: the policy file; report: the page")
+    parser.add_argument("--figure", type=Path, help="report: the learning curves' PNG")
+    parser.add_argument("--trials", type=int, default=50, help="held-out trials evaluated")
+    defaults = Imitation()
     for name, kind in (("rounds", int), ("trials_per_round", int), ("hidden", int),
                        ("layers", int), ("epochs", int), ("learning_rate", float)):  # fmt: skip
         key = "trials" if name == "trials_per_round" else name
         parser.add_argument(
-            f"--{name.replace('_', '-')}", type=kind, default=getattr(Imitation(), key),
-            help=f"bc: {key} of `Imitation`",
+            f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, key),
+            help=f"bc: {key} of `Imitation` [%(default)s]",
         )  # fmt: skip
     parser.add_argument("--config", help="a scenario TOML file (default: the paper's)")
+    parser.add_argument(
+        "--set", action="append", default=[], metavar="FIELD=VALUE", dest="changes",
+        help="a scenario field, dotted, its value read as TOML (repeatable)",
+    )  # fmt: skip
     args = parser.parse_args(argv)
     scenario = Scenario() if args.config is None else Scenario.from_toml(args.config)
-    if args.row == "bc":
-        if args.out is None:
-            parser.error("bc needs --out FILE")
+    changes: dict[str, Any] = {}
+    for item in args.changes:
+        name, sep, text = item.partition("=")
+        if not sep or not name.strip():
+            raise UsageError(f"--set expects FIELD=VALUE, got {item!r}")
+        changes[name.strip()] = parse_value(text.strip(), where=f"--set {name.strip()}")
+    if changes:
+        scenario = scenario.with_overrides(changes)
+    if args.trials < 2:
+        raise UsageError(f"--trials must be at least 2 (an interval needs two), got {args.trials}")
+    if args.row in ROWS:
+        if args.out is None or args.paths:
+            raise UsageError(f"{args.row} writes one policy file: give --out FILE, no paths")
+        if not args.out.parent.is_dir():
+            raise UsageError(f"--out {args.out}: no folder {args.out.parent}")
         settings = Imitation(
             rounds=args.rounds, trials=args.trials_per_round, hidden=args.hidden,
             layers=args.layers, epochs=args.epochs, learning_rate=args.learning_rate,
         )  # fmt: skip
+        for field_, value in vars(settings).items():
+            if value <= 0:
+                raise UsageError(f"--{field_.replace('_', '-')} must be above 0, got {value}")
+        given = list(argv) if argv is not None else sys.argv[1:]
+        command = "python -m uavtrack.experiments.learned " + shlex.join(given)
         policy = imitate(scenario, settings, args.seed)
+        policy = Policy(
+            layers=policy.layers, activation=policy.activation,
+            max_targets=policy.max_targets, max_neighbours=policy.max_neighbours,
+            meta={**policy.meta, "command": command},
+        )  # fmt: skip
         policy.save(args.out)
-        print(f"wrote {args.out} ({policy.meta['cpu_seconds']:.0f} s of CPU)")
+        result = record(args.out, scenario, args.trials)
+        d = result["difference"]
+        print(
+            f"wrote {args.out}: rate {result['rate']['policy']['mean']:.3f}, planner "
+            f"{result['rate']['distributed']['mean']:.3f}, difference {d['mean']:+.3f} "
+            f"({d['ci_low']:+.3f}, {d['ci_high']:+.3f}) on {args.trials} held-out trials; "
+            f"{policy.meta['cpu_seconds']:.0f} s of CPU to train"
+        )
         return 0
-    if args.policy is None:
-        parser.error("evaluate needs --policy policy:FILE")
-    print(json.dumps(evaluate(scenario, args.policy, args.trials, args.seed), indent=1))
+    if not args.paths:
+        raise UsageError(f"{args.row} needs policy files")
+    if args.row == "evaluate":
+        for path in args.paths:
+            print(json.dumps({str(path): record(path, scenario, args.trials)}, indent=1))
+        return 0
+    page = report(args.paths, args.figure)
+    if args.out is None:
+        print(page, end="")
+    else:
+        args.out.write_text(page)
     return 0
 
 
