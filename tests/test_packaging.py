@@ -46,3 +46,6 @@ def test_the_built_wheel_carries_the_licence(tmp_path):
         (metadata,) = [n for n in names if n.endswith(".dist-info/METADATA")]
         lines = archive.read(metadata).decode().splitlines()
     assert "License-Expression: MIT" in lines and "License-File: LICENSE" in lines
+    # the data a fresh install needs: the shipped presets and policies (policy:bc)
+    assert "uavtrack/config/presets/realistic.toml" in names
+    assert {"uavtrack/env/policies/bc.npz", "uavtrack/env/policies/bc-jpda.npz"} <= set(names)
