@@ -1,7 +1,8 @@
 """Learned teams against the paper's planner: train a policy, evaluate it paired.
 
-Each row of the benchmark is one command with its seed (``python -m uavtrack.experiments.learned
-ROW --seed S --out FILE``), CPU only, on the scenario given (default: the paper's 5 x 4):
+Each row of the benchmark is one command with its seed, CPU only, on the scenario given
+(default: the paper's 5 x 4): ``python -m uavtrack.experiments.learned ROW --seed S --out
+FILE`` trains the row, evaluates it and records both in the file.
 
 * ``bc``: behaviour cloning of the paper's method with DAgger (Ross, Gordon and
   Bagnell, 2011). Round 0 flies the planner's actions and records (observation, the
@@ -12,7 +13,8 @@ ROW --seed S --out FILE``), CPU only, on the scenario given (default: the paper'
 * ``evaluate``: the policy and the paper's method on the same held-out trials (trial t
   of seed 0, as ``uavtrack compare`` draws them; training draws trials from
   `TRAIN_SEED` on, which these never are): the observation rate with a 95 % interval,
-  and the paired difference to the planner.
+  and the paired difference to the planner, written into the file (``record``);
+* ``report``: the results page of evaluated files, and their learning curves.
 
 The training's own random draws (initial weights, minibatch order) come from the seed,
 so a seed gives the same file on one CPU (another may round the sums differently).
@@ -100,6 +102,7 @@ def _fit(x: np.ndarray, y: np.ndarray, settings: Imitation, seed: int, log: Any)
     squares = [np.zeros_like(p) for p in params]
     beta1, beta2, eps, t = 0.9, 0.999, 1e-8, 0
     x, onehot = x.astype(np.float32), np.eye(3, dtype=np.float32)[y]
+    total = np.nan  # the last epoch's summed cross-entropy
     for epoch in range(settings.epochs):
         total = 0.0
         order = rng.permutation(len(x))
