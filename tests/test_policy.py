@@ -226,3 +226,88 @@ def test_one_command_trains_evaluates_and_reports_a_row(tmp_path, capsys):
         err = capsys.readouterr().err
         assert err.count("\n") == 1 and "Traceback" not in err
     assert not (tmp_path / "x.npz").exists() and not list(tmp_path.glob("*.part*"))
+
+
+def test_a_policy_file_changed_between_two_runs_is_read_anew(tmp_path):
+    """In one process and in a results folder alike: the file, not its name, is what
+    flies, and a sweep's stored results of the old file are not taken for the new."""
+    path = tmp_path / "p.npz"
+    constant(1).save(path)
+    straight = uavtrack.run(SHORT, f"policy:{path}", seeds=[0], trace=True)
+    pursuit().save(path)
+    chased = uavtrack.run(SHORT, f"policy:{path}", seeds=[0], trace=True)
+    assert straight.traces is not None and chased.traces is not None
+    assert (np.asarray(straight.traces[0].action) == 0).all()
+    assert (np.asarray(chased.traces[0].action) != 0).any()
+    argv = ["sweep", "comm_range", "30", "100", "--method", f"policy:{path}", "--trials", "1",
+            "--steps", "20", "--workers", "1", "--out", str(tmp_path / "sweep")]  # fmt: skip
+    assert cli.main(argv) == 0
+    constant(0).save(path)
+    assert cli.main(argv) == 0
+    rejected = list((tmp_path / "sweep" / "failed").glob("*.rejected*"))
+    assert len(rejected) == 2  # both old results set aside, both jobs run again
+    assert "another policy" in rejected[0].read_text()
+
+
+def test_a_policy_that_does_not_fit_a_cell_stops_a_sweep_before_any_work(tmp_path, capsys):
+    code = cli.main(["sweep", "n_uavs", "2", "5", "--method", "policy:bc", "--trials", "1",
+                     "--steps", "10", "--workers", "1", "--out", str(tmp_path / "s")])  # fmt: skip
+    err = capsys.readouterr().err
+    assert code == 2 and "does not fit" in err and "Traceback" not in err
+    assert not list((tmp_path / "s").glob("raw/*.json"))
+
+
+def test_bad_policy_files_are_named_in_one_line(tmp_path):
+    (tmp_path / "folder.npz").mkdir()
+    (tmp_path / "text.npz").write_text("not an archive")
+    np.savez(tmp_path / "list.npz", meta=np.array(json.dumps([1, 2])), W0=np.zeros((2, 3)),
+             b0=np.zeros(3))  # fmt: skip
+    for name, named in (("folder.npz", "is a folder"), ("text.npz", "not a NumPy archive"),
+                        ("list.npz", "not a JSON object")):  # fmt: skip
+        with pytest.raises(UsageError, match=named) as caught:
+            Policy.load(tmp_path / name)
+        assert "allow_pickle" not in str(caught.value)
+    with pytest.raises(ValueError, match="real floats"):
+        Policy(layers=[(np.zeros((SIZE, 3), dtype=complex), np.zeros(3))])
+
+
+def test_the_trainer_refuses_bad_input_and_an_interruption_leaves_no_file(
+    tmp_path, capsys, monkeypatch
+):
+    out = tmp_path / "x.npz"
+    small = ["--rounds", "1", "--trials-per-round", "2", "--hidden", "8", "--epochs", "1",
+             "--trials", "2", "--set", "steps=20"]  # fmt: skip
+    (tmp_path / "exists.npz").write_bytes(b"mine")
+    for argv in (["bc", "--out", str(tmp_path)],
+                 ["bc", "--out", str(tmp_path / "exists.npz"), *small],
+                 ["bc", "--out", str(out), "--learning-rate", "nan"],
+                 ["bc", "--out", str(out), "--set", "n_uavs=2"],
+                 ["evaluate", "bc"],
+                 ["evaluate", str(out), "--set", "steps=10"],
+                 ["report", "policy.npz", "--out", str(tmp_path / "no" / "page.md")]):  # fmt: skip
+        assert learned.main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert err.count("\n") == 1 and "Traceback" not in err, (argv, err)
+    assert (tmp_path / "exists.npz").read_bytes() == b"mine"
+
+    def interrupted(*_, **__):
+        raise KeyboardInterrupt
+
+    for stage in ("imitate", "evaluate"):  # while training, and while evaluating
+        with monkeypatch.context() as m:
+            m.setattr(learned, stage, interrupted)
+            assert learned.main(["bc", "--out", str(out), *small]) == 130
+        assert "interrupted" in capsys.readouterr().err
+        assert not out.exists() and sorted(p.name for p in tmp_path.iterdir()) == ["exists.npz"]
+
+
+def test_evaluate_flies_the_scenario_the_file_was_trained_on(tmp_path):
+    out = tmp_path / "x.npz"
+    assert learned.main(["bc", "--rounds", "1", "--trials-per-round", "2", "--hidden", "8",
+                         "--epochs", "1", "--trials", "2", "--set", "steps=25",
+                         "--out", str(out)]) == 0  # fmt: skip
+    assert learned.main(["evaluate", str(out), "--trials", "3"]) == 0
+    evaluation = Policy.load(out).meta["evaluation"]
+    assert evaluation["scenario"] == {"steps": 25} and evaluation["trials"] == 3
+    rates = np.array(evaluation["per_trial"]["policy"]) * 25
+    np.testing.assert_allclose(rates * 4, np.round(rates * 4))  # 4 targets, 25 steps

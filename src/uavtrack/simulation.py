@@ -194,7 +194,11 @@ class Context:
 
 def refusal(scenario: Scenario, method: Method) -> str | None:
     """Why `method` cannot run `scenario` (a piece not built yet, docs/how-to/pairs.md),
-    or None: what `Context.of` refuses, for a caller to check every run before any."""
+    or None: what `Context.of` refuses, for a caller to check every run before any.
+    The method's own refusal (`Method.refusal`) comes first."""
+    own = method.refusal(scenario)
+    if own is not None:
+        return own
     listed = scenario.radio.encoding != "full" or scenario.fusion.trigger is not None
     if method.central and listed:
         return (
@@ -943,13 +947,21 @@ def step(
     """One decision cycle at step k = state.k for every trial: `decide`, then `finish`
     with `actions` (B, Nu) indices into the action set, or else the method's: its
     planned ones, or those it chooses itself (`Method.actions`, a learned policy)."""
-    method = ctx.method
-    pending = decide(state, targets, noise, ctx, plan=method.plans)
-    if actions is None and not method.plans:  # its choice is its decision time
-        start = timing.start()
-        actions = method.actions(state, pending, ctx)
-        pending = replace(pending, plan_seconds=pending.plan_seconds + timing.since(start))
+    pending = decide(state, targets, noise, ctx, plan=ctx.method.plans)
+    if actions is None:
+        pending, actions = chosen(state, pending, ctx)
     return finish(state, pending, ctx, actions)
+
+
+def chosen(state: State, pending: Pending, ctx: Context) -> tuple[Pending, np.ndarray | None]:
+    """The actions a method that does not plan chooses itself (`Method.actions`, a
+    learned policy), its time to choose added to the cycle's decision time; None for a
+    method that plans (its planned actions fly)."""
+    if ctx.method.plans:
+        return pending, None
+    start = timing.start()
+    actions = ctx.method.actions(state, pending, ctx)
+    return replace(pending, plan_seconds=pending.plan_seconds + timing.since(start)), actions
 
 
 def graph(uavs: np.ndarray, alive: np.ndarray, scenario: Scenario) -> np.ndarray:

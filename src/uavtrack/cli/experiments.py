@@ -424,6 +424,7 @@ def sweep(
     axes = sweep_axes(scenario, raw)
     names = chosen_methods(methods)
     plan = sweep_plan(scenario, axes, names, trials, chunk=10, seed=seed)  # every cell checked
+    refuse_any(plan)  # and every method on it
     out = out or Path("results") / ("sweep-" + "-".join(axes))
     one = len(axes) == 1
     manifest = {

@@ -102,6 +102,11 @@ class Policy:
             raise ValueError("a policy needs at least one layer")
         width = self.layers[0][0].shape[0]
         for i, (W, b) in enumerate(self.layers):
+            real = all(np.issubdtype(a.dtype, np.floating) for a in (W, b))
+            if not real:
+                raise ValueError(
+                    f"layer {i}: W and b must be real floats, not {W.dtype}, {b.dtype}"
+                )
             if W.ndim != 2 or b.shape != (W.shape[1],) or W.shape[0] != width:
                 raise ValueError(f"layer {i}: W {W.shape} and b {b.shape} do not chain")
             if not (np.isfinite(W).all() and np.isfinite(b).all()):
@@ -159,9 +164,12 @@ class Policy:
         for i, (W, b) in enumerate(self.layers):
             arrays[f"W{i}"], arrays[f"b{i}"] = W.astype(np.float32), b.astype(np.float32)
         part = path.with_name(path.name + ".part")
-        with open(part, "wb") as f:
-            np.savez_compressed(f, **arrays)  # pyright: ignore[reportArgumentType]
-        part.replace(path)
+        try:
+            with open(part, "wb") as f:
+                np.savez_compressed(f, **arrays)  # pyright: ignore[reportArgumentType]
+            part.replace(path)
+        finally:
+            part.unlink(missing_ok=True)
         return path
 
     @classmethod
@@ -169,16 +177,24 @@ class Policy:
         """The policy of a file, or a shipped one by name; a one-line `UsageError` that
         names what is wrong otherwise."""
         path = _path(str(spec))
+        if path.is_dir():
+            raise UsageError(f"{path} is a folder, not a policy file")
         if not path.is_file():
             names = ", ".join(shipped()) or "none"
             raise UsageError(f"no policy file {path} (shipped policies: {names})")
         try:
             with np.load(path, allow_pickle=False) as data:
+                if not hasattr(data, "files"):  # a lone array (.npy), not an archive
+                    raise ValueError("one array")
                 arrays = {k: data[k] for k in data.files}
-        except Exception as exc:  # a file that is no NumPy archive
-            raise UsageError(f"{path} is not a policy file (.npz): {exc}") from None
+        except Exception:  # a file that is no NumPy archive, or one of objects
+            raise UsageError(
+                f"{path} is not a policy file: not a NumPy archive of arrays (.npz)"
+            ) from None
         try:
             meta = json.loads(str(arrays.pop("meta")))
+            if not isinstance(meta, dict):
+                raise ValueError(f"meta is a {type(meta).__name__}, not a JSON object")
             if meta.get("format") != FORMAT:
                 raise ValueError(f"format {meta.get('format')!r}, this version reads {FORMAT}")
             count = sum(1 for k in arrays if k.startswith("W"))
@@ -209,6 +225,14 @@ class PolicyMethod(Distributed):
     @property
     def name(self) -> str:  # pyright: ignore[reportIncompatibleVariableOverride]
         return self.instance_name
+
+    def refusal(self, scenario: Any) -> str | None:
+        """Why the policy cannot fly `scenario`: its observation does not fit."""
+        try:
+            self.policy.spaces(scenario)
+        except UsageError as exc:
+            return str(exc)
+        return None
 
     def actions(self, state: State, pending: Pending, ctx: Any) -> np.ndarray:
         """The policy's actions (B, N) for the pending cycle."""

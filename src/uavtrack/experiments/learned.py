@@ -17,7 +17,7 @@ FILE`` trains the row, evaluates it and records both in the file.
 * ``report``: the results page of evaluated files, and their learning curves.
 
 The training's own random draws (initial weights, minibatch order) come from the seed,
-so a seed gives the same file on one CPU (another may round the sums differently).
+so a seed gives the same weights on one CPU (another may round the sums differently).
 NumPy only: no learning library is needed to train, fly or evaluate this row.
 """
 
@@ -25,6 +25,8 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
+import os
 import shlex
 import sys
 import time
@@ -37,6 +39,7 @@ import numpy as np
 
 from ..config import Scenario, ScenarioError, flatten, parse_value
 from ..env.policy import Policy
+from ..env.spaces import Spaces
 from ..env.vector import vector_env
 from ..errors import UsageError
 
@@ -201,17 +204,21 @@ def evaluate(
     }
 
 
-def record(path: Path, scenario: Scenario, trials: int = 50, seed: int = 0) -> dict[str, Any]:
-    """Evaluate the policy file at `path` (`evaluate`) and write the result into its meta
-    as ``evaluation``, so that the file carries the rate it reached."""
+def record(
+    path: Path, scenario: Scenario | None = None, trials: int = 50, seed: int = 0
+) -> dict[str, Any]:
+    """Evaluate the policy file at `path` (`evaluate`) on the scenario it was trained on
+    (its ``meta["scenario"]``; `scenario` only for a file that records none) and write the
+    result, with that scenario, into its meta as ``evaluation``: the file carries the
+    rate it reached."""
     policy = Policy.load(path)
+    if "scenario" in policy.meta:
+        scenario = Scenario.model_validate(policy.meta["scenario"])
+    scenario = Scenario() if scenario is None else scenario
     result = evaluate(scenario, f"policy:{path}", trials, seed)
-    result["rate"] = {
-        ("policy" if k.startswith("policy:") else k): v for k, v in result["rate"].items()
-    }
-    result["per_trial"] = {
-        ("policy" if k.startswith("policy:") else k): v for k, v in result["per_trial"].items()
-    }
+    renamed = lambda d: {("policy" if k.startswith("policy:") else k): v for k, v in d.items()}  # noqa: E731
+    result["rate"], result["per_trial"] = renamed(result["rate"]), renamed(result["per_trial"])
+    result["scenario"] = scenario.model_dump(mode="json", exclude_defaults=True)
     Policy(
         layers=policy.layers, activation=policy.activation, max_targets=policy.max_targets,
         max_neighbours=policy.max_neighbours, meta={**policy.meta, "evaluation": result},
@@ -223,10 +230,11 @@ ROWS = {"bc": "behaviour cloning of the planner (DAgger), NumPy"}
 """The rows this module trains, by name."""
 
 
-def report(paths: Sequence[Path], figure: Path | None = None) -> str:
+def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None = None) -> str:
     """The results page (markdown) of evaluated policy files: per row its frames, CPU
     hours, observation rate with its 95 % interval, the paired difference to the planner
-    and the command that made it; with `figure`, the learning curves drawn there."""
+    and the command that made it; with `figure`, the learning curves drawn there and
+    linked from where the page will be written (`page`)."""
     from .statistics import ci
 
     lines = [
@@ -249,7 +257,7 @@ def report(paths: Sequence[Path], figure: Path | None = None) -> str:
         meta = Policy.load(path).meta
         ev = meta.get("evaluation")
         if ev is None:
-            raise UsageError(f"{path} holds no evaluation: run evaluate --record on it first")
+            raise UsageError(f"{path} holds no evaluation: run 'evaluate {path}' first")
         rate, planner, d = ev["rate"]["policy"], ev["rate"]["distributed"], ev["difference"]
         changed = ", ".join(f"{k}={v}" for k, v in flatten(meta.get("scenario", {})).items())
         lines.append(
@@ -262,9 +270,10 @@ def report(paths: Sequence[Path], figure: Path | None = None) -> str:
         curves.append((path.stem, meta))
     if figure is not None:
         _curves(curves, figure)
+        link = Path(os.path.relpath(figure, page.parent)).as_posix() if page else figure.name
         lines += [
             "",
-            f"![learning curves](figures/{figure.name})",
+            f"![learning curves]({link})",
             "",
             "The curves: each DAgger round's rate on its own training trials against the "
             "UAV-steps recorded so far (round 0, dashed, is the planner flying).",
@@ -296,12 +305,26 @@ def _curves(curves: list[tuple[str, dict[str, Any]]], figure: Path) -> None:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """The command line (see the module); a bad input is one line and exit code 2."""
+    """The command line (see the module); a bad input is one line and exit code 2, an
+    interruption one line and exit code 130, and neither leaves a file."""
     try:
         return _main(argv)
     except (UsageError, ScenarioError) as exc:
         print(f"learned: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("learned: interrupted; nothing written", file=sys.stderr)
+        return 130
+
+
+def _writable(path: Path, option: str, force: bool = True) -> None:
+    """Refuse an output path that cannot be written whole, in one line."""
+    if path.is_dir():
+        raise UsageError(f"{option} {path} is a folder; give a file")
+    if not path.parent.is_dir():
+        raise UsageError(f"{option} {path}: no folder {path.parent}")
+    if not force and path.exists():
+        raise UsageError(f"{option} {path} exists; give --force to replace it")
 
 
 def _main(argv: Sequence[str] | None) -> int:
@@ -313,6 +336,7 @@ def _main(argv: Sequence[str] | None) -> int:
     parser.add_argument("paths", nargs="*", type=Path, help="evaluate, report: policy files")
     parser.add_argument("--seed", type=int, default=0, help="the training's seed")
     parser.add_argument("--out", type=Path, help="bc: the policy file; report: the page")
+    parser.add_argument("--force", action="store_true", help="bc: replace --out if it exists")
     parser.add_argument("--figure", type=Path, help="report: the learning curves' PNG")
     parser.add_argument("--trials", type=int, default=50, help="held-out trials evaluated")
     defaults = Imitation()
@@ -323,12 +347,45 @@ def _main(argv: Sequence[str] | None) -> int:
             f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, key),
             help=f"bc: {key} of `Imitation` [%(default)s]",
         )  # fmt: skip
-    parser.add_argument("--config", help="a scenario TOML file (default: the paper's)")
+    parser.add_argument("--config", help="bc: a scenario TOML file (default: the paper's)")
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="changes",
-        help="a scenario field, dotted, its value read as TOML (repeatable)",
+        help="bc: a scenario field, dotted, its value read as TOML (repeatable)",
     )  # fmt: skip
     args = parser.parse_args(argv)
+    if args.trials < 2:
+        raise UsageError(f"--trials must be at least 2 (an interval needs two), got {args.trials}")
+    if args.row in ROWS:
+        return _train(args, argv)
+    if not args.paths:
+        raise UsageError(f"{args.row} needs policy files")
+    if args.row == "evaluate":
+        if args.config is not None or args.changes:
+            raise UsageError(
+                "evaluate flies the scenario each file was trained on (its meta): no --config "
+                "or --set"
+            )
+        for path in args.paths:
+            if not path.is_file():  # a shipped policy by name is read-only
+                raise UsageError(f"evaluate writes into the file: no file {path}")
+        for path in args.paths:
+            print(json.dumps({str(path): record(path, trials=args.trials)}, indent=1))
+        return 0
+    for option, path in (("--out", args.out), ("--figure", args.figure)):
+        if path is not None:
+            _writable(path, option)
+    page = report(args.paths, args.figure, args.out)
+    if args.out is None:
+        print(page, end="")
+    else:
+        part = args.out.with_name(args.out.name + ".part")
+        part.write_text(page)
+        part.replace(args.out)
+    return 0
+
+
+def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
+    """A row's command: train, evaluate and write the policy file whole."""
     scenario = Scenario() if args.config is None else Scenario.from_toml(args.config)
     changes: dict[str, Any] = {}
     for item in args.changes:
@@ -338,49 +395,42 @@ def _main(argv: Sequence[str] | None) -> int:
         changes[name.strip()] = parse_value(text.strip(), where=f"--set {name.strip()}")
     if changes:
         scenario = scenario.with_overrides(changes)
-    if args.trials < 2:
-        raise UsageError(f"--trials must be at least 2 (an interval needs two), got {args.trials}")
-    if args.row in ROWS:
-        if args.out is None or args.paths:
-            raise UsageError(f"{args.row} writes one policy file: give --out FILE, no paths")
-        if not args.out.parent.is_dir():
-            raise UsageError(f"--out {args.out}: no folder {args.out.parent}")
-        settings = Imitation(
-            rounds=args.rounds, trials=args.trials_per_round, hidden=args.hidden,
-            layers=args.layers, epochs=args.epochs, learning_rate=args.learning_rate,
-        )  # fmt: skip
-        for field_, value in vars(settings).items():
-            if value <= 0:
-                raise UsageError(f"--{field_.replace('_', '-')} must be above 0, got {value}")
-        given = list(argv) if argv is not None else sys.argv[1:]
-        command = "python -m uavtrack.experiments.learned " + shlex.join(given)
-        policy = imitate(scenario, settings, args.seed)
-        policy = Policy(
-            layers=policy.layers, activation=policy.activation,
-            max_targets=policy.max_targets, max_neighbours=policy.max_neighbours,
-            meta={**policy.meta, "command": command},
-        )  # fmt: skip
-        policy.save(args.out)
-        result = record(args.out, scenario, args.trials)
-        d = result["difference"]
-        print(
-            f"wrote {args.out}: rate {result['rate']['policy']['mean']:.3f}, planner "
-            f"{result['rate']['distributed']['mean']:.3f}, difference {d['mean']:+.3f} "
-            f"({d['ci_low']:+.3f}, {d['ci_high']:+.3f}) on {args.trials} held-out trials; "
-            f"{policy.meta['cpu_seconds']:.0f} s of CPU to train"
-        )
-        return 0
-    if not args.paths:
-        raise UsageError(f"{args.row} needs policy files")
-    if args.row == "evaluate":
-        for path in args.paths:
-            print(json.dumps({str(path): record(path, scenario, args.trials)}, indent=1))
-        return 0
-    page = report(args.paths, args.figure)
-    if args.out is None:
-        print(page, end="")
-    else:
-        args.out.write_text(page)
+    if args.out is None or args.paths:
+        raise UsageError(f"{args.row} writes one policy file: give --out FILE, no paths")
+    _writable(args.out, "--out", args.force)
+    settings = Imitation(
+        rounds=args.rounds, trials=args.trials_per_round, hidden=args.hidden,
+        layers=args.layers, epochs=args.epochs, learning_rate=args.learning_rate,
+    )  # fmt: skip
+    for field_, value in vars(settings).items():
+        if not (math.isfinite(value) and value > 0):
+            raise UsageError(f"--{field_.replace('_', '-')} must be above 0, got {value}")
+    try:  # the observation must fit the team, before any work
+        Spaces(scenario, "box", settings.max_targets, settings.max_neighbours)
+    except ValueError as exc:
+        raise UsageError(f"the scenario's team does not fill the observation: {exc}") from None
+    given = list(argv) if argv is not None else sys.argv[1:]
+    command = "python -m uavtrack.experiments.learned " + shlex.join(given)
+    policy = imitate(scenario, settings, args.seed)
+    policy = Policy(
+        layers=policy.layers, activation=policy.activation,
+        max_targets=policy.max_targets, max_neighbours=policy.max_neighbours,
+        meta={**policy.meta, "command": command},
+    )  # fmt: skip
+    training = args.out.with_name(args.out.name + ".training.npz")  # moved once evaluated
+    try:
+        policy.save(training)
+        result = record(training, trials=args.trials)
+        training.replace(args.out)
+    finally:
+        training.unlink(missing_ok=True)
+    d = result["difference"]
+    print(
+        f"wrote {args.out}: rate {result['rate']['policy']['mean']:.3f}, planner "
+        f"{result['rate']['distributed']['mean']:.3f}, difference {d['mean']:+.3f} "
+        f"({d['ci_low']:+.3f}, {d['ci_high']:+.3f}) on {args.trials} held-out trials; "
+        f"{policy.meta['cpu_seconds']:.0f} s of CPU to train"
+    )
     return 0
 
 

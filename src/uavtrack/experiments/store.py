@@ -207,11 +207,11 @@ class Store:
         except (TypeError, ValueError):
             return "its content does not match its checksum (edited or corrupted)", {}
         expected = self.identity(job)
-        for field in ("key", "seed", "first", "count", "method", "scenario", "code"):
-            if record["job"].get(field) != expected[field]:
+        for field in ("key", "seed", "first", "count", "method", "scenario", "code", "policy"):
+            if record["job"].get(field) != expected.get(field):
                 return (
                     f"it was made for another {field} ({record['job'].get(field)!r}, "
-                    f"this job has {expected[field]!r})"
+                    f"this job has {expected.get(field)!r})"
                 ), {}
         return "", record
 

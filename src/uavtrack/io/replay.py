@@ -211,7 +211,7 @@ def replay(
         observed, sensed, links = step.observed, step.sensed, step.links
         uavs = step.uavs
         pending = simulation.decided(state, sensed, alive, uavs, observed, ctx, method.plans, links)
-        actions = method.actions(state, pending, ctx)
+        pending, actions = simulation.chosen(state, pending, ctx)
         state, cycle = simulation.finish(state, pending, ctx, actions, fly=False)
         tally.add(cycle, truth[k][None])
         rec.record(k, cycle)

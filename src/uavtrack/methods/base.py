@@ -244,6 +244,11 @@ class Method:
         """Targets from bids (B, N, M)."""
         raise NotImplementedError
 
+    def refusal(self, scenario: Scenario) -> str | None:
+        """Why this method cannot run `scenario`, in one line, or None (every built-in
+        method runs every scenario the model takes)."""
+        return None
+
     def actions(self, state: Any, pending: Any, ctx: Any) -> np.ndarray | None:
         """The actions (B, N) the UAVs fly this cycle (indices into the action set) from
         the cycle's `records.State`, `records.Pending` and `simulation.Context` (the

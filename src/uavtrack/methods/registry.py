@@ -62,11 +62,9 @@ def load(name: str) -> Any:
     ``policy:FILE`` a learned policy (`uavtrack.env.policy.PolicyMethod`)."""
     if name in _REGISTERED:
         return _REGISTERED[name]
-    if name.startswith(POLICY):  # loaded as a plugin is: by where it lives
+    if name.startswith(POLICY):  # loaded as a plugin is, and read anew: its file may change
         module, _, attribute = POLICIES.partition(":")
-        method = getattr(importlib.import_module(module), attribute)(name)
-        _REGISTERED[name] = method
-        return method
+        return getattr(importlib.import_module(module), attribute)(name)
     where = BUILT_IN.get(name) or _plugins().get(name)
     if where is None:
         raise ValueError(f"unknown method {name!r}; choose one of: {', '.join(names())}")
