@@ -48,4 +48,5 @@ def test_the_built_wheel_carries_the_licence(tmp_path):
     assert "License-Expression: MIT" in lines and "License-File: LICENSE" in lines
     # the data a fresh install needs: the shipped presets and policies (policy:bc)
     assert "uavtrack/config/presets/realistic.toml" in names
-    assert {"uavtrack/env/policies/bc.npz", "uavtrack/env/policies/bc-jpda.npz"} <= set(names)
+    shipped = {f"uavtrack/env/policies/{n}.npz" for n in ("bc", "bc-ppo", "bc-jpda")}
+    assert shipped <= set(names)

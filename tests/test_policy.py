@@ -179,19 +179,21 @@ def test_dagger_learns_the_planners_choices_on_short_missions():
     assert (policy.act(x) == y).mean() > majority + 0.15
 
 
-def test_the_shipped_policy_reproduces_its_published_rate_on_its_first_trials():
-    """The shipped policy (``policy:bc``) flies its first three evaluation trials to the
-    rates its file records (equal on the CPU that made it; within 0.05 a trial where
-    another CPU's float32 sums could turn one close choice the other way)."""
+@pytest.mark.parametrize("name", ["bc", "bc-ppo", "bc-jpda"])
+def test_each_shipped_policy_reproduces_its_published_rates_on_its_first_trials(name):
+    """A shipped policy flies its first three evaluation trials, on the scenario its file
+    records, to the rates the file records (equal on the CPU that made it and on numpy's
+    baseline path; within 0.05 a trial where another CPU's float32 sums could turn one
+    close choice the other way)."""
     from uavtrack.env.policy import shipped
     from uavtrack.world import trial_seed
 
-    assert "bc" in shipped()
-    policy = Policy.load("bc")
-    evaluation = policy.meta["evaluation"]
-    assert evaluation["trials"] == 50 and policy.meta["row"] == "bc"
+    assert name in shipped()
+    evaluation = Policy.load(name).meta["evaluation"]
+    assert evaluation["trials"] == 50
+    scenario = uavtrack.Scenario.model_validate(evaluation["scenario"])
     seeds = [trial_seed(evaluation["seed"], t) for t in range(3)]
-    got = uavtrack.run(uavtrack.Scenario(), "policy:bc", seeds).metrics["observation_rate"]
+    got = uavtrack.run(scenario, f"policy:{name}", seeds).metrics["observation_rate"]
     np.testing.assert_allclose(got, evaluation["per_trial"]["policy"][:3], atol=0.05)
 
 
@@ -311,3 +313,38 @@ def test_evaluate_flies_the_scenario_the_file_was_trained_on(tmp_path):
     assert evaluation["scenario"] == {"steps": 25} and evaluation["trials"] == 3
     rates = np.array(evaluation["per_trial"]["policy"]) * 25
     np.testing.assert_allclose(rates * 4, np.round(rates * 4))  # 4 targets, 25 steps
+
+
+def test_fine_tuning_starts_from_the_imitation_weight_for_weight():
+    """PPO's actor is the start's perceptron, copied weight for weight: its greedy action
+    is the policy's on observations of a trial; with a learning rate of 0 the exported
+    policy is the start; with one above 0 the actor moves once the critic has warmed."""
+    pytest.importorskip("torch")
+    pytest.importorskip("stable_baselines3")
+    start = pursuit_mlp()
+    frozen = learned.FineTuning(frames=2560, warm=1280, trials=2, learning_rate=0.0)
+    model, _ = learned.ppo_from(SHORT, start, frozen)
+    observations = model.get_env().reset()
+    greedy, _ = model.predict(observations, deterministic=True)
+    np.testing.assert_array_equal(greedy, start.act(observations))
+    assert len(np.unique(greedy)) > 1  # a test of more than one action
+    same = learned.fine_tune(SHORT, start, frozen, seed=0, log=lambda _: None)
+    for (W, b), (W0, b0) in zip(same.layers, start.layers, strict=True):
+        np.testing.assert_array_equal(W, W0)
+        np.testing.assert_array_equal(b, b0)
+    assert same.meta["row"] == "bc-ppo" and same.meta["frames"] >= 2560
+    moving = learned.FineTuning(frames=2560, warm=1280, trials=2, learning_rate=1e-3)
+    moved = learned.fine_tune(SHORT, start, moving, seed=0, log=lambda _: None)
+    pairs = zip(moved.layers, start.layers, strict=True)
+    assert any(not np.array_equal(W, W0) for (W, _), (W0, _) in pairs)
+
+
+def pursuit_mlp(hidden=16):
+    """`pursuit` as a tanh perceptron with one hidden layer (the shape PPO's actor takes):
+    the hidden units carry the sine of the nearest target's bearing."""
+    W0 = np.zeros((SIZE, hidden), dtype=np.float32)
+    W0[len(OWN) + TARGET.index("sin_bearing"), :] = 1.0
+    W1 = np.zeros((hidden, 3), dtype=np.float32)
+    W1[:, 0], W1[:, 2] = -10.0 / hidden, 10.0 / hidden
+    b1 = np.array([0.0, 0.3, 0.0], dtype=np.float32)
+    return Policy(layers=[(W0, np.zeros(hidden, dtype=np.float32)), (W1, b1)])

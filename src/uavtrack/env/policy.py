@@ -82,7 +82,7 @@ def _path(spec: str) -> Path:
     return path
 
 
-@dataclass(frozen=True)
+@dataclass(frozen=True, kw_only=True)
 class Policy:
     """A multilayer perceptron over one UAV's observation: layers [(W, b)], the hidden
     activation's name and the observation's rows; meta holds the trainer's record."""

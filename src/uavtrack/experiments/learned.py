@@ -41,9 +41,12 @@ from ..config import Scenario, ScenarioError, flatten, parse_value
 from ..env.policy import Policy
 from ..env.spaces import Spaces
 from ..env.vector import vector_env
-from ..errors import UsageError
+from ..errors import UsageError, install_hint
 
-__all__ = ["ROWS", "TRAIN_SEED", "Imitation", "evaluate", "imitate", "main", "record", "report"]
+__all__ = [
+    "FINE_TUNE_SEED", "ROWS", "TRAIN_SEED", "FineTuning", "Imitation", "evaluate", "fine_tune",
+    "imitate", "main", "ppo_from", "record", "report",
+]  # fmt: skip
 
 TRAIN_SEED = 1_000_000
 """The first trial seed of training (``vector_env``'s reset seeds, one per trial): far
@@ -226,7 +229,110 @@ def record(
     return result
 
 
-ROWS = {"bc": "behaviour cloning of the planner (DAgger), NumPy"}
+@dataclass(frozen=True, kw_only=True)
+class FineTuning:
+    """The settings of ``bc-ppo``: agent-steps of PPO, of them the first ones with the
+    policy frozen (the critic learns the value of the imitation first), trials stepped
+    as one batch, PPO's learning rate and clip range."""
+
+    frames: int = 4_000_000
+    warm: int = 500_000
+    trials: int = 32
+    learning_rate: float = 3e-5
+    clip: float = 0.1
+
+
+FINE_TUNE_SEED = 2_000_000
+"""The first trial seed of fine-tuning: apart from imitation's and evaluation's."""
+
+
+def ppo_from(
+    scenario: Scenario, start: Policy, settings: FineTuning = FineTuning(), seed: int = 0
+) -> tuple[Any, list[Any]]:
+    """A Stable-Baselines3 PPO on the vector environment of `scenario` whose actor is
+    `start`'s perceptron, copied weight for weight (its greedy action is the policy's),
+    and its critic of the same shape; returns (model, the actor's linear layers)."""
+    try:
+        import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+        from stable_baselines3 import PPO  # pyright: ignore[reportMissingImports]
+    except ImportError as exc:
+        hint = install_hint("learn")
+        raise UsageError(f"bc-ppo needs torch and stable-baselines3: {hint} ({exc})") from None
+    from ..env.learn import sb3_vec_env
+
+    if start.activation != "tanh":
+        raise UsageError(f"bc-ppo starts from a tanh perceptron, not {start.activation}")
+    torch.set_num_threads(1)
+    vector = vector_env(
+        settings.trials, scenario, max_targets=start.max_targets,
+        max_neighbours=start.max_neighbours, paper_actions=False,
+    )  # fmt: skip
+    hidden = [int(W.shape[1]) for W, _ in start.layers[:-1]]
+    model = PPO(
+        "MlpPolicy", sb3_vec_env(vector, seed=FINE_TUNE_SEED), n_steps=128, batch_size=4096,
+        n_epochs=4, learning_rate=settings.learning_rate, gamma=0.99, gae_lambda=0.95,
+        ent_coef=0.0, clip_range=settings.clip, seed=seed, verbose=0,
+        policy_kwargs={"net_arch": {"pi": hidden, "vf": hidden}, "activation_fn": torch.nn.Tanh},
+    )  # fmt: skip
+    actor = [*_linears(model.policy.mlp_extractor.policy_net), model.policy.action_net]
+    with torch.no_grad():
+        for linear, (W, b) in zip(actor, start.layers, strict=True):
+            linear.weight.copy_(torch.as_tensor(W.T))
+            linear.bias.copy_(torch.as_tensor(b))
+    return model, actor
+
+
+def fine_tune(
+    scenario: Scenario,
+    start: Policy,
+    settings: FineTuning = FineTuning(),
+    seed: int = 0,
+    log: Any = print,
+) -> Policy:
+    """``bc-ppo``: PPO (Stable-Baselines3, `ppo_from`) from the policy `start` on the team
+    reward: the critic learns alone for ``settings.warm`` agent-steps, then both learn.
+    Needs the learn extra (torch, stable-baselines3)."""
+    begin = time.process_time()
+    model, actor = ppo_from(scenario, start, settings, seed)
+    for linear in actor:
+        linear.requires_grad_(False)
+    model.learn(settings.warm)
+    log(f"critic alone: {model.num_timesteps:,} agent-steps")
+    for linear in actor:
+        linear.requires_grad_(True)
+    model.learn(settings.frames - settings.warm, reset_num_timesteps=False)
+    log(f"actor and critic: {model.num_timesteps:,} agent-steps")
+    layers = [
+        (m.weight.detach().numpy().T.astype(np.float32), m.bias.detach().numpy().astype(np.float32))
+        for m in actor
+    ]
+    model.get_env().close()
+    meta = {
+        "row": "bc-ppo",
+        "seed": seed,
+        "settings": vars(settings),
+        "start": start.meta.get("command", ""),
+        "frames": int(start.meta.get("frames", 0)) + int(model.num_timesteps),
+        "round_rates": start.meta.get("round_rates", []),
+        "cpu_seconds": float(start.meta.get("cpu_seconds", 0.0)) + time.process_time() - begin,
+        "scenario": scenario.model_dump(mode="json", exclude_defaults=True),
+    }
+    return Policy(
+        layers=layers, activation="tanh", max_targets=start.max_targets,
+        max_neighbours=start.max_neighbours, meta=meta,
+    )  # fmt: skip
+
+
+def _linears(net: Any) -> list[Any]:
+    import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+
+    return [m for m in net if isinstance(m, torch.nn.Linear)]
+
+
+ROWS = {
+    "bc": "behaviour cloning of the planner (DAgger), NumPy",
+    "bc-ppo": "bc fine-tuned by PPO on the team reward (Stable-Baselines3)",
+}
 """The rows this module trains, by name."""
 
 
@@ -267,7 +373,8 @@ def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None 
             f"{planner['ci95']:.3f} | {ci(d, digits=3)} | "
             f"{'yes' if d['mean'] >= -0.02 else 'no'} | `{meta.get('command', '')}` |"
         )
-        curves.append((path.stem, meta))
+        if meta["row"] == "bc":  # a fine-tuned row carries its start's rounds
+            curves.append((path.stem, meta))
     if figure is not None:
         _curves(curves, figure)
         link = Path(os.path.relpath(figure, page.parent)).as_posix() if page else figure.name
@@ -347,6 +454,11 @@ def _main(argv: Sequence[str] | None) -> int:
             f"--{name.replace('_', '-')}", type=kind, default=getattr(defaults, key),
             help=f"bc: {key} of `Imitation` [%(default)s]",
         )  # fmt: skip
+    parser.add_argument("--start", help="bc-ppo: the policy it starts from (file or name)")
+    parser.add_argument("--frames", type=int, default=FineTuning().frames,
+                        help="bc-ppo: agent-steps of PPO [%(default)s]")  # fmt: skip
+    parser.add_argument("--warm", type=int, default=FineTuning().warm,
+                        help="bc-ppo: of them, with the policy frozen [%(default)s]")  # fmt: skip
     parser.add_argument("--config", help="bc: a scenario TOML file (default: the paper's)")
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="changes",
@@ -398,6 +510,21 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     if args.out is None or args.paths:
         raise UsageError(f"{args.row} writes one policy file: give --out FILE, no paths")
     _writable(args.out, "--out", args.force)
+    given = list(argv) if argv is not None else sys.argv[1:]
+    command = "python -m uavtrack.experiments.learned " + shlex.join(given)
+    if args.row == "bc-ppo":
+        if args.start is None:
+            raise UsageError("bc-ppo fine-tunes a policy: give --start FILE (or a shipped name)")
+        start = Policy.load(args.start)
+        if args.config is None and not changes:  # the scenario the start was trained on
+            scenario = Scenario.model_validate(start.meta.get("scenario", {}))
+        tuning = FineTuning(frames=args.frames, warm=args.warm)
+        if not 0 <= tuning.warm < tuning.frames:
+            raise UsageError(f"--warm must be in [0, --frames), got {tuning.warm}")
+        if start.spaces(scenario).size != start.inputs:  # refuses a team that does not fit
+            raise UsageError("the start policy does not fit the scenario")
+        policy = fine_tune(scenario, start, tuning, args.seed)
+        return _write(policy, command, args)
     settings = Imitation(
         rounds=args.rounds, trials=args.trials_per_round, hidden=args.hidden,
         layers=args.layers, epochs=args.epochs, learning_rate=args.learning_rate,
@@ -409,9 +536,12 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         Spaces(scenario, "box", settings.max_targets, settings.max_neighbours)
     except ValueError as exc:
         raise UsageError(f"the scenario's team does not fill the observation: {exc}") from None
-    given = list(argv) if argv is not None else sys.argv[1:]
-    command = "python -m uavtrack.experiments.learned " + shlex.join(given)
     policy = imitate(scenario, settings, args.seed)
+    return _write(policy, command, args)
+
+
+def _write(policy: Policy, command: str, args: argparse.Namespace) -> int:
+    """Evaluate a trained policy and write its file whole, with its command."""
     policy = Policy(
         layers=policy.layers, activation=policy.activation,
         max_targets=policy.max_targets, max_neighbours=policy.max_neighbours,
