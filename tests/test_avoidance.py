@@ -793,6 +793,28 @@ def test_the_measured_model_keeps_jsbsim_aircraft_apart(wind):
     assert kept["observation_rate"].mean() > 0.5 * rate.mean()
 
 
+def fresh_flights(count, history, rng, seed):
+    """`count` JSBSim aircraft of the default scenario, each flying `history` random
+    commands, one random action, then the loiter long enough to settle and be fitted:
+    (plans (count, history + 1), states (T + 1, count, 5))."""
+    from uavtrack import flight
+    from uavtrack.airspace import response
+
+    scenario = uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"})
+    plans = rng.integers(0, 3, (count, history + 1))
+    loiter = np.full((count, response.SETTLE + response.FIT), 2)
+    commands = np.concatenate([plans, loiter], axis=1)
+    banks = np.radians(45) * np.array([-1.0, 0.0, 1.0])
+    start = np.zeros((1, count, 5))
+    start[..., 2], start[..., 3] = scenario.uav.altitude, scenario.uav.speed
+    pilot, uavs = flight.start(scenario, [np.random.SeedSequence(seed)], start)
+    track = [uavs[0]]
+    for t in range(commands.shape[1]):
+        uavs = pilot.fly(uavs, banks[commands[:, t]][None], np.ones((1, count), dtype=bool))
+        track.append(uavs[0])
+    return plans, np.array(track)
+
+
 @pytest.mark.integration  # JSBSim aircraft
 def test_the_measured_tables_predict_flights_they_were_not_measured_on():
     """Fresh flights of 20 random commands, then a random action and the loiter: the
@@ -801,25 +823,11 @@ def test_the_measured_tables_predict_flights_they_were_not_measured_on():
     pytest.importorskip("jsbsim")
     import math
 
-    from uavtrack import flight
     from uavtrack.airspace import response
 
-    scenario = uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"})
-    model = response.measure(scenario)
+    model = response.measure(uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"}))
     count, history = 60, 20
-    rng = np.random.default_rng(5)
-    plans = rng.integers(0, 3, (count, history + 1))
-    loiter = np.full((count, response.SETTLE + response.FIT), 2)
-    commands = np.concatenate([plans, loiter], axis=1)
-    banks = np.radians(45) * np.array([-1.0, 0.0, 1.0])
-    start = np.zeros((1, count, 5))
-    start[..., 2], start[..., 3] = scenario.uav.altitude, scenario.uav.speed
-    pilot, uavs = flight.start(scenario, [np.random.SeedSequence(9)], start)
-    track = [uavs[0]]
-    for t in range(commands.shape[1]):
-        uavs = pilot.fly(uavs, banks[commands[:, t]][None], np.ones((1, count), dtype=bool))
-        track.append(uavs[0])
-    flown = np.array(track)  # (T + 1, count, 5)
+    plans, flown = fresh_flights(count, history, np.random.default_rng(5), 9)
     tail = flown[history + 1 + response.SETTLE :, :, :2]  # the loiter, settled
     key = response.recent(plans[:, history - 2], plans[:, history - 1])
     c, _ = model.after(flown[history], key)  # (count, 3, 2)
@@ -843,27 +851,15 @@ def test_the_margin_covers_pairs_of_fresh_flights_while_they_settle():
     clearance of the backups the tables give them less the margin (7.5 m at most here,
     of a 23 m margin), though pairs do come closer than the clearance."""
     pytest.importorskip("jsbsim")
-    from uavtrack import flight
     from uavtrack.airspace import response
 
-    scenario = uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"})
-    model = response.measure(scenario)
+    model = response.measure(uavtrack.Scenario().with_overrides({"uav.dynamics": "jsbsim"}))
     count, history = 40, 12
     rng = np.random.default_rng(11)
-    plans = rng.integers(0, 3, (count, history + 1))
-    loiter = np.full((count, response.SETTLE + response.FIT), 2)
-    commands = np.concatenate([plans, loiter], axis=1)
-    banks = np.radians(45) * np.array([-1.0, 0.0, 1.0])
-    start = np.zeros((1, count, 5))
-    start[..., 2], start[..., 3] = scenario.uav.altitude, scenario.uav.speed
-    pilot, uavs = flight.start(scenario, [np.random.SeedSequence(3)], start)
-    track = [uavs[0]]
-    for t in range(commands.shape[1]):
-        uavs = pilot.fly(uavs, banks[commands[:, t]][None], np.ones((1, count), dtype=bool))
-        track.append(uavs[0])
-    flown = np.array(track)[history:, :, :2]  # (T', count, 2) from the state that acts
+    plans, track = fresh_flights(count, history, rng, 3)
+    flown = track[history:, :, :2]  # (T', count, 2) from the state that acts
     key = response.recent(plans[:, history - 2], plans[:, history - 1])
-    c, u = model.after(np.array(track)[history], key)  # (count, 3, 2)
+    c, u = model.after(track[history], key)  # (count, 3, 2)
     act = plans[:, history]
     c, u = c[np.arange(count), act], u[np.arange(count), act]
     i, j = np.triu_indices(count, 1)
