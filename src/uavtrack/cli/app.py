@@ -221,22 +221,10 @@ def parse_team(text: str) -> tuple[int, int]:
 
 
 def parse_overrides(items: list[str]) -> dict[str, Any]:
-    """``["a.b=1", "c=[1, 2]"]`` -> ``{"a.b": 1, "c": [1, 2]}`` (values read as TOML).
+    """`config.parse_overrides`, loaded when a command runs (help loads no numpy)."""
+    from ..config import parse_overrides as parsed
 
-    A field set twice is refused: which of the two was meant cannot be told.
-    """
-    from ..config import parse_value
-
-    out: dict[str, Any] = {}
-    for item in items:
-        name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or not name:
-            raise ScenarioError(f"--set expects FIELD=VALUE, got {item!r}")
-        if name in out:
-            raise ScenarioError(f"--set {name} is given twice; give each field once")
-        out[name] = parse_value(text.strip(), where=f"--set {name}")
-    return out
+    return parsed(items)
 
 
 def steps_bar(scenario: Scenario, trials: int = 1, label: str = "steps"):

@@ -164,6 +164,24 @@ def _short(value: object, most: int = 60) -> str:
     return text if len(text) <= most else f"{text[: most - 12]}... ({len(text)} chars)"
 
 
+def parse_overrides(items: list[str]) -> dict[str, Any]:
+    """``["a.b=1", "c=[1, 2]"]`` -> ``{"a.b": 1, "c": [1, 2]}`` (values read as TOML,
+    `parse_value`): the ``--set FIELD=VALUE`` options of every command.
+
+    A field set twice is refused: which of the two was meant cannot be told.
+    """
+    out: dict[str, Any] = {}
+    for item in items:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ScenarioError(f"--set expects FIELD=VALUE, got {item!r}")
+        if name in out:
+            raise ScenarioError(f"--set {name} is given twice; give each field once")
+        out[name] = parse_value(text.strip(), where=f"--set {name}")
+    return out
+
+
 def parse_value(text: str, where: str = "value") -> Any:
     """Read a command-line value as TOML (numbers, booleans, lists), ``none`` as None (an
     optional field left unset), else as a string.

@@ -31,13 +31,13 @@ import shlex
 import sys
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from ..config import Scenario, ScenarioError, flatten, parse_value
+from ..config import Scenario, ScenarioError, flatten, parse_overrides
 from ..env.policy import Policy
 from ..env.spaces import Spaces
 from ..env.vector import vector_env
@@ -177,10 +177,7 @@ def imitate(
         "cpu_seconds": time.process_time() - start,
         "scenario": scenario.model_dump(mode="json", exclude_defaults=True),
     }
-    return Policy(
-        layers=policy.layers, activation=policy.activation, max_targets=policy.max_targets,
-        max_neighbours=policy.max_neighbours, meta=meta,
-    )  # fmt: skip
+    return replace(policy, meta=meta)
 
 
 def evaluate(
@@ -222,10 +219,7 @@ def record(
     renamed = lambda d: {("policy" if k.startswith("policy:") else k): v for k, v in d.items()}  # noqa: E731
     result["rate"], result["per_trial"] = renamed(result["rate"]), renamed(result["per_trial"])
     result["scenario"] = scenario.model_dump(mode="json", exclude_defaults=True)
-    Policy(
-        layers=policy.layers, activation=policy.activation, max_targets=policy.max_targets,
-        max_neighbours=policy.max_neighbours, meta={**policy.meta, "evaluation": result},
-    ).save(path)  # fmt: skip
+    replace(policy, meta={**policy.meta, "evaluation": result}).save(path)
     return result
 
 
@@ -499,12 +493,7 @@ def _main(argv: Sequence[str] | None) -> int:
 def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     """A row's command: train, evaluate and write the policy file whole."""
     scenario = Scenario() if args.config is None else Scenario.from_toml(args.config)
-    changes: dict[str, Any] = {}
-    for item in args.changes:
-        name, sep, text = item.partition("=")
-        if not sep or not name.strip():
-            raise UsageError(f"--set expects FIELD=VALUE, got {item!r}")
-        changes[name.strip()] = parse_value(text.strip(), where=f"--set {name.strip()}")
+    changes = parse_overrides(args.changes)
     if changes:
         scenario = scenario.with_overrides(changes)
     if args.out is None or args.paths:
@@ -542,11 +531,7 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
 
 def _write(policy: Policy, command: str, args: argparse.Namespace) -> int:
     """Evaluate a trained policy and write its file whole, with its command."""
-    policy = Policy(
-        layers=policy.layers, activation=policy.activation,
-        max_targets=policy.max_targets, max_neighbours=policy.max_neighbours,
-        meta={**policy.meta, "command": command},
-    )  # fmt: skip
+    policy = replace(policy, meta={**policy.meta, "command": command})
     training = args.out.with_name(args.out.name + ".training.npz")  # moved once evaluated
     try:
         policy.save(training)
