@@ -10,7 +10,7 @@ import pytest
 import uavtrack
 
 pytest.importorskip("gymnasium")
-from uavtrack import cli  # noqa: E402
+from uavtrack import cli, simulation  # noqa: E402
 from uavtrack.env.episodes import Episodes  # noqa: E402
 from uavtrack.env.policy import Policy, PolicyMethod  # noqa: E402
 from uavtrack.env.spaces import OWN, TARGET, Spaces  # noqa: E402
@@ -65,7 +65,9 @@ def test_a_policy_file_round_trips_and_computes_its_perceptron(tmp_path):
 
 def test_flying_a_policy_is_the_environment_flying_its_actions(tmp_path):
     """A policy that always flies straight gives the trace of the environment's own loop
-    (no planning) told to fly straight every step: the same cycle, step for step."""
+    (no planning) told to fly straight every step: the same cycle, step for step, but
+    the beacons of whole states the policy's UAVs send, one message a link, all of
+    them delivered on the fault-free radio."""
     path = constant(1).save(tmp_path / "straight.npz")
     flown = uavtrack.run(SHORT, f"policy:{path}", seeds=[3], trace=True)
     episodes = Episodes(
@@ -76,8 +78,19 @@ def test_flying_a_policy_is_the_environment_flying_its_actions(tmp_path):
         episodes.step(np.ones((1, SHORT.n_uavs), dtype=np.int64))
     alone = episodes.batch_result()
     assert flown.traces is not None and alone.traces is not None
-    assert_same_trace(flown.traces[0], alone.traces[0])
-    assert (np.asarray(flown.traces[0].action) == 0.0).all()  # straight: bank 0
+    f, a = flown.traces[0], alone.traces[0]
+    assert_same_trace(f, a, counters=False)
+    for name in ("rounds", "late", "node_bytes", "conflicts"):
+        np.testing.assert_array_equal(getattr(f, name), getattr(a, name), err_msg=name)
+    links = simulation.graph(np.asarray(f.uavs), np.asarray(f.alive), SHORT)
+    beacons = (links & ~np.eye(SHORT.n_uavs, dtype=bool)).sum(axis=(1, 2))
+    assert beacons.max() > 0 and beacons.min() == 0  # steps with beacons, and without
+    np.testing.assert_array_equal(np.asarray(f.messages) - np.asarray(a.messages), beacons)
+    np.testing.assert_array_equal(np.asarray(f.delivered) - np.asarray(a.delivered), beacons)
+    sent = links.any(axis=1)  # a UAV with a receiver in range puts its beacon on air
+    assert (np.asarray(f.bytes)[sent] > np.asarray(a.bytes)[sent]).all()
+    assert (np.asarray(f.bytes)[~sent] == np.asarray(a.bytes)[~sent]).all()
+    assert (np.asarray(f.action) == 0.0).all()  # straight: bank 0
     assert flown.metrics["observation_rate"] == pytest.approx(alone.metrics["observation_rate"])
     assert np.isnan(np.asarray(flown.traces[0].bids)).all()  # no planner, no bids
 
@@ -138,7 +151,8 @@ def test_the_commands_take_a_policy_beside_the_paper_and_refuse_a_bad_one(tmp_pa
     for argv, named in (
         (["run", "--method", f"policy:{tmp_path / 'none.npz'}"], "no policy file"),
         (["run", "--method", "polcy"], "policy:FILE"),
-        (["swarm", "--method", f"policy:{path}", "--steps", "3"], "without planning"),
+        (["swarm", "--method", f"policy:{path}", "--steps", "3",
+          "--set", 'tracker.association="jpda"'], "known association only"),  # fmt: skip
     ):
         code = cli.main(argv)
         out, err = capsys.readouterr()

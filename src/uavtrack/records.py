@@ -254,6 +254,9 @@ class Pending:
     columns: np.ndarray | None = None  # with unknown association: the held label each took
     labels: np.ndarray | None = None  # (B, L) with unknown association: the columns' labels
     held: np.ndarray | None = None  # (B,) with unknown association: labels held confirmed
+    # with a method that does not plan: this cycle's beacons, got (B, Nu, Nu) [receiver,
+    # sender] those that arrived and states (B, Nu, 5) as their senders sent them
+    beacons: tuple[np.ndarray, np.ndarray] | None = None
 
     @property
     def width(self) -> int:

@@ -39,6 +39,7 @@ from .metrics import METRICS, NEES_BINS_PER_DECADE, NEES_DECADES, PER_UAV_SETS
 from .numerics import lsap
 from .numerics.buffers import Buffers
 from .radio import (
+    Inbox,
     Limit,
     Radio,
     RadioState,
@@ -177,7 +178,7 @@ class Context:
             trigger=scenario.fusion.trigger,
             refresh=scenario.fusion.refresh,
             encoding=scenario.radio.encoding,
-            wire=wire_of(scenario),
+            wire=wire_of(scenario, method.plans),
         )
         detection = None
         if not scenario.sensor.ideal or tracked:
@@ -306,7 +307,7 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
     bps = scenario.radio.bandwidth_bps
     if bps is None:
         return None
-    shape = ctx.setting.wire or wire_of(scenario)
+    shape = ctx.setting.wire or wire_of(scenario, method.plans)
     n = shape.n
 
     def largest(parts: Any, count: int) -> Any:
@@ -328,7 +329,7 @@ def limit(ctx: Context, k: int, rows: np.ndarray | None = None) -> Limit | None:
             download=download, central=True, beacon=beacon, broadcast=number,
         )  # fmt: skip
     first = beacon  # the greedy method's first priority: its beacon alone
-    if isinstance(method, Distributed):
+    if isinstance(method, Distributed) and method.plans:  # a policy sends no bids
         first = int(largest(part("beacon") + part("bids"), 2))
     return Limit(bytes_per_cycle=bps * scenario.dt / 8, first=first, round=rounds, broadcast=number)
 
@@ -898,14 +899,9 @@ def avoid(
     the beacons each UAV heard. A method that sent no beacon this cycle (centralized,
     greedy) has one sent now, one message per link, counted as the others (returned as
     (sent, delivered)); the distributed method's beacon carries the states already."""
-    scenario, radio, alive, k = ctx.scenario, pending.radio, pending.alive, pending.k
+    scenario, alive, k = ctx.scenario, pending.alive, pending.k
     B, Nu = alive.shape
-    own = not radio.sending("beacon")
-    if own:
-        radio.send("beacon", beacon_of(pending.believed, k, own_recent(state, scenario)))
-        size = int((ctx.setting.wire or wire_of(scenario)).bytes("beacon"))  # shares afford
-        radio.on_air(part_bytes("beacon", 0, -1, size), 1, radio.afforded(alive))
-    inbox = radio.receive("beacon")
+    inbox, counts = beaconed(state, pending, ctx)
     heard = state.beacons if state.beacons is not None else avoidance.Heard.nothing(B, Nu)
     memory = avoidance.memory_of(ctx.setting.delay, scenario.faults.loss)
     if inbox is None:  # nothing has arrived yet (the first cycles of a delay)
@@ -925,16 +921,31 @@ def avoid(
     chosen = avoidance.choose_in(
         scenario, actions, pending.believed, alive, heard, k, values, own_recent(state, scenario)
     )
-    counts: tuple[Any, Any] = (0, 0)
-    if own:
-        zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, Nu), dtype=bool)
-        once = alive.astype(np.int64)
-        counts = counted(
-            ctx.setting.delay,
-            lambda: [radio.transmitted("beacon", once, first=0)],
-            [fusion.count(inbox, everyone, zero, zero)] if inbox is not None else [],
-        )
     return chosen, heard, counts
+
+
+def beaconed(state: State, pending: Pending, ctx: Context) -> tuple[Inbox | None, tuple[Any, Any]]:
+    """This cycle's beacons (`methods.base.beacon_of`): sent now, one message per link,
+    unless the cycle sent them already (the distributed method's, with its bids).
+    Returns what arrives now (None in the first cycles of a delay) and the messages
+    (sent, delivered) of the beacons sent here ((0, 0) for those sent before)."""
+    scenario, radio, alive, k = ctx.scenario, pending.radio, pending.alive, pending.k
+    if radio.sending("beacon"):
+        return radio.receive("beacon"), (0, 0)
+    radio.send("beacon", beacon_of(pending.believed, k, own_recent(state, scenario)))
+    wire = ctx.setting.wire or wire_of(scenario, ctx.method.plans)
+    size = int(wire.bytes("beacon"))  # what the shares afford
+    radio.on_air(part_bytes("beacon", 0, -1, size), 1, radio.afforded(alive))
+    inbox = radio.receive("beacon")
+    B, Nu = alive.shape
+    zero, everyone = np.zeros(B, dtype=np.int64), np.ones((B, Nu), dtype=bool)
+    once = alive.astype(np.int64)
+    counts = counted(
+        ctx.setting.delay,
+        lambda: [radio.transmitted("beacon", once, first=0)],
+        [fusion.count(inbox, everyone, zero, zero)] if inbox is not None else [],
+    )
+    return inbox, counts
 
 
 def step(
@@ -955,10 +966,21 @@ def step(
 
 def chosen(state: State, pending: Pending, ctx: Context) -> tuple[Pending, np.ndarray | None]:
     """The actions a method that does not plan chooses itself (`Method.actions`, a
-    learned policy), its time to choose added to the cycle's decision time; None for a
-    method that plans (its planned actions fly)."""
+    learned policy), after the UAVs exchange beacons of their whole states (`beaconed`,
+    counted with the cycle's messages; what arrived is `Pending.beacons`), its time to
+    choose added to the cycle's decision time; None for a method that plans (its
+    planned actions fly)."""
     if ctx.method.plans:
         return pending, None
+    inbox, (sent, delivered) = beaconed(state, pending, ctx)
+    B, Nu = pending.alive.shape
+    if inbox is None:  # nothing has arrived yet (the first cycles of a delay)
+        heard = (np.zeros((B, Nu, Nu), dtype=bool), np.zeros((B, Nu, 5)))
+    else:
+        heard = (inbox.delivered.adjacency(), np.asarray(inbox.content["uavs"]))
+    a = pending.assigned
+    assigned = replace(a, sent=a.sent + sent, delivered=a.delivered + delivered)
+    pending = replace(pending, assigned=assigned, beacons=heard)
     start = timing.start()
     actions = ctx.method.actions(state, pending, ctx)
     return replace(pending, plan_seconds=pending.plan_seconds + timing.since(start)), actions

@@ -221,20 +221,21 @@ def plausible(spec: Spec, mailbox: Mailbox, content: dict) -> dict:
     return content
 
 
-def check_method(method: Method) -> None:
+def check_method(method: Method, scenario: Scenario | None = None) -> None:
     """Refuse (ValueError) a method the agent form cannot run as it is: one not built on
-    Distributed, Greedy or Centralized, or one that replaces their `assign` (each UAV
-    program runs the method's neighbourhood rule, `solve`, not a batch `assign`)."""
+    Distributed, Greedy or Centralized, one that replaces their `assign` (each UAV
+    program runs the method's neighbourhood rule, `solve`, not a batch `assign`), or a
+    learned policy with tracks of unknown association in `scenario`."""
     bases = [c for c in type(method).__mro__ if c in (Distributed, Greedy, Centralized)]
     if not bases:
         raise ValueError(
             f"method {method.name!r}: the agent form runs methods built on "
             "Distributed, Greedy or Centralized"
         )
-    if not method.plans:
+    if not method.plans and scenario is not None and scenario.tracker.unlabelled:
         raise ValueError(
-            f"method {method.name!r} chooses its actions without planning (a learned "
-            "policy); the UAV programs plan and bid: run it with uavtrack run, compare or sweep"
+            f"method {method.name!r} chooses without planning (a learned policy); the UAV "
+            "programs run it with known association only: run tracks with uavtrack run"
         )
     if type(method).assign is not bases[0].assign:
         raise ValueError(
@@ -321,7 +322,7 @@ class UavAgent:
         self.radio = AgentRadio(me, self.n, faults, link, mailbox, deadline, broadcast)
         self.ctx = simulation.Context.of(scenario, self.method, [np.random.SeedSequence(0)])
         self.setting = self.ctx.setting
-        self.spec = Spec.of(scenario, isinstance(self.method, Centralized))
+        self.spec = Spec.of(scenario, isinstance(self.method, Centralized), self.method.plans)
         self.measured: gate.Measured | None = None
         self.seen: np.ndarray | None = None  # (1, 1, Nt) the step it last measured each
         tracker = self.ctx.const.tracker
@@ -331,7 +332,7 @@ class UavAgent:
         self.held = None
         if scenario.faults.loss > 0:
             self.held = Held(np.zeros((self.n, self.m)), np.full(self.n, -1, dtype=np.int64))
-        check_method(self.method)
+        check_method(self.method, scenario)
         self.central = isinstance(self.method, Centralized)
         self.beacons = avoidance.Heard.nothing(1, self.n)  # with planner.avoidance
         self.recent = response.START  # and the measured model: its last two actions
@@ -340,6 +341,7 @@ class UavAgent:
         self.limits = beacons.Limits.of(scenario)  # what an honest beacon can do
         self.told: np.ndarray | None = None  # with fusion.trigger: the confidences last sent
         self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
+        self.kept = -1  # the last cycle whose beacons `beacons` holds
 
     # ------------------------------------------------------------ the cycle
 
@@ -367,22 +369,29 @@ class UavAgent:
             )
         else:
             fused_mean, fused_cov, rounds, sent, delivered = self.consensus(k, mean, cov)
-        top = None if self.central else self.method.top(self.setting, np.array([[self.largest]]))
-        plan_start = timing.start()
-        bids, best = self.setting.plan(believed[None, None], fused_mean[None, None], top)
-        bids, best = bids[0, 0], best[0, 0]
-        plan_seconds = timing.since(plan_start)
-        if self.central:
-            target = target if target >= 0 else self.target
-            target = target if target >= 0 else int(assignment.greedy(bids))
-            solve_seconds, more = np.zeros(2), (0, 0)
-        elif isinstance(self.method, Greedy):
-            target, solve_seconds, more = int(assignment.greedy(bids)), np.zeros(2), (0, 0)
+        if not self.method.plans:  # a learned policy: no bids, no auction, its target kept
+            bids, target, solve_seconds = np.full(self.m, np.nan), self.target, np.zeros(2)
+            action, more, plan_seconds = self.chosen(k, fused_mean, fused_cov, observed)
         else:
-            target, solve_seconds, more = self.auction(k, bids, alive)
-        action = int(best[target])
-        if self.spec.avoid:  # each action's best score for its target breaks the ties
-            values = simulation.first_values(believed[None], fused_mean[None, None, target], s)
+            top = None
+            if not self.central:
+                top = self.method.top(self.setting, np.array([[self.largest]]))
+            plan_start = timing.start()
+            bids, best = self.setting.plan(believed[None, None], fused_mean[None, None], top)
+            bids, best = bids[0, 0], best[0, 0]
+            plan_seconds = timing.since(plan_start)
+            if self.central:
+                target = target if target >= 0 else self.target
+                target = target if target >= 0 else int(assignment.greedy(bids))
+                solve_seconds, more = np.zeros(2), (0, 0)
+            elif isinstance(self.method, Greedy):
+                target, solve_seconds, more = int(assignment.greedy(bids)), np.zeros(2), (0, 0)
+            else:
+                target, solve_seconds, more = self.auction(k, bids, alive)
+            action = int(best[target])
+        if self.scenario.planner.avoidance != "none":  # its best scores break the ties
+            scored = max(target, 0)  # a policy's UAV has none: the batch's first target
+            values = simulation.first_values(believed[None], fused_mean[None, None, scored], s)
             values = values[0, 0]
             action, beaconed = self.avoided(k, action, values)
             more = (more[0] + beaconed[0], more[1] + beaconed[1])
@@ -637,8 +646,42 @@ class UavAgent:
         )
         return beacon, inbox, (sent, delivered)
 
+    def chosen(self, k: int, mean: np.ndarray, cov: np.ndarray, observed: np.ndarray):
+        """A learned policy's action (`env.policy`, as `simulation.chosen` for the
+        batch): this UAV's beacon of its whole state to the UAVs in range, then the
+        policy's reading of its own state, its fused estimates (mean (M, 4), cov
+        (M, 4, 4)), the targets it measured and the beacons it heard (those no honest
+        UAV sends are dropped, counted). Returns (action, messages (sent, delivered),
+        seconds of inference (2,))."""
+        from ..env.spaces import View  # the env extra, which a policy needs
+
+        n, m, me = self.n, self.m, self.me
+        self.radio.send(k, [part("beacon", 0, self.beacon_content())])
+        beacon = self.radio.receive(k, "beacon", 0)
+        self.beacon = (k, beacon)
+        counts = counted(
+            self.setting.delay,
+            lambda: [self.radio.transmitted(k, "beacon", 1, first=0)],
+            [(beacon.sent, beacon.delivered)] if beacon is not None else [],
+        )
+        links, heard = self.keep(k, beacon)
+        believed, alive = np.zeros((1, n, 5)), np.zeros((1, n), dtype=bool)
+        believed[0, me], alive[0, me] = self.believed, True
+        means, covs = np.zeros((1, n, m, 4)), np.broadcast_to(np.eye(4), (1, n, m, 4, 4)).copy()
+        means[0, me], covs[0, me] = mean, cov
+        seen = np.zeros((1, n, m), dtype=bool)
+        seen[0, me] = observed
+        view = View(
+            k=k, believed=believed, uavs=believed, mean=means, cov=covs, links=links,
+            alive=alive, observed=seen, heard=heard,
+        )  # fmt: skip
+        start = timing.start()
+        action = int(self.method.choose(view, self.scenario)[0, me])
+        return action, (int(counts[0]), int(counts[1])), timing.since(start)
+
     def beacon_content(self) -> dict[str, np.ndarray]:
-        """Who, where, when (`messages.Spec`): the position, or with avoidance the state."""
+        """Who, where, when (`messages.Spec`): the position, or the whole state (with
+        avoidance, or for a policy's observation)."""
         if self.spec.recent:
             return {"uav": self.believed, "recent": np.array(self.recent, dtype=np.uint8)}
         if self.spec.avoid:
@@ -665,20 +708,8 @@ class UavAgent:
                 lambda: [self.radio.transmitted(k, "beacon", 1, first=0)],
                 [(beacon.sent, beacon.delivered)] if beacon is not None else [],
             )
-        got = np.zeros((1, n, n), dtype=bool)
-        states, stamps = np.zeros((1, n, 5)), np.full((1, n), -1)
-        recent = np.full((1, n), response.START) if self.spec.recent else None
-        sent = k - self.setting.delay
-        for q, content in ({} if beacon is None else beacon.contents).items():
-            reason = self._believable(q, content["uav"], sent)
-            if reason is not None:  # not heard: no honest UAV sends it
-                dropped(self.mailbox, {reason: 1})
-                continue
-            got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], sent
-            if recent is not None:
-                recent[0, q] = content["recent"]
-        memory = avoidance.memory_of(self.setting.delay, s.faults.loss)
-        self.beacons = self.beacons.update(got, states, stamps, k, memory, recent)
+        if self.kept != k:  # a policy's cycle kept them already
+            self.keep(k, beacon)
         desired = np.full((1, n), simulation.STRAIGHT)
         believed, alive = np.zeros((1, n, 5)), np.zeros((1, n), dtype=bool)
         desired[0, me], believed[0, me], alive[0, me] = action, self.believed, True
@@ -692,6 +723,28 @@ class UavAgent:
         if self.spec.recent:
             self.recent = int(response.recent(np.asarray(self.recent), np.asarray(action)))
         return action, (int(counts[0]), int(counts[1]))
+
+    def keep(self, k: int, beacon: Inbox | None) -> tuple[np.ndarray, np.ndarray]:
+        """Keep this cycle's beacons in `beacons` (`avoidance.Heard`), but those no
+        honest UAV sends (dropped, counted). Returns who was heard now, got (1, N, N)
+        [receiver, sender], and their states (1, N, 5) as sent."""
+        n, me = self.n, self.me
+        got = np.zeros((1, n, n), dtype=bool)
+        states, stamps = np.zeros((1, n, 5)), np.full((1, n), -1)
+        recent = np.full((1, n), response.START) if self.spec.recent else None
+        sent = k - self.setting.delay
+        for q, content in ({} if beacon is None else beacon.contents).items():
+            reason = self._believable(q, content["uav"], sent)
+            if reason is not None:  # not heard: no honest UAV sends it
+                dropped(self.mailbox, {reason: 1})
+                continue
+            got[0, me, q], states[0, q], stamps[0, q] = True, content["uav"], sent
+            if recent is not None:
+                recent[0, q] = content["recent"]
+        memory = avoidance.memory_of(self.setting.delay, self.scenario.faults.loss)
+        self.beacons = self.beacons.update(got, states, stamps, k, memory, recent)
+        self.kept = k
+        return got, states
 
     def _believable(self, q: int, state: np.ndarray, sent: int) -> str | None:
         """Why q's beacon sent at step `sent` is one no honest UAV sends, against the last

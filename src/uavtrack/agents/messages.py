@@ -333,8 +333,9 @@ class Spec:
     """With unknown association, the labels of the run are below this: a UAV starts at
     most K tracks a scan, each under a label of its own (`tracks.manage`)."""
     avoid: bool = False
-    """With ``planner.avoidance``: the beacon carries the sender's whole state (x, y,
-    altitude, speed, heading), which the avoidance filter reads."""
+    """With ``planner.avoidance`` or a method that does not plan (a learned policy): the
+    beacon carries the sender's whole state (x, y, altitude, speed, heading), which the
+    avoidance filter and the policy's observation read."""
     recent: bool = False
     """With ``planner.avoidance_model = "measured"``: the beacon carries the sender's
     recent commands (`airspace.response.recent`)."""
@@ -346,10 +347,15 @@ class Spec:
     """With ``radio.bandwidth_bps``: Sense and Tick carry what the shares afford."""
     book: tuple[str, ...] = ()
     """The track book's fields beyond M-of-N's a download carries (`manage.sent_fields`)."""
+    plans: bool = True
+    """Whether the run's method plans (`Method.plans`); a learned policy's UAVs follow
+    no target (their reports name -1)."""
 
     @classmethod
-    def of(cls, scenario, central: bool) -> Spec:
-        wire = wire_of(scenario)
+    def of(cls, scenario, central: bool, plans: bool = True) -> Spec:
+        """The run's spec: `scenario`, with a central node or not, a method that plans
+        or not (`Method.plans`: without, the beacon carries the whole state)."""
+        wire = wire_of(scenario, plans)
         n, budget = wire.n, scenario.faults.round_budget or 0
         tracked = wire.slots > 0
         return cls(
@@ -372,6 +378,7 @@ class Spec:
             tuples=wire.tuples,
             limited=scenario.radio.bandwidth_bps is not None,
             book=wire.book,
+            plans=plans,
         )
 
     def contents(self, protocol: str) -> dict[str, tuple[str, tuple[int, ...], str]] | None:
@@ -424,12 +431,16 @@ class Spec:
 
     def _finite(self, domain: str, value: np.ndarray) -> str | None:
         """Why a field's floats are not what its domain admits: finite, NaN only as a
-        bid not scored, -inf only as a confidence of no estimate."""
+        bid not scored (every bid of a method that does not plan), -inf only as a
+        confidence of no estimate."""
         if value.dtype.kind != "f":
             return None
         nan = np.isnan(value)
         if domain == "slot bids":  # NaN where no confirmed track: checked with the labels
             pass
+        elif domain == "bids" and not self.plans:  # a learned policy scores nothing
+            if not nan.all():
+                return "bids of a method that does not bid"
         elif domain == "bids":
             if nan.all() or nan.any() and not (self.bounds is None or self.bounds.unscored):
                 return "bids not scored"
@@ -675,7 +686,8 @@ class Spec:
             if (message.action, message.target) != (-1, -1):
                 return "action or target out of range"
             return {}
-        target_ok = message.target >= -1 if self.slots else 0 <= message.target < self.m
+        free = self.slots or not self.plans  # a track's label, or a policy's no target
+        target_ok = message.target >= -1 if free else 0 <= message.target < self.m
         if not 0 <= message.action < self.actions or not target_ok:
             return "action or target out of range"
         m = self.m

@@ -92,7 +92,8 @@ def serve(
         return Served(ran=0, steps=0, end=end)
     scenario = Scenario.from_dict(json.loads(hello.scenario), origin="the world's scenario")
     n = scenario.n_uavs
-    central = get(hello.method).central
+    method = get(hello.method)
+    central = method.central
     programs = n + int(central)
     if hello.authenticated and credential is None:
         return Served(
@@ -120,7 +121,7 @@ def serve(
     gate.programs = programs
     if central and me < n:  # without its central node a UAV waits for no download
         transport.watch(f"{k_['alive']}{n}", mailbox.lost)
-    spec = Spec.of(scenario, central)
+    spec = Spec.of(scenario, central, method.plans)
     mailbox.learn(spec, hello.publics)
     link = Link(transport, gate)
     faults = Faults(scenario.faults, hello.key.array()[None].astype(np.uint32), n)

@@ -164,7 +164,7 @@ def run_swarm(
     if transport not in TRANSPORTS:
         raise UsageError(f"unknown transport {transport!r}; choose memory or zenoh")
     try:  # refuses an unknown method, or one the programs cannot run, now
-        check_method(get(method))
+        check_method(get(method), scenario)
     except ValueError as exc:
         raise UsageError(str(exc)) from None
     if sign and not spawn and keys is None:

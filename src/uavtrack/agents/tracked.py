@@ -113,7 +113,7 @@ class TrackedUav(UavAgent):
         """The cycle's report, following the track in `slot` (-1: none, straight)."""
         labels = book.label[0, 0]
         action = int(best[slot]) if slot >= 0 else simulation.STRAIGHT
-        if self.spec.avoid:  # as the batch's tracks: no scores, the fixed fall-backs
+        if self.scenario.planner.avoidance != "none":  # as the batch's: no scores, fixed fall-backs
             action, beaconed = self.avoided(k, action, None)
             counts = (counts[0] + beaconed[0], counts[1] + beaconed[1])
         followed = int(labels[slot]) if slot >= 0 else -1

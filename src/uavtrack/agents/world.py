@@ -131,7 +131,7 @@ class WorldProgram:
             else Gate(run=run, me=WORLD, programs=programs, credential=None)
         )
         self.link = Link(transport, gate)
-        self.spec = Spec.of(scenario, self.method.central)
+        self.spec = Spec.of(scenario, self.method.central, self.method.plans)
         self.stops = STOPS.watch()  # a stop of the world is not its programs' fault
         self.mailbox = Mailbox(gate, self.spec, transport, self.stops)
         transport.subscribe(inbox_key(run, WORLD), self.mailbox.handler)

@@ -154,11 +154,14 @@ class Episodes:
 
 def view_of(pending: Pending, scenario: Scenario) -> View:
     """What a pending cycle shows the agents (`View`): the radio graph of the UAVs'
-    positions, each UAV's fused estimates, and with tracks each UAV's confirmed tracks
-    and which of them its own scan met (`in_view_now`). One reading for the
+    positions (or, after a policy's beacons, `Pending.beacons`: whom each UAV heard and
+    the states they sent), each UAV's fused estimates, and with tracks each UAV's
+    confirmed tracks and which of them its own scan met (`in_view_now`). One reading for the
     environments and a learned policy flown as a method (`env.policy`)."""
     p = pending
-    links = graph(p.uavs, p.alive, scenario)
+    links, heard = graph(p.uavs, p.alive, scenario), None
+    if p.beacons is not None:  # a policy's cycle: whom each UAV heard, and their states
+        links, heard = p.beacons
     label = met = None
     if p.tracks is not None:
         t = p.tracks
@@ -176,6 +179,7 @@ def view_of(pending: Pending, scenario: Scenario) -> View:
         observed=p.observed,
         label=label,
         met=met,
+        heard=heard,
     )
 
 

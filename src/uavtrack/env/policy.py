@@ -36,7 +36,7 @@ from ..errors import UsageError
 from ..methods.distributed import Distributed
 from ..records import Pending, State
 from .episodes import view_of
-from .spaces import Spaces
+from .spaces import Spaces, View
 
 __all__ = [
     "ACTIVATIONS", "FORMAT", "PREFIX", "SHIPPED", "Policy", "PolicyMethod", "digest", "shipped",
@@ -235,11 +235,15 @@ class PolicyMethod(Distributed):
         return None
 
     def actions(self, state: State, pending: Pending, ctx: Any) -> np.ndarray:
-        """The policy's actions (B, N) for the pending cycle."""
-        if self._spaces is None or self._spaces[0] is not ctx.scenario:
-            self._spaces = (ctx.scenario, self.policy.spaces(ctx.scenario))
-        spaces = self._spaces[1]
-        observation = spaces.observe(view_of(pending, ctx.scenario))
+        """The policy's actions (B, N) for the pending cycle (`simulation.chosen`)."""
+        return self.choose(view_of(pending, ctx.scenario), ctx.scenario)
+
+    def choose(self, view: View, scenario: Any) -> np.ndarray:
+        """The policy's actions (B, N) for a cycle's `View` of `scenario`: the batch's
+        (`actions`), or one UAV program's, whose view holds its own row."""
+        if self._spaces is None or self._spaces[0] is not scenario:
+            self._spaces = (scenario, self.policy.spaces(scenario))
+        observation = self._spaces[1].observe(view)
         assert isinstance(observation, np.ndarray)  # the Box form
         return self.policy.act(observation)
 

@@ -70,6 +70,9 @@ class View:
     confirmed track of a living UAV (-1 in every other slot) and met (B, Nu, K) whether
     one of the UAV's own measurements of this scan lies in that track's gate; both are
     None with the paper's known association.
+
+    heard (B, Nu, 5): each UAV's state as its beacon carried it, which the neighbour
+    rows read (None: the believed states); links then says whose beacon each UAV heard.
     """
 
     k: int
@@ -82,6 +85,7 @@ class View:
     observed: np.ndarray
     label: np.ndarray | None = None
     met: np.ndarray | None = None
+    heard: np.ndarray | None = None
 
 
 class Spaces:
@@ -221,14 +225,15 @@ class Spaces:
     def _neighbours(self, view: View) -> np.ndarray:
         """(B, Nu, max_neighbours, len(NEIGHBOUR)), nearest in radio range first."""
         u = view.believed
+        v = u if view.heard is None else view.heard  # the neighbours' states, as heard
         c, s = np.cos(u[..., 4])[..., None], np.sin(u[..., 4])[..., None]
-        dx = u[:, None, :, 0] - u[..., 0:1]
-        dy = u[:, None, :, 1] - u[..., 1:2]
+        dx = v[:, None, :, 0] - u[..., 0:1]
+        dy = v[:, None, :, 1] - u[..., 1:2]
         Nu = u.shape[1]
         linked = view.links & ~np.eye(Nu, dtype=bool)
         d = np.hypot(dx, dy)
         safe = np.where(d > 0, d, 1.0)
-        turn = u[:, None, :, 4] - u[..., 4:5]
+        turn = v[:, None, :, 4] - u[..., 4:5]
         rows = np.stack(
             [
                 linked.astype(np.float64),

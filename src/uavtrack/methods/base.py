@@ -280,17 +280,19 @@ def fusion_rounds(inputs: Inputs) -> tuple[fusion.Depth, np.ndarray]:
     return depth, rounds
 
 
-def wire_of(scenario: Scenario) -> Wire:
+def wire_of(scenario: Scenario, plans: bool = True) -> Wire:
     """What shapes a run's messages (`radio.Wire`): its team, its track slots and the
-    download's book fields with unknown association, the avoidance beacon and the
-    consensus listing. The one reading of these settings the batch's bytes, the radio's
-    shares and the agents' admission share."""
+    download's book fields with unknown association, the beacon and the consensus
+    listing. The one reading of these settings the batch's bytes, the radio's shares and
+    the agents' admission share. The beacon carries the sender's whole state with
+    ``planner.avoidance`` or for a method that does not plan (`Method.plans`: a learned
+    policy reads its neighbours' states)."""
     tracked = scenario.tracker.unlabelled
     return Wire(
         n=scenario.n_uavs,
         m=scenario.n_targets,
         slots=scenario.track_slots if tracked else 0,
-        avoid=scenario.planner.avoidance != "none",
+        avoid=scenario.planner.avoidance != "none" or not plans,
         tuples=scenario.radio.encoding
         if scenario.radio.encoding != "full"
         else "listed"
