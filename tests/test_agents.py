@@ -46,6 +46,19 @@ def test_memory_swarm_equals_the_simulator(method, faults):
     assert swarm.traffic.published > 0 and swarm.traffic.dropped == 0
 
 
+@pytest.mark.parametrize("faults", FAULTS[:4], ids=lambda f: ",".join(f) or "no-faults")
+def test_memory_swarm_of_a_learned_policy_equals_the_simulator(faults):
+    """Each program reads its neighbours from the beacons it heard, as the batch does:
+    the same trace with losses, delay and failures."""
+    pytest.importorskip("gymnasium")  # the policy's observation builder
+    scenario = uavtrack.Scenario(steps=25).with_overrides(faults)
+    swarm = run_swarm(scenario, "policy:bc", seed=3, transport="memory")
+    reference = uavtrack.simulate(scenario, "policy:bc", seed=3)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert np.isnan(reference.trace.bids).all() and (reference.trace.assignment == -1).all()
+    assert swarm.traffic.published > 0 and swarm.traffic.dropped == 0
+
+
 @pytest.mark.parametrize("method", ["distributed", "greedy"])
 def test_memory_swarm_prunes_bids_as_the_simulator_does(method):
     # 20 targets, UAVs spread out: small neighbourhoods, so the planner scores only a
@@ -117,6 +130,19 @@ def test_zenoh_swarm_of_processes_equals_run(method, faults):
     assert_same_trace(swarm.result.trace, reference.trace)
     assert swarm.transport == "zenoh" and swarm.traffic.bytes > 0
     assert swarm.traffic.dropped == 0
+
+
+def test_zenoh_swarm_of_a_learned_policy_equals_run():
+    """The shipped fine-tuned policy, one process per UAV over Zenoh: its trace is the
+    batch's, with message losses and a delay."""
+    zenoh_or_skip()
+    pytest.importorskip("gymnasium")
+    overrides = {"faults.loss": 0.2, "faults.delay": 1, "robust.stale": True}
+    scenario = uavtrack.Scenario(steps=15).with_overrides(overrides)
+    swarm = run_swarm(scenario, "policy:bc-ppo", seed=4, transport="zenoh")
+    reference = uavtrack.simulate(scenario, "policy:bc-ppo", seed=4)
+    assert_same_trace(swarm.result.trace, reference.trace)
+    assert swarm.transport == "zenoh" and swarm.traffic.dropped == 0
 
 
 def test_a_world_asked_for_any_port_tells_its_programs_the_real_one():

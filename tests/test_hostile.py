@@ -256,6 +256,8 @@ RUNS = {
     },
     ("centralized", 1, "jpda"): {"radio:presence", "radio:upload", "report"},  # a scan
     ("centralized", 5, "jpda"): {"radio:presence", "radio:download", "report"},  # a book
+    # a learned policy: beacons of whole states, reports with no target and no bids
+    ("policy:bc", 1, "known"): {"radio:presence", "radio:flood+consensus", "radio:beacon", "report"},
 }  # fmt: skip
 TRACKED = {"sensor.detection_probability": 0.9, "sensor.clutter_rate": 2.0}
 
@@ -352,6 +354,49 @@ def test_the_attacks_that_took_swarms_down_are_dropped_by_reason(monkeypatch, ho
     result = swarm.result
     assert np.isfinite([result.observation_rate, result.rmse, result.nees, result.ospa]).all()
     assert result.rmse < 100  # the honest UAVs kept their estimates
+
+
+BEACON_LIES = {
+    "a beacon 1 km away": "position out of bounds",
+    "a beacon at 3 times the speed": "speed out of bounds",
+}
+
+
+@pytest.mark.integration  # a swarm: the agent form against real deadlines
+@pytest.mark.parametrize("how", list(BEACON_LIES))
+def test_a_members_lying_beacon_never_enters_a_policys_observation(monkeypatch, how):
+    """A learned policy reads its neighbours from their beacons: a member whose every
+    beacon no honest UAV could send (teleported, or beyond the aircraft's speed) is
+    never heard (dropped by reason), and every honest program flies on to the end."""
+    from uavtrack.agents import agent
+
+    def lie(content):
+        uav = content["uav"].array().copy()
+        if how == "a beacon 1 km away":
+            uav[:2] += 1000.0
+        else:
+            uav[3] *= 3.0
+        return dict(content, uav=Array.of(uav))
+
+    member_alters(monkeypatch, "beacon", lie)
+    chosen = agent.UavAgent.chosen
+    kept: list[int] = []
+
+    def spy(self, k, mean, cov, observed):
+        out = chosen(self, k, mean, cov, observed)
+        if self.me != 1:  # whether an honest UAV kept a beacon of the member
+            kept.append(int(self.beacons.stamp[0, self.me, 1]))
+        return out
+
+    monkeypatch.setattr(agent.UavAgent, "chosen", spy)
+    scenario = uavtrack.Scenario(steps=6)
+    swarm = run_swarm(scenario, "policy:bc", seed=1, transport="memory", deadline=0.5)
+    assert swarm.traffic.lost == {}
+    reasons = {r: c for r, c in swarm.traffic.drops.items() if BEACON_LIES[how] in r}
+    assert sum(reasons.values()) > 0, swarm.traffic.drops
+    assert len(kept) == 4 * scenario.steps and set(kept) == {-1}
+    assert np.isfinite(swarm.result.observation_rate)
+    assert swarm.result.trace.alive.all()
 
 
 def lied_tracks(content: dict, how: str) -> dict:

@@ -362,3 +362,36 @@ def pursuit_mlp(hidden=16):
     W1[:, 0], W1[:, 2] = -10.0 / hidden, 10.0 / hidden
     b1 = np.array([0.0, 0.3, 0.0], dtype=np.float32)
     return Policy(layers=[(W0, np.zeros(hidden, dtype=np.float32)), (W1, b1)])
+
+
+def test_a_policys_report_names_no_target_and_no_bids_and_a_planners_must():
+    """The world admits from a policy's UAV exactly what the batch records of it: no
+    target (-1) and no bid (NaN); from a planner's, a target and scored bids."""
+    pytest.importorskip("msgspec")
+    from uavtrack.agents.messages import VERSION, Report, Spec, packed
+
+    scenario = uavtrack.Scenario()
+    m = scenario.n_targets
+    mean = np.tile([100.0, 100.0, 0.0, 0.0], (m, 1))
+    cov = np.broadcast_to(np.eye(4), (m, 4, 4)).copy()
+
+    def report(target: int, bids: np.ndarray) -> Report:
+        return Report(
+            version=VERSION, run="r", k=0, uav=0, action=1, target=target,
+            mean=packed({"x": mean})["x"], cov=packed({"x": cov})["x"],
+            bids=packed({"x": bids})["x"], rounds=1, sent=0, delivered=0,
+            decision_ms=0.1, decision_wall_ms=0.1, late={}, radio_bytes=0,
+        )  # fmt: skip
+
+    policy, planner = Spec.of(scenario, False, plans=False), Spec.of(scenario, False)
+    none, scored = np.full(m, np.nan), np.ones(m)
+    assert isinstance(policy.report(report(-1, none)), dict)
+    assert policy.report(report(0, none)) == "action or target out of range"
+    assert policy.report(report(2**62, none)) == "action or target out of range"
+    assert policy.report(report(-1, scored)) == "bids of a method that does not bid"
+    assert isinstance(planner.report(report(0, scored)), dict)
+    assert planner.report(report(-1, none)) == "action or target out of range"
+    assert planner.report(report(0, none)) == "bids not scored"
+    # the beacon carries the whole state for the policy, the position for the planner
+    assert list(policy.contents("beacon") or {}) == ["uav"]
+    assert list(planner.contents("beacon") or {}) == ["position"]

@@ -686,8 +686,11 @@ class Spec:
             if (message.action, message.target) != (-1, -1):
                 return "action or target out of range"
             return {}
-        free = self.slots or not self.plans  # a track's label, or a policy's no target
-        target_ok = message.target >= -1 if free else 0 <= message.target < self.m
+        target_ok = 0 <= message.target < self.m
+        if self.slots:  # a team label, or none
+            target_ok = message.target >= -1
+        elif not self.plans:  # a learned policy's UAV follows no target
+            target_ok = message.target == -1
         if not 0 <= message.action < self.actions or not target_ok:
             return "action or target out of range"
         m = self.m

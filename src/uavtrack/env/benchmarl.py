@@ -39,6 +39,7 @@ from ..errors import install_hint
 try:
     import yaml  # BenchMARL's own task files are YAML (PyYAML comes with its hydra-core)
     from benchmarl.environments import Task, TaskClass  # pyright: ignore[reportMissingImports]  (the learn extra)
+    from benchmarl.experiment.callback import Callback  # pyright: ignore[reportMissingImports]
     from torchrl.data import Composite  # pyright: ignore[reportMissingImports]  (the learn extra)
     from torchrl.envs import EnvBase  # pyright: ignore[reportMissingImports]  (the learn extra)
 except ImportError as exc:  # an optional extra
@@ -51,6 +52,8 @@ from .learn import torchrl_env
 from .vector import vector_env
 
 GROUP = "agents"
+
+__all__ = ["GROUP", "Curve", "TaskConfig", "UAVTrackClass", "UAVTrackTask", "task_config"]
 
 
 @dataclass(kw_only=True)
@@ -163,3 +166,22 @@ class UAVTrackTask(Task):
         if config is not None and not isinstance(config, dict):
             raise ValueError(f"{path}: the task's settings must be a mapping of setting: value")
         return self.get_task(config=config or {})
+
+
+class Curve(Callback):
+    """A learning curve: after each batch an experiment collects, the frames so far
+    and the batch's mean reward (with the team reward, the training's observation
+    rate); printed as it goes if `verbose`. A module's class: BenchMARL pickles its
+    callbacks."""
+
+    def __init__(self, verbose: bool = True) -> None:
+        super().__init__()
+        self.points: list[tuple[int, float]] = []
+        self.verbose = verbose
+
+    def on_batch_collected(self, batch: Any) -> None:
+        frames = (self.points[-1][0] if self.points else 0) + int(batch.numel())
+        reward = float(batch["next", GROUP, "reward"].mean())
+        self.points.append((frames, reward))
+        if self.verbose:
+            print(f"{frames:,} frames: mean reward {reward:.3f}", flush=True)

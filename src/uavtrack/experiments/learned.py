@@ -29,6 +29,7 @@ import math
 import os
 import shlex
 import sys
+import tempfile
 import time
 from collections.abc import Sequence
 from dataclasses import dataclass, replace
@@ -317,6 +318,97 @@ def fine_tune(
     )  # fmt: skip
 
 
+MARL_SEED = 3_000_000
+"""Added to a BenchMARL row's seed: the experiment's seed, which seeds torch and the
+trials it trains on (`vector_env` trials from it on), apart from the others'."""
+
+MARL = {"mappo": "MappoConfig", "ippo": "IppoConfig"}
+"""BenchMARL's algorithms of the MARL rows, by row name."""
+
+
+@dataclass(frozen=True, kw_only=True)
+class Marl:
+    """The settings of a BenchMARL row (``mappo``, ``ippo``): frames (trial-steps, as
+    BenchMARL counts them: every UAV acts in each), trials stepped as one batch, frames
+    per iteration, the hidden layers' width and count (tanh, the actor's and the
+    critic's), the learning rate; the rest is BenchMARL's default configuration."""
+
+    frames: int = 600_000
+    trials: int = 10
+    batch: int = 6_000
+    hidden: int = 256
+    layers: int = 2
+    learning_rate: float = 5e-5
+
+
+def _marl_classes() -> Any:
+    """BenchMARL's modules, or a one-line `UsageError` saying how to install them."""
+    try:
+        import benchmarl.algorithms as algorithms  # pyright: ignore[reportMissingImports]
+        import benchmarl.experiment as experiment  # pyright: ignore[reportMissingImports]
+        import benchmarl.models as models  # pyright: ignore[reportMissingImports]
+        import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+    except ImportError as exc:
+        raise UsageError(f"the MARL rows need benchmarl: {install_hint('learn')} ({exc})") from None
+    return algorithms, experiment, models, torch
+
+
+def marl(
+    scenario: Scenario, row: str, settings: Marl = Marl(), seed: int = 0, log: Any = print
+) -> Policy:
+    """A BenchMARL row (`MARL`: MAPPO or IPPO) trained from scratch on the task
+    (`env.benchmarl`, the team reward), CPU, one thread; its shared actor written as a
+    policy whose greedy action is the actor's most likely one. Its ``meta`` records each
+    iteration's mean team reward on its own trials (sampling actions: the training's
+    observation rate) against the frames so far."""
+    algorithms, experiment, models, torch = _marl_classes()
+    from ..env.benchmarl import Curve, UAVTrackTask
+
+    torch.set_num_threads(1)
+    begin = time.process_time()
+    curve = Curve(verbose=log is print)
+
+    config = experiment.ExperimentConfig.get_from_yaml()
+    config.max_n_frames, config.max_n_iters = settings.frames, None
+    config.on_policy_collected_frames_per_batch = settings.batch
+    config.on_policy_n_envs_per_worker = settings.trials
+    config.lr = settings.learning_rate
+    config.evaluation, config.render, config.loggers = False, False, []
+    config.create_json, config.checkpoint_at_end = False, False
+    model = models.MlpConfig.get_from_yaml()
+    model.num_cells = [settings.hidden] * settings.layers
+    model.activation_class = torch.nn.Tanh
+    rows = {"max_targets": 4, "max_neighbours": 4}
+    overrides = scenario.model_dump(mode="json", exclude_defaults=True)
+    task = UAVTrackTask.TRACKING.get_task({"overrides": overrides, **rows})
+    algorithm = getattr(algorithms, MARL[row]).get_from_yaml()
+    with tempfile.TemporaryDirectory() as folder:
+        config.save_folder = folder
+        run = experiment.Experiment(
+            task=task, algorithm_config=algorithm, model_config=model,
+            critic_model_config=model, seed=MARL_SEED + seed, config=config,
+            callbacks=[curve],
+        )  # fmt: skip
+        run.run()
+    params = dict(run.policy.named_parameters())
+    count = settings.layers + 1
+    layers = []
+    for i in range(count):  # the MLP's linear layers are every other module
+        (w,) = [v for k, v in params.items() if k.endswith(f"mlp.params.{2 * i}.weight")]
+        (b,) = [v for k, v in params.items() if k.endswith(f"mlp.params.{2 * i}.bias")]
+        layers.append((w.detach().numpy().T.copy(), b.detach().numpy().copy()))
+    meta = {
+        "row": row,
+        "seed": seed,
+        "settings": vars(settings),
+        "frames": int(run.total_frames) * scenario.n_uavs,  # UAV-steps, as the other rows
+        "curve": curve.points,
+        "cpu_seconds": time.process_time() - begin,
+        "scenario": overrides,
+    }
+    return Policy(layers=layers, activation="tanh", meta=meta, **rows)
+
+
 def _linears(net: Any) -> list[Any]:
     import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
 
@@ -326,6 +418,8 @@ def _linears(net: Any) -> list[Any]:
 ROWS = {
     "bc": "behaviour cloning of the planner (DAgger), NumPy",
     "bc-ppo": "bc fine-tuned by PPO on the team reward (Stable-Baselines3)",
+    "mappo": "MAPPO from scratch on the team reward (BenchMARL), shared actor, central critic",
+    "ippo": "IPPO from scratch on the team reward (BenchMARL), shared actor, local critic",
 }
 """The rows this module trains, by name."""
 
@@ -449,8 +543,10 @@ def _main(argv: Sequence[str] | None) -> int:
             help=f"bc: {key} of `Imitation` [%(default)s]",
         )  # fmt: skip
     parser.add_argument("--start", help="bc-ppo: the policy it starts from (file or name)")
-    parser.add_argument("--frames", type=int, default=FineTuning().frames,
-                        help="bc-ppo: agent-steps of PPO [%(default)s]")  # fmt: skip
+    parser.add_argument(
+        "--frames", type=int, help=f"bc-ppo: agent-steps of PPO [{FineTuning().frames}]; "
+        f"mappo, ippo: trial-steps, BenchMARL's frames [{Marl().frames}]",
+    )  # fmt: skip
     parser.add_argument("--warm", type=int, default=FineTuning().warm,
                         help="bc-ppo: of them, with the policy frozen [%(default)s]")  # fmt: skip
     parser.add_argument("--config", help="bc: a scenario TOML file (default: the paper's)")
@@ -501,13 +597,23 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
     _writable(args.out, "--out", args.force)
     given = list(argv) if argv is not None else sys.argv[1:]
     command = "python -m uavtrack.experiments.learned " + shlex.join(given)
+    if args.row in MARL:
+        tuning = Marl() if args.frames is None else Marl(frames=args.frames)
+        if tuning.frames < tuning.batch:
+            raise UsageError(f"--frames must be one batch ({tuning.batch}) or more: {args.frames}")
+        try:  # the observation must fit the team, before any work
+            Spaces(scenario, "box", 4, 4)
+        except ValueError as exc:
+            raise UsageError(f"the scenario's team does not fill the observation: {exc}") from None
+        return _write(marl(scenario, args.row, tuning, args.seed), command, args)
     if args.row == "bc-ppo":
         if args.start is None:
             raise UsageError("bc-ppo fine-tunes a policy: give --start FILE (or a shipped name)")
         start = Policy.load(args.start)
         if args.config is None and not changes:  # the scenario the start was trained on
             scenario = Scenario.model_validate(start.meta.get("scenario", {}))
-        tuning = FineTuning(frames=args.frames, warm=args.warm)
+        frames = FineTuning().frames if args.frames is None else args.frames
+        tuning = FineTuning(frames=frames, warm=args.warm)
         if not 0 <= tuning.warm < tuning.frames:
             raise UsageError(f"--warm must be in [0, --frames), got {tuning.warm}")
         if start.spaces(scenario).size != start.inputs:  # refuses a team that does not fit
