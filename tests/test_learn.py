@@ -220,3 +220,50 @@ def test_benchmarl_task_reads_its_settings_from_yaml(tmp_path):
     path.write_text("- reward\n")
     with pytest.raises(ValueError, match="must be a mapping"):
         UAVTrackTask.TRACKING.get_from_yaml(str(path))
+
+
+# ---------------------------------------------------------------- the MARL rows
+
+
+@pytest.mark.parametrize("row", ["mappo", "ippo", "mappo-gnn"])
+def test_a_marl_rows_policy_file_is_its_benchmarl_actor(tmp_path, row):
+    """The policy file of a BenchMARL row computes the logits of BenchMARL's own actor
+    (a graph row's GraphConv included) on what its rollouts observed: the rates the
+    file flies are the actor's."""
+    pytest.importorskip("torch_geometric")
+    from uavtrack import Scenario
+    from uavtrack.env.spaces import Spaces
+    from uavtrack.experiments import learned
+
+    scenario = Scenario(steps=20)
+    settings = learned.Marl(frames=400, batch=400, trials=2, hidden=16)
+    run = learned.marl_experiment(scenario, row, settings, 0, str(tmp_path))
+    run.run()
+    policy = learned.policy_of(run, row, settings)
+    assert (policy.graph is not None) == (row == "mappo-gnn")
+    rollout = run.env_func().rollout(25, policy=run.policy, break_when_any_done=False)
+    with torch.no_grad():
+        logits = run.policy(rollout.clone())["agents", "logits"].numpy()
+    observation = rollout["agents", "observation"].numpy()
+    mine = policy.logits(observation, Spaces(scenario, "box", 4, 4))
+    np.testing.assert_allclose(mine, logits, rtol=1e-4, atol=1e-5)
+    assert (np.argmax(mine, -1) == np.argmax(logits, -1)).all()
+
+
+def test_the_dense_radius_graph_links_exactly_the_pairs_in_range():
+    from uavtrack.env.benchmarl import dense_radius_graph
+
+    rng = np.random.default_rng(0)
+    x = torch.as_tensor(rng.uniform(0, 3, (4 * 6, 3)), dtype=torch.float32)
+    batch = torch.repeat_interleave(torch.arange(4), 6)
+    edges = dense_radius_graph(x, 1.5, batch).numpy()
+    got = set(map(tuple, edges.T.tolist()))
+    want = {
+        (j, i)
+        for i in range(24)
+        for j in range(24)
+        if i != j and i // 6 == j // 6 and np.linalg.norm(x[i] - x[j]) <= 1.5
+    }
+    assert got == want and 0 < len(want) < 24 * 5
+    with_loops = dense_radius_graph(x, 1.5, batch, loop=True).numpy()
+    assert with_loops.shape[1] == len(want) + 24

@@ -395,3 +395,63 @@ def test_a_policys_report_names_no_target_and_no_bids_and_a_planners_must():
     # the beacon carries the whole state for the policy, the position for the planner
     assert list(policy.contents("beacon") or {}) == ["uav"]
     assert list(planner.contents("beacon") or {}) == ["position"]
+
+
+def graph_policy(seed=0, hidden=8, size=SIZE):
+    rng = np.random.default_rng(seed)
+    draw = lambda *shape: rng.normal(0, 0.5, shape).astype(np.float32)  # noqa: E731
+    return Policy(
+        graph=(draw(size, hidden), draw(size, hidden), draw(hidden)),
+        layers=[(draw(hidden, hidden), draw(hidden)), (draw(hidden, 3), draw(3))],
+        meta={"row": "test"},
+    )
+
+
+def team_observations():
+    """One cycle's observations (1, 5, size) of the paper's team, some UAVs in range."""
+    episodes = Episodes(
+        SHORT, get("distributed"), Spaces(SHORT), "team", [np.random.SeedSequence(1)], plan=False
+    )
+    return Spaces(SHORT, "box", 4, 4), episodes.view()
+
+
+def test_a_graph_policy_sums_its_neighbours_within_the_radio_range(tmp_path):
+    """The graph layer: a UAV alone reads only itself; a neighbour within r_C adds its
+    observation through G_rel; the layer is equivariant to the UAVs' order; the file
+    keeps it."""
+    spaces, view = team_observations()
+    x = spaces.observe(view)
+    assert isinstance(x, np.ndarray)
+    policy = graph_policy()
+    root, rel, bias = policy.graph  # type: ignore[misc]
+    where = spaces.positions(x)[0]
+    apart = np.linalg.norm(where[:, None] - where[None], axis=-1) * spaces.half
+    believed = view.believed[0]
+    true = np.linalg.norm(believed[:, None, :3] - believed[None, :, :3], axis=-1)
+    np.testing.assert_allclose(apart, true, atol=1e-3)  # positions: metres / half-field
+    linked = (true <= SHORT.comm_range) & ~np.eye(SHORT.n_uavs, dtype=bool)
+    assert linked.any() and not linked.all()
+    first = x[0] @ root + (linked.astype(np.float32) @ x[0]) @ rel + bias
+    h = np.tanh(first @ policy.layers[0][0] + policy.layers[0][1])  # no activation between
+    expected = h @ policy.layers[1][0] + policy.layers[1][1]
+    np.testing.assert_allclose(policy.logits(x, spaces)[0], expected, rtol=1e-4, atol=1e-5)
+    order = np.array([3, 0, 4, 1, 2])
+    np.testing.assert_allclose(
+        policy.logits(x[:, order], spaces)[0], expected[order], rtol=1e-4, atol=1e-5
+    )
+    loaded = Policy.load(policy.save(tmp_path / "g.npz"))
+    assert loaded.graph is not None
+    np.testing.assert_array_equal(loaded.logits(x, spaces), policy.logits(x, spaces))
+    with pytest.raises(ValueError, match="team's observations"):
+        policy.logits(x[0, 0])
+
+
+def test_a_graph_policy_flies_in_the_batch_and_is_refused_by_the_agent_form(tmp_path, capsys):
+    path = graph_policy().save(tmp_path / "g.npz")
+    method = get(f"policy:{path}")
+    assert not method.local and get("distributed").local
+    result = uavtrack.run(SHORT, f"policy:{path}", seeds=[2])
+    assert 0.0 <= result.metrics["observation_rate"][0] <= 1.0
+    code = cli.main(["swarm", "--method", f"policy:{path}", "--steps", "3"])
+    err = capsys.readouterr().err
+    assert code == 2 and "whole team's observations" in err and "Traceback" not in err

@@ -232,6 +232,11 @@ def check_method(method: Method, scenario: Scenario | None = None) -> None:
             f"method {method.name!r}: the agent form runs methods built on "
             "Distributed, Greedy or Centralized"
         )
+    if not method.local:
+        raise ValueError(
+            f"method {method.name!r} reads the whole team's observations (a graph policy), "
+            "which no UAV program holds: run it with uavtrack run, compare or sweep"
+        )
     if not method.plans and scenario is not None and scenario.tracker.unlabelled:
         raise ValueError(
             f"method {method.name!r} chooses without planning (a learned policy); the UAV "

@@ -22,7 +22,9 @@ The config (`TaskConfig`, or a dict of its fields given to ``get_task``, or a YA
 of them given to ``get_from_yaml``): ``scenario`` a scenario TOML file (None: the
 paper's), ``overrides`` its fields by name (nested parts as dicts, as `vector_env` takes
 them), ``reward``, ``max_targets`` and ``max_neighbours`` as `parallel_env` takes them,
-``method_for_others`` the method whose planning the world runs.
+``method_for_others`` the method whose planning the world runs, ``positions`` whether
+each agent's observation also holds its ``position`` (`torchrl_env`), for BenchMARL's
+graph networks (``GnnConfig(topology="from_pos", position_key="position")``).
 
 Needs the learn extra (torch, torchrl, benchmarl).
 """
@@ -53,7 +55,10 @@ from .vector import vector_env
 
 GROUP = "agents"
 
-__all__ = ["GROUP", "Curve", "TaskConfig", "UAVTrackClass", "UAVTrackTask", "task_config"]
+__all__ = [
+    "GROUP", "Curve", "TaskConfig", "UAVTrackClass", "UAVTrackTask", "dense_radius_graph",
+    "task_config", "use_dense_radius_graph",
+]  # fmt: skip
 
 
 @dataclass(kw_only=True)
@@ -66,6 +71,7 @@ class TaskConfig:
     max_targets: int | None = None
     max_neighbours: int | None = None
     method_for_others: str = "distributed"
+    positions: bool = False
 
 
 def task_config(config: dict[str, Any] | None) -> dict[str, Any]:
@@ -106,7 +112,8 @@ class UAVTrackClass(TaskClass):
     ) -> Callable[[], EnvBase]:
         if continuous_actions:
             raise ValueError("the uavtrack task has discrete actions (a bank angle of three)")
-        return lambda: torchrl_env(self._vector(num_envs), seed=seed).to(device)
+        positions = self.config["positions"]
+        return lambda: torchrl_env(self._vector(num_envs), seed, positions).to(device)
 
     def supports_continuous_actions(self) -> bool:
         return False
@@ -185,3 +192,35 @@ class Curve(Callback):
         self.points.append((frames, reward))
         if self.verbose:
             print(f"{frames:,} frames: mean reward {reward:.3f}", flush=True)
+
+
+def dense_radius_graph(x: Any, r: float, batch: Any = None, loop: bool = False, **_: Any) -> Any:
+    """PyTorch Geometric's ``radius_graph`` for graphs of equal size, in plain torch:
+    the edges (2, E) between nodes x (P, d) at most `r` apart within each graph of
+    `batch` (P,), in its order (source row 0, target row 1), without self-loops unless
+    `loop`. For a machine without pyg-lib or torch-cluster, which PyG's needs."""
+    import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+
+    P = x.shape[0]
+    graphs = 1 if batch is None else int(batch.max()) + 1
+    n = P // graphs
+    pos = x.reshape(graphs, n, -1)
+    near = torch.cdist(pos, pos) <= r
+    if not loop:
+        near &= ~torch.eye(n, dtype=torch.bool, device=x.device)
+    b, i, j = near.nonzero(as_tuple=True)
+    return torch.stack([b * n + j, b * n + i])
+
+
+def use_dense_radius_graph() -> bool:
+    """Put `dense_radius_graph` in PyTorch Geometric's place if its own cannot run here
+    (no pyg-lib or torch-cluster); returns whether it did."""
+    import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
+    import torch_geometric.nn.pool as pool  # pyright: ignore[reportMissingImports]
+
+    try:
+        pool.radius_graph(torch.zeros((2, 2)), r=1.0)
+        return False
+    except ImportError:
+        pool.radius_graph = dense_radius_graph
+        return True

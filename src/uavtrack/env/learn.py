@@ -94,8 +94,11 @@ def sb3_vec_env(vector: VectorEnv, seed: int | None = None):
     return AgentsVecEnv()
 
 
-def torchrl_env(vector: VectorEnv, seed: int | None = None):
-    """`vector` as a TorchRL EnvBase of batch size [num_envs] (see the module)."""
+def torchrl_env(vector: VectorEnv, seed: int | None = None, positions: bool = False):
+    """`vector` as a TorchRL EnvBase of batch size [num_envs] (see the module); with
+    `positions`, each agent's ``("agents", "position")`` (`Spaces.positions`: where its
+    observation says it is, in half-fields), from which a graph network builds the
+    radio graph."""
     try:
         import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
         from tensordict import TensorDict  # pyright: ignore[reportMissingImports]  (the learn extra)
@@ -122,6 +125,7 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
                 agents=agents(
                     observation=box(B, N, D),
                     alive=Categorical(2, torch.Size((B, N, 1)), dtype=torch.bool),
+                    **({"position": box(B, N, 3)} if positions else {}),
                 ),
                 state=box(B, S),
                 shape=(B,),
@@ -173,15 +177,15 @@ def torchrl_env(vector: VectorEnv, seed: int | None = None):
             observations = vector.observations() if observations is None else observations
             state = vector.state() if state is None else state
             alive = observations[..., 0:1] > 0  # the observation's first entry: alive
+            agents = {
+                "observation": torch.from_numpy(observations),
+                "alive": torch.from_numpy(alive),
+            }
+            if positions:
+                agents["position"] = torch.from_numpy(vector.spaces.positions(observations))
             return TensorDict(
                 {
-                    "agents": TensorDict(
-                        {
-                            "observation": torch.from_numpy(observations),
-                            "alive": torch.from_numpy(alive),
-                        },
-                        batch_size=(B, N),
-                    ),
+                    "agents": TensorDict(agents, batch_size=(B, N)),
                     "state": torch.from_numpy(state),
                     "done": terminated | truncated,
                     "terminated": terminated,

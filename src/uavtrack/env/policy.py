@@ -9,6 +9,14 @@ UAV's observation (`spaces.Spaces`, the Box form) to the logits of its three act
   ``max_targets`` and ``max_neighbours`` (the observation's rows), and anything the
   trainer records of itself (algorithm, frames, seed, the rate it reached).
 
+A graph policy (``mappo-gnn``) has a first layer over the radio graph, as BenchMARL's
+graph network with PyTorch Geometric's ``GraphConv`` computes it: ``G_root, G_rel,
+G_b``, each UAV's ``x @ G_root + (the sum of its neighbours' x) @ G_rel + G_b``, its
+neighbours the UAVs within r_C of where their observations say they are
+(`Spaces.positions`); then the perceptron's layers, the first of them reading that
+sum directly (no activation between, as BenchMARL chains its models). It reads the whole team's
+observations, so only the batch runs it (not the agent form).
+
 Each UAV flies the action of its largest logit (the lowest index on ties), so a policy
 is deterministic: the same seed gives the same trial. The team fuses as the paper's
 method does (max-consensus over the radio) and runs no planner and no auction: the
@@ -39,7 +47,8 @@ from .episodes import view_of
 from .spaces import Spaces, View
 
 __all__ = [
-    "ACTIVATIONS", "FORMAT", "PREFIX", "SHIPPED", "Policy", "PolicyMethod", "digest", "shipped",
+    "ACTIVATIONS", "FORMAT", "GRAPH", "PREFIX", "SHIPPED", "Policy", "PolicyMethod", "digest",
+    "shipped",
 ]  # fmt: skip
 
 FORMAT = 1
@@ -82,16 +91,22 @@ def _path(spec: str) -> Path:
     return path
 
 
+GRAPH = ("G_root", "G_rel", "G_b")
+"""The arrays of a graph policy's first layer (see the module)."""
+
+
 @dataclass(frozen=True, kw_only=True)
 class Policy:
     """A multilayer perceptron over one UAV's observation: layers [(W, b)], the hidden
-    activation's name and the observation's rows; meta holds the trainer's record."""
+    activation's name and the observation's rows; meta holds the trainer's record. With
+    graph (root (D, H), rel (D, H), bias (H,)), a first layer over the radio graph."""
 
     layers: list[tuple[np.ndarray, np.ndarray]]
     activation: str = "tanh"
     max_targets: int = 4
     max_neighbours: int = 4
     meta: dict[str, Any] = field(default_factory=dict)
+    graph: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
 
     def __post_init__(self) -> None:
         if self.activation not in ACTIVATIONS:
@@ -101,6 +116,15 @@ class Policy:
         if not self.layers:
             raise ValueError("a policy needs at least one layer")
         width = self.layers[0][0].shape[0]
+        if self.graph is not None:
+            root, rel, bias = self.graph
+            chained = root.ndim == 2 and root.shape == rel.shape and bias.shape == (width,)
+            if not chained or root.shape[1] != width:
+                raise ValueError(f"the graph layer {root.shape}, {rel.shape}, {bias.shape} "
+                                 f"does not chain to a first layer of {width} inputs")  # fmt: skip
+            if not all(np.issubdtype(a.dtype, np.floating) and np.isfinite(a).all()
+                       for a in self.graph):  # fmt: skip
+                raise ValueError("the graph layer holds a value that is not a finite float")
         for i, (W, b) in enumerate(self.layers):
             real = all(np.issubdtype(a.dtype, np.floating) for a in (W, b))
             if not real:
@@ -118,13 +142,19 @@ class Policy:
     @property
     def inputs(self) -> int:
         """The size of the observation it reads."""
-        return int(self.layers[0][0].shape[0])
+        first = self.layers[0][0] if self.graph is None else self.graph[0]
+        return int(first.shape[0])
 
-    def logits(self, observation: np.ndarray) -> np.ndarray:
-        """The logits (..., 3) of observations (..., inputs)."""
+    def logits(self, observation: np.ndarray, spaces: Spaces | None = None) -> np.ndarray:
+        """The logits (..., 3) of observations (..., inputs); a graph policy's of the
+        team's observations (..., N, inputs) built by `spaces` (its scales and r_C)."""
         x = np.asarray(observation, dtype=np.float32)
         if x.shape[-1] != self.inputs:
             raise ValueError(f"the policy reads {self.inputs} numbers, not {x.shape[-1]}")
+        if self.graph is not None:
+            if spaces is None or x.ndim < 2:
+                raise ValueError("a graph policy reads the team's observations and their spaces")
+            x = self._graph(x, spaces)
         act = ACTIVATIONS[self.activation]
         for i, (W, b) in enumerate(self.layers):
             x = x @ W + b
@@ -132,9 +162,20 @@ class Policy:
                 x = act(x)
         return x
 
-    def act(self, observation: np.ndarray) -> np.ndarray:
+    def _graph(self, x: np.ndarray, spaces: Spaces) -> np.ndarray:
+        """The graph layer (see the module) of the team's observations x (..., N, D)."""
+        root, rel, bias = self.graph  # pyright: ignore[reportGeneralTypeIssues]
+        where = spaces.positions(x)
+        apart = np.linalg.norm(where[..., :, None, :] - where[..., None, :, :], axis=-1)
+        reach = spaces.scenario.comm_range / spaces.half
+        n = x.shape[-2]
+        linked = (apart <= np.float32(reach)) & ~np.eye(n, dtype=bool)
+        summed = linked.astype(np.float32) @ x
+        return x @ root + summed @ rel + bias
+
+    def act(self, observation: np.ndarray, spaces: Spaces | None = None) -> np.ndarray:
         """The action (...) of the largest logit of each observation (the lowest on ties)."""
-        return np.argmax(self.logits(observation), axis=-1)
+        return np.argmax(self.logits(observation, spaces), axis=-1)
 
     def spaces(self, scenario: Any) -> Spaces:
         """The observation builder of `scenario` with this policy's rows; a one-line
@@ -163,6 +204,8 @@ class Policy:
         arrays: dict[str, np.ndarray] = {"meta": np.array(json.dumps(meta, sort_keys=True))}
         for i, (W, b) in enumerate(self.layers):
             arrays[f"W{i}"], arrays[f"b{i}"] = W.astype(np.float32), b.astype(np.float32)
+        if self.graph is not None:
+            arrays |= {k: a.astype(np.float32) for k, a in zip(GRAPH, self.graph, strict=True)}
         part = path.with_name(path.name + ".part")
         try:
             with open(part, "wb") as f:
@@ -199,7 +242,12 @@ class Policy:
                 raise ValueError(f"format {meta.get('format')!r}, this version reads {FORMAT}")
             count = sum(1 for k in arrays if k.startswith("W"))
             layers = [(arrays[f"W{i}"], arrays[f"b{i}"]) for i in range(count)]
+            graph = None
+            if GRAPH[0] in arrays:
+                root, rel, bias = (arrays[k] for k in GRAPH)
+                graph = (root, rel, bias)
             return cls(
+                graph=graph,
                 layers=layers,
                 activation=meta["activation"],
                 max_targets=int(meta["max_targets"]),
@@ -220,6 +268,7 @@ class PolicyMethod(Distributed):
         self.spec = spec.removeprefix(PREFIX)
         self.policy = Policy.load(self.spec)
         self.instance_name = PREFIX + self.spec
+        self.local = self.policy.graph is None  # a graph policy reads the whole team
         self._spaces: tuple[Any, Spaces] | None = None  # the last scenario's builder
 
     @property
@@ -243,9 +292,10 @@ class PolicyMethod(Distributed):
         (`actions`), or one UAV program's, whose view holds its own row."""
         if self._spaces is None or self._spaces[0] is not scenario:
             self._spaces = (scenario, self.policy.spaces(scenario))
-        observation = self._spaces[1].observe(view)
+        spaces = self._spaces[1]
+        observation = spaces.observe(view)
         assert isinstance(observation, np.ndarray)  # the Box form
-        return self.policy.act(observation)
+        return self.policy.act(observation, spaces)
 
     def __repr__(self) -> str:
         return f"PolicyMethod({self.spec!r})"

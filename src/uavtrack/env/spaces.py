@@ -173,6 +173,15 @@ class Spaces:
         out = np.where(view.alive[..., None], out, 0.0)  # a failed UAV observes nothing
         return np.clip(out, -BOUND, BOUND).astype(np.float32)
 
+    def positions(self, observation: np.ndarray) -> np.ndarray:
+        """Where Box observations (..., size) say their UAVs are (..., 3), float32: x and
+        y as the observation has them, the altitude in the same unit (half the field's
+        side), so that UAVs within r_C are within ``comm_range / (field_size / 2)``; a
+        failed UAV's (a zero observation) is the field's centre at altitude 0."""
+        scale = self.altitude / self.half
+        x = np.asarray(observation, dtype=np.float32)
+        return np.stack([x[..., 1], x[..., 2], x[..., 6] * np.float32(scale)], axis=-1)
+
     def _own(self, view: View) -> np.ndarray:
         progress = np.full(view.alive.shape + (1,), view.k / self.scenario.steps)
         return np.concatenate([self._uav_rows(view.believed, view.alive), progress], axis=-1)

@@ -322,7 +322,7 @@ MARL_SEED = 3_000_000
 """Added to a BenchMARL row's seed: the experiment's seed, which seeds torch and the
 trials it trains on (`vector_env` trials from it on), apart from the others'."""
 
-MARL = {"mappo": "MappoConfig", "ippo": "IppoConfig"}
+MARL = {"mappo": "MappoConfig", "ippo": "IppoConfig", "mappo-gnn": "MappoConfig"}
 """BenchMARL's algorithms of the MARL rows, by row name."""
 
 
@@ -353,20 +353,17 @@ def _marl_classes() -> Any:
     return algorithms, experiment, models, torch
 
 
-def marl(
-    scenario: Scenario, row: str, settings: Marl = Marl(), seed: int = 0, log: Any = print
-) -> Policy:
-    """A BenchMARL row (`MARL`: MAPPO or IPPO) trained from scratch on the task
-    (`env.benchmarl`, the team reward), CPU, one thread; its shared actor written as a
-    policy whose greedy action is the actor's most likely one. Its ``meta`` records each
-    iteration's mean team reward on its own trials (sampling actions: the training's
-    observation rate) against the frames so far."""
-    algorithms, experiment, models, torch = _marl_classes()
-    from ..env.benchmarl import Curve, UAVTrackTask
+ROWS_OF_THE_OBSERVATION = {"max_targets": 4, "max_neighbours": 4}
+"""The observation's rows of the MARL rows, as ``bc``'s."""
 
-    torch.set_num_threads(1)
-    begin = time.process_time()
-    curve = Curve(verbose=log is print)
+
+def marl_experiment(
+    scenario: Scenario, row: str, settings: Marl, seed: int, folder: str, callbacks: Any = ()
+) -> Any:
+    """The BenchMARL experiment of a MARL row (`MARL`), not yet run, saving in `folder`
+    (see `marl`)."""
+    algorithms, experiment, models, torch = _marl_classes()
+    from ..env.benchmarl import UAVTrackTask
 
     config = experiment.ExperimentConfig.get_from_yaml()
     config.max_n_frames, config.max_n_iters = settings.frames, None
@@ -375,28 +372,58 @@ def marl(
     config.lr = settings.learning_rate
     config.evaluation, config.render, config.loggers = False, False, []
     config.create_json, config.checkpoint_at_end = False, False
+    config.save_folder = folder
     model = models.MlpConfig.get_from_yaml()
     model.num_cells = [settings.hidden] * settings.layers
     model.activation_class = torch.nn.Tanh
-    rows = {"max_targets": 4, "max_neighbours": 4}
+    graph = row == "mappo-gnn"
+    actor = _graph_actor(scenario, settings, models, torch) if graph else model
     overrides = scenario.model_dump(mode="json", exclude_defaults=True)
-    task = UAVTrackTask.TRACKING.get_task({"overrides": overrides, **rows})
+    task = UAVTrackTask.TRACKING.get_task(
+        {"overrides": overrides, "positions": graph, **ROWS_OF_THE_OBSERVATION}
+    )
     algorithm = getattr(algorithms, MARL[row]).get_from_yaml()
+    return experiment.Experiment(
+        task=task, algorithm_config=algorithm, model_config=actor, critic_model_config=model,
+        seed=MARL_SEED + seed, config=config, callbacks=list(callbacks),
+    )  # fmt: skip
+
+
+def policy_of(run: Any, row: str, settings: Marl, meta: dict[str, Any] | None = None) -> Policy:
+    """The shared actor of a MARL row's experiment `run` as a policy file's layers:
+    BenchMARL's perceptron, after a graph row's GraphConv layer (lin_root, no bias, and
+    lin_rel with its bias)."""
+    found = {k: v.detach().numpy() for k, v in run.policy.named_parameters()}
+    graph = row == "mappo-gnn"
+    first = None
+    if graph:
+        pick = lambda end: next(v for k, v in found.items() if k.endswith(end))  # noqa: E731
+        first = (pick("lin_root.weight").T.copy(), pick("lin_rel.weight").T.copy(),
+                 pick("lin_rel.bias").copy())  # fmt: skip
+    layers = _actor_layers(found, settings.layers - int(graph) + 1)
+    return Policy(
+        layers=layers, activation="tanh", meta=meta or {}, graph=first,
+        **ROWS_OF_THE_OBSERVATION,
+    )  # fmt: skip
+
+
+def marl(
+    scenario: Scenario, row: str, settings: Marl = Marl(), seed: int = 0, log: Any = print
+) -> Policy:
+    """A BenchMARL row (`MARL`: MAPPO, IPPO, MAPPO with a graph layer) trained from
+    scratch on the task (`env.benchmarl`, the team reward), CPU, one thread; its shared
+    actor written as a policy whose greedy action is the actor's most likely one
+    (`policy_of`). Its ``meta`` records each iteration's mean team reward on its own
+    trials (sampling actions: the training's observation rate) against the frames."""
+    torch = _marl_classes()[3]
+    from ..env.benchmarl import Curve
+
+    torch.set_num_threads(1)
+    begin = time.process_time()
+    curve = Curve(verbose=log is print)
     with tempfile.TemporaryDirectory() as folder:
-        config.save_folder = folder
-        run = experiment.Experiment(
-            task=task, algorithm_config=algorithm, model_config=model,
-            critic_model_config=model, seed=MARL_SEED + seed, config=config,
-            callbacks=[curve],
-        )  # fmt: skip
+        run = marl_experiment(scenario, row, settings, seed, folder, [curve])
         run.run()
-    params = dict(run.policy.named_parameters())
-    count = settings.layers + 1
-    layers = []
-    for i in range(count):  # the MLP's linear layers are every other module
-        (w,) = [v for k, v in params.items() if k.endswith(f"mlp.params.{2 * i}.weight")]
-        (b,) = [v for k, v in params.items() if k.endswith(f"mlp.params.{2 * i}.bias")]
-        layers.append((w.detach().numpy().T.copy(), b.detach().numpy().copy()))
     meta = {
         "row": row,
         "seed": seed,
@@ -404,9 +431,45 @@ def marl(
         "frames": int(run.total_frames) * scenario.n_uavs,  # UAV-steps, as the other rows
         "curve": curve.points,
         "cpu_seconds": time.process_time() - begin,
-        "scenario": overrides,
+        "scenario": scenario.model_dump(mode="json", exclude_defaults=True),
     }
-    return Policy(layers=layers, activation="tanh", meta=meta, **rows)
+    return policy_of(run, row, settings, meta)
+
+
+def _graph_actor(scenario: Scenario, settings: Marl, models: Any, torch: Any) -> Any:
+    """``mappo-gnn``'s actor: one GraphConv layer (PyTorch Geometric, sum over the UAVs
+    within r_C, `Spaces.positions`) to the hidden width, then the perceptron's other
+    hidden layers (tanh) to the three logits."""
+    from torch_geometric.nn import GraphConv  # pyright: ignore[reportMissingImports]
+
+    from ..env.benchmarl import use_dense_radius_graph
+
+    use_dense_radius_graph()  # PyG's needs pyg-lib or torch-cluster, which PyPI lacks
+
+    gnn = models.GnnConfig(
+        topology="from_pos", self_loops=False, gnn_class=GraphConv,
+        gnn_kwargs={"aggr": "add"}, position_key="position", pos_features=3,
+        exclude_pos_from_node_features=True,
+        edge_radius=scenario.comm_range / (scenario.field_size / 2),
+    )  # fmt: skip
+    mlp = models.MlpConfig.get_from_yaml()
+    mlp.num_cells = [settings.hidden] * (settings.layers - 1)
+    mlp.activation_class = torch.nn.Tanh
+    return models.SequenceModelConfig(
+        model_configs=[gnn, mlp], intermediate_sizes=[settings.hidden]
+    )
+
+
+def _actor_layers(found: dict[str, np.ndarray], count: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The `count` linear layers of BenchMARL's shared MLP actor among its parameters
+    `found` by name, as (W, b) with x @ W + b (its linear layers are every other
+    module, between them the activations)."""
+    layers = []
+    for i in range(count):
+        (w,) = [v for k, v in found.items() if k.endswith(f"mlp.params.{2 * i}.weight")]
+        (b,) = [v for k, v in found.items() if k.endswith(f"mlp.params.{2 * i}.bias")]
+        layers.append((w.T.copy(), b.copy()))
+    return layers
 
 
 def _linears(net: Any) -> list[Any]:
@@ -419,6 +482,7 @@ ROWS = {
     "bc": "behaviour cloning of the planner (DAgger), NumPy",
     "bc-ppo": "bc fine-tuned by PPO on the team reward (Stable-Baselines3)",
     "mappo": "MAPPO from scratch on the team reward (BenchMARL), shared actor, central critic",
+    "mappo-gnn": "MAPPO whose actor's first layer sums over the radio graph (GraphConv)",
     "ippo": "IPPO from scratch on the team reward (BenchMARL), shared actor, local critic",
 }
 """The rows this module trains, by name."""

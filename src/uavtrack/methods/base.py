@@ -230,6 +230,9 @@ class Method:
     plans: ClassVar[bool] = True
     """Whether the cycle plans and assigns (`simulation.decide`); a method whose UAVs
     choose their actions otherwise (`actions`, a learned policy) sets it False."""
+    local: bool = True
+    """Whether each UAV decides from what it holds and hears alone, so that the agent
+    form can run it (a graph policy reads the whole team's observations: False)."""
 
     def fuse(self, inputs: Inputs) -> Fused:
         """Consensus over the radio: the D_i protocol, then max-consensus rounds."""
