@@ -3,6 +3,7 @@ paper's planner that makes one (`uavtrack.experiments.learned`): the file, the c
 commands that take it, and what the imitation learns."""
 
 import json
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -237,6 +238,7 @@ def test_one_command_trains_evaluates_and_reports_a_row(tmp_path, capsys):
     for bad in (["bc", "--out", str(tmp_path / "no" / "x.npz")],
                 ["bc", "--out", str(tmp_path / "x.npz"), "--set", "sensor.detection_probability=2"],
                 ["bc", "--out", str(tmp_path / "x.npz"), "--epochs", "0"],
+                ["mappo", "--out", str(tmp_path / "x.npz"), "--frames", "10"],
                 ["report", str(tmp_path / "missing.npz")]):  # fmt: skip
         assert learned.main(bad) == 2
         err = capsys.readouterr().err
@@ -455,3 +457,20 @@ def test_a_graph_policy_flies_in_the_batch_and_is_refused_by_the_agent_form(tmp_
     code = cli.main(["swarm", "--method", f"policy:{path}", "--steps", "3"])
     err = capsys.readouterr().err
     assert code == 2 and "whole team's observations" in err and "Traceback" not in err
+
+
+def test_the_report_draws_a_marl_rows_curve_and_tables_its_rate(tmp_path):
+    """A BenchMARL row's file (here a graph policy with the meta such a row records):
+    evaluated on its scenario, tabled, and its curve drawn on the figure."""
+    import matplotlib.image
+
+    path = tmp_path / "gnn.npz"
+    meta = {"row": "mappo-gnn", "frames": 1000, "cpu_seconds": 36.0, "command": "c",
+            "curve": [[100, 0.1], [200, 0.3]], "scenario": {"steps": 30}}  # fmt: skip
+    replace(graph_policy(), meta=meta).save(path)
+    result = learned.record(path, trials=2)
+    assert result["scenario"] == {"steps": 30}
+    figure = tmp_path / "curves.png"
+    page = learned.report([path], figure, tmp_path / "page.md")
+    assert "| mappo-gnn (gnn) | steps=30 | 1,000 | 0.01 | 2 |" in page
+    assert matplotlib.image.imread(figure).shape[2] in (3, 4)

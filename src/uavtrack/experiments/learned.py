@@ -525,7 +525,7 @@ def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None 
             f"{planner['ci95']:.3f} | {ci(d, digits=3)} | "
             f"{'yes' if d['mean'] >= -0.02 else 'no'} | `{meta.get('command', '')}` |"
         )
-        if meta["row"] == "bc":  # a fine-tuned row carries its start's rounds
+        if meta["row"] == "bc" or meta.get("curve"):  # bc-ppo carries its start's rounds
             curves.append((path.stem, meta))
     if figure is not None:
         _curves(curves, figure)
@@ -534,8 +534,12 @@ def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None 
             "",
             f"![learning curves]({link})",
             "",
-            "The curves: each DAgger round's rate on its own training trials against the "
-            "UAV-steps recorded so far (round 0, dashed, is the planner flying).",
+            "The curves: the rate on each row's own training trials against the UAV-steps "
+            "it has seen. DAgger (bc): each round's policy flying (round 0, the dashed "
+            "line, is the planner). BenchMARL's rows: each iteration's mean team reward, "
+            "its actions sampled from the actor (the table's rates fly the most likely "
+            "action). The team reward at step k is the share of targets seen at k + 1, so "
+            "a trial's team return is its steps times its observation rate, to one step.",
         ]
     return "\n".join(lines) + "\n"
 
@@ -545,15 +549,25 @@ def _curves(curves: list[tuple[str, dict[str, Any]]], figure: Path) -> None:
     is the planner flying, each later round the policy fitted so far."""
     import matplotlib.pyplot as plt
 
-    fig, ax = plt.subplots(figsize=(6.4, 3.6))
+    fig, ax = plt.subplots(figsize=(7.2, 4.0))
+    seen = False  # whether any curve has a point
     for name, meta in curves:
-        per_round = meta["frames"] / max(len(meta["round_rates"]), 1)
-        frames = per_round * np.arange(1, len(meta["round_rates"]))
-        (line,) = ax.plot(frames, meta["round_rates"][1:], marker="o", label=name)
-        ax.axhline(meta["round_rates"][0], ls="--", color=line.get_color(), lw=1)
-    ax.set_xlabel("frames seen (UAV-steps)")
+        if meta["row"] == "bc":
+            per_round = meta["frames"] / max(len(meta["round_rates"]), 1)
+            frames = per_round * np.arange(1, len(meta["round_rates"]))
+            seen = seen or frames.size > 0
+            (line,) = ax.plot(frames, meta["round_rates"][1:], marker="o", label=name)
+            ax.axhline(meta["round_rates"][0], ls="--", color=line.get_color(), lw=1)
+            continue
+        n = Scenario.model_validate(meta.get("scenario", {})).n_uavs
+        points = np.asarray(meta["curve"], dtype=float)
+        seen = True
+        ax.plot(points[:, 0] * n, points[:, 1], lw=1.2, label=f"{name} (sampling)")
+    if seen:  # frames span decades: DAgger's thousands to PPO's millions
+        ax.set_xscale("log")
+    ax.set_xlabel("UAV-steps seen")
     ax.set_ylabel("observation rate, training trials")
-    ax.set_title("DAgger: the policy's rate by round (dashed: the planner, round 0)")
+    ax.set_title("Learning curves (dashed: the planner, DAgger's round 0)")
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
