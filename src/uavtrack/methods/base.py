@@ -258,6 +258,12 @@ class Method:
         records name this module: not named here), or None: the planned ones."""
         return None
 
+    def choose(self, view: Any, scenario: Scenario) -> np.ndarray:
+        """The actions (B, N) a method that does not plan chooses from a cycle's view
+        (`env.spaces.View`): how one UAV program asks it (the agent form), its view
+        holding its own row. A method that plans chooses none."""
+        raise NotImplementedError(f"method {self.name!r} plans: it chooses from no view")
+
     def top(self, setting: Setting, largest: np.ndarray | None) -> np.ndarray | None:
         """How many of its best bids each UAV's assignment can read (B, N), or None: all
         (the default: a method that does not say needs every bid). The planner scores
