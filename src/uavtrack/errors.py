@@ -34,7 +34,7 @@ EXTRAS = {
     "env": "pettingzoo gymnasium",
     "flight": "jsbsim pymavlink",
     "io": "xarray pandas pyarrow h5netcdf h5py rosbags",
-    "learn": "torch stable-baselines3 supersuit torchrl benchmarl",
+    "learn": "torch stable-baselines3 supersuit torchrl benchmarl torch-geometric",
     "viz": "rerun-sdk pyarrow",
 }
 """The packages of each optional extra (as pyproject.toml lists them)."""

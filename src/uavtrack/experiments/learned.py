@@ -328,7 +328,7 @@ MARL = {"mappo": "MappoConfig", "ippo": "IppoConfig", "mappo-gnn": "MappoConfig"
 
 @dataclass(frozen=True, kw_only=True)
 class Marl:
-    """The settings of a BenchMARL row (``mappo``, ``ippo``): frames (trial-steps, as
+    """The settings of a BenchMARL row (`MARL`): frames (trial-steps, as
     BenchMARL counts them: every UAV acts in each), trials stepped as one batch, frames
     per iteration, the hidden layers' width and count (tanh, the actor's and the
     critic's), the learning rate; the rest is BenchMARL's default configuration."""
