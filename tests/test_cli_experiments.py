@@ -70,6 +70,7 @@ def test_reproduce_again_reuses_every_job(quick, capsys):
     )
 
 
+@pytest.mark.slow  # 35 s; the base-value test runs the sensitivity end to end, smaller
 @pytest.mark.integration
 def test_sensitivity_adds_its_jobs_to_the_same_folder(quick, capsys):
     from uavtrack.experiments.reproduce import SENSITIVITY

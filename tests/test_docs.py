@@ -160,6 +160,7 @@ def test_equations_cited_in_table_are_those_their_objects_docstrings_cite():
     assert rows >= 20
 
 
+@pytest.mark.slow  # a whole build (25 s); the default suite builds the site strictly
 @pytest.mark.integration
 def test_a_broken_link_fails_the_build(tmp_path):
     pytest.importorskip("mkdocs")
