@@ -194,7 +194,9 @@ def test_dagger_learns_the_planners_choices_on_short_missions():
     assert (policy.act(x) == y).mean() > majority + 0.15
 
 
-@pytest.mark.parametrize("name", ["bc", "bc-ppo", "bc-jpda", "mappo", "ippo", "mappo-gnn"])
+@pytest.mark.parametrize(
+    "name", ["bc", "bc-ppo", "bc-jpda", "bc-ppo-jpda", "mappo", "ippo", "mappo-gnn"]
+)
 def test_each_shipped_policy_reproduces_its_published_rates_on_its_first_trials(name):
     """A shipped policy flies its first three evaluation trials, on the scenario its file
     records, to the rates the file records (equal on the CPU that made it and on numpy's
