@@ -257,7 +257,9 @@ RUNS = {
     ("centralized", 1, "jpda"): {"radio:presence", "radio:upload", "report"},  # a scan
     ("centralized", 5, "jpda"): {"radio:presence", "radio:download", "report"},  # a book
     # a learned policy: beacons of whole states, reports with no target and no bids
-    ("policy:bc", 1, "known"): {"radio:presence", "radio:flood+consensus", "radio:beacon", "report"},
+    ("policy:bc", 1, "known"): {
+        "radio:presence", "radio:flood+consensus", "radio:beacon", "report"
+    },
 }  # fmt: skip
 TRACKED = {"sensor.detection_probability": 0.9, "sensor.clutter_rate": 2.0}
 

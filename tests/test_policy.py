@@ -152,8 +152,10 @@ def test_the_commands_take_a_policy_beside_the_paper_and_refuse_a_bad_one(tmp_pa
     for argv, named in (
         (["run", "--method", f"policy:{tmp_path / 'none.npz'}"], "no policy file"),
         (["run", "--method", "polcy"], "policy:FILE"),
-        (["swarm", "--method", f"policy:{path}", "--steps", "3",
-          "--set", 'tracker.association="jpda"'], "known association only"),  # fmt: skip
+        (
+            ["swarm", "--method", f"policy:{path}", "--set", 'tracker.association="jpda"'],
+            "known association only",
+        ),
     ):
         code = cli.main(argv)
         out, err = capsys.readouterr()
