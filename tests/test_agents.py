@@ -46,10 +46,14 @@ def test_memory_swarm_equals_the_simulator(method, faults):
     assert swarm.traffic.published > 0 and swarm.traffic.dropped == 0
 
 
-@pytest.mark.parametrize("faults", FAULTS[:4], ids=lambda f: ",".join(f) or "no-faults")
+MISSING = {"sensor.detection_probability": 0.7}  # "in view": what a UAV measured
+
+
+@pytest.mark.parametrize("faults", [*FAULTS[:4], MISSING], ids=lambda f: ",".join(f) or "no-faults")
 def test_memory_swarm_of_a_learned_policy_equals_the_simulator(faults):
-    """Each program reads its neighbours from the beacons it heard, as the batch does:
-    the same trace with losses, delay and failures."""
+    """Each program reads its neighbours from the beacons it heard, and its targets in
+    view from what it measured, as the batch does: the same trace with losses, delay,
+    failures and a sensor that misses."""
     pytest.importorskip("gymnasium")  # the policy's observation builder
     scenario = uavtrack.Scenario(steps=25).with_overrides(faults)
     swarm = run_swarm(scenario, "policy:bc", seed=3, transport="memory")

@@ -454,6 +454,8 @@ def test_a_graph_policy_sums_its_neighbours_within_the_radio_range(tmp_path):
 
 def test_a_graph_policy_flies_in_the_batch_and_is_refused_by_the_agent_form(tmp_path, capsys):
     path = graph_policy().save(tmp_path / "g.npz")
+    code = learned.main(["bc-ppo", "--start", str(path), "--out", str(tmp_path / "t.npz")])
+    assert code == 2 and "graph policy" in capsys.readouterr().err
     method = get(f"policy:{path}")
     assert not method.local and get("distributed").local
     result = uavtrack.run(SHORT, f"policy:{path}", seeds=[2])

@@ -224,8 +224,9 @@ def plausible(spec: Spec, mailbox: Mailbox, content: dict) -> dict:
 def check_method(method: Method, scenario: Scenario | None = None) -> None:
     """Refuse (ValueError) a method the agent form cannot run as it is: one not built on
     Distributed, Greedy or Centralized, one that replaces their `assign` (each UAV
-    program runs the method's neighbourhood rule, `solve`, not a batch `assign`), or a
-    learned policy with tracks of unknown association in `scenario`."""
+    program runs the method's neighbourhood rule, `solve`, not a batch `assign`), one
+    that reads the whole team (`Method.local` False: a graph policy), or a learned
+    policy with tracks of unknown association in `scenario`."""
     bases = [c for c in type(method).__mro__ if c in (Distributed, Greedy, Centralized)]
     if not bases:
         raise ValueError(
@@ -678,7 +679,7 @@ class UavAgent:
         seen[0, me] = observed
         view = View(
             k=k, believed=believed, uavs=believed, mean=means, cov=covs, links=links,
-            alive=alive, observed=seen, heard=heard,
+            alive=alive, observed=seen, heard=heard, detected=seen,
         )  # fmt: skip
         start = timing.start()
         action = int(self.method.choose(view, self.scenario)[0, me])

@@ -180,6 +180,7 @@ def view_of(pending: Pending, scenario: Scenario) -> View:
         label=label,
         met=met,
         heard=heard,
+        detected=p.detected,  # what each UAV measured: it cannot know what it missed
     )
 
 

@@ -13,16 +13,19 @@ A graph policy (``mappo-gnn``) has a first layer over the radio graph, as BenchM
 graph network with PyTorch Geometric's ``GraphConv`` computes it: ``G_root, G_rel,
 G_b``, each UAV's ``x @ G_root + (the sum of its neighbours' x) @ G_rel + G_b``, its
 neighbours the UAVs within r_C of where their observations say they are
-(`Spaces.positions`); then the perceptron's layers, the first of them reading that
-sum directly (no activation between, as BenchMARL chains its models). It reads the whole team's
-observations, so only the batch runs it (not the agent form).
+(`Spaces.positions`, whatever the radio delivers); then the perceptron's layers, the
+first of them reading that sum directly (no activation between, as BenchMARL chains
+its models). It reads the whole team's observations, so only the batch runs it (not
+the agent form).
 
 Each UAV flies the action of its largest logit (the lowest index on ties), so a policy
 is deterministic: the same seed gives the same trial. The team fuses as the paper's
 method does (max-consensus over the radio) and runs no planner and no auction: the
 policy is the whole decision. The cycle is the simulator's own (`simulation.decide`
-without planning, `simulation.finish` with the policy's actions), so every metric and
-fault of a run applies unchanged.
+without planning; `simulation.chosen`, where the UAVs send each other beacons of their
+whole states, counted with the cycle's messages and bytes, and the policy reads its
+neighbours from those that arrived; `simulation.finish` with the policy's actions), so
+every metric and fault of a run applies. A UAV's "in view" is what it measured.
 
 Shipped policies live in this package's ``policies`` folder and are named without a
 path or suffix (``policy:NAME``); any other ``policy:PATH`` is a file.

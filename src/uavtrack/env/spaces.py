@@ -73,6 +73,8 @@ class View:
 
     heard (B, Nu, 5): each UAV's state as its beacon carried it, which the neighbour
     rows read (None: the believed states); links then says whose beacon each UAV heard.
+    detected (B, Nu, Nt): the targets each UAV measured, its "in view" (None: observed;
+    the same with a sensor that never misses).
     """
 
     k: int
@@ -86,6 +88,7 @@ class View:
     label: np.ndarray | None = None
     met: np.ndarray | None = None
     heard: np.ndarray | None = None
+    detected: np.ndarray | None = None
 
 
 class Spaces:
@@ -208,7 +211,7 @@ class Spaces:
         c, s = np.cos(u[..., 4])[..., None], np.sin(u[..., 4])[..., None]
         dx, dy = m[..., 0] - u[..., 0:1], m[..., 1] - u[..., 1:2]
         present = view.alive[..., None] & np.isfinite(m).all(axis=-1)
-        in_view = view.observed
+        in_view = view.observed if view.detected is None else view.detected
         if view.label is not None:  # tracks: the confirmed ones, seen by its own sensor
             present &= view.label >= 0
             in_view = view.met

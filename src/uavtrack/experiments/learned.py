@@ -45,8 +45,9 @@ from ..env.vector import vector_env
 from ..errors import UsageError, install_hint
 
 __all__ = [
-    "FINE_TUNE_SEED", "ROWS", "TRAIN_SEED", "FineTuning", "Imitation", "evaluate", "fine_tune",
-    "imitate", "main", "ppo_from", "record", "report",
+    "FINE_TUNE_SEED", "MARL", "MARL_SEED", "ROWS", "ROWS_OF_THE_OBSERVATION", "TRAIN_SEED",
+    "FineTuning", "Imitation", "Marl", "evaluate", "fine_tune", "imitate", "main", "marl",
+    "marl_experiment", "policy_of", "ppo_from", "record", "report",
 ]  # fmt: skip
 
 TRAIN_SEED = 1_000_000
@@ -257,6 +258,8 @@ def ppo_from(
 
     if start.activation != "tanh":
         raise UsageError(f"bc-ppo starts from a tanh perceptron, not {start.activation}")
+    if start.graph is not None:
+        raise UsageError("bc-ppo starts from a perceptron; a graph policy's first layer has none")
     torch.set_num_threads(1)
     vector = vector_env(
         settings.trials, scenario, max_targets=start.max_targets,
@@ -525,7 +528,7 @@ def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None 
             f"{planner['ci95']:.3f} | {ci(d, digits=3)} | "
             f"{'yes' if d['mean'] >= -0.02 else 'no'} | `{meta.get('command', '')}` |"
         )
-        if meta["row"] == "bc" or meta.get("curve"):  # bc-ppo carries its start's rounds
+        if meta["row"] == "bc" or meta.get("curve"):  # DAgger's rounds, or BenchMARL's
             curves.append((path.stem, meta))
     if figure is not None:
         _curves(curves, figure)
@@ -545,8 +548,9 @@ def report(paths: Sequence[Path], figure: Path | None = None, page: Path | None 
 
 
 def _curves(curves: list[tuple[str, dict[str, Any]]], figure: Path) -> None:
-    """Each row's rate on its training trials against the frames it had seen: round 0
-    is the planner flying, each later round the policy fitted so far."""
+    """Each row's rate on its training trials against the UAV-steps it had seen: for
+    DAgger each round's (round 0 is the planner flying, dashed), for a BenchMARL row
+    each iteration's mean team reward under sampled actions."""
     import matplotlib.pyplot as plt
 
     fig, ax = plt.subplots(figsize=(7.2, 4.0))
@@ -623,14 +627,16 @@ def _main(argv: Sequence[str] | None) -> int:
     parser.add_argument("--start", help="bc-ppo: the policy it starts from (file or name)")
     parser.add_argument(
         "--frames", type=int, help=f"bc-ppo: agent-steps of PPO [{FineTuning().frames}]; "
-        f"mappo, ippo: trial-steps, BenchMARL's frames [{Marl().frames}]",
+        f"mappo, ippo, mappo-gnn: trial-steps, BenchMARL's frames [{Marl().frames}]",
     )  # fmt: skip
     parser.add_argument("--warm", type=int, default=FineTuning().warm,
                         help="bc-ppo: of them, with the policy frozen [%(default)s]")  # fmt: skip
-    parser.add_argument("--config", help="bc: a scenario TOML file (default: the paper's)")
+    parser.add_argument(
+        "--config", help="a row's scenario TOML file (default: the paper's; bc-ppo: its start's)"
+    )
     parser.add_argument(
         "--set", action="append", default=[], metavar="FIELD=VALUE", dest="changes",
-        help="bc: a scenario field, dotted, its value read as TOML (repeatable)",
+        help="a row's scenario field, dotted, its value read as TOML (repeatable)",
     )  # fmt: skip
     args = parser.parse_args(argv)
     if args.trials < 2:
@@ -688,6 +694,8 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         if args.start is None:
             raise UsageError("bc-ppo fine-tunes a policy: give --start FILE (or a shipped name)")
         start = Policy.load(args.start)
+        if start.graph is not None:
+            raise UsageError("bc-ppo starts from a perceptron, not a graph policy")
         if args.config is None and not changes:  # the scenario the start was trained on
             scenario = Scenario.model_validate(start.meta.get("scenario", {}))
         frames = FineTuning().frames if args.frames is None else args.frames
