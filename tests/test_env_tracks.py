@@ -150,8 +150,11 @@ def test_the_observation_reads_no_truth():
     known = parallel_env(steps=10)
     known.reset(seed=1)
     known.step({})
-    view = known._run.view()  # the paper's "in view" is the truth's disk: it changes
-    flipped = replace(view, observed=~view.observed)
+    view = known._run.view()  # the paper's "in view": the targets the UAV measured
+    assert view.detected is not None
+    flipped = replace(view, observed=~view.observed)  # the truth's disks: not read
+    assert np.array_equal(known.spaces.observe(view), known.spaces.observe(flipped))
+    flipped = replace(view, detected=~view.detected)
     assert not np.array_equal(known.spaces.observe(view), known.spaces.observe(flipped))
 
 
