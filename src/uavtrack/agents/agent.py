@@ -347,7 +347,7 @@ class UavAgent:
         self.limits = beacons.Limits.of(scenario)  # what an honest beacon can do
         self.told: np.ndarray | None = None  # with fusion.trigger: the confidences last sent
         self.beacon: tuple[int, Inbox | None] | None = None  # (k, this cycle's beacons)
-        self.kept = -1  # the last cycle whose beacons `beacons` holds
+        self.kept_at = -1  # the last cycle whose beacons `beacons` holds
 
     # ------------------------------------------------------------ the cycle
 
@@ -714,7 +714,7 @@ class UavAgent:
                 lambda: [self.radio.transmitted(k, "beacon", 1, first=0)],
                 [(beacon.sent, beacon.delivered)] if beacon is not None else [],
             )
-        if self.kept != k:  # a policy's cycle kept them already
+        if self.kept_at != k:  # a policy's cycle kept them already
             self.keep(k, beacon)
         desired = np.full((1, n), simulation.STRAIGHT)
         believed, alive = np.zeros((1, n, 5)), np.zeros((1, n), dtype=bool)
@@ -749,7 +749,7 @@ class UavAgent:
                 recent[0, q] = content["recent"]
         memory = avoidance.memory_of(self.setting.delay, self.scenario.faults.loss)
         self.beacons = self.beacons.update(got, states, stamps, k, memory, recent)
-        self.kept = k
+        self.kept_at = k
         return got, states
 
     def _believable(self, q: int, state: np.ndarray, sent: int) -> str | None:

@@ -382,7 +382,8 @@ def marl_experiment(
     graph = row == "mappo-gnn"
     actor = _graph_actor(scenario, settings, models, torch) if graph else model
     overrides = scenario.model_dump(mode="json", exclude_defaults=True)
-    task = UAVTrackTask.TRACKING.get_task(
+    tracking: Any = UAVTrackTask.TRACKING  # an enum member once BenchMARL made the class
+    task = tracking.get_task(
         {"overrides": overrides, "positions": graph, **ROWS_OF_THE_OBSERVATION}
     )
     algorithm = getattr(algorithms, MARL[row]).get_from_yaml()
