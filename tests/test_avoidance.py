@@ -766,7 +766,8 @@ def test_a_beacon_with_recent_commands_out_of_range_is_refused():
 
 
 @pytest.mark.integration  # JSBSim aircraft
-@pytest.mark.parametrize("wind", [0.0, pytest.param(5.0, marks=pytest.mark.slow)])
+@pytest.mark.slow  # 40 s of JSBSim flights; the tables' JSBSim tests stay in the default
+@pytest.mark.parametrize("wind", [0.0, 5.0])
 def test_the_measured_model_keeps_jsbsim_aircraft_apart(wind):
     """JSBSim aircraft at one altitude, at the measured model's sound range: with the
     filter on eq. (1) pairs come closer than the separation; on the measured model,

@@ -28,6 +28,7 @@ def test_bandwidth_refuses_bad_input_in_one_line_and_writes_nothing(tmp_path, ar
     assert not out.exists()
 
 
+@pytest.mark.slow  # 40 s of workers; the byte budget's own tests (test_wire) stay in the default
 @pytest.mark.integration  # worker processes
 def test_uavtrack_bandwidth_writes_its_tables_and_figure_and_resumes(tmp_path, capsys):
     from PIL import Image

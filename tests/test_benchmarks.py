@@ -108,6 +108,7 @@ def test_the_cycle_profile_names_the_stages_of_the_track_pipeline(tmp_path):
     assert shown["other"] < 0.5 * shown["total"], shown
 
 
+@pytest.mark.slow  # 25 s; test_scoring checks the scores against Stone Soup's in the default
 def test_the_trackers_head_to_head_replays_the_run_and_scores_both(tmp_path):
     """uavtrack's central tracker replayed on a run's scans must give the run's tracks
     (the script stops otherwise); Stone Soup's tracker runs on the same scans; both
