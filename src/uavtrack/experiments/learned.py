@@ -248,6 +248,10 @@ def ppo_from(
     """A Stable-Baselines3 PPO on the vector environment of `scenario` whose actor is
     `start`'s perceptron, copied weight for weight (its greedy action is the policy's),
     and its critic of the same shape; returns (model, the actor's linear layers)."""
+    if start.activation != "tanh":  # refused before the learning libraries load
+        raise UsageError(f"bc-ppo starts from a tanh perceptron, not {start.activation}")
+    if start.graph is not None:
+        raise UsageError("bc-ppo starts from a perceptron, not a graph policy")
     try:
         import torch  # pyright: ignore[reportMissingImports]  (the learn extra)
         from stable_baselines3 import PPO  # pyright: ignore[reportMissingImports]
@@ -256,10 +260,6 @@ def ppo_from(
         raise UsageError(f"bc-ppo needs torch and stable-baselines3: {hint} ({exc})") from None
     from ..env.learn import sb3_vec_env
 
-    if start.activation != "tanh":
-        raise UsageError(f"bc-ppo starts from a tanh perceptron, not {start.activation}")
-    if start.graph is not None:
-        raise UsageError("bc-ppo starts from a perceptron; a graph policy's first layer has none")
     torch.set_num_threads(1)
     vector = vector_env(
         settings.trials, scenario, max_targets=start.max_targets,
@@ -695,8 +695,6 @@ def _train(args: argparse.Namespace, argv: Sequence[str] | None) -> int:
         if args.start is None:
             raise UsageError("bc-ppo fine-tunes a policy: give --start FILE (or a shipped name)")
         start = Policy.load(args.start)
-        if start.graph is not None:
-            raise UsageError("bc-ppo starts from a perceptron, not a graph policy")
         if args.config is None and not changes:  # the scenario the start was trained on
             scenario = Scenario.model_validate(start.meta.get("scenario", {}))
         frames = FineTuning().frames if args.frames is None else args.frames
